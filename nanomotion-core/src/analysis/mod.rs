@@ -1,0 +1,1 @@
+//! Signal analysis toolkit (filled in by the analysis work).

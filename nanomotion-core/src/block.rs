@@ -1,0 +1,369 @@
+//! The [`Block`] trait: the unit a graph is made of.
+//!
+//! A block has input and output ports carrying `f64` vectors, runs at a fixed rate
+//! (an integer divisor of the graph's base rate), and is stepped in two phases per
+//! sample:
+//!
+//! 1. [`Block::output`] — in topological order. A block *with* direct feed-through
+//!    reads its inputs of this sample and writes its outputs (and may update its
+//!    state here). A block *without* direct feed-through writes its outputs from its
+//!    state only and must not depend on `u`.
+//! 2. [`Block::update`] — called only for blocks without direct feed-through, after
+//!    every block's outputs of this sample exist: advance the state with this sample's
+//!    inputs.
+//!
+//! Life cycle (after copper-rs): deserialise (YAML or plain Rust constructor) →
+//! [`Block::build`] (validate parameters, preallocate, derive coefficients from the
+//! sample time) → ticks. Everything that allocates, looks up or validates belongs in
+//! `build`; `output`/`update` are the real-time path and must not allocate, lock, do
+//! I/O or look up strings.
+//!
+//! ```
+//! use nanomotion_core::{Block, BuildContext, ParamError, Port, Tick};
+//! use serde::{Deserialize, Serialize};
+//!
+//! /// y = k·u
+//! #[derive(Debug, Clone, Serialize, Deserialize)]
+//! #[serde(deny_unknown_fields)]
+//! struct Doubler { k: f64 }
+//!
+//! #[typetag::serde(name = "doc_doubler")]
+//! impl Block for Doubler {
+//!     fn inputs(&self) -> Vec<Port> { vec![Port::new("u", 1)] }
+//!     fn outputs(&self) -> Vec<Port> { vec![Port::new("y", 1)] }
+//!     fn build(&mut self, _ctx: &BuildContext) -> Result<(), ParamError> {
+//!         nanomotion_core::block::check::finite("k", self.k)
+//!     }
+//!     fn output(&mut self, _t: Tick, u: &[f64], y: &mut [f64]) { y[0] = self.k * u[0]; }
+//! }
+//!
+//! let mut b = Doubler { k: 2.0 };
+//! b.build(&BuildContext::new("d", 1e-3, 0)).unwrap();
+//! let mut y = [0.0];
+//! b.output(Tick::new(0, 1e-3), &[3.0], &mut y);
+//! assert_eq!(y[0], 6.0);
+//! ```
+
+use crate::error::ParamError;
+use crate::lti::StateSpace;
+use std::fmt::Debug;
+
+/// A named port of fixed width.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Port {
+    /// Port name, as used in `block.port` references.
+    pub name: String,
+    /// Number of `f64` values the port carries.
+    pub width: usize,
+}
+
+impl Port {
+    /// A port named `name` carrying `width` values.
+    pub fn new(name: impl Into<String>, width: usize) -> Self {
+        Self { name: name.into(), width }
+    }
+}
+
+/// Timing of one step of a block, at the block's own rate.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Tick {
+    /// Index of this sample at the block's rate (0, 1, 2, ...).
+    pub k: u64,
+    /// Time of this sample in seconds (k·dt).
+    pub t: f64,
+    /// The block's sample period in seconds.
+    pub dt: f64,
+}
+
+impl Tick {
+    /// Tick `k` of a block with period `dt`.
+    pub fn new(k: u64, dt: f64) -> Self {
+        Self { k, t: k as f64 * dt, dt }
+    }
+}
+
+/// What a block learns when it is built.
+#[derive(Debug, Clone)]
+pub struct BuildContext {
+    /// The block's instance name in the graph (for messages).
+    pub name: String,
+    /// The block's sample period in seconds.
+    pub dt: f64,
+    /// A seed for this block's random numbers, derived from the graph seed and the
+    /// block name: same graph, same seed, same bits.
+    pub seed: u64,
+}
+
+impl BuildContext {
+    /// A context for block `name` with period `dt` (s) and seed `seed`.
+    pub fn new(name: impl Into<String>, dt: f64, seed: u64) -> Self {
+        Self { name: name.into(), dt, seed }
+    }
+}
+
+/// The role a block plays in a loop (for listings and documentation).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum Role {
+    /// Reference generators and disturbance/noise sources.
+    Source,
+    /// Feedback and feed-forward controllers.
+    Controller,
+    /// Converts commands into physical drive signals (drivers, amplifiers).
+    Actuator,
+    /// The simulated physical system.
+    Plant,
+    /// Measures a physical quantity (encoders, interferometers, quantisers).
+    Sensor,
+    /// Reconstructs a quantity from measurements (velocity estimation, HOTS).
+    Estimator,
+    /// Learning filters of repetitive/iterative control (L, Q).
+    LearningFilter,
+    /// Arithmetic, routing and filtering.
+    Math,
+}
+
+impl Role {
+    /// Lower-case name of the role.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Role::Source => "source",
+            Role::Controller => "controller",
+            Role::Actuator => "actuator",
+            Role::Plant => "plant",
+            Role::Sensor => "sensor",
+            Role::Estimator => "estimator",
+            Role::LearningFilter => "learning filter",
+            Role::Math => "math",
+        }
+    }
+}
+
+/// A block of a controller graph. See the [module documentation](self).
+#[typetag::serde(tag = "type")]
+pub trait Block: Send + Debug {
+    /// Input ports, in the order their values are concatenated in `u`.
+    /// Valid after [`Block::build`].
+    fn inputs(&self) -> Vec<Port> {
+        Vec::new()
+    }
+    /// Output ports, in the order their values are concatenated in `y`.
+    /// Valid after [`Block::build`].
+    fn outputs(&self) -> Vec<Port>;
+    /// Whether any output depends on the input of the same sample. Blocks without
+    /// feed-through break algebraic loops and get [`Block::update`] calls.
+    fn direct_feedthrough(&self) -> bool {
+        true
+    }
+    /// Validate parameters and prepare for running at period `ctx.dt`.
+    /// Called once before the first tick; may be called again to restart from the
+    /// initial state.
+    fn build(&mut self, ctx: &BuildContext) -> Result<(), ParamError> {
+        let _ = ctx;
+        Ok(())
+    }
+    /// Phase 1 of a step: write the outputs `y` of sample `tick`.
+    fn output(&mut self, tick: Tick, u: &[f64], y: &mut [f64]);
+    /// Phase 2 of a step (blocks without feed-through only): advance the state
+    /// with the inputs `u` of sample `tick`.
+    fn update(&mut self, tick: Tick, u: &[f64]) {
+        let _ = (tick, u);
+    }
+    /// The block's discrete-time LTI model at its own rate (from all inputs to all
+    /// outputs, ports concatenated), if it is linear time-invariant. Valid after
+    /// [`Block::build`]. Lets tools analyse loops before a graph runs.
+    fn lti(&self) -> Option<StateSpace> {
+        None
+    }
+    /// The role the block plays.
+    fn role(&self) -> Role {
+        Role::Math
+    }
+}
+
+/// Documentation of a parameter, for `nanomotion blocks`.
+#[derive(Debug, Clone, Copy)]
+pub struct ParamDoc {
+    /// Field name in YAML.
+    pub name: &'static str,
+    /// Unit and meaning, with the thesis symbol where one exists.
+    pub doc: &'static str,
+    /// Default, if the field is optional.
+    pub default: Option<&'static str>,
+}
+
+/// Documentation of a block type, registered with [`inventory`] next to the
+/// `typetag` registration so that `nanomotion blocks` can list it:
+///
+/// ```
+/// use nanomotion_core::{BlockDoc, ParamDoc, Role};
+/// nanomotion_core::submit_block_doc! {
+///     BlockDoc {
+///         type_name: "doc_example",
+///         role: Role::Math,
+///         summary: "an example",
+///         params: &[ParamDoc { name: "k", doc: "gain (-)", default: None }],
+///         ports: "u -> y",
+///     }
+/// }
+/// ```
+#[derive(Debug, Clone, Copy)]
+pub struct BlockDoc {
+    /// The `type:` tag.
+    pub type_name: &'static str,
+    /// The role of the block.
+    pub role: Role,
+    /// One line saying what it does.
+    pub summary: &'static str,
+    /// The parameters.
+    pub params: &'static [ParamDoc],
+    /// Port summary, e.g. `"u[n] -> y[n]"`.
+    pub ports: &'static str,
+}
+
+inventory::collect!(BlockDoc);
+
+/// Register a [`BlockDoc`].
+#[macro_export]
+macro_rules! submit_block_doc {
+    ($doc:expr) => {
+        $crate::__private::inventory::submit! { $doc }
+    };
+}
+
+/// All registered block documentation, sorted by type name.
+pub fn block_docs() -> Vec<&'static BlockDoc> {
+    let mut v: Vec<&'static BlockDoc> = inventory::iter::<BlockDoc>.into_iter().collect();
+    v.sort_by_key(|d| d.type_name);
+    v
+}
+
+/// All block types registered with `typetag` (every linked crate), sorted.
+///
+/// typetag does not expose its registry, so this asks it: deserialising an unknown
+/// tag makes it list the known ones.
+pub fn registered_types() -> Vec<String> {
+    let probe = "type: \"\u{1}no-such-block\"\n";
+    match crate::yaml::from_str::<Box<dyn Block>>(probe, "probe") {
+        Ok(_) => Vec::new(),
+        Err(e) => parse_expected_list(&e.to_string()),
+    }
+}
+
+/// Parse serde's "expected one of `a`, `b`" list out of an error message.
+pub(crate) fn parse_expected_list(msg: &str) -> Vec<String> {
+    let Some(pos) = msg.find("expected one of") else {
+        return Vec::new();
+    };
+    let rest = &msg[pos + "expected one of".len()..];
+    let mut line = rest.lines().next().unwrap_or("");
+    if let Some(at) = line.find(" at line ") {
+        line = &line[..at];
+    }
+    let mut v: Vec<String> = line
+        .split(',')
+        .map(|s| s.trim().trim_matches('`').trim().to_string())
+        .filter(|s| !s.is_empty())
+        .collect();
+    v.sort();
+    v.dedup();
+    v
+}
+
+/// Parameter validation helpers for [`Block::build`]; each returns a
+/// [`ParamError`] naming the field and the fix.
+pub mod check {
+    use crate::error::ParamError;
+
+    /// `value` must be finite.
+    pub fn finite(field: &str, value: f64) -> Result<(), ParamError> {
+        if value.is_finite() {
+            Ok(())
+        } else {
+            Err(ParamError::new(field, format!("is {value}, not a finite number"), "give a finite number"))
+        }
+    }
+    /// Every element of `values` must be finite.
+    pub fn all_finite(field: &str, values: &[f64]) -> Result<(), ParamError> {
+        match values.iter().position(|v| !v.is_finite()) {
+            None => Ok(()),
+            Some(i) => Err(ParamError::new(
+                format!("{field}[{i}]"),
+                format!("is {}, not a finite number", values[i]),
+                "give finite numbers",
+            )),
+        }
+    }
+    /// `value` must be finite and > 0.
+    pub fn positive(field: &str, value: f64) -> Result<(), ParamError> {
+        finite(field, value)?;
+        if value > 0.0 {
+            Ok(())
+        } else {
+            Err(ParamError::new(field, format!("is {value}, must be > 0"), "give a positive value"))
+        }
+    }
+    /// `value` must be finite and ≥ 0.
+    pub fn non_negative(field: &str, value: f64) -> Result<(), ParamError> {
+        finite(field, value)?;
+        if value >= 0.0 {
+            Ok(())
+        } else {
+            Err(ParamError::new(field, format!("is {value}, must be ≥ 0"), "give a non-negative value"))
+        }
+    }
+    /// `value` must be finite and in `[lo, hi]`.
+    pub fn in_range(field: &str, value: f64, lo: f64, hi: f64) -> Result<(), ParamError> {
+        finite(field, value)?;
+        if (lo..=hi).contains(&value) {
+            Ok(())
+        } else {
+            Err(ParamError::new(field, format!("is {value}, outside [{lo}, {hi}]"), format!("give a value in [{lo}, {hi}]")))
+        }
+    }
+    /// `lo` must be ≤ `hi` (both finite).
+    pub fn ordered(field_lo: &str, lo: f64, field_hi: &str, hi: f64) -> Result<(), ParamError> {
+        finite(field_lo, lo)?;
+        finite(field_hi, hi)?;
+        if lo <= hi {
+            Ok(())
+        } else {
+            Err(ParamError::new(
+                field_lo,
+                format!("{field_lo} = {lo} is larger than {field_hi} = {hi}"),
+                format!("make {field_lo} ≤ {field_hi}"),
+            ))
+        }
+    }
+    /// `value` must be ≥ 1.
+    pub fn at_least_one(field: &str, value: usize) -> Result<(), ParamError> {
+        if value >= 1 {
+            Ok(())
+        } else {
+            Err(ParamError::new(field, "is 0", "give at least 1"))
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn expected_list_is_parsed() {
+        let v = parse_expected_list("unknown variant `x`, expected one of `b`, `a`, `c` at line 1");
+        assert_eq!(v, vec!["a", "b", "c"]);
+        let v = parse_expected_list("unknown variant `x`, expected one of b, a");
+        assert_eq!(v, vec!["a", "b"]);
+    }
+
+    #[test]
+    fn checks_name_field_and_fix() {
+        let e = check::positive("mass_kg", -1.0).unwrap_err();
+        assert_eq!(e.field, "mass_kg");
+        assert!(e.to_string().contains("> 0"));
+        assert!(check::finite("k", f64::NAN).is_err());
+        assert!(check::in_range("q", 0.5, 0.0, 1.0).is_ok());
+        assert!(check::in_range("q", 1.5, 0.0, 1.0).is_err());
+        assert_eq!(check::all_finite("num", &[1.0, f64::INFINITY]).unwrap_err().field, "num[1]");
+    }
+}

@@ -1,0 +1,1 @@
+//! Standard block library (filled in by the blocks work).

@@ -1,0 +1,3 @@
+//! YAML graphs (in progress).
+pub struct GraphSpec;
+pub struct Graph;

@@ -1,0 +1,49 @@
+//! # nanomotion-core
+//!
+//! The core of **nanomotion**, a framework for controlling nano-motion systems
+//! (piezo-driven stages, optical-encoder systems) after R.J.E. Merry,
+//! *Performance-driven control of nano-motion systems*, PhD thesis, TU Eindhoven, 2009.
+//!
+//! What lives here:
+//! - [`block`]: the [`Block`] trait every graph block implements (registered with
+//!   `typetag`, so YAML names a block by `type:`), ports, build context and parameter
+//!   validation helpers;
+//! - [`roles`]: the role traits [`Actuator`], [`Sensor`], [`Estimator`],
+//!   [`Controller`], [`LearningFilter`], [`Plant`] and [`Source`], which give every
+//!   block a typed Rust API usable without any graph;
+//! - [`graph`] and [`scheduler`]: YAML controller graphs, validated and compiled once
+//!   into a flat, allocation-free multi-rate tick loop;
+//! - [`lti`]: discrete LTI toolkit (transfer functions, state space, Tustin/ZOH,
+//!   delays, frequency response, H∞ norm, FIR design, ZPETC);
+//! - [`analysis`]: Welch PSD/CPSD, cumulative PSD, FRF identification (open and
+//!   closed loop), zero-phase filtering, metrics;
+//! - [`blocks`]: the standard block library (gains, sums, filters, PID, noise,
+//!   references, ...);
+//! - [`rng`]: the seeded, version-stable random number generator behind all noise.
+//!
+//! The thesis's equation numbers are given as (n.m) in the documentation.
+
+pub mod analysis;
+pub mod block;
+pub mod blocks;
+pub mod error;
+pub mod graph;
+pub mod lti;
+pub mod rng;
+pub mod roles;
+pub mod scheduler;
+pub mod yaml;
+
+pub use block::{Block, BlockDoc, BuildContext, ParamDoc, Port, Role, Tick};
+pub use error::{GraphError, ParamError};
+pub use graph::{Graph, GraphSpec};
+pub use roles::{Actuator, Controller, Estimator, LearningFilter, Plant, Sensor, Source};
+pub use scheduler::Scheduler;
+
+/// Re-exported so that plugin and third-party crates register blocks with the same
+/// `typetag` and `inventory` versions as the core.
+#[doc(hidden)]
+pub mod __private {
+    pub use inventory;
+    pub use typetag;
+}

@@ -1,0 +1,2 @@
+//! Scheduler (in progress).
+pub struct Scheduler;
