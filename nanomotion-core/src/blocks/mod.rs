@@ -1,1 +1,9 @@
-//! Standard block library (filled in by the blocks work).
+//! The standard block library. Every block is a plain Rust type implementing its
+//! role trait (see [`crate::roles`]) and, as a thin adapter, [`crate::Block`]
+//! registered with `typetag` under the `type:` name given in its docs.
+
+pub mod control;
+pub mod linear;
+pub mod math;
+pub mod sensors;
+pub mod sources;

@@ -36,3 +36,8 @@ pub struct TransferFunction {
     /// Sample period in seconds, `None` for continuous time.
     pub dt: Option<f64>,
 }
+
+/// One second-order section in scipy's `sos` layout `[b0, b1, b2, a0, a1, a2]`:
+/// H(z) = (b0 + b1 z⁻¹ + b2 z⁻²) / (a0 + a1 z⁻¹ + a2 z⁻²). A cascade of sections is
+/// a `Vec<SosSection>`.
+pub type SosSection = [f64; 6];
