@@ -1,3 +1,615 @@
-//! YAML graphs (in progress).
-pub struct GraphSpec;
-pub struct Graph;
+//! YAML controller graphs: the schema ([`GraphSpec`]), loading with located errors,
+//! and compilation into a [`Scheduler`].
+//!
+//! The format is documented in `docs/graph-format.md`. In short:
+//!
+//! ```
+//! use nanomotion_core::graph::GraphSpec;
+//! let yaml = r#"
+//! base_rate_hz: 1000
+//! duration_s: 0.01
+//! seed: 1
+//! blocks:
+//!   - { name: src, type: graph_doc_const, value: 2.0 }
+//! log: [src.y]
+//! "#;
+//! # use nanomotion_core::{Block, Port, Tick};
+//! # #[derive(Debug, serde::Serialize, serde::Deserialize)]
+//! # struct C { value: f64 }
+//! # #[typetag::serde(name = "graph_doc_const")]
+//! # impl Block for C {
+//! #     fn outputs(&self) -> Vec<Port> { vec![Port::new("y", 1)] }
+//! #     fn output(&mut self, _t: Tick, _u: &[f64], y: &mut [f64]) { y[0] = self.value; }
+//! # }
+//! let spec = GraphSpec::from_yaml(yaml, "doc.yaml").unwrap();
+//! let (mut sched, _report) = spec.build().unwrap();
+//! let result = sched.run(|_| {});
+//! assert_eq!(result.logs[0].data, vec![2.0; 10]);
+//! ```
+
+use crate::block::{Block, BuildContext, Port};
+use crate::error::GraphError;
+use crate::rng::derive_seed;
+use crate::scheduler::{Gather, LogChannel, Node, Scheduler, ScoreChannel};
+use serde::{Deserialize, Serialize};
+use std::fmt::Write as _;
+
+/// One block of a graph: instance name, optional rate, and the block itself
+/// (its `type:` and parameters, flattened into the same YAML map).
+#[derive(Debug, Serialize, Deserialize)]
+pub struct BlockSpec {
+    /// Unique instance name (letters, digits, `_`, `-`; no `.`).
+    pub name: String,
+    /// Rate in Hz; must divide the base rate. Default: the base rate.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rate_hz: Option<f64>,
+    /// The block: `type:` tag and its parameters.
+    #[serde(flatten)]
+    pub block: Box<dyn Block>,
+}
+
+/// A connection from an output port to an input port (`block.port`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Connection {
+    /// Source, `block.port` of an output.
+    pub from: String,
+    /// Destination, `block.port` of an input.
+    pub to: String,
+}
+
+/// An error signal to score (rms, max, ... after the run).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ScoreSpec {
+    /// The signal, `block.port` of an output.
+    pub signal: String,
+    /// Ignore samples before this time (s), to skip start-up transients.
+    #[serde(default)]
+    pub from_s: f64,
+}
+
+/// A whole graph as written in YAML.
+#[derive(Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct GraphSpec {
+    /// Optional title, shown in reports and plots.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub title: Option<String>,
+    /// Base tick rate (Hz): every block's rate must divide it.
+    pub base_rate_hz: f64,
+    /// Simulated duration (s).
+    pub duration_s: f64,
+    /// Seed of all random blocks (each block derives its own stream from it and its
+    /// name).
+    #[serde(default)]
+    pub seed: u64,
+    /// Reject connections between different rates instead of inserting rate
+    /// transitions.
+    #[serde(default)]
+    pub strict_rates: bool,
+    /// The blocks.
+    pub blocks: Vec<BlockSpec>,
+    /// The connections.
+    #[serde(default)]
+    pub connections: Vec<Connection>,
+    /// Output ports to record (`block.port`).
+    #[serde(default)]
+    pub log: Vec<String>,
+    /// Error signals to score.
+    #[serde(default)]
+    pub score: Vec<ScoreSpec>,
+}
+
+/// What the loader did on its own initiative, for the user to see.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct BuildReport {
+    /// Rate transitions inserted between blocks of different rates, one line each.
+    pub rate_transitions: Vec<String>,
+    /// Execution order (block names) of the output phase.
+    pub order: Vec<String>,
+}
+
+/// Alias kept for readability: a built graph is a [`Scheduler`].
+pub type Graph = Scheduler;
+
+/// Maximum number of base ticks a graph may ask for (keeps memory and time sane).
+pub const MAX_TICKS: f64 = 2.0e9;
+
+impl GraphSpec {
+    /// An empty graph at `base_rate_hz` running for `duration_s`, for building graphs
+    /// from Rust.
+    pub fn new(base_rate_hz: f64, duration_s: f64) -> Self {
+        Self {
+            title: None,
+            base_rate_hz,
+            duration_s,
+            seed: 0,
+            strict_rates: false,
+            blocks: Vec::new(),
+            connections: Vec::new(),
+            log: Vec::new(),
+            score: Vec::new(),
+        }
+    }
+
+    /// Add a block running at the base rate.
+    pub fn add(&mut self, name: &str, block: impl Block + 'static) -> &mut Self {
+        self.blocks.push(BlockSpec { name: name.to_string(), rate_hz: None, block: Box::new(block) });
+        self
+    }
+
+    /// Add a block running at `rate_hz`.
+    pub fn add_at(&mut self, name: &str, rate_hz: f64, block: impl Block + 'static) -> &mut Self {
+        self.blocks.push(BlockSpec { name: name.to_string(), rate_hz: Some(rate_hz), block: Box::new(block) });
+        self
+    }
+
+    /// Connect output `from` (`block.port`) to input `to`.
+    pub fn connect(&mut self, from: &str, to: &str) -> &mut Self {
+        self.connections.push(Connection { from: from.to_string(), to: to.to_string() });
+        self
+    }
+
+    /// Record output `signal` (`block.port`).
+    pub fn log(&mut self, signal: &str) -> &mut Self {
+        self.log.push(signal.to_string());
+        self
+    }
+
+    /// Parse a graph from YAML text; `origin` (file name) prefixes errors.
+    pub fn from_yaml(text: &str, origin: &str) -> Result<Self, GraphError> {
+        crate::yaml::from_str::<GraphSpec>(text, origin).map_err(add_type_suggestion)
+    }
+
+    /// Read and parse a graph file.
+    pub fn from_file(path: impl AsRef<std::path::Path>) -> Result<Self, GraphError> {
+        let path = path.as_ref();
+        let text = std::fs::read_to_string(path)
+            .map_err(|source| GraphError::Io { path: path.display().to_string(), source })?;
+        Self::from_yaml(&text, &path.display().to_string())
+    }
+
+    /// Validate the graph, build every block, resolve ports, rates and order, and
+    /// return the ready-to-run scheduler with a report of what was inserted.
+    pub fn build(self) -> Result<(Scheduler, BuildReport), GraphError> {
+        compile(self)
+    }
+}
+
+/// Add "did you mean" to unknown-type errors.
+fn add_type_suggestion(e: GraphError) -> GraphError {
+    let GraphError::Parse { origin, mut message } = e else { return e };
+    if let Some(pos) = message.find("unknown variant `") {
+        let rest = &message[pos + "unknown variant `".len()..];
+        if let Some(end) = rest.find('`') {
+            let bad = rest[..end].to_string();
+            let known = crate::block::parse_expected_list(&message);
+            if let Some(best) = nearest(&bad, known.iter().map(String::as_str)) {
+                message = format!("{message}\nhint: unknown block type `{bad}`; did you mean `{best}`? (`nanomotion blocks` lists all types)");
+            } else {
+                message = format!("{message}\nhint: unknown block type `{bad}` (`nanomotion blocks` lists all types)");
+            }
+        }
+    }
+    GraphError::Parse { origin, message }
+}
+
+/// Levenshtein distance (for suggestions).
+fn edit_distance(a: &str, b: &str) -> usize {
+    let b: Vec<char> = b.chars().collect();
+    let mut prev: Vec<usize> = (0..=b.len()).collect();
+    for (i, ca) in a.chars().enumerate() {
+        let mut cur = vec![i + 1; b.len() + 1];
+        for (j, cb) in b.iter().enumerate() {
+            let sub = prev[j] + usize::from(ca != *cb);
+            cur[j + 1] = sub.min(prev[j + 1] + 1).min(cur[j] + 1);
+        }
+        prev = cur;
+    }
+    prev[b.len()]
+}
+
+/// The candidate nearest to `word`, if it is reasonably near.
+pub(crate) fn nearest<'a>(word: &str, candidates: impl Iterator<Item = &'a str>) -> Option<&'a str> {
+    candidates
+        .map(|c| (edit_distance(word, c), c))
+        .filter(|(d, c)| *d <= (c.len().max(word.len()) / 2).max(2))
+        .min_by_key(|(d, _)| *d)
+        .map(|(_, c)| c)
+}
+
+/// A block while compiling.
+struct Pending {
+    name: String,
+    type_name: String,
+    block: Box<dyn Block>,
+    period: u64,
+    rate_hz: f64,
+    ctx: BuildContext,
+    inputs: Vec<Port>,
+    outputs: Vec<Port>,
+    feedthrough: bool,
+    /// For each input port, the (block index, output port index) feeding it.
+    sources: Vec<Option<(usize, usize, usize)>>, // (block, port, connection index)
+}
+
+fn setting(field: &str, problem: impl Into<String>, fix: impl Into<String>) -> GraphError {
+    GraphError::Setting { field: field.into(), problem: problem.into(), fix: fix.into() }
+}
+
+fn valid_name(name: &str) -> bool {
+    !name.is_empty() && name.chars().all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-' || c == ':')
+}
+
+fn compile(spec: GraphSpec) -> Result<(Scheduler, BuildReport), GraphError> {
+    let GraphSpec { title, base_rate_hz, duration_s, seed, strict_rates, blocks, connections, log, score } = spec;
+    if !(base_rate_hz.is_finite() && base_rate_hz > 0.0) {
+        return Err(setting("base_rate_hz", format!("is {base_rate_hz}"), "give a positive rate in Hz, e.g. 4000"));
+    }
+    if !(duration_s.is_finite() && duration_s >= 0.0) {
+        return Err(setting("duration_s", format!("is {duration_s}"), "give a non-negative duration in seconds"));
+    }
+    let n_ticks_f = (duration_s * base_rate_hz).round();
+    if n_ticks_f > MAX_TICKS {
+        return Err(setting(
+            "duration_s",
+            format!("{duration_s} s at {base_rate_hz} Hz is {n_ticks_f:e} ticks, more than {MAX_TICKS:e}"),
+            "shorten the run or lower the base rate",
+        ));
+    }
+    if blocks.is_empty() {
+        return Err(setting("blocks", "is empty", "add at least one block"));
+    }
+    let base_dt = 1.0 / base_rate_hz;
+
+    // 1. Names, rates, build.
+    let mut pending: Vec<Pending> = Vec::with_capacity(blocks.len());
+    for b in blocks {
+        if !valid_name(&b.name) {
+            return Err(setting(
+                "blocks.name",
+                format!("`{}` is not a valid block name", b.name),
+                "use letters, digits, `_` and `-` only (no `.`, which separates block and port)",
+            ));
+        }
+        if pending.iter().any(|p| p.name == b.name) {
+            return Err(GraphError::DuplicateName { name: b.name });
+        }
+        let rate_hz = b.rate_hz.unwrap_or(base_rate_hz);
+        let ratio = base_rate_hz / rate_hz;
+        let period = ratio.round();
+        if !(rate_hz.is_finite() && rate_hz > 0.0) || period < 1.0 || (ratio - period).abs() > 1e-9 * ratio {
+            return Err(GraphError::BadRate { block: b.name, rate_hz, base_rate_hz });
+        }
+        let period = period as u64;
+        let dt = period as f64 * base_dt;
+        let type_name = b.block.typetag_name().to_string();
+        let mut block = b.block;
+        let ctx = BuildContext::new(b.name.clone(), dt, derive_seed(seed, &b.name));
+        block
+            .build(&ctx)
+            .map_err(|source| GraphError::Param { block: b.name.clone(), type_name: type_name.clone(), source })?;
+        let inputs = block.inputs();
+        let outputs = block.outputs();
+        let feedthrough = block.direct_feedthrough();
+        pending.push(Pending {
+            sources: vec![None; inputs.len()],
+            name: b.name,
+            type_name,
+            block,
+            period,
+            rate_hz,
+            ctx,
+            inputs,
+            outputs,
+            feedthrough,
+        });
+    }
+
+    // 2. Connections.
+    let mut report = BuildReport::default();
+    for (index, c) in connections.iter().enumerate() {
+        let (sb, sp) = resolve(&pending, &c.from, index, Direction::Output)?;
+        let (db, dp) = resolve(&pending, &c.to, index, Direction::Input)?;
+        let fw = pending[sb].outputs[sp].width;
+        let tw = pending[db].inputs[dp].width;
+        if fw != tw {
+            return Err(GraphError::WidthMismatch {
+                index,
+                from: c.from.clone(),
+                to: c.to.clone(),
+                from_width: fw,
+                to_width: tw,
+            });
+        }
+        if let Some((_, _, first)) = pending[db].sources[dp] {
+            return Err(GraphError::DoubleConnection { to: c.to.clone(), first, second: index });
+        }
+        let (src_block, src_port) = if pending[sb].period != pending[db].period {
+            let (from_hz, to_hz) = (pending[sb].rate_hz, pending[db].rate_hz);
+            if strict_rates {
+                return Err(GraphError::RateMismatch { index, from: c.from.clone(), to: c.to.clone(), from_hz, to_hz });
+            }
+            // Insert an explicit rate transition running at the destination's rate.
+            let kind = if to_hz > from_hz { "zero-order hold" } else { "decimation (sampling, no anti-alias filter)" };
+            let name = format!("rt:{}:{}", c.from.replace('.', ":"), pending[db].name);
+            report.rate_transitions.push(format!(
+                "`{}` -> `{}`: {kind} {from_hz} Hz -> {to_hz} Hz, inserted as block `{name}`",
+                c.from, c.to
+            ));
+            let idx = match pending.iter().position(|p| p.name == name) {
+                Some(i) => i,
+                None => {
+                    let mut block: Box<dyn Block> = Box::new(crate::scheduler::RateTransition::new(fw));
+                    let ctx = BuildContext::new(name.clone(), pending[db].ctx.dt, 0);
+                    block.build(&ctx).map_err(|source| GraphError::Param {
+                        block: name.clone(),
+                        type_name: "rate_transition".into(),
+                        source,
+                    })?;
+                    pending.push(Pending {
+                        sources: vec![Some((sb, sp, index))],
+                        name: name.clone(),
+                        type_name: "rate_transition".into(),
+                        inputs: block.inputs(),
+                        outputs: block.outputs(),
+                        feedthrough: true,
+                        block,
+                        period: pending[db].period,
+                        rate_hz: to_hz,
+                        ctx,
+                    });
+                    pending.len() - 1
+                }
+            };
+            (idx, 0)
+        } else {
+            (sb, sp)
+        };
+        pending[db].sources[dp] = Some((src_block, src_port, index));
+    }
+    for p in &pending {
+        for (i, s) in p.sources.iter().enumerate() {
+            if s.is_none() {
+                return Err(GraphError::Unconnected { block: p.name.clone(), port: p.inputs[i].name.clone() });
+            }
+        }
+    }
+
+    // 3. Order: Kahn's algorithm on the feed-through dependencies, stable in the
+    //    order blocks were written.
+    let n = pending.len();
+    let mut indegree = vec![0usize; n];
+    let mut dependents: Vec<Vec<usize>> = vec![Vec::new(); n];
+    for (d, p) in pending.iter().enumerate() {
+        if !p.feedthrough {
+            continue;
+        }
+        for &(s, _, _) in p.sources.iter().flatten() {
+            indegree[d] += 1;
+            dependents[s].push(d);
+        }
+    }
+    let mut order = Vec::with_capacity(n);
+    let mut ready: std::collections::BTreeSet<usize> = (0..n).filter(|&i| indegree[i] == 0).collect();
+    while let Some(i) = ready.pop_first() {
+        order.push(i);
+        for &d in &dependents[i] {
+            indegree[d] -= 1;
+            if indegree[d] == 0 {
+                ready.insert(d);
+            }
+        }
+    }
+    if order.len() < n {
+        return Err(GraphError::AlgebraicLoop { cycle: find_cycle(&pending, &indegree) });
+    }
+
+    // 4. Buffers: outputs laid out in execution order, inputs gathered per block.
+    let mut out_offsets: Vec<Vec<usize>> = vec![Vec::new(); n];
+    let mut signal_len = 0usize;
+    for &i in &order {
+        for port in &pending[i].outputs {
+            out_offsets[i].push(signal_len);
+            signal_len += port.width;
+        }
+    }
+    let mut nodes = Vec::with_capacity(n);
+    let mut gathers = Vec::new();
+    let mut input_len = 0usize;
+    let mut ctxs = Vec::with_capacity(n);
+    let mut names = Vec::with_capacity(n);
+    let mut type_names = Vec::with_capacity(n);
+    let mut position = vec![0usize; n];
+    for (pos, &i) in order.iter().enumerate() {
+        position[i] = pos;
+    }
+    let mut slots: Vec<Option<Box<dyn Block>>> = Vec::with_capacity(n);
+    let mut port_tables = Vec::with_capacity(n);
+    for p in pending.iter_mut() {
+        slots.push(Some(std::mem::replace(&mut p.block, Box::new(crate::scheduler::RateTransition::new(0)))));
+    }
+    let mut block_list: Vec<Box<dyn Block>> = Vec::with_capacity(n);
+    for &i in &order {
+        let p = &pending[i];
+        let in_start = input_len;
+        let g_start = gathers.len();
+        for (k, port) in p.inputs.iter().enumerate() {
+            let (s, sp, _) = p.sources[k].expect("checked above");
+            gathers.push(Gather { src: out_offsets[s][sp], dst: input_len, len: port.width });
+            input_len += port.width;
+        }
+        let out_start = out_offsets[i].first().copied().unwrap_or(0);
+        let out_len: usize = p.outputs.iter().map(|o| o.width).sum();
+        nodes.push(Node {
+            period: p.period,
+            dt: p.ctx.dt,
+            k_local: 0,
+            inputs: in_start..input_len,
+            outputs: out_start..out_start + out_len,
+            gathers: g_start..gathers.len(),
+            feedthrough: p.feedthrough,
+        });
+        block_list.push(slots[i].take().expect("each block taken once"));
+        ctxs.push(p.ctx.clone());
+        names.push(p.name.clone());
+        type_names.push(p.type_name.clone());
+        port_tables.push((p.inputs.clone(), p.outputs.clone(), out_offsets[i].clone()));
+        report.order.push(p.name.clone());
+    }
+
+    // 5. Logs and scores.
+    let n_ticks = n_ticks_f as u64;
+    let lookup = |reference: &str, section: &'static str| -> Result<(usize, usize, usize), GraphError> {
+        let bad = |problem: String| GraphError::BadSignal { section, reference: reference.to_string(), problem };
+        let (b, port) = reference
+            .split_once('.')
+            .ok_or_else(|| bad("write signals as `block.port`".into()))?;
+        let Some(bi) = names.iter().position(|n| n == b) else {
+            let hint = nearest(b, names.iter().map(String::as_str))
+                .map(|s| format!("; did you mean `{s}`?"))
+                .unwrap_or_default();
+            return Err(bad(format!("no block named `{b}`{hint}")));
+        };
+        let (_, outs, offs) = &port_tables[bi];
+        let Some(pi) = outs.iter().position(|o| o.name == port) else {
+            let known: Vec<&str> = outs.iter().map(|o| o.name.as_str()).collect();
+            return Err(bad(format!("block `{b}` has no output `{port}`; its outputs are: {}", known.join(", "))));
+        };
+        Ok((bi, offs[pi], outs[pi].width))
+    };
+    let mut logs: Vec<LogChannel> = Vec::new();
+    let add_log = |reference: &str, section: &'static str, logs: &mut Vec<LogChannel>| -> Result<usize, GraphError> {
+        if let Some(i) = logs.iter().position(|l| l.name == reference) {
+            return Ok(i);
+        }
+        let (bi, offset, width) = lookup(reference, section)?;
+        let period = nodes[bi].period;
+        let samples = n_ticks.div_ceil(period) as usize;
+        logs.push(LogChannel {
+            name: reference.to_string(),
+            offset,
+            width,
+            period,
+            rate_hz: base_rate_hz / period as f64,
+            data: Vec::with_capacity(samples * width),
+        });
+        Ok(logs.len() - 1)
+    };
+    for l in &log {
+        add_log(l, "log", &mut logs)?;
+    }
+    let mut scores = Vec::new();
+    for s in &score {
+        if !(s.from_s.is_finite() && s.from_s >= 0.0) {
+            return Err(GraphError::BadSignal {
+                section: "score",
+                reference: s.signal.clone(),
+                problem: format!("from_s is {}; give a non-negative time in seconds", s.from_s),
+            });
+        }
+        let channel = add_log(&s.signal, "score", &mut logs)?;
+        scores.push(ScoreChannel { channel, from_s: s.from_s });
+    }
+
+    let sched = Scheduler::new_internal(crate::scheduler::Parts {
+        title,
+        base_rate_hz,
+        n_ticks,
+        blocks: block_list,
+        nodes,
+        gathers,
+        signal_len,
+        input_len,
+        ctxs,
+        names,
+        type_names,
+        ports: port_tables,
+        logs,
+        scores,
+        rate_transitions: report.rate_transitions.clone(),
+    });
+    Ok((sched, report))
+}
+
+#[derive(Clone, Copy, PartialEq)]
+enum Direction {
+    Input,
+    Output,
+}
+
+fn resolve(pending: &[Pending], reference: &str, index: usize, dir: Direction) -> Result<(usize, usize), GraphError> {
+    let (b, port) = reference
+        .split_once('.')
+        .ok_or_else(|| GraphError::BadReference { index, reference: reference.to_string() })?;
+    let Some(bi) = pending.iter().position(|p| p.name == b) else {
+        let hint = nearest(b, pending.iter().map(|p| p.name.as_str()))
+            .map(|s| format!("; did you mean `{s}`?"))
+            .unwrap_or_default();
+        return Err(GraphError::UnknownBlock { index, reference: reference.to_string(), block: b.to_string(), hint });
+    };
+    let ports = match dir {
+        Direction::Input => &pending[bi].inputs,
+        Direction::Output => &pending[bi].outputs,
+    };
+    match ports.iter().position(|p| p.name == port) {
+        Some(pi) => Ok((bi, pi)),
+        None => {
+            let mut known = String::new();
+            for (i, p) in ports.iter().enumerate() {
+                let _ = write!(known, "{}{} (width {})", if i > 0 { ", " } else { "" }, p.name, p.width);
+            }
+            if known.is_empty() {
+                known.push_str("(none)");
+            }
+            Err(GraphError::UnknownPort {
+                index,
+                reference: reference.to_string(),
+                block: b.to_string(),
+                port: port.to_string(),
+                direction: if dir == Direction::Input { "input" } else { "output" },
+                known,
+            })
+        }
+    }
+}
+
+/// A cycle among the blocks left with positive in-degree, as `a -> b -> a`.
+fn find_cycle(pending: &[Pending], indegree: &[usize]) -> String {
+    // Follow feed-through sources backwards from any blocked node until a repeat.
+    let start = indegree.iter().position(|&d| d > 0).unwrap_or(0);
+    let mut path = vec![start];
+    let mut cur = start;
+    loop {
+        let next = pending[cur]
+            .sources
+            .iter()
+            .flatten()
+            .map(|&(s, _, _)| s)
+            .find(|&s| indegree[s] > 0 && pending[s].feedthrough);
+        let Some(next) = next else { break };
+        if let Some(pos) = path.iter().position(|&p| p == next) {
+            let mut cycle: Vec<&str> = path[pos..].iter().rev().map(|&i| pending[i].name.as_str()).collect();
+            cycle.push(cycle[0]);
+            return cycle.join(" -> ");
+        }
+        path.push(next);
+        cur = next;
+    }
+    path.iter().map(|&i| pending[i].name.as_str()).collect::<Vec<_>>().join(" <- ")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn edit_distance_and_nearest() {
+        assert_eq!(edit_distance("gain", "gian"), 2);
+        assert_eq!(edit_distance("", "abc"), 3);
+        assert_eq!(edit_distance("kitten", "sitting"), 3);
+        assert_eq!(nearest("gian", ["gain", "sum", "pid"].into_iter()), Some("gain"));
+        assert_eq!(nearest("zzzzzzzz", ["gain", "sum"].into_iter()), None);
+    }
+}
