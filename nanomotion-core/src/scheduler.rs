@@ -221,7 +221,7 @@ impl Scheduler {
         let Self { blocks, nodes, gathers, signals, inputs, updaters, logs, .. } = self;
         // Phase 1: outputs in topological order.
         for (node, block) in nodes.iter_mut().zip(blocks.iter_mut()) {
-            if k % node.period != 0 {
+            if !k.is_multiple_of(node.period) {
                 continue;
             }
             if node.feedthrough {
@@ -235,7 +235,7 @@ impl Scheduler {
         // Phase 2: state updates of blocks without feed-through.
         for &i in updaters.iter() {
             let node = &nodes[i];
-            if k % node.period != 0 {
+            if !k.is_multiple_of(node.period) {
                 continue;
             }
             for g in &gathers[node.gathers.clone()] {
@@ -245,13 +245,13 @@ impl Scheduler {
             blocks[i].update(tick, &inputs[node.inputs.clone()]);
         }
         for node in nodes.iter_mut() {
-            if k % node.period == 0 {
+            if k.is_multiple_of(node.period) {
                 node.k_local += 1;
             }
         }
         // Phase 3: logging into preallocated buffers (capacity reserved at build).
         for log in logs.iter_mut() {
-            if k % log.period == 0 && log.data.len() + log.width <= log.data.capacity() {
+            if k.is_multiple_of(log.period) && log.data.len() + log.width <= log.data.capacity() {
                 log.data.extend_from_slice(&signals[log.offset..log.offset + log.width]);
             }
         }

@@ -1,0 +1,410 @@
+//! Dense linear-algebra and polynomial helpers of the LTI toolkit: matrix
+//! exponential, balancing, eigenvalues, polynomial roots and products.
+//!
+//! Polynomials are `&[f64]` in **descending** powers (MATLAB/python-control order).
+
+use super::Complex;
+use nalgebra::{DMatrix, DVector};
+
+/// Matrix exponential e^A by scaling and squaring with a Padé(3/5/7/9/13)
+/// approximant (Higham 2005, the algorithm behind MATLAB's and scipy's `expm`).
+///
+/// # Panics
+/// If `a` is not square.
+pub fn expm(a: &DMatrix<f64>) -> DMatrix<f64> {
+    assert!(a.is_square(), "expm: matrix must be square");
+    let n = a.nrows();
+    if n == 0 {
+        return a.clone();
+    }
+    let ident = DMatrix::<f64>::identity(n, n);
+    let norm1 = norm_1(a);
+    if !norm1.is_finite() {
+        return DMatrix::from_element(n, n, f64::NAN);
+    }
+    // (theta_m, Padé coefficients b_0..b_m)
+    const B3: [f64; 4] = [120.0, 60.0, 12.0, 1.0];
+    const B5: [f64; 6] = [30240.0, 15120.0, 3360.0, 420.0, 30.0, 1.0];
+    const B7: [f64; 8] = [
+        17297280.0, 8648640.0, 1995840.0, 277200.0, 25200.0, 1512.0, 56.0, 1.0,
+    ];
+    const B9: [f64; 10] = [
+        17643225600.0,
+        8821612800.0,
+        2075673600.0,
+        302702400.0,
+        30270240.0,
+        2162160.0,
+        110880.0,
+        3960.0,
+        90.0,
+        1.0,
+    ];
+    const B13: [f64; 14] = [
+        64764752532480000.0,
+        32382376266240000.0,
+        7771770303897600.0,
+        1187353796428800.0,
+        129060195264000.0,
+        10559470521600.0,
+        670442572800.0,
+        33522128640.0,
+        1323241920.0,
+        40840800.0,
+        960960.0,
+        16380.0,
+        182.0,
+        1.0,
+    ];
+    let small: [(f64, &[f64]); 4] = [
+        (1.495585217958292e-2, &B3),
+        (2.539_398_330_063_23e-1, &B5),
+        (9.504178996162932e-1, &B7),
+        (2.097847961257068, &B9),
+    ];
+    for (theta, b) in small {
+        if norm1 <= theta {
+            let (u, v) = pade_uv_low(a, b, &ident);
+            return pade_solve(&u, &v);
+        }
+    }
+    const THETA13: f64 = 5.371920351148152;
+    let s = if norm1 > THETA13 {
+        (norm1 / THETA13).log2().ceil().max(0.0) as i32
+    } else {
+        0
+    };
+    let a_s = a * 2f64.powi(-s);
+    let b = &B13;
+    let a2 = &a_s * &a_s;
+    let a4 = &a2 * &a2;
+    let a6 = &a4 * &a2;
+    let u_inner = &a6 * (&a6 * b[13] + &a4 * b[11] + &a2 * b[9])
+        + &a6 * b[7]
+        + &a4 * b[5]
+        + &a2 * b[3]
+        + &ident * b[1];
+    let u = &a_s * u_inner;
+    let v = &a6 * (&a6 * b[12] + &a4 * b[10] + &a2 * b[8])
+        + &a6 * b[6]
+        + &a4 * b[4]
+        + &a2 * b[2]
+        + &ident * b[0];
+    let mut r = pade_solve(&u, &v);
+    for _ in 0..s {
+        r = &r * &r;
+    }
+    r
+}
+
+fn pade_uv_low(a: &DMatrix<f64>, b: &[f64], ident: &DMatrix<f64>) -> (DMatrix<f64>, DMatrix<f64>) {
+    let m = b.len() - 1;
+    let a2 = a * a;
+    let mut u_inner = ident * b[1];
+    let mut v = ident * b[0];
+    let mut p = ident.clone();
+    let mut k = 2;
+    while k <= m {
+        p = &p * &a2;
+        v += &p * b[k];
+        if k < m {
+            u_inner += &p * b[k + 1];
+        }
+        k += 2;
+    }
+    (a * u_inner, v)
+}
+
+fn pade_solve(u: &DMatrix<f64>, v: &DMatrix<f64>) -> DMatrix<f64> {
+    let lhs = v - u;
+    let rhs = v + u;
+    lhs.lu()
+        .solve(&rhs)
+        .unwrap_or_else(|| DMatrix::from_element(u.nrows(), u.ncols(), f64::NAN))
+}
+
+/// Induced 1-norm (maximum absolute column sum).
+pub fn norm_1(a: &DMatrix<f64>) -> f64 {
+    a.column_iter()
+        .map(|c| c.iter().map(|v| v.abs()).sum::<f64>())
+        .fold(0.0, f64::max)
+}
+
+/// Diagonal similarity balancing (Parlett–Reinsch, powers of two, as LAPACK
+/// `gebal` without permutations): returns `(T⁻¹ A T, d)` with `T = diag(d)`.
+/// Eigenvalues are unchanged and their numerical computation is better
+/// conditioned.
+pub fn balance(a: &DMatrix<f64>) -> (DMatrix<f64>, DVector<f64>) {
+    let n = a.nrows();
+    let mut m = a.clone();
+    let mut d = DVector::from_element(n, 1.0);
+    if n < 2 {
+        return (m, d);
+    }
+    for _sweep in 0..100 {
+        let mut converged = true;
+        for i in 0..n {
+            let mut c = 0.0;
+            let mut r = 0.0;
+            for j in 0..n {
+                if j != i {
+                    c += m[(j, i)].abs();
+                    r += m[(i, j)].abs();
+                }
+            }
+            if c == 0.0 || r == 0.0 || !c.is_finite() || !r.is_finite() {
+                continue;
+            }
+            let s = c + r;
+            let mut f = 1.0;
+            let g = r / 2.0;
+            while c < g && f < 1e150 {
+                f *= 2.0;
+                c *= 4.0;
+            }
+            let g = r * 2.0;
+            while c >= g && f > 1e-150 {
+                f /= 2.0;
+                c /= 4.0;
+            }
+            if (c + r) / f < 0.95 * s {
+                converged = false;
+                d[i] *= f;
+                // A <- T^-1 A T: row i divided by f, column i multiplied by f.
+                for j in 0..n {
+                    m[(i, j)] /= f;
+                }
+                for j in 0..n {
+                    m[(j, i)] *= f;
+                }
+            }
+        }
+        if converged {
+            break;
+        }
+    }
+    (m, d)
+}
+
+/// Eigenvalues of a real square matrix (complex, in no particular order).
+///
+/// The matrix is balanced first, then reduced by nalgebra's real Schur
+/// decomposition. Returns NaNs if the QR iteration fails to converge (not observed
+/// on the toolkit's matrices, but reported rather than looping forever).
+pub fn eigvals(a: &DMatrix<f64>) -> Vec<Complex<f64>> {
+    let n = a.nrows();
+    assert!(a.is_square(), "eigvals: matrix must be square");
+    if n == 0 {
+        return Vec::new();
+    }
+    if a.iter().any(|v| !v.is_finite()) {
+        return vec![Complex::new(f64::NAN, f64::NAN); n];
+    }
+    let (b, _) = balance(a);
+    match nalgebra::linalg::Schur::try_new(b.clone(), f64::EPSILON, 10_000 * n.max(1)) {
+        Some(s) => s.complex_eigenvalues().iter().copied().collect(),
+        None => {
+            // Retry with a tiny relative perturbation of the scaling (breaks
+            // exceptional cycles of the shifted QR).
+            let scale = 1.0 + 1e-13;
+            let mut c = b;
+            c[(0, 0)] *= scale;
+            match nalgebra::linalg::Schur::try_new(c, f64::EPSILON * 4.0, 100_000 * n.max(1)) {
+                Some(s) => s.complex_eigenvalues().iter().copied().collect(),
+                None => vec![Complex::new(f64::NAN, f64::NAN); n],
+            }
+        }
+    }
+}
+
+/// Remove leading (highest-power) zero coefficients; an all-zero polynomial
+/// becomes `[0.0]`.
+pub fn poly_trim(p: &[f64]) -> Vec<f64> {
+    match p.iter().position(|&c| c != 0.0) {
+        Some(i) => p[i..].to_vec(),
+        None => vec![0.0],
+    }
+}
+
+/// Evaluate a real polynomial (descending powers) at a complex point (Horner).
+pub fn polyval(p: &[f64], x: Complex<f64>) -> Complex<f64> {
+    p.iter().fold(Complex::new(0.0, 0.0), |acc, &c| acc * x + c)
+}
+
+/// Product of two polynomials (descending powers).
+pub fn polymul(a: &[f64], b: &[f64]) -> Vec<f64> {
+    if a.is_empty() || b.is_empty() {
+        return Vec::new();
+    }
+    let mut out = vec![0.0; a.len() + b.len() - 1];
+    for (i, &x) in a.iter().enumerate() {
+        for (j, &y) in b.iter().enumerate() {
+            out[i + j] += x * y;
+        }
+    }
+    out
+}
+
+/// Sum of two polynomials (descending powers, aligned at the constant term).
+pub fn polyadd(a: &[f64], b: &[f64]) -> Vec<f64> {
+    let n = a.len().max(b.len());
+    let mut out = vec![0.0; n];
+    for (i, &x) in a.iter().rev().enumerate() {
+        out[n - 1 - i] += x;
+    }
+    for (i, &x) in b.iter().rev().enumerate() {
+        out[n - 1 - i] += x;
+    }
+    out
+}
+
+/// Monic real polynomial with the given roots (complex roots must come in
+/// conjugate pairs; imaginary round-off of the coefficients is dropped).
+pub fn poly_from_roots(roots: &[Complex<f64>]) -> Vec<f64> {
+    let mut c = vec![Complex::new(1.0, 0.0)];
+    for &r in roots {
+        let mut next = vec![Complex::new(0.0, 0.0); c.len() + 1];
+        for (i, &ci) in c.iter().enumerate() {
+            next[i] += ci;
+            next[i + 1] -= ci * r;
+        }
+        c = next;
+    }
+    c.iter().map(|z| z.re).collect()
+}
+
+/// Roots of a real polynomial (descending powers) as eigenvalues of its
+/// (balanced) companion matrix, like numpy's `roots`. Leading zeros are ignored;
+/// trailing zeros give roots at 0.
+pub fn roots(p: &[f64]) -> Vec<Complex<f64>> {
+    let p = poly_trim(p);
+    let n = p.len() - 1;
+    if n == 0 {
+        return Vec::new();
+    }
+    let mut comp = DMatrix::<f64>::zeros(n, n);
+    for j in 0..n {
+        comp[(0, j)] = -p[j + 1] / p[0];
+    }
+    for i in 1..n {
+        comp[(i, i - 1)] = 1.0;
+    }
+    eigvals(&comp)
+}
+
+/// Sort complex numbers into conjugate pairs: returns the real ones (imaginary
+/// part below `tol`·(1+|z|), imaginary part zeroed) and one member (positive
+/// imaginary part) of each pair.
+pub fn split_conjugates(z: &[Complex<f64>], tol: f64) -> (Vec<f64>, Vec<Complex<f64>>) {
+    let mut reals = Vec::new();
+    let mut pos = Vec::new();
+    for &v in z {
+        if v.im.abs() <= tol * (1.0 + v.norm()) {
+            reals.push(v.re);
+        } else if v.im > 0.0 {
+            pos.push(v);
+        }
+    }
+    (reals, pos)
+}
+
+/// Complex linear solve `M X = R` for a complex square `M`.
+pub fn solve_complex(
+    m: DMatrix<Complex<f64>>,
+    r: &DMatrix<Complex<f64>>,
+) -> Option<DMatrix<Complex<f64>>> {
+    m.lu().solve(r)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn close(a: &DMatrix<f64>, b: &DMatrix<f64>, tol: f64) -> bool {
+        (a - b).amax() <= tol * (1.0 + b.amax())
+    }
+
+    #[test]
+    fn expm_rotation_matches_closed_form() {
+        for &w in &[0.1, 1.0, 3.0, 10.0, 100.0, 1234.5] {
+            let a = DMatrix::from_row_slice(2, 2, &[0.0, -w, w, 0.0]);
+            let e = expm(&a);
+            let r = DMatrix::from_row_slice(2, 2, &[w.cos(), -w.sin(), w.sin(), w.cos()]);
+            assert!(close(&e, &r, 1e-11), "w={w}: {e} vs {r}");
+        }
+    }
+
+    #[test]
+    fn expm_diagonal_and_nilpotent() {
+        for &s in &[1e-4, 0.01, 0.2, 0.9, 2.0, 5.0, 40.0] {
+            let a = DMatrix::from_diagonal(&DVector::from_vec(vec![-s, s, 0.5 * s, 0.0]));
+            let e = expm(&a);
+            for i in 0..4 {
+                let want = a[(i, i)].exp();
+                assert!((e[(i, i)] - want).abs() <= 1e-13 * want.max(1.0), "s={s}");
+            }
+            // Nilpotent N (3x3 upper shift times s): e^N = I + N + N²/2.
+            let n = DMatrix::from_row_slice(3, 3, &[0.0, s, 0.0, 0.0, 0.0, s, 0.0, 0.0, 0.0]);
+            let want = DMatrix::identity(3, 3) + &n + &n * &n * 0.5;
+            assert!(close(&expm(&n), &want, 1e-13), "s={s}");
+        }
+    }
+
+    #[test]
+    fn expm_agrees_with_nalgebra_and_taylor() {
+        let mut rng = crate::rng::Rng::new(7);
+        for trial in 0..30 {
+            let n = 1 + trial % 6;
+            let scale = [0.01, 0.3, 1.0, 4.0, 20.0][trial % 5];
+            let a = DMatrix::from_fn(n, n, |_, _| scale * (rng.uniform() * 2.0 - 1.0));
+            let e = expm(&a);
+            let reference = a.exp();
+            assert!(close(&e, &reference, 1e-9), "trial {trial}");
+            // e^A e^-A = I (well conditioned only for moderate norms)
+            if scale > 4.0 {
+                continue;
+            }
+            let prod = &e * expm(&(-&a));
+            assert!(
+                close(&prod, &DMatrix::identity(n, n), 1e-8),
+                "trial {trial}"
+            );
+        }
+    }
+
+    #[test]
+    fn roots_and_poly_round_trip() {
+        let r = roots(&[1.0, -6.0, 11.0, -6.0]);
+        let mut re: Vec<f64> = r.iter().map(|z| z.re).collect();
+        re.sort_by(|a, b| a.partial_cmp(b).unwrap());
+        for (x, want) in re.iter().zip([1.0, 2.0, 3.0]) {
+            assert!((x - want).abs() < 1e-10);
+        }
+        let z = [
+            Complex::new(-0.3, 0.8),
+            Complex::new(-0.3, -0.8),
+            Complex::new(0.5, 0.0),
+        ];
+        let p = poly_from_roots(&z);
+        for &zi in &z {
+            assert!(polyval(&p, zi).norm() < 1e-14);
+        }
+        assert_eq!(polymul(&[1.0, 1.0], &[1.0, -1.0]), vec![1.0, 0.0, -1.0]);
+        assert_eq!(polyadd(&[1.0, 0.0, 0.0], &[2.0, 3.0]), vec![1.0, 2.0, 3.0]);
+        assert_eq!(poly_trim(&[0.0, 0.0, 2.0, 1.0]), vec![2.0, 1.0]);
+    }
+
+    #[test]
+    fn balance_preserves_eigenvalues() {
+        let a = DMatrix::from_row_slice(3, 3, &[1.0, 1e6, 0.0, 1e-6, 2.0, 1e5, 0.0, 1e-5, 3.0]);
+        let (b, d) = balance(&a);
+        let t = DMatrix::from_diagonal(&d);
+        let back = &t * &b * t.try_inverse().unwrap();
+        assert!(close(&back, &a, 1e-14));
+        assert!(b.amax() < a.amax());
+        let mut ev: Vec<f64> = eigvals(&a).iter().map(|z| z.re).collect();
+        ev.sort_by(|x, y| x.partial_cmp(y).unwrap());
+        let tr: f64 = ev.iter().sum();
+        assert!((tr - 6.0).abs() < 1e-9);
+    }
+}

@@ -1,0 +1,303 @@
+//! Time-domain simulation of discrete state-space models: the allocation-free
+//! [`SsStepper`] for real-time use, and whole-sequence helpers ([`lsim`],
+//! [`step_response`], [`impulse`]).
+
+use super::{LtiError, StateSpace};
+use nalgebra::{DMatrix, DVector, DVectorView, DVectorViewMut};
+
+/// Steps a discrete model x\[k+1\] = A x\[k\] + B u\[k\], y\[k\] = C x\[k\] + D u\[k\] with
+/// preallocated buffers: [`output`](Self::output), [`update`](Self::update) and
+/// [`step`](Self::step) never allocate.
+///
+/// ```
+/// use nanomotion_core::lti::{SsStepper, StateSpace};
+/// use nalgebra::DMatrix;
+/// // y[k] = 0.5 y[k-1] + u[k-1]
+/// let sys = StateSpace::new(
+///     DMatrix::from_element(1, 1, 0.5), DMatrix::from_element(1, 1, 1.0),
+///     DMatrix::from_element(1, 1, 1.0), DMatrix::zeros(1, 1), Some(1e-3)).unwrap();
+/// let mut s = SsStepper::new(&sys).unwrap();
+/// let ys: Vec<f64> = (0..3).map(|_| s.step_siso(1.0)).collect();
+/// assert_eq!(ys, vec![0.0, 1.0, 1.5]);
+/// ```
+#[derive(Debug, Clone, PartialEq)]
+pub struct SsStepper {
+    a: DMatrix<f64>,
+    b: DMatrix<f64>,
+    c: DMatrix<f64>,
+    d: DMatrix<f64>,
+    feedthrough: bool,
+    x: DVector<f64>,
+    x_next: DVector<f64>,
+}
+
+impl SsStepper {
+    /// A stepper for the discrete model `sys`, starting from x = 0.
+    pub fn new(sys: &StateSpace) -> Result<Self, LtiError> {
+        if sys.dt.is_none() {
+            return Err(LtiError::Domain(
+                "SsStepper needs a discrete model: discretise it with c2d first".into(),
+            ));
+        }
+        let n = sys.nstates();
+        Ok(Self {
+            a: sys.a.clone(),
+            b: sys.b.clone(),
+            c: sys.c.clone(),
+            d: sys.d.clone(),
+            feedthrough: sys.has_feedthrough(),
+            x: DVector::zeros(n),
+            x_next: DVector::zeros(n),
+        })
+    }
+
+    /// Number of states.
+    pub fn nstates(&self) -> usize {
+        self.x.len()
+    }
+    /// Number of inputs.
+    pub fn ninputs(&self) -> usize {
+        self.b.ncols()
+    }
+    /// Number of outputs.
+    pub fn noutputs(&self) -> usize {
+        self.c.nrows()
+    }
+    /// Whether y\[k\] depends on u\[k\] (D ≠ 0).
+    pub fn has_feedthrough(&self) -> bool {
+        self.feedthrough
+    }
+
+    /// Write y = C x + D u of the current sample. `u` may be empty when the model
+    /// has no feed-through. Does not allocate.
+    ///
+    /// # Panics
+    /// If `y` is not `noutputs()` long, or `u` has the wrong length while D ≠ 0.
+    pub fn output(&self, u: &[f64], y: &mut [f64]) {
+        let p = self.noutputs();
+        let mut yv = DVectorViewMut::from_slice(y, p);
+        if self.x.is_empty() {
+            yv.fill(0.0);
+        } else {
+            yv.gemv(1.0, &self.c, &self.x, 0.0);
+        }
+        if self.feedthrough {
+            let uv = DVectorView::from_slice(u, self.ninputs());
+            yv.gemv(1.0, &self.d, &uv, 1.0);
+        }
+    }
+
+    /// Advance the state: x ← A x + B u. Does not allocate.
+    pub fn update(&mut self, u: &[f64]) {
+        if self.x.is_empty() {
+            return;
+        }
+        let uv = DVectorView::from_slice(u, self.ninputs());
+        self.x_next.gemv(1.0, &self.a, &self.x, 0.0);
+        self.x_next.gemv(1.0, &self.b, &uv, 1.0);
+        std::mem::swap(&mut self.x, &mut self.x_next);
+    }
+
+    /// One full sample: [`output`](Self::output) then [`update`](Self::update).
+    pub fn step(&mut self, u: &[f64], y: &mut [f64]) {
+        self.output(u, y);
+        self.update(u);
+    }
+
+    /// One sample of a single-input single-output model.
+    pub fn step_siso(&mut self, u: f64) -> f64 {
+        let mut y = [0.0];
+        self.step(&[u], &mut y);
+        y[0]
+    }
+
+    /// Set the state to zero.
+    pub fn reset(&mut self) {
+        self.x.fill(0.0);
+    }
+
+    /// The current state x\[k\].
+    pub fn state(&self) -> &[f64] {
+        self.x.as_slice()
+    }
+
+    /// Overwrite the state.
+    ///
+    /// # Panics
+    /// If `x` is not `nstates()` long.
+    pub fn set_state(&mut self, x: &[f64]) {
+        self.x.copy_from_slice(x);
+    }
+
+    /// Set the state to the steady state for a constant input `u`:
+    /// x = (I − A)⁻¹ B u (fails if A has an eigenvalue at 1, e.g. an
+    /// integrator). Allocates; call at build time.
+    pub fn set_steady_state(&mut self, u: &[f64]) -> Result<(), LtiError> {
+        let n = self.nstates();
+        let m = DMatrix::<f64>::identity(n, n) - &self.a;
+        let rhs = &self.b * DVector::from_column_slice(u);
+        let x = m
+            .lu()
+            .solve(&rhs)
+            .ok_or_else(|| LtiError::Singular("I − A is singular (pole at z = 1)".into()))?;
+        self.x.copy_from(&x);
+        Ok(())
+    }
+}
+
+/// Simulate a discrete model from zero state (or `x0`) for the input sequence `u`
+/// (one row per sample, m columns); returns the outputs (one row per sample, p
+/// columns). python-control `forced_response` for discrete systems.
+pub fn lsim(
+    sys: &StateSpace,
+    u: &DMatrix<f64>,
+    x0: Option<&[f64]>,
+) -> Result<DMatrix<f64>, LtiError> {
+    if u.ncols() != sys.ninputs() {
+        return Err(LtiError::Dimension(format!(
+            "u has {} columns, system has {} inputs",
+            u.ncols(),
+            sys.ninputs()
+        )));
+    }
+    let mut s = SsStepper::new(sys)?;
+    if let Some(x0) = x0 {
+        if x0.len() != sys.nstates() {
+            return Err(LtiError::Dimension(format!(
+                "x0 has {} entries, system has {} states",
+                x0.len(),
+                sys.nstates()
+            )));
+        }
+        s.set_state(x0);
+    }
+    let mut y = DMatrix::zeros(u.nrows(), sys.noutputs());
+    let mut ui = vec![0.0; sys.ninputs()];
+    let mut yi = vec![0.0; sys.noutputs()];
+    for k in 0..u.nrows() {
+        for (j, v) in ui.iter_mut().enumerate() {
+            *v = u[(k, j)];
+        }
+        s.step(&ui, &mut yi);
+        for (j, v) in yi.iter().enumerate() {
+            y[(k, j)] = *v;
+        }
+    }
+    Ok(y)
+}
+
+/// Simulate the (0, 0) channel of a discrete model for a scalar input sequence.
+pub fn lsim_siso(sys: &StateSpace, u: &[f64]) -> Result<Vec<f64>, LtiError> {
+    let mut s = SsStepper::new(sys)?;
+    let mut uu = vec![0.0; sys.ninputs()];
+    let mut y = vec![0.0; sys.noutputs()];
+    Ok(u.iter()
+        .map(|&v| {
+            if !uu.is_empty() {
+                uu[0] = v;
+            }
+            s.step(&uu, &mut y);
+            y[0]
+        })
+        .collect())
+}
+
+/// Unit-step response (first input → first output) over `n` samples, from zero
+/// state: y\[k\] for u\[k\] = 1, k ≥ 0.
+pub fn step_response(sys: &StateSpace, n: usize) -> Result<Vec<f64>, LtiError> {
+    lsim_siso(sys, &vec![1.0; n])
+}
+
+/// Unit-pulse response (first input → first output) over `n` samples: the
+/// Markov parameters D, CB, CAB, ... (u\[0\] = 1, u\[k>0\] = 0).
+pub fn impulse(sys: &StateSpace, n: usize) -> Result<Vec<f64>, LtiError> {
+    let mut u = vec![0.0; n];
+    if n > 0 {
+        u[0] = 1.0;
+    }
+    lsim_siso(sys, &u)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::lti::TransferFunction;
+
+    #[test]
+    fn impulse_is_markov_parameters() {
+        let tf =
+            TransferFunction::new(vec![0.5, 0.2, 0.1], vec![1.0, -0.9, 0.2], Some(0.1)).unwrap();
+        let sys = tf.to_ss().unwrap();
+        let h = impulse(&sys, 6).unwrap();
+        // Long division of num/den in z⁻¹: h0 = 0.5, h1 = 0.2 + 0.9·0.5, h_k = 0.9 h_{k-1} − 0.2 h_{k-2} (+ b_k)
+        let mut want = vec![0.5, 0.2 + 0.45];
+        want.push(0.1 + 0.9 * want[1] - 0.2 * want[0]);
+        for k in 3..6 {
+            want.push(0.9 * want[k - 1] - 0.2 * want[k - 2]);
+        }
+        for (a, b) in h.iter().zip(&want) {
+            assert!((a - b).abs() < 1e-14, "{h:?} vs {want:?}");
+        }
+        let s = step_response(&sys, 400).unwrap();
+        assert!((s[399] - tf.dcgain()).abs() < 1e-12);
+    }
+
+    #[test]
+    fn stepper_does_not_allocate_and_matches_lsim() {
+        let mut rng = crate::rng::Rng::new(5);
+        let (n, m, p) = (4, 2, 3);
+        let a = DMatrix::from_fn(n, n, |_, _| rng.uniform_in(-0.4, 0.4));
+        let sys = StateSpace::new(
+            a,
+            DMatrix::from_fn(n, m, |_, _| rng.uniform_in(-1.0, 1.0)),
+            DMatrix::from_fn(p, n, |_, _| rng.uniform_in(-1.0, 1.0)),
+            DMatrix::from_fn(p, m, |_, _| rng.uniform_in(-1.0, 1.0)),
+            Some(1e-3),
+        )
+        .unwrap();
+        let u = DMatrix::from_fn(50, m, |_, _| rng.normal());
+        let y = lsim(&sys, &u, None).unwrap();
+        let mut s = SsStepper::new(&sys).unwrap();
+        let mut yk = [0.0; 3];
+        let mut uk = [0.0; 2];
+        let mut x = DVector::<f64>::zeros(n);
+        let info = allocation_counter::measure(|| {
+            for k in 0..50 {
+                uk[0] = u[(k, 0)];
+                uk[1] = u[(k, 1)];
+                s.step(&uk, &mut yk);
+                for j in 0..p {
+                    assert!((yk[j] - y[(k, j)]).abs() < 1e-14);
+                }
+            }
+        });
+        assert_eq!(info.count_total, 0, "SsStepper allocated");
+        // Independent recursion with allocating nalgebra arithmetic.
+        let mut last = DVector::zeros(p);
+        for k in 0..50 {
+            let uk = DVector::from_fn(m, |j, _| u[(k, j)]);
+            last = &sys.c * &x + &sys.d * &uk;
+            x = &sys.a * &x + &sys.b * &uk;
+        }
+        for j in 0..p {
+            assert!((last[j] - y[(49, j)]).abs() < 1e-12);
+        }
+    }
+
+    #[test]
+    fn steady_state_initialisation() {
+        let tf = TransferFunction::new(vec![0.3], vec![1.0, -0.7], Some(1.0)).unwrap();
+        let mut s = SsStepper::new(&tf.to_ss().unwrap()).unwrap();
+        s.set_steady_state(&[2.0]).unwrap();
+        assert!((s.step_siso(2.0) - 2.0).abs() < 1e-14);
+        assert!(
+            SsStepper::new(
+                &TransferFunction::new(vec![1.0], vec![1.0, 1.0], None)
+                    .unwrap()
+                    .to_ss()
+                    .unwrap()
+            )
+            .is_err()
+        );
+    }
+}
