@@ -242,7 +242,7 @@ pub fn block_docs() -> Vec<&'static BlockDoc> {
 /// typetag does not expose its registry, so this asks it: deserialising an unknown
 /// tag makes it list the known ones.
 pub fn registered_types() -> Vec<String> {
-    let probe = "type: \"\u{1}no-such-block\"\n";
+    let probe = "type: no_such_block_zz\n";
     match crate::yaml::from_str::<Box<dyn Block>>(probe, "probe") {
         Ok(_) => Vec::new(),
         Err(e) => parse_expected_list(&e.to_string()),

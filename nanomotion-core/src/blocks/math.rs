@@ -1,1 +1,755 @@
-//! (in progress)
+//! Arithmetic and routing blocks: `gain`, `sum`, `product`, `saturation`, `deadzone`,
+//! `mux`, `demux`.
+//!
+//! All of them are memoryless (direct feed-through, no state). The linear ones
+//! (`gain`, `sum`, `mux`, `demux`) report their static [`StateSpace`] (no states,
+//! D matrix only) through [`Block::lti`], so loop analysis sees through them.
+//!
+//! ```
+//! use nanomotion_core::blocks::math::{Gain, Sum};
+//! let g = Gain::new(2.0);
+//! let mut y = [0.0];
+//! g.apply(&[1.5], &mut y);
+//! assert_eq!(y, [3.0]);
+//!
+//! let s = Sum::new("+-").unwrap();           // r − y
+//! s.apply(&[5.0, 2.0], &mut y);
+//! assert_eq!(y, [3.0]);
+//! ```
+
+use crate::block::check;
+use crate::lti::StateSpace;
+use crate::{Block, BlockDoc, BuildContext, ParamDoc, ParamError, Port, Role, Tick};
+use nalgebra::DMatrix;
+use serde::{Deserialize, Serialize};
+
+fn one() -> usize {
+    1
+}
+
+fn two() -> usize {
+    2
+}
+
+/// A memoryless system y = D u as a [`StateSpace`] without states; discrete with
+/// period `dt` if the block was built (`dt > 0`).
+pub(crate) fn static_ss(d: DMatrix<f64>, dt: f64) -> StateSpace {
+    let (p, m) = d.shape();
+    StateSpace {
+        a: DMatrix::zeros(0, 0),
+        b: DMatrix::zeros(0, m),
+        c: DMatrix::zeros(p, 0),
+        d,
+        dt: (dt > 0.0).then_some(dt),
+    }
+}
+
+/// Ports `prefix0`, `prefix1`, ... with the given widths.
+fn numbered_ports(prefix: &str, widths: impl IntoIterator<Item = usize>) -> Vec<Port> {
+    widths
+        .into_iter()
+        .enumerate()
+        .map(|(i, w)| Port::new(format!("{prefix}{i}"), w))
+        .collect()
+}
+
+// ---------------------------------------------------------------------------------
+// gain
+// ---------------------------------------------------------------------------------
+
+/// `gain`: y = k·u, element-wise on a vector of width `n`.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Gain {
+    /// Gain k (unit of y per unit of u).
+    pub k: f64,
+    /// Signal width n (YAML `width`, default 1).
+    #[serde(default = "one")]
+    pub width: usize,
+    #[serde(skip)]
+    dt: f64,
+}
+
+impl Gain {
+    /// A scalar gain `k`.
+    pub fn new(k: f64) -> Self {
+        Self::with_width(k, 1)
+    }
+    /// A gain `k` applied to each of `n` channels.
+    pub fn with_width(k: f64, n: usize) -> Self {
+        Self {
+            k,
+            width: n,
+            dt: 0.0,
+        }
+    }
+    /// y = k·u.
+    pub fn apply(&self, u: &[f64], y: &mut [f64]) {
+        for (yi, ui) in y.iter_mut().zip(u) {
+            *yi = self.k * ui;
+        }
+    }
+}
+
+#[typetag::serde(name = "gain")]
+impl Block for Gain {
+    fn inputs(&self) -> Vec<Port> {
+        vec![Port::new("u", self.width)]
+    }
+    fn outputs(&self) -> Vec<Port> {
+        vec![Port::new("y", self.width)]
+    }
+    fn build(&mut self, ctx: &BuildContext) -> Result<(), ParamError> {
+        check::finite("k", self.k)?;
+        check::at_least_one("width", self.width)?;
+        self.dt = ctx.dt;
+        Ok(())
+    }
+    fn output(&mut self, _tick: Tick, u: &[f64], y: &mut [f64]) {
+        self.apply(u, y);
+    }
+    fn lti(&self) -> Option<StateSpace> {
+        Some(static_ss(
+            DMatrix::identity(self.width, self.width) * self.k,
+            self.dt,
+        ))
+    }
+}
+
+crate::submit_block_doc! {
+    BlockDoc {
+        type_name: "gain",
+        role: Role::Math,
+        summary: "y = k·u, element-wise",
+        params: &[
+            ParamDoc { name: "k", doc: "gain (unit of y per unit of u)", default: None },
+            ParamDoc { name: "width", doc: "signal width", default: Some("1") },
+        ],
+        ports: "u[n] -> y[n]",
+    }
+}
+
+// ---------------------------------------------------------------------------------
+// sum
+// ---------------------------------------------------------------------------------
+
+/// `sum`: y = Σᵢ sᵢ·inᵢ with signs sᵢ = ±1 given as a string (`"+-"` gives
+/// y = in0 − in1, the error of a feedback loop).
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Sum {
+    /// One `+` or `-` per input, in port order (`in0`, `in1`, ...).
+    pub signs: String,
+    /// Width n of every input and of the output (YAML `width`, default 1).
+    #[serde(default = "one")]
+    pub width: usize,
+    #[serde(skip)]
+    gains: Vec<f64>,
+    #[serde(skip)]
+    dt: f64,
+}
+
+impl Sum {
+    /// A scalar sum with the given signs, e.g. `"+-"`.
+    pub fn new(signs: &str) -> Result<Self, ParamError> {
+        Self::with_width(signs, 1)
+    }
+    /// A sum of vectors of width `n`.
+    pub fn with_width(signs: &str, n: usize) -> Result<Self, ParamError> {
+        let mut s = Self {
+            signs: signs.to_string(),
+            width: n,
+            gains: Vec::new(),
+            dt: 0.0,
+        };
+        s.parse()?;
+        Ok(s)
+    }
+    fn parse(&mut self) -> Result<(), ParamError> {
+        check::at_least_one("width", self.width)?;
+        let mut gains = Vec::with_capacity(self.signs.len());
+        for (i, c) in self.signs.chars().enumerate() {
+            gains.push(match c {
+                '+' => 1.0,
+                '-' => -1.0,
+                _ => {
+                    return Err(ParamError::new(
+                        "signs",
+                        format!("character {i} is `{c}`"),
+                        "use only `+` and `-`, one per input, e.g. \"+-\"",
+                    ));
+                }
+            });
+        }
+        if gains.is_empty() {
+            return Err(ParamError::new(
+                "signs",
+                "is empty",
+                "give one `+` or `-` per input, e.g. \"+-\"",
+            ));
+        }
+        self.gains = gains;
+        Ok(())
+    }
+    /// y = Σᵢ sᵢ·inᵢ; `u` holds the inputs concatenated (width n each).
+    pub fn apply(&self, u: &[f64], y: &mut [f64]) {
+        let n = self.width;
+        y.fill(0.0);
+        for (input, &g) in u.chunks_exact(n.max(1)).zip(&self.gains) {
+            for (yi, ui) in y.iter_mut().zip(input) {
+                *yi += g * ui;
+            }
+        }
+    }
+}
+
+#[typetag::serde(name = "sum")]
+impl Block for Sum {
+    fn inputs(&self) -> Vec<Port> {
+        numbered_ports("in", self.signs.chars().map(|_| self.width))
+    }
+    fn outputs(&self) -> Vec<Port> {
+        vec![Port::new("y", self.width)]
+    }
+    fn build(&mut self, ctx: &BuildContext) -> Result<(), ParamError> {
+        self.parse()?;
+        self.dt = ctx.dt;
+        Ok(())
+    }
+    fn output(&mut self, _tick: Tick, u: &[f64], y: &mut [f64]) {
+        self.apply(u, y);
+    }
+    fn lti(&self) -> Option<StateSpace> {
+        let n = self.width;
+        let mut d = DMatrix::zeros(n, n * self.gains.len());
+        for (j, &g) in self.gains.iter().enumerate() {
+            for i in 0..n {
+                d[(i, j * n + i)] = g;
+            }
+        }
+        Some(static_ss(d, self.dt))
+    }
+}
+
+crate::submit_block_doc! {
+    BlockDoc {
+        type_name: "sum",
+        role: Role::Math,
+        summary: "y = Σ ±in_i with signs from a string such as \"+-\" (r − y)",
+        params: &[
+            ParamDoc { name: "signs", doc: "one `+` or `-` per input in0, in1, ...", default: None },
+            ParamDoc { name: "width", doc: "width of every input and the output", default: Some("1") },
+        ],
+        ports: "in0[n], in1[n], ... -> y[n]",
+    }
+}
+
+// ---------------------------------------------------------------------------------
+// product
+// ---------------------------------------------------------------------------------
+
+/// `product`: element-wise product y = in0·in1·…  of `factors` inputs of width `n`.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Product {
+    /// Number of inputs multiplied (default 2).
+    #[serde(default = "two")]
+    pub factors: usize,
+    /// Width n of every input and of the output (YAML `width`, default 1).
+    #[serde(default = "one")]
+    pub width: usize,
+}
+
+impl Product {
+    /// The product of `factors` inputs of width `n`.
+    pub fn new(factors: usize, n: usize) -> Self {
+        Self { factors, width: n }
+    }
+    /// y = Π inᵢ element-wise; `u` holds the inputs concatenated.
+    pub fn apply(&self, u: &[f64], y: &mut [f64]) {
+        y.fill(1.0);
+        for input in u.chunks_exact(self.width.max(1)) {
+            for (yi, ui) in y.iter_mut().zip(input) {
+                *yi *= ui;
+            }
+        }
+    }
+}
+
+#[typetag::serde(name = "product")]
+impl Block for Product {
+    fn inputs(&self) -> Vec<Port> {
+        numbered_ports("in", (0..self.factors).map(|_| self.width))
+    }
+    fn outputs(&self) -> Vec<Port> {
+        vec![Port::new("y", self.width)]
+    }
+    fn build(&mut self, _ctx: &BuildContext) -> Result<(), ParamError> {
+        check::at_least_one("factors", self.factors)?;
+        check::at_least_one("width", self.width)
+    }
+    fn output(&mut self, _tick: Tick, u: &[f64], y: &mut [f64]) {
+        self.apply(u, y);
+    }
+}
+
+crate::submit_block_doc! {
+    BlockDoc {
+        type_name: "product",
+        role: Role::Math,
+        summary: "element-wise product y = in0·in1·…",
+        params: &[
+            ParamDoc { name: "factors", doc: "number of inputs", default: Some("2") },
+            ParamDoc { name: "width", doc: "width of every input and the output", default: Some("1") },
+        ],
+        ports: "in0[n], in1[n], ... -> y[n]",
+    }
+}
+
+// ---------------------------------------------------------------------------------
+// saturation
+// ---------------------------------------------------------------------------------
+
+/// `saturation`: y = min(max(u, lower), upper), element-wise. A NaN input passes as
+/// NaN (it is never hidden by the clamp).
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Saturation {
+    /// Lower limit (unit of u).
+    pub lower: f64,
+    /// Upper limit (unit of u), ≥ `lower`.
+    pub upper: f64,
+    /// Signal width n (YAML `width`, default 1).
+    #[serde(default = "one")]
+    pub width: usize,
+}
+
+impl Saturation {
+    /// A scalar saturation to `[lower, upper]`, e.g. the leg voltages `[0, 46]` V.
+    pub fn new(lower: f64, upper: f64) -> Self {
+        Self {
+            lower,
+            upper,
+            width: 1,
+        }
+    }
+    /// One value clamped to `[lower, upper]`.
+    pub fn clamp(&self, u: f64) -> f64 {
+        if u < self.lower {
+            self.lower
+        } else if u > self.upper {
+            self.upper
+        } else {
+            u
+        }
+    }
+    /// y = clamp(u) element-wise.
+    pub fn apply(&self, u: &[f64], y: &mut [f64]) {
+        for (yi, &ui) in y.iter_mut().zip(u) {
+            *yi = self.clamp(ui);
+        }
+    }
+}
+
+#[typetag::serde(name = "saturation")]
+impl Block for Saturation {
+    fn inputs(&self) -> Vec<Port> {
+        vec![Port::new("u", self.width)]
+    }
+    fn outputs(&self) -> Vec<Port> {
+        vec![Port::new("y", self.width)]
+    }
+    fn build(&mut self, _ctx: &BuildContext) -> Result<(), ParamError> {
+        check::ordered("lower", self.lower, "upper", self.upper)?;
+        check::at_least_one("width", self.width)
+    }
+    fn output(&mut self, _tick: Tick, u: &[f64], y: &mut [f64]) {
+        self.apply(u, y);
+    }
+}
+
+crate::submit_block_doc! {
+    BlockDoc {
+        type_name: "saturation",
+        role: Role::Math,
+        summary: "y = min(max(u, lower), upper), element-wise",
+        params: &[
+            ParamDoc { name: "lower", doc: "lower limit (unit of u)", default: None },
+            ParamDoc { name: "upper", doc: "upper limit (unit of u), ≥ lower", default: None },
+            ParamDoc { name: "width", doc: "signal width", default: Some("1") },
+        ],
+        ports: "u[n] -> y[n]",
+    }
+}
+
+// ---------------------------------------------------------------------------------
+// deadzone
+// ---------------------------------------------------------------------------------
+
+/// `deadzone`: y = 0 inside `[lower, upper]`, y = u − upper above it and
+/// y = u − lower below it (continuous, slope 1 outside the zone), element-wise.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Deadzone {
+    /// Start of the dead zone (unit of u).
+    pub lower: f64,
+    /// End of the dead zone (unit of u), ≥ `lower`.
+    pub upper: f64,
+    /// Signal width n (YAML `width`, default 1).
+    #[serde(default = "one")]
+    pub width: usize,
+}
+
+impl Deadzone {
+    /// A scalar dead zone `[lower, upper]`.
+    pub fn new(lower: f64, upper: f64) -> Self {
+        Self {
+            lower,
+            upper,
+            width: 1,
+        }
+    }
+    /// The dead-zone map of one value.
+    pub fn map(&self, u: f64) -> f64 {
+        if u > self.upper {
+            u - self.upper
+        } else if u < self.lower {
+            u - self.lower
+        } else if u.is_nan() {
+            u
+        } else {
+            0.0
+        }
+    }
+}
+
+#[typetag::serde(name = "deadzone")]
+impl Block for Deadzone {
+    fn inputs(&self) -> Vec<Port> {
+        vec![Port::new("u", self.width)]
+    }
+    fn outputs(&self) -> Vec<Port> {
+        vec![Port::new("y", self.width)]
+    }
+    fn build(&mut self, _ctx: &BuildContext) -> Result<(), ParamError> {
+        check::ordered("lower", self.lower, "upper", self.upper)?;
+        check::at_least_one("width", self.width)
+    }
+    fn output(&mut self, _tick: Tick, u: &[f64], y: &mut [f64]) {
+        for (yi, &ui) in y.iter_mut().zip(u) {
+            *yi = self.map(ui);
+        }
+    }
+}
+
+crate::submit_block_doc! {
+    BlockDoc {
+        type_name: "deadzone",
+        role: Role::Math,
+        summary: "zero inside [lower, upper], u − upper above, u − lower below",
+        params: &[
+            ParamDoc { name: "lower", doc: "start of the dead zone (unit of u)", default: None },
+            ParamDoc { name: "upper", doc: "end of the dead zone (unit of u), ≥ lower", default: None },
+            ParamDoc { name: "width", doc: "signal width", default: Some("1") },
+        ],
+        ports: "u[n] -> y[n]",
+    }
+}
+
+// ---------------------------------------------------------------------------------
+// mux / demux
+// ---------------------------------------------------------------------------------
+
+fn check_widths(widths: &[usize]) -> Result<(), ParamError> {
+    if widths.is_empty() {
+        return Err(ParamError::new(
+            "widths",
+            "is empty",
+            "give one width per port, e.g. [1, 1]",
+        ));
+    }
+    match widths.iter().position(|&w| w == 0) {
+        Some(i) => Err(ParamError::new(
+            format!("widths[{i}]"),
+            "is 0",
+            "give widths ≥ 1",
+        )),
+        None => Ok(()),
+    }
+}
+
+/// A selection matrix: identity of size Σ widths (mux and demux only reorder
+/// nothing: both are the identity on the concatenated vector).
+fn identity_ss(widths: &[usize], dt: f64) -> StateSpace {
+    let n: usize = widths.iter().sum();
+    static_ss(DMatrix::identity(n, n), dt)
+}
+
+/// `mux`: concatenates inputs `in0`, `in1`, ... (widths from `widths`) into `y`.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Mux {
+    /// Width of each input, in port order.
+    pub widths: Vec<usize>,
+    #[serde(skip)]
+    dt: f64,
+}
+
+impl Mux {
+    /// A mux of inputs with the given widths.
+    pub fn new(widths: Vec<usize>) -> Self {
+        Self { widths, dt: 0.0 }
+    }
+}
+
+#[typetag::serde(name = "mux")]
+impl Block for Mux {
+    fn inputs(&self) -> Vec<Port> {
+        numbered_ports("in", self.widths.iter().copied())
+    }
+    fn outputs(&self) -> Vec<Port> {
+        vec![Port::new("y", self.widths.iter().sum())]
+    }
+    fn build(&mut self, ctx: &BuildContext) -> Result<(), ParamError> {
+        check_widths(&self.widths)?;
+        self.dt = ctx.dt;
+        Ok(())
+    }
+    fn output(&mut self, _tick: Tick, u: &[f64], y: &mut [f64]) {
+        y.copy_from_slice(u);
+    }
+    fn lti(&self) -> Option<StateSpace> {
+        Some(identity_ss(&self.widths, self.dt))
+    }
+}
+
+crate::submit_block_doc! {
+    BlockDoc {
+        type_name: "mux",
+        role: Role::Math,
+        summary: "concatenate inputs in0, in1, ... into one vector y",
+        params: &[ParamDoc { name: "widths", doc: "width of each input, e.g. [1, 1, 1]", default: None }],
+        ports: "in0[w0], in1[w1], ... -> y[Σw]",
+    }
+}
+
+/// `demux`: splits the input `u` into outputs `y0`, `y1`, ... (widths from `widths`).
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Demux {
+    /// Width of each output, in port order.
+    pub widths: Vec<usize>,
+    #[serde(skip)]
+    dt: f64,
+}
+
+impl Demux {
+    /// A demux into outputs with the given widths.
+    pub fn new(widths: Vec<usize>) -> Self {
+        Self { widths, dt: 0.0 }
+    }
+}
+
+#[typetag::serde(name = "demux")]
+impl Block for Demux {
+    fn inputs(&self) -> Vec<Port> {
+        vec![Port::new("u", self.widths.iter().sum())]
+    }
+    fn outputs(&self) -> Vec<Port> {
+        numbered_ports("y", self.widths.iter().copied())
+    }
+    fn build(&mut self, ctx: &BuildContext) -> Result<(), ParamError> {
+        check_widths(&self.widths)?;
+        self.dt = ctx.dt;
+        Ok(())
+    }
+    fn output(&mut self, _tick: Tick, u: &[f64], y: &mut [f64]) {
+        y.copy_from_slice(u);
+    }
+    fn lti(&self) -> Option<StateSpace> {
+        Some(identity_ss(&self.widths, self.dt))
+    }
+}
+
+crate::submit_block_doc! {
+    BlockDoc {
+        type_name: "demux",
+        role: Role::Math,
+        summary: "split the input vector u into outputs y0, y1, ...",
+        params: &[ParamDoc { name: "widths", doc: "width of each output, e.g. [1, 1, 1]", default: None }],
+        ports: "u[Σw] -> y0[w0], y1[w1], ...",
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn ctx() -> BuildContext {
+        BuildContext::new("t", 1e-3, 0)
+    }
+
+    fn run(b: &mut dyn Block, u: &[f64]) -> Vec<f64> {
+        let w: usize = b.outputs().iter().map(|p| p.width).sum();
+        let mut y = vec![0.0; w];
+        b.output(Tick::new(0, 1e-3), u, &mut y);
+        y
+    }
+
+    /// y = D u from the block's static lti() model.
+    fn lti_apply(b: &dyn Block, u: &[f64]) -> Vec<f64> {
+        let ss = b.lti().unwrap();
+        assert_eq!(ss.a.nrows(), 0);
+        assert_eq!(ss.dt, Some(1e-3));
+        (&ss.d * nalgebra::DVector::from_column_slice(u))
+            .iter()
+            .copied()
+            .collect()
+    }
+
+    #[test]
+    fn gain_scales_each_channel_and_lti_agrees() {
+        let mut g = Gain::with_width(-2.5, 3);
+        g.build(&ctx()).unwrap();
+        let u = [1.0, -4.0, 0.2];
+        assert_eq!(run(&mut g, &u), vec![-2.5, 10.0, -0.5]);
+        assert_eq!(lti_apply(&g, &u), vec![-2.5, 10.0, -0.5]);
+        assert_eq!(Gain::new(f64::NAN).build(&ctx()).unwrap_err().field, "k");
+        assert_eq!(
+            Gain::with_width(1.0, 0).build(&ctx()).unwrap_err().field,
+            "width"
+        );
+    }
+
+    #[test]
+    fn sum_applies_signs_per_port() {
+        let mut s = Sum::with_width("+-+", 2).unwrap();
+        s.build(&ctx()).unwrap();
+        let names: Vec<String> = s.inputs().into_iter().map(|p| p.name).collect();
+        assert_eq!(names, ["in0", "in1", "in2"]);
+        let u = [1.0, 2.0, 10.0, 20.0, 100.0, 200.0];
+        assert_eq!(run(&mut s, &u), vec![91.0, 182.0]);
+        assert_eq!(lti_apply(&s, &u), vec![91.0, 182.0]);
+        let e = Sum::new("+x").unwrap_err();
+        assert_eq!(e.field, "signs");
+        assert!(e.problem.contains("character 1"));
+        assert_eq!(Sum::new("").unwrap_err().field, "signs");
+    }
+
+    #[test]
+    fn product_multiplies_elementwise() {
+        let mut p = Product::new(3, 2);
+        p.build(&ctx()).unwrap();
+        assert_eq!(
+            run(&mut p, &[1.0, 2.0, 3.0, 4.0, 5.0, -6.0]),
+            vec![15.0, -48.0]
+        );
+    }
+
+    #[test]
+    fn saturation_clamps_and_passes_nan() {
+        let mut s = Saturation::new(0.0, 46.0);
+        s.build(&ctx()).unwrap();
+        assert_eq!(run(&mut s, &[-3.0]), vec![0.0]);
+        assert_eq!(run(&mut s, &[12.5]), vec![12.5]);
+        assert_eq!(run(&mut s, &[99.0]), vec![46.0]);
+        assert!(run(&mut s, &[f64::NAN])[0].is_nan());
+        assert_eq!(
+            Saturation::new(1.0, 0.0).build(&ctx()).unwrap_err().field,
+            "lower"
+        );
+        assert_eq!(
+            Saturation::new(0.0, f64::INFINITY)
+                .build(&ctx())
+                .unwrap_err()
+                .field,
+            "upper"
+        );
+    }
+
+    #[test]
+    fn deadzone_is_continuous_with_unit_slope() {
+        let mut d = Deadzone::new(-1.0, 2.0);
+        d.build(&ctx()).unwrap();
+        for (u, y) in [
+            (-3.0, -2.0),
+            (-1.0, 0.0),
+            (0.5, 0.0),
+            (2.0, 0.0),
+            (5.0, 3.0),
+        ] {
+            assert_eq!(run(&mut d, &[u]), vec![y], "u = {u}");
+        }
+        assert_eq!(
+            Deadzone::new(3.0, 2.0).build(&ctx()).unwrap_err().field,
+            "lower"
+        );
+    }
+
+    #[test]
+    fn mux_then_demux_is_identity() {
+        let mut m = Mux::new(vec![1, 2]);
+        let mut d = Demux::new(vec![2, 1]);
+        m.build(&ctx()).unwrap();
+        d.build(&ctx()).unwrap();
+        assert_eq!(m.outputs(), vec![Port::new("y", 3)]);
+        assert_eq!(d.outputs(), vec![Port::new("y0", 2), Port::new("y1", 1)]);
+        let y = run(&mut m, &[1.0, 2.0, 3.0]);
+        assert_eq!(run(&mut d, &y), vec![1.0, 2.0, 3.0]);
+        assert_eq!(lti_apply(&m, &[4.0, 5.0, 6.0]), vec![4.0, 5.0, 6.0]);
+        assert_eq!(Mux::new(vec![]).build(&ctx()).unwrap_err().field, "widths");
+        assert_eq!(
+            Demux::new(vec![1, 0]).build(&ctx()).unwrap_err().field,
+            "widths[1]"
+        );
+    }
+
+    #[test]
+    fn library_blocks_are_registered_and_documented() {
+        let names = [
+            "gain",
+            "sum",
+            "product",
+            "saturation",
+            "deadzone",
+            "mux",
+            "demux", // math
+            "pid",
+            "pi", // control
+            "constant",
+            "step",
+            "constant_velocity",
+            "sinusoid",
+            "triangular_scan",
+            "point_to_point",
+            "white_noise", // sources
+            "quantizer",
+            "measurement_noise", // sensors
+        ];
+        // Ask typetag for its registry with an unknown tag (as
+        // `block::registered_types` does, with a tag the YAML parser accepts).
+        let err = crate::yaml::from_str::<Box<dyn Block>>("type: no_such_block_zz\n", "probe")
+            .unwrap_err();
+        let types = crate::block::parse_expected_list(&err.to_string());
+        let docs = crate::block::block_docs();
+        for name in names {
+            assert!(
+                types.iter().any(|t| t == name),
+                "`{name}` not registered with typetag"
+            );
+            let doc = docs
+                .iter()
+                .find(|d| d.type_name == name)
+                .unwrap_or_else(|| panic!("`{name}` has no BlockDoc"));
+            assert!(!doc.summary.is_empty() && !doc.ports.is_empty());
+        }
+    }
+
+    #[test]
+    fn blocks_load_from_yaml() {
+        let b: Box<dyn Block> = crate::yaml::from_str("type: sum\nsigns: \"+-\"\n", "t").unwrap();
+        assert_eq!(b.inputs().len(), 2);
+        let e = crate::yaml::from_str::<Box<dyn Block>>("type: gain\nk: 1\nkk: 2\n", "t");
+        assert!(e.is_err(), "unknown fields are rejected");
+    }
+}
