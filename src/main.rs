@@ -1,1 +1,213 @@
-fn main() {}
+//! The `nanomotion` command: run, check and inspect YAML controller graphs.
+
+use clap::{Parser, Subcommand};
+use indicatif::{ProgressBar, ProgressStyle};
+use nanomotion::core::block::{block_docs, registered_types};
+use nanomotion::core::graph::GraphSpec;
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::time::{Duration, Instant};
+
+/// Simulate and control nano-motion systems (piezo stages, encoders) from YAML
+/// controller graphs.
+///
+/// A graph names blocks (references, controllers, plants, sensors) by `type:`, wires
+/// their ports, and says what to log and score. See docs/graph-format.md, and
+/// examples/quickstart.yaml for a first loop.
+#[derive(Parser, Debug)]
+#[command(
+    name = "nanomotion",
+    version,
+    about,
+    long_about,
+    arg_required_else_help = true
+)]
+#[command(
+    after_help = "Examples:\n  nanomotion run examples/quickstart.yaml --out out/quickstart\n  nanomotion check examples/quickstart.yaml\n  nanomotion blocks"
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand, Debug)]
+enum Command {
+    /// Run a graph: print a metrics table and write signals (CSV), metrics (JSON)
+    /// and plots (SVG) into the output folder.
+    Run {
+        /// The graph file (YAML).
+        graph: PathBuf,
+        /// Output folder (created if missing).
+        #[arg(long, short, default_value = "out")]
+        out: PathBuf,
+        /// Override the graph's seed.
+        #[arg(long)]
+        seed: Option<u64>,
+        /// Override the graph's duration (s).
+        #[arg(long)]
+        duration: Option<f64>,
+        /// Write no files, print the metrics only.
+        #[arg(long)]
+        no_files: bool,
+    },
+    /// Validate a graph without running it: parse, build every block, resolve ports,
+    /// rates and execution order, and report inserted rate transitions.
+    Check {
+        /// The graph file (YAML).
+        graph: PathBuf,
+    },
+    /// List the registered block types, with their ports and parameters.
+    Blocks {
+        /// Show only types whose name contains this text.
+        filter: Option<String>,
+    },
+}
+
+fn main() -> ExitCode {
+    nanomotion::link_plugins();
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Run {
+            graph,
+            out,
+            seed,
+            duration,
+            no_files,
+        } => run(graph, out, seed, duration, no_files),
+        Command::Check { graph } => check(graph),
+        Command::Blocks { filter } => {
+            blocks(filter.as_deref());
+            Ok(())
+        }
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(msg) => {
+            eprintln!("error: {msg}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+fn load(graph: &PathBuf) -> Result<GraphSpec, String> {
+    GraphSpec::from_file(graph).map_err(|e| e.to_string())
+}
+
+fn check(graph: PathBuf) -> Result<(), String> {
+    let spec = load(&graph)?;
+    let (sched, report) = spec.build().map_err(|e| e.to_string())?;
+    println!("{}: ok", graph.display());
+    println!(
+        "  base rate {} Hz, {} ticks",
+        sched.base_rate_hz(),
+        sched.ticks_total()
+    );
+    println!("  blocks in execution order:");
+    for line in sched.describe() {
+        println!("    {line}");
+    }
+    if report.rate_transitions.is_empty() {
+        println!("  no rate transitions");
+    } else {
+        println!("  rate transitions inserted:");
+        for r in &report.rate_transitions {
+            println!("    {r}");
+        }
+    }
+    Ok(())
+}
+
+fn run(
+    graph: PathBuf,
+    out: PathBuf,
+    seed: Option<u64>,
+    duration: Option<f64>,
+    no_files: bool,
+) -> Result<(), String> {
+    let mut spec = load(&graph)?;
+    if let Some(s) = seed {
+        spec.seed = s;
+    }
+    if let Some(d) = duration {
+        spec.duration_s = d;
+    }
+    let (mut sched, report) = spec.build().map_err(|e| e.to_string())?;
+    for r in &report.rate_transitions {
+        eprintln!("note: rate transition {r}");
+    }
+    let start = Instant::now();
+    let mut bar: Option<ProgressBar> = None;
+    let result = sched.run(|fraction| {
+        // Show a bar only for runs that last more than a second.
+        if bar.is_none() && start.elapsed() > Duration::from_millis(300) && fraction < 0.7 {
+            let b = ProgressBar::new(1000);
+            b.set_style(
+                ProgressStyle::with_template(
+                    "{spinner} simulating [{bar:40}] {percent:>3}% (eta {eta})",
+                )
+                .expect("static template")
+                .progress_chars("=> "),
+            );
+            bar = Some(b);
+        }
+        if let Some(b) = &bar {
+            b.set_position((fraction * 1000.0) as u64);
+        }
+    });
+    if let Some(b) = bar {
+        b.finish_and_clear();
+    }
+    let wall = start.elapsed().as_secs_f64();
+    sched.check_finite().map_err(|e| e.to_string())?;
+    println!(
+        "{}: simulated {:.3} s in {:.3} s ({:.0}x real time)",
+        result
+            .title
+            .as_deref()
+            .unwrap_or(&graph.display().to_string()),
+        result.duration_s,
+        wall,
+        result.duration_s / wall.max(1e-9)
+    );
+    if !result.scores.is_empty() {
+        println!(
+            "{:<32} {:>12} {:>12} {:>12} {:>8}",
+            "signal", "rms", "max |.|", "mean", "from (s)"
+        );
+        for s in &result.scores {
+            println!(
+                "{:<32} {:>12.4e} {:>12.4e} {:>12.4e} {:>8}",
+                s.signal, s.rms, s.max_abs, s.mean, s.from_s
+            );
+        }
+    }
+    if !no_files {
+        let files = nanomotion::output::write_all(&out, &result, &report.rate_transitions)
+            .map_err(|e| e.to_string())?;
+        println!("wrote {} files to {}", files.len(), out.display());
+    }
+    Ok(())
+}
+
+fn blocks(filter: Option<&str>) {
+    let docs = block_docs();
+    let types = registered_types();
+    for t in &types {
+        if filter.is_some_and(|f| !t.contains(f)) {
+            continue;
+        }
+        match docs.iter().find(|d| d.type_name == t) {
+            Some(d) => {
+                println!("{} ({}): {}", d.type_name, d.role.as_str(), d.summary);
+                println!("    ports: {}", d.ports);
+                for p in d.params {
+                    match p.default {
+                        Some(def) => println!("    {:<22} {} [default {def}]", p.name, p.doc),
+                        None => println!("    {:<22} {}", p.name, p.doc),
+                    }
+                }
+            }
+            None => println!("{t}: (no documentation registered)"),
+        }
+    }
+}

@@ -60,7 +60,10 @@ pub struct Port {
 impl Port {
     /// A port named `name` carrying `width` values.
     pub fn new(name: impl Into<String>, width: usize) -> Self {
-        Self { name: name.into(), width }
+        Self {
+            name: name.into(),
+            width,
+        }
     }
 }
 
@@ -78,7 +81,11 @@ pub struct Tick {
 impl Tick {
     /// Tick `k` of a block with period `dt`.
     pub fn new(k: u64, dt: f64) -> Self {
-        Self { k, t: k as f64 * dt, dt }
+        Self {
+            k,
+            t: k as f64 * dt,
+            dt,
+        }
     }
 }
 
@@ -97,7 +104,11 @@ pub struct BuildContext {
 impl BuildContext {
     /// A context for block `name` with period `dt` (s) and seed `seed`.
     pub fn new(name: impl Into<String>, dt: f64, seed: u64) -> Self {
-        Self { name: name.into(), dt, seed }
+        Self {
+            name: name.into(),
+            dt,
+            seed,
+        }
     }
 }
 
@@ -279,7 +290,11 @@ pub mod check {
         if value.is_finite() {
             Ok(())
         } else {
-            Err(ParamError::new(field, format!("is {value}, not a finite number"), "give a finite number"))
+            Err(ParamError::new(
+                field,
+                format!("is {value}, not a finite number"),
+                "give a finite number",
+            ))
         }
     }
     /// Every element of `values` must be finite.
@@ -299,7 +314,11 @@ pub mod check {
         if value > 0.0 {
             Ok(())
         } else {
-            Err(ParamError::new(field, format!("is {value}, must be > 0"), "give a positive value"))
+            Err(ParamError::new(
+                field,
+                format!("is {value}, must be > 0"),
+                "give a positive value",
+            ))
         }
     }
     /// `value` must be finite and ≥ 0.
@@ -308,7 +327,11 @@ pub mod check {
         if value >= 0.0 {
             Ok(())
         } else {
-            Err(ParamError::new(field, format!("is {value}, must be ≥ 0"), "give a non-negative value"))
+            Err(ParamError::new(
+                field,
+                format!("is {value}, must be ≥ 0"),
+                "give a non-negative value",
+            ))
         }
     }
     /// `value` must be finite and in `[lo, hi]`.
@@ -317,7 +340,11 @@ pub mod check {
         if (lo..=hi).contains(&value) {
             Ok(())
         } else {
-            Err(ParamError::new(field, format!("is {value}, outside [{lo}, {hi}]"), format!("give a value in [{lo}, {hi}]")))
+            Err(ParamError::new(
+                field,
+                format!("is {value}, outside [{lo}, {hi}]"),
+                format!("give a value in [{lo}, {hi}]"),
+            ))
         }
     }
     /// `lo` must be ≤ `hi` (both finite).
@@ -364,6 +391,11 @@ mod tests {
         assert!(check::finite("k", f64::NAN).is_err());
         assert!(check::in_range("q", 0.5, 0.0, 1.0).is_ok());
         assert!(check::in_range("q", 1.5, 0.0, 1.0).is_err());
-        assert_eq!(check::all_finite("num", &[1.0, f64::INFINITY]).unwrap_err().field, "num[1]");
+        assert_eq!(
+            check::all_finite("num", &[1.0, f64::INFINITY])
+                .unwrap_err()
+                .field,
+            "num[1]"
+        );
     }
 }

@@ -17,8 +17,16 @@ pub struct ParamError {
 
 impl ParamError {
     /// A new parameter error.
-    pub fn new(field: impl Into<String>, problem: impl Into<String>, fix: impl Into<String>) -> Self {
-        Self { field: field.into(), problem: problem.into(), fix: fix.into() }
+    pub fn new(
+        field: impl Into<String>,
+        problem: impl Into<String>,
+        fix: impl Into<String>,
+    ) -> Self {
+        Self {
+            field: field.into(),
+            problem: problem.into(),
+            fix: fix.into(),
+        }
     }
 }
 
@@ -31,44 +39,105 @@ pub enum GraphError {
     Parse { origin: String, message: String },
     /// A block's parameters are invalid.
     #[error("block `{block}` (type `{type_name}`): {source}")]
-    Param { block: String, type_name: String, #[source] source: ParamError },
+    Param {
+        block: String,
+        type_name: String,
+        #[source]
+        source: ParamError,
+    },
     /// Two blocks share a name.
     #[error("duplicate block name `{name}`: block names must be unique (rename one of them)")]
     DuplicateName { name: String },
     /// A connection names a block that does not exist.
     #[error("connection {index} (`{reference}`): unknown block `{block}`{hint}")]
-    UnknownBlock { index: usize, reference: String, block: String, hint: String },
+    UnknownBlock {
+        index: usize,
+        reference: String,
+        block: String,
+        hint: String,
+    },
     /// A connection names a port the block does not have.
-    #[error("connection {index} (`{reference}`): block `{block}` has no {direction} port `{port}`; its {direction} ports are: {known}")]
-    UnknownPort { index: usize, reference: String, block: String, port: String, direction: &'static str, known: String },
+    #[error(
+        "connection {index} (`{reference}`): block `{block}` has no {direction} port `{port}`; its {direction} ports are: {known}"
+    )]
+    UnknownPort {
+        index: usize,
+        reference: String,
+        block: String,
+        port: String,
+        direction: &'static str,
+        known: String,
+    },
     /// A port reference is not of the form `block.port`.
     #[error("connection {index}: `{reference}` is not a port reference; write it as `block.port`")]
     BadReference { index: usize, reference: String },
     /// The two ends of a connection have different widths.
-    #[error("connection {index} (`{from}` -> `{to}`): width mismatch, `{from}` carries {from_width} values but `{to}` expects {to_width}")]
-    WidthMismatch { index: usize, from: String, to: String, from_width: usize, to_width: usize },
+    #[error(
+        "connection {index} (`{from}` -> `{to}`): width mismatch, `{from}` carries {from_width} values but `{to}` expects {to_width}"
+    )]
+    WidthMismatch {
+        index: usize,
+        from: String,
+        to: String,
+        from_width: usize,
+        to_width: usize,
+    },
     /// An input port is fed by nothing.
     #[error("input `{block}.{port}` is not connected: add a connection `to: {block}.{port}`")]
     Unconnected { block: String, port: String },
     /// An input port is fed twice.
-    #[error("input `{to}` is connected twice (connections {first} and {second}); an input takes exactly one source, use a `sum` block to add signals")]
-    DoubleConnection { to: String, first: usize, second: usize },
+    #[error(
+        "input `{to}` is connected twice (connections {first} and {second}); an input takes exactly one source, use a `sum` block to add signals"
+    )]
+    DoubleConnection {
+        to: String,
+        first: usize,
+        second: usize,
+    },
     /// A block's rate is not an integer divisor of the base rate.
-    #[error("block `{block}`: rate {rate_hz} Hz is not an integer divisor of the base rate {base_rate_hz} Hz (fix: choose base_rate_hz / k for an integer k)")]
-    BadRate { block: String, rate_hz: f64, base_rate_hz: f64 },
+    #[error(
+        "block `{block}`: rate {rate_hz} Hz is not an integer divisor of the base rate {base_rate_hz} Hz (fix: choose base_rate_hz / k for an integer k)"
+    )]
+    BadRate {
+        block: String,
+        rate_hz: f64,
+        base_rate_hz: f64,
+    },
     /// Connecting blocks of different rates while the graph asked for strict rates.
-    #[error("connection {index} (`{from}` -> `{to}`): rates differ ({from_hz} Hz -> {to_hz} Hz) and `strict_rates: true` forbids implicit rate transitions; insert a `rate_transition` block or give both blocks the same rate")]
-    RateMismatch { index: usize, from: String, to: String, from_hz: f64, to_hz: f64 },
+    #[error(
+        "connection {index} (`{from}` -> `{to}`): rates differ ({from_hz} Hz -> {to_hz} Hz) and `strict_rates: true` forbids implicit rate transitions; insert a `rate_transition` block or give both blocks the same rate"
+    )]
+    RateMismatch {
+        index: usize,
+        from: String,
+        to: String,
+        from_hz: f64,
+        to_hz: f64,
+    },
     /// A cycle of blocks with direct feed-through.
-    #[error("algebraic loop: {cycle}; break it with a block without direct feed-through (e.g. `unit_delay`)")]
+    #[error(
+        "algebraic loop: {cycle}; break it with a block without direct feed-through (e.g. `unit_delay`)"
+    )]
     AlgebraicLoop { cycle: String },
     /// A graph-level setting is invalid.
     #[error("graph setting `{field}`: {problem} (fix: {fix})")]
-    Setting { field: String, problem: String, fix: String },
+    Setting {
+        field: String,
+        problem: String,
+        fix: String,
+    },
     /// A logged or scored signal does not exist.
     #[error("{section} entry `{reference}`: {problem}")]
-    BadSignal { section: &'static str, reference: String, problem: String },
+    BadSignal {
+        section: &'static str,
+        reference: String,
+        problem: String,
+    },
     /// The file could not be read.
     #[error("cannot read `{path}`: {source}")]
-    Io { path: String, #[source] source: std::io::Error },
+    Io {
+        path: String,
+        #[source]
+        source: std::io::Error,
+    },
 }

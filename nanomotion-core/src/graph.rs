@@ -135,19 +135,30 @@ impl GraphSpec {
 
     /// Add a block running at the base rate.
     pub fn add(&mut self, name: &str, block: impl Block + 'static) -> &mut Self {
-        self.blocks.push(BlockSpec { name: name.to_string(), rate_hz: None, block: Box::new(block) });
+        self.blocks.push(BlockSpec {
+            name: name.to_string(),
+            rate_hz: None,
+            block: Box::new(block),
+        });
         self
     }
 
     /// Add a block running at `rate_hz`.
     pub fn add_at(&mut self, name: &str, rate_hz: f64, block: impl Block + 'static) -> &mut Self {
-        self.blocks.push(BlockSpec { name: name.to_string(), rate_hz: Some(rate_hz), block: Box::new(block) });
+        self.blocks.push(BlockSpec {
+            name: name.to_string(),
+            rate_hz: Some(rate_hz),
+            block: Box::new(block),
+        });
         self
     }
 
     /// Connect output `from` (`block.port`) to input `to`.
     pub fn connect(&mut self, from: &str, to: &str) -> &mut Self {
-        self.connections.push(Connection { from: from.to_string(), to: to.to_string() });
+        self.connections.push(Connection {
+            from: from.to_string(),
+            to: to.to_string(),
+        });
         self
     }
 
@@ -165,8 +176,10 @@ impl GraphSpec {
     /// Read and parse a graph file.
     pub fn from_file(path: impl AsRef<std::path::Path>) -> Result<Self, GraphError> {
         let path = path.as_ref();
-        let text = std::fs::read_to_string(path)
-            .map_err(|source| GraphError::Io { path: path.display().to_string(), source })?;
+        let text = std::fs::read_to_string(path).map_err(|source| GraphError::Io {
+            path: path.display().to_string(),
+            source,
+        })?;
         Self::from_yaml(&text, &path.display().to_string())
     }
 
@@ -179,16 +192,26 @@ impl GraphSpec {
 
 /// Add "did you mean" to unknown-type errors.
 fn add_type_suggestion(e: GraphError) -> GraphError {
-    let GraphError::Parse { origin, mut message } = e else { return e };
+    let GraphError::Parse {
+        origin,
+        mut message,
+    } = e
+    else {
+        return e;
+    };
     if let Some(pos) = message.find("unknown variant `") {
         let rest = &message[pos + "unknown variant `".len()..];
         if let Some(end) = rest.find('`') {
             let bad = rest[..end].to_string();
             let known = crate::block::parse_expected_list(&message);
             if let Some(best) = nearest(&bad, known.iter().map(String::as_str)) {
-                message = format!("{message}\nhint: unknown block type `{bad}`; did you mean `{best}`? (`nanomotion blocks` lists all types)");
+                message = format!(
+                    "{message}\nhint: unknown block type `{bad}`; did you mean `{best}`? (`nanomotion blocks` lists all types)"
+                );
             } else {
-                message = format!("{message}\nhint: unknown block type `{bad}` (`nanomotion blocks` lists all types)");
+                message = format!(
+                    "{message}\nhint: unknown block type `{bad}` (`nanomotion blocks` lists all types)"
+                );
             }
         }
     }
@@ -211,7 +234,10 @@ fn edit_distance(a: &str, b: &str) -> usize {
 }
 
 /// The candidate nearest to `word`, if it is reasonably near.
-pub(crate) fn nearest<'a>(word: &str, candidates: impl Iterator<Item = &'a str>) -> Option<&'a str> {
+pub(crate) fn nearest<'a>(
+    word: &str,
+    candidates: impl Iterator<Item = &'a str>,
+) -> Option<&'a str> {
     candidates
         .map(|c| (edit_distance(word, c), c))
         .filter(|(d, c)| *d <= (c.len().max(word.len()) / 2).max(2))
@@ -235,26 +261,53 @@ struct Pending {
 }
 
 fn setting(field: &str, problem: impl Into<String>, fix: impl Into<String>) -> GraphError {
-    GraphError::Setting { field: field.into(), problem: problem.into(), fix: fix.into() }
+    GraphError::Setting {
+        field: field.into(),
+        problem: problem.into(),
+        fix: fix.into(),
+    }
 }
 
 fn valid_name(name: &str) -> bool {
-    !name.is_empty() && name.chars().all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-' || c == ':')
+    !name.is_empty()
+        && name
+            .chars()
+            .all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-' || c == ':')
 }
 
 fn compile(spec: GraphSpec) -> Result<(Scheduler, BuildReport), GraphError> {
-    let GraphSpec { title, base_rate_hz, duration_s, seed, strict_rates, blocks, connections, log, score } = spec;
+    let GraphSpec {
+        title,
+        base_rate_hz,
+        duration_s,
+        seed,
+        strict_rates,
+        blocks,
+        connections,
+        log,
+        score,
+    } = spec;
     if !(base_rate_hz.is_finite() && base_rate_hz > 0.0) {
-        return Err(setting("base_rate_hz", format!("is {base_rate_hz}"), "give a positive rate in Hz, e.g. 4000"));
+        return Err(setting(
+            "base_rate_hz",
+            format!("is {base_rate_hz}"),
+            "give a positive rate in Hz, e.g. 4000",
+        ));
     }
     if !(duration_s.is_finite() && duration_s >= 0.0) {
-        return Err(setting("duration_s", format!("is {duration_s}"), "give a non-negative duration in seconds"));
+        return Err(setting(
+            "duration_s",
+            format!("is {duration_s}"),
+            "give a non-negative duration in seconds",
+        ));
     }
     let n_ticks_f = (duration_s * base_rate_hz).round();
     if n_ticks_f > MAX_TICKS {
         return Err(setting(
             "duration_s",
-            format!("{duration_s} s at {base_rate_hz} Hz is {n_ticks_f:e} ticks, more than {MAX_TICKS:e}"),
+            format!(
+                "{duration_s} s at {base_rate_hz} Hz is {n_ticks_f:e} ticks, more than {MAX_TICKS:e}"
+            ),
             "shorten the run or lower the base rate",
         ));
     }
@@ -279,17 +332,26 @@ fn compile(spec: GraphSpec) -> Result<(Scheduler, BuildReport), GraphError> {
         let rate_hz = b.rate_hz.unwrap_or(base_rate_hz);
         let ratio = base_rate_hz / rate_hz;
         let period = ratio.round();
-        if !(rate_hz.is_finite() && rate_hz > 0.0) || period < 1.0 || (ratio - period).abs() > 1e-9 * ratio {
-            return Err(GraphError::BadRate { block: b.name, rate_hz, base_rate_hz });
+        if !(rate_hz.is_finite() && rate_hz > 0.0)
+            || period < 1.0
+            || (ratio - period).abs() > 1e-9 * ratio
+        {
+            return Err(GraphError::BadRate {
+                block: b.name,
+                rate_hz,
+                base_rate_hz,
+            });
         }
         let period = period as u64;
         let dt = period as f64 * base_dt;
         let type_name = b.block.typetag_name().to_string();
         let mut block = b.block;
         let ctx = BuildContext::new(b.name.clone(), dt, derive_seed(seed, &b.name));
-        block
-            .build(&ctx)
-            .map_err(|source| GraphError::Param { block: b.name.clone(), type_name: type_name.clone(), source })?;
+        block.build(&ctx).map_err(|source| GraphError::Param {
+            block: b.name.clone(),
+            type_name: type_name.clone(),
+            source,
+        })?;
         let inputs = block.inputs();
         let outputs = block.outputs();
         let feedthrough = block.direct_feedthrough();
@@ -324,15 +386,29 @@ fn compile(spec: GraphSpec) -> Result<(Scheduler, BuildReport), GraphError> {
             });
         }
         if let Some((_, _, first)) = pending[db].sources[dp] {
-            return Err(GraphError::DoubleConnection { to: c.to.clone(), first, second: index });
+            return Err(GraphError::DoubleConnection {
+                to: c.to.clone(),
+                first,
+                second: index,
+            });
         }
         let (src_block, src_port) = if pending[sb].period != pending[db].period {
             let (from_hz, to_hz) = (pending[sb].rate_hz, pending[db].rate_hz);
             if strict_rates {
-                return Err(GraphError::RateMismatch { index, from: c.from.clone(), to: c.to.clone(), from_hz, to_hz });
+                return Err(GraphError::RateMismatch {
+                    index,
+                    from: c.from.clone(),
+                    to: c.to.clone(),
+                    from_hz,
+                    to_hz,
+                });
             }
             // Insert an explicit rate transition running at the destination's rate.
-            let kind = if to_hz > from_hz { "zero-order hold" } else { "decimation (sampling, no anti-alias filter)" };
+            let kind = if to_hz > from_hz {
+                "zero-order hold"
+            } else {
+                "decimation (sampling, no anti-alias filter)"
+            };
             let name = format!("rt:{}:{}", c.from.replace('.', ":"), pending[db].name);
             report.rate_transitions.push(format!(
                 "`{}` -> `{}`: {kind} {from_hz} Hz -> {to_hz} Hz, inserted as block `{name}`",
@@ -341,7 +417,8 @@ fn compile(spec: GraphSpec) -> Result<(Scheduler, BuildReport), GraphError> {
             let idx = match pending.iter().position(|p| p.name == name) {
                 Some(i) => i,
                 None => {
-                    let mut block: Box<dyn Block> = Box::new(crate::scheduler::RateTransition::new(fw));
+                    let mut block: Box<dyn Block> =
+                        Box::new(crate::scheduler::RateTransition::new(fw));
                     let ctx = BuildContext::new(name.clone(), pending[db].ctx.dt, 0);
                     block.build(&ctx).map_err(|source| GraphError::Param {
                         block: name.clone(),
@@ -372,7 +449,10 @@ fn compile(spec: GraphSpec) -> Result<(Scheduler, BuildReport), GraphError> {
     for p in &pending {
         for (i, s) in p.sources.iter().enumerate() {
             if s.is_none() {
-                return Err(GraphError::Unconnected { block: p.name.clone(), port: p.inputs[i].name.clone() });
+                return Err(GraphError::Unconnected {
+                    block: p.name.clone(),
+                    port: p.inputs[i].name.clone(),
+                });
             }
         }
     }
@@ -392,7 +472,8 @@ fn compile(spec: GraphSpec) -> Result<(Scheduler, BuildReport), GraphError> {
         }
     }
     let mut order = Vec::with_capacity(n);
-    let mut ready: std::collections::BTreeSet<usize> = (0..n).filter(|&i| indegree[i] == 0).collect();
+    let mut ready: std::collections::BTreeSet<usize> =
+        (0..n).filter(|&i| indegree[i] == 0).collect();
     while let Some(i) = ready.pop_first() {
         order.push(i);
         for &d in &dependents[i] {
@@ -403,7 +484,9 @@ fn compile(spec: GraphSpec) -> Result<(Scheduler, BuildReport), GraphError> {
         }
     }
     if order.len() < n {
-        return Err(GraphError::AlgebraicLoop { cycle: find_cycle(&pending, &indegree) });
+        return Err(GraphError::AlgebraicLoop {
+            cycle: find_cycle(&pending, &indegree),
+        });
     }
 
     // 4. Buffers: outputs laid out in execution order, inputs gathered per block.
@@ -428,7 +511,10 @@ fn compile(spec: GraphSpec) -> Result<(Scheduler, BuildReport), GraphError> {
     let mut slots: Vec<Option<Box<dyn Block>>> = Vec::with_capacity(n);
     let mut port_tables = Vec::with_capacity(n);
     for p in pending.iter_mut() {
-        slots.push(Some(std::mem::replace(&mut p.block, Box::new(crate::scheduler::RateTransition::new(0)))));
+        slots.push(Some(std::mem::replace(
+            &mut p.block,
+            Box::new(crate::scheduler::RateTransition::new(0)),
+        )));
     }
     let mut block_list: Vec<Box<dyn Block>> = Vec::with_capacity(n);
     for &i in &order {
@@ -437,7 +523,11 @@ fn compile(spec: GraphSpec) -> Result<(Scheduler, BuildReport), GraphError> {
         let g_start = gathers.len();
         for (k, port) in p.inputs.iter().enumerate() {
             let (s, sp, _) = p.sources[k].expect("checked above");
-            gathers.push(Gather { src: out_offsets[s][sp], dst: input_len, len: port.width });
+            gathers.push(Gather {
+                src: out_offsets[s][sp],
+                dst: input_len,
+                len: port.width,
+            });
             input_len += port.width;
         }
         let out_start = out_offsets[i].first().copied().unwrap_or(0);
@@ -461,26 +551,37 @@ fn compile(spec: GraphSpec) -> Result<(Scheduler, BuildReport), GraphError> {
 
     // 5. Logs and scores.
     let n_ticks = n_ticks_f as u64;
-    let lookup = |reference: &str, section: &'static str| -> Result<(usize, usize, usize), GraphError> {
-        let bad = |problem: String| GraphError::BadSignal { section, reference: reference.to_string(), problem };
-        let (b, port) = reference
-            .split_once('.')
-            .ok_or_else(|| bad("write signals as `block.port`".into()))?;
-        let Some(bi) = names.iter().position(|n| n == b) else {
-            let hint = nearest(b, names.iter().map(String::as_str))
-                .map(|s| format!("; did you mean `{s}`?"))
-                .unwrap_or_default();
-            return Err(bad(format!("no block named `{b}`{hint}")));
+    let lookup =
+        |reference: &str, section: &'static str| -> Result<(usize, usize, usize), GraphError> {
+            let bad = |problem: String| GraphError::BadSignal {
+                section,
+                reference: reference.to_string(),
+                problem,
+            };
+            let (b, port) = reference
+                .split_once('.')
+                .ok_or_else(|| bad("write signals as `block.port`".into()))?;
+            let Some(bi) = names.iter().position(|n| n == b) else {
+                let hint = nearest(b, names.iter().map(String::as_str))
+                    .map(|s| format!("; did you mean `{s}`?"))
+                    .unwrap_or_default();
+                return Err(bad(format!("no block named `{b}`{hint}")));
+            };
+            let (_, outs, offs) = &port_tables[bi];
+            let Some(pi) = outs.iter().position(|o| o.name == port) else {
+                let known: Vec<&str> = outs.iter().map(|o| o.name.as_str()).collect();
+                return Err(bad(format!(
+                    "block `{b}` has no output `{port}`; its outputs are: {}",
+                    known.join(", ")
+                )));
+            };
+            Ok((bi, offs[pi], outs[pi].width))
         };
-        let (_, outs, offs) = &port_tables[bi];
-        let Some(pi) = outs.iter().position(|o| o.name == port) else {
-            let known: Vec<&str> = outs.iter().map(|o| o.name.as_str()).collect();
-            return Err(bad(format!("block `{b}` has no output `{port}`; its outputs are: {}", known.join(", "))));
-        };
-        Ok((bi, offs[pi], outs[pi].width))
-    };
     let mut logs: Vec<LogChannel> = Vec::new();
-    let add_log = |reference: &str, section: &'static str, logs: &mut Vec<LogChannel>| -> Result<usize, GraphError> {
+    let add_log = |reference: &str,
+                   section: &'static str,
+                   logs: &mut Vec<LogChannel>|
+     -> Result<usize, GraphError> {
         if let Some(i) = logs.iter().position(|l| l.name == reference) {
             return Ok(i);
         }
@@ -506,11 +607,17 @@ fn compile(spec: GraphSpec) -> Result<(Scheduler, BuildReport), GraphError> {
             return Err(GraphError::BadSignal {
                 section: "score",
                 reference: s.signal.clone(),
-                problem: format!("from_s is {}; give a non-negative time in seconds", s.from_s),
+                problem: format!(
+                    "from_s is {}; give a non-negative time in seconds",
+                    s.from_s
+                ),
             });
         }
         let channel = add_log(&s.signal, "score", &mut logs)?;
-        scores.push(ScoreChannel { channel, from_s: s.from_s });
+        scores.push(ScoreChannel {
+            channel,
+            from_s: s.from_s,
+        });
     }
 
     let sched = Scheduler::new_internal(crate::scheduler::Parts {
@@ -539,15 +646,28 @@ enum Direction {
     Output,
 }
 
-fn resolve(pending: &[Pending], reference: &str, index: usize, dir: Direction) -> Result<(usize, usize), GraphError> {
+fn resolve(
+    pending: &[Pending],
+    reference: &str,
+    index: usize,
+    dir: Direction,
+) -> Result<(usize, usize), GraphError> {
     let (b, port) = reference
         .split_once('.')
-        .ok_or_else(|| GraphError::BadReference { index, reference: reference.to_string() })?;
+        .ok_or_else(|| GraphError::BadReference {
+            index,
+            reference: reference.to_string(),
+        })?;
     let Some(bi) = pending.iter().position(|p| p.name == b) else {
         let hint = nearest(b, pending.iter().map(|p| p.name.as_str()))
             .map(|s| format!("; did you mean `{s}`?"))
             .unwrap_or_default();
-        return Err(GraphError::UnknownBlock { index, reference: reference.to_string(), block: b.to_string(), hint });
+        return Err(GraphError::UnknownBlock {
+            index,
+            reference: reference.to_string(),
+            block: b.to_string(),
+            hint,
+        });
     };
     let ports = match dir {
         Direction::Input => &pending[bi].inputs,
@@ -558,7 +678,13 @@ fn resolve(pending: &[Pending], reference: &str, index: usize, dir: Direction) -
         None => {
             let mut known = String::new();
             for (i, p) in ports.iter().enumerate() {
-                let _ = write!(known, "{}{} (width {})", if i > 0 { ", " } else { "" }, p.name, p.width);
+                let _ = write!(
+                    known,
+                    "{}{} (width {})",
+                    if i > 0 { ", " } else { "" },
+                    p.name,
+                    p.width
+                );
             }
             if known.is_empty() {
                 known.push_str("(none)");
@@ -568,7 +694,11 @@ fn resolve(pending: &[Pending], reference: &str, index: usize, dir: Direction) -
                 reference: reference.to_string(),
                 block: b.to_string(),
                 port: port.to_string(),
-                direction: if dir == Direction::Input { "input" } else { "output" },
+                direction: if dir == Direction::Input {
+                    "input"
+                } else {
+                    "output"
+                },
                 known,
             })
         }
@@ -590,14 +720,21 @@ fn find_cycle(pending: &[Pending], indegree: &[usize]) -> String {
             .find(|&s| indegree[s] > 0 && pending[s].feedthrough);
         let Some(next) = next else { break };
         if let Some(pos) = path.iter().position(|&p| p == next) {
-            let mut cycle: Vec<&str> = path[pos..].iter().rev().map(|&i| pending[i].name.as_str()).collect();
+            let mut cycle: Vec<&str> = path[pos..]
+                .iter()
+                .rev()
+                .map(|&i| pending[i].name.as_str())
+                .collect();
             cycle.push(cycle[0]);
             return cycle.join(" -> ");
         }
         path.push(next);
         cur = next;
     }
-    path.iter().map(|&i| pending[i].name.as_str()).collect::<Vec<_>>().join(" <- ")
+    path.iter()
+        .map(|&i| pending[i].name.as_str())
+        .collect::<Vec<_>>()
+        .join(" <- ")
 }
 
 #[cfg(test)]
@@ -609,7 +746,10 @@ mod tests {
         assert_eq!(edit_distance("gain", "gian"), 2);
         assert_eq!(edit_distance("", "abc"), 3);
         assert_eq!(edit_distance("kitten", "sitting"), 3);
-        assert_eq!(nearest("gian", ["gain", "sum", "pid"].into_iter()), Some("gain"));
+        assert_eq!(
+            nearest("gian", ["gain", "sum", "pid"].into_iter()),
+            Some("gain")
+        );
         assert_eq!(nearest("zzzzzzzz", ["gain", "sum"].into_iter()), None);
     }
 }

@@ -36,7 +36,12 @@ impl Rng {
     /// A generator seeded from `seed`.
     pub fn new(seed: u64) -> Self {
         let mut sm = seed;
-        let s = [splitmix64(&mut sm), splitmix64(&mut sm), splitmix64(&mut sm), splitmix64(&mut sm)];
+        let s = [
+            splitmix64(&mut sm),
+            splitmix64(&mut sm),
+            splitmix64(&mut sm),
+            splitmix64(&mut sm),
+        ];
         Self { s }
     }
 
@@ -83,7 +88,14 @@ mod tests {
         // Reference values of SplitMix64 seeded with 1234567 (from the authors' C code).
         let mut s = 1234567u64;
         let v: Vec<u64> = (0..3).map(|_| splitmix64(&mut s)).collect();
-        assert_eq!(v, vec![6457827717110365317, 3203168211198807973, 9817491932198370423]);
+        assert_eq!(
+            v,
+            vec![
+                6457827717110365317,
+                3203168211198807973,
+                9817491932198370423
+            ]
+        );
     }
 
     #[test]

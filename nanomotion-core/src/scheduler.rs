@@ -115,7 +115,12 @@ impl SignalLog {
     }
     /// Element `j` of every sample.
     pub fn column(&self, j: usize) -> Vec<f64> {
-        self.data.iter().skip(j).step_by(self.width.max(1)).copied().collect()
+        self.data
+            .iter()
+            .skip(j)
+            .step_by(self.width.max(1))
+            .copied()
+            .collect()
     }
     /// Sample times (s).
     pub fn times(&self) -> Vec<f64> {
@@ -191,7 +196,13 @@ impl std::fmt::Debug for Scheduler {
 
 impl Scheduler {
     pub(crate) fn new_internal(p: Parts) -> Self {
-        let updaters = p.nodes.iter().enumerate().filter(|(_, n)| !n.feedthrough).map(|(i, _)| i).collect();
+        let updaters = p
+            .nodes
+            .iter()
+            .enumerate()
+            .filter(|(_, n)| !n.feedthrough)
+            .map(|(i, _)| i)
+            .collect();
         Self {
             title: p.title,
             base_rate_hz: p.base_rate_hz,
@@ -218,7 +229,16 @@ impl Scheduler {
     #[inline]
     pub fn tick(&mut self) {
         let k = self.k;
-        let Self { blocks, nodes, gathers, signals, inputs, updaters, logs, .. } = self;
+        let Self {
+            blocks,
+            nodes,
+            gathers,
+            signals,
+            inputs,
+            updaters,
+            logs,
+            ..
+        } = self;
         // Phase 1: outputs in topological order.
         for (node, block) in nodes.iter_mut().zip(blocks.iter_mut()) {
             if !k.is_multiple_of(node.period) {
@@ -229,8 +249,16 @@ impl Scheduler {
                     inputs[g.dst..g.dst + g.len].copy_from_slice(&signals[g.src..g.src + g.len]);
                 }
             }
-            let tick = Tick { k: node.k_local, t: node.k_local as f64 * node.dt, dt: node.dt };
-            block.output(tick, &inputs[node.inputs.clone()], &mut signals[node.outputs.clone()]);
+            let tick = Tick {
+                k: node.k_local,
+                t: node.k_local as f64 * node.dt,
+                dt: node.dt,
+            };
+            block.output(
+                tick,
+                &inputs[node.inputs.clone()],
+                &mut signals[node.outputs.clone()],
+            );
         }
         // Phase 2: state updates of blocks without feed-through.
         for &i in updaters.iter() {
@@ -241,7 +269,11 @@ impl Scheduler {
             for g in &gathers[node.gathers.clone()] {
                 inputs[g.dst..g.dst + g.len].copy_from_slice(&signals[g.src..g.src + g.len]);
             }
-            let tick = Tick { k: node.k_local, t: node.k_local as f64 * node.dt, dt: node.dt };
+            let tick = Tick {
+                k: node.k_local,
+                t: node.k_local as f64 * node.dt,
+                dt: node.dt,
+            };
             blocks[i].update(tick, &inputs[node.inputs.clone()]);
         }
         for node in nodes.iter_mut() {
@@ -252,7 +284,8 @@ impl Scheduler {
         // Phase 3: logging into preallocated buffers (capacity reserved at build).
         for log in logs.iter_mut() {
             if k.is_multiple_of(log.period) && log.data.len() + log.width <= log.data.capacity() {
-                log.data.extend_from_slice(&signals[log.offset..log.offset + log.width]);
+                log.data
+                    .extend_from_slice(&signals[log.offset..log.offset + log.width]);
             }
         }
         self.k += 1;
@@ -285,7 +318,12 @@ impl Scheduler {
         let logs: Vec<SignalLog> = self
             .logs
             .iter()
-            .map(|l| SignalLog { name: l.name.clone(), rate_hz: l.rate_hz, width: l.width, data: l.data.clone() })
+            .map(|l| SignalLog {
+                name: l.name.clone(),
+                rate_hz: l.rate_hz,
+                width: l.width,
+                data: l.data.clone(),
+            })
             .collect();
         let mut scores = Vec::new();
         for s in &self.scores {
@@ -303,11 +341,27 @@ impl Scheduler {
                         col.iter().sum::<f64>() / n as f64,
                     )
                 };
-                let signal = if log.width == 1 { log.name.clone() } else { format!("{}[{j}]", log.name) };
-                scores.push(Score { signal, from_s: s.from_s, rms, max_abs, mean, samples: n });
+                let signal = if log.width == 1 {
+                    log.name.clone()
+                } else {
+                    format!("{}[{j}]", log.name)
+                };
+                scores.push(Score {
+                    signal,
+                    from_s: s.from_s,
+                    rms,
+                    max_abs,
+                    mean,
+                    samples: n,
+                });
             }
         }
-        RunResult { title: self.title.clone(), duration_s: self.k as f64 / self.base_rate_hz, logs, scores }
+        RunResult {
+            title: self.title.clone(),
+            duration_s: self.k as f64 / self.base_rate_hz,
+            logs,
+            scores,
+        }
     }
 
     /// Check that every output is finite; names the first block that produced a
@@ -316,7 +370,10 @@ impl Scheduler {
     pub fn check_finite(&mut self) -> Result<(), GraphError> {
         if self.non_finite.is_none() {
             for (i, node) in self.nodes.iter().enumerate() {
-                if self.signals[node.outputs.clone()].iter().any(|v| !v.is_finite()) {
+                if self.signals[node.outputs.clone()]
+                    .iter()
+                    .any(|v| !v.is_finite())
+                {
                     self.non_finite = Some((i, self.k));
                     break;
                 }
@@ -336,11 +393,12 @@ impl Scheduler {
     /// context (same seeds), logs are cleared. Same graph, same bits.
     pub fn reset(&mut self) -> Result<(), GraphError> {
         for (i, b) in self.blocks.iter_mut().enumerate() {
-            b.build(&self.ctxs[i]).map_err(|source: ParamError| GraphError::Param {
-                block: self.names[i].clone(),
-                type_name: self.type_names[i].clone(),
-                source,
-            })?;
+            b.build(&self.ctxs[i])
+                .map_err(|source: ParamError| GraphError::Param {
+                    block: self.names[i].clone(),
+                    type_name: self.type_names[i].clone(),
+                    source,
+                })?;
         }
         for n in &mut self.nodes {
             n.k_local = 0;
@@ -361,7 +419,10 @@ impl Scheduler {
         let bi = self.names.iter().position(|n| n == b)?;
         let (_, outs, offs) = &self.ports[bi];
         let pi = outs.iter().position(|o| o.name == port)?;
-        Some(SignalId { offset: offs[pi], width: outs[pi].width })
+        Some(SignalId {
+            offset: offs[pi],
+            width: outs[pi].width,
+        })
     }
 
     /// The current value of a signal.
@@ -410,7 +471,12 @@ impl Scheduler {
             .enumerate()
             .map(|(i, n)| {
                 let (ins, outs, _) = &self.ports[i];
-                let fmt = |ps: &[Port]| ps.iter().map(|p| format!("{}[{}]", p.name, p.width)).collect::<Vec<_>>().join(", ");
+                let fmt = |ps: &[Port]| {
+                    ps.iter()
+                        .map(|p| format!("{}[{}]", p.name, p.width))
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                };
                 format!(
                     "{n} ({}, {}) at {} Hz: in ({}) -> out ({}){}",
                     self.type_names[i],
@@ -418,7 +484,11 @@ impl Scheduler {
                     1.0 / self.nodes[i].dt,
                     fmt(ins),
                     fmt(outs),
-                    if self.nodes[i].feedthrough { "" } else { ", no feed-through" }
+                    if self.nodes[i].feedthrough {
+                        ""
+                    } else {
+                        ", no feed-through"
+                    }
                 )
             })
             .collect()

@@ -14,12 +14,16 @@ pub fn from_str<T: DeserializeOwned>(text: &str, origin: &str) -> Result<T, Grap
     let opts = serde_saphyr::options!(
         non_finite_float_policy: serde_saphyr::NonFiniteFloatPolicy::PassThrough,
     );
-    serde_saphyr::from_str_with_options(text, opts)
-        .map_err(|e| GraphError::Parse { origin: origin.to_string(), message: e.to_string() })
+    serde_saphyr::from_str_with_options(text, opts).map_err(|e| GraphError::Parse {
+        origin: origin.to_string(),
+        message: e.to_string(),
+    })
 }
 
 /// Serialise `value` as YAML.
 pub fn to_string<T: serde::Serialize>(value: &T) -> Result<String, GraphError> {
-    serde_saphyr::to_string(value)
-        .map_err(|e| GraphError::Parse { origin: "serialisation".into(), message: e.to_string() })
+    serde_saphyr::to_string(value).map_err(|e| GraphError::Parse {
+        origin: "serialisation".into(),
+        message: e.to_string(),
+    })
 }

@@ -155,7 +155,10 @@ score:
 #[test]
 fn closed_loop_matches_closed_form() {
     // x[k+1] = x[k] + kp (1 - x[k])  =>  x[k] = 1 - (1 - kp)^k
-    let (mut s, report) = GraphSpec::from_yaml(LOOP, "loop.yaml").unwrap().build().unwrap();
+    let (mut s, report) = GraphSpec::from_yaml(LOOP, "loop.yaml")
+        .unwrap()
+        .build()
+        .unwrap();
     assert!(report.rate_transitions.is_empty());
     // The accumulator has no feed-through, so it may run first; the rest follow data flow.
     let order = &report.order;
@@ -191,8 +194,16 @@ connections:
   - { from: fast.y, to: slower.u }
 log: [fast.y, slower.y, slow.t]
 "#;
-    let (mut s, report) = GraphSpec::from_yaml(yaml, "mr.yaml").unwrap().build().unwrap();
-    assert_eq!(report.rate_transitions.len(), 2, "{:?}", report.rate_transitions);
+    let (mut s, report) = GraphSpec::from_yaml(yaml, "mr.yaml")
+        .unwrap()
+        .build()
+        .unwrap();
+    assert_eq!(
+        report.rate_transitions.len(),
+        2,
+        "{:?}",
+        report.rate_transitions
+    );
     assert!(report.rate_transitions[0].contains("zero-order hold"));
     assert!(report.rate_transitions[1].contains("decimation"));
     let res = s.run(|_| {});
@@ -211,7 +222,10 @@ log: [fast.y, slower.y, slow.t]
 
     // Strict mode refuses the same graph.
     let strict = yaml.replace("duration_s: 0.2", "duration_s: 0.2\nstrict_rates: true");
-    let err = GraphSpec::from_yaml(&strict, "mr.yaml").unwrap().build().unwrap_err();
+    let err = GraphSpec::from_yaml(&strict, "mr.yaml")
+        .unwrap()
+        .build()
+        .unwrap_err();
     assert!(matches!(err, GraphError::RateMismatch { .. }), "{err}");
 }
 
@@ -227,12 +241,21 @@ connections:
   - { from: a.y, to: b.u }
   - { from: b.y, to: a.u }
 "#;
-    let err = GraphSpec::from_yaml(yaml, "l.yaml").unwrap().build().unwrap_err();
+    let err = GraphSpec::from_yaml(yaml, "l.yaml")
+        .unwrap()
+        .build()
+        .unwrap_err();
     let msg = err.to_string();
     assert!(matches!(err, GraphError::AlgebraicLoop { .. }));
-    assert!(msg.contains("a -> b -> a") || msg.contains("b -> a -> b"), "{msg}");
+    assert!(
+        msg.contains("a -> b -> a") || msg.contains("b -> a -> b"),
+        "{msg}"
+    );
     // Broken by a block without feed-through: fine.
-    let ok = yaml.replace("{ name: b, type: t_gain, k: 0.5 }", "{ name: b, type: t_accumulator }");
+    let ok = yaml.replace(
+        "{ name: b, type: t_gain, k: 0.5 }",
+        "{ name: b, type: t_accumulator }",
+    );
     assert!(GraphSpec::from_yaml(&ok, "l.yaml").unwrap().build().is_ok());
 }
 
@@ -250,29 +273,71 @@ fn build_err(yaml: &str) -> String {
 fn bad_graphs_get_located_typed_errors() {
     let base = LOOP;
     let cases: &[(&str, &str, &[&str])] = &[
-        ("type: t_gain, k: 0.3", "type: t_gian, k: 0.3", &["line", "t_gian", "did you mean `t_gain`"]),
-        ("r.y, to: e.a", "r.z, to: e.a", &["no output port `z`", "y (width 1)"]),
-        ("p.y, to: e.b", "pp.y, to: e.b", &["unknown block `pp`", "did you mean `p`"]),
-        ("{ from: p.y, to: e.b }", "{ from: p.y, to: e.a }", &["connected twice"]),
-        ("  - { from: p.y, to: e.b }\n", "", &["`e.b` is not connected"]),
-        ("{ name: c, type: t_gain", "{ name: r, type: t_gain", &["duplicate block name `r`"]),
-        ("k: 0.3 }", "k: .nan }", &["block `c`", "field `k`", "finite"]),
+        (
+            "type: t_gain, k: 0.3",
+            "type: t_gian, k: 0.3",
+            &["line", "t_gian", "did you mean `t_gain`"],
+        ),
+        (
+            "r.y, to: e.a",
+            "r.z, to: e.a",
+            &["no output port `z`", "y (width 1)"],
+        ),
+        (
+            "p.y, to: e.b",
+            "pp.y, to: e.b",
+            &["unknown block `pp`", "did you mean `p`"],
+        ),
+        (
+            "{ from: p.y, to: e.b }",
+            "{ from: p.y, to: e.a }",
+            &["connected twice"],
+        ),
+        (
+            "  - { from: p.y, to: e.b }\n",
+            "",
+            &["`e.b` is not connected"],
+        ),
+        (
+            "{ name: c, type: t_gain",
+            "{ name: r, type: t_gain",
+            &["duplicate block name `r`"],
+        ),
+        (
+            "k: 0.3 }",
+            "k: .nan }",
+            &["block `c`", "field `k`", "finite"],
+        ),
         ("k: 0.3 }", "k: abc }", &["line", "expected f64"]),
         ("k: 0.3 }", "k: 0.3, kk: 1 }", &["unknown field `kk`"]),
-        ("{ name: p, type: t_accumulator }", "{ name: p, type: t_accumulator, rate_hz: 300 }", &["not an integer divisor"]),
+        (
+            "{ name: p, type: t_accumulator }",
+            "{ name: p, type: t_accumulator, rate_hz: 300 }",
+            &["not an integer divisor"],
+        ),
         ("base_rate_hz: 1000", "base_rate_hz: -5", &["base_rate_hz"]),
         ("log: [p.y]", "log: [p.x]", &["has no output `x`"]),
         ("log: [p.y]", "log: [py]", &["block.port"]),
-        ("{ from: r.y, to: e.a }", "{ from: ry, to: e.a }", &["not a port reference"]),
+        (
+            "{ from: r.y, to: e.a }",
+            "{ from: ry, to: e.a }",
+            &["not a port reference"],
+        ),
         ("seed: 3", "sed: 3", &["unknown field `sed`"]),
         ("k: 0.3 }", "k: 0.3, width: 2 }", &["width mismatch"]),
     ];
     for (from, to, needles) in cases {
-        assert!(base.contains(from), "test case pattern `{from}` not in base");
+        assert!(
+            base.contains(from),
+            "test case pattern `{from}` not in base"
+        );
         let yaml = base.replacen(from, to, 1);
         let msg = build_err(&yaml);
         for n in *needles {
-            assert!(msg.contains(n), "error for `{to}` should mention `{n}`:\n{msg}");
+            assert!(
+                msg.contains(n),
+                "error for `{to}` should mention `{n}`:\n{msg}"
+            );
         }
     }
 }
@@ -300,7 +365,13 @@ log: [n1.y, n2.y]
     let a = run("seed: 11");
     let b = run("seed: 11");
     let c = run("seed: 12");
-    let bits = |r: &nanomotion_core::scheduler::RunResult| r.logs[0].data.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+    let bits = |r: &nanomotion_core::scheduler::RunResult| {
+        r.logs[0]
+            .data
+            .iter()
+            .map(|v| v.to_bits())
+            .collect::<Vec<_>>()
+    };
     assert_eq!(bits(&a), bits(&b));
     assert_ne!(bits(&a), bits(&c));
     // Two blocks of one graph get different streams.
@@ -310,7 +381,10 @@ log: [n1.y, n2.y]
 #[test]
 fn graph_built_from_rust_and_signal_handles() {
     let mut g = GraphSpec::new(1000.0, 0.01);
-    g.add("r", TConst { value: 2.0 }).add("k", TGain { k: 3.0, width: 1 }).connect("r.y", "k.u").log("k.y");
+    g.add("r", TConst { value: 2.0 })
+        .add("k", TGain { k: 3.0, width: 1 })
+        .connect("r.y", "k.u")
+        .log("k.y");
     let (mut s, _) = g.build().unwrap();
     let id = s.signal_id("k.y").unwrap();
     s.tick();
@@ -326,10 +400,16 @@ fn ticks_do_not_allocate() {
     // Multi-rate loop with noise, logging and a rate transition, 10 000 ticks.
     let yaml = LOOP
         .replace("duration_s: 0.05", "duration_s: 20")
-        .replace("{ name: c, type: t_gain, k: 0.3 }", "{ name: c, type: t_gain, k: 0.3, rate_hz: 500 }")
+        .replace(
+            "{ name: c, type: t_gain, k: 0.3 }",
+            "{ name: c, type: t_gain, k: 0.3, rate_hz: 500 }",
+        )
         .replace("blocks:\n", "blocks:\n  - { name: n, type: t_noise }\n")
         .replace("log: [p.y]", "log: [p.y, n.y, c.y]");
-    let (mut s, report) = GraphSpec::from_yaml(&yaml, "na.yaml").unwrap().build().unwrap();
+    let (mut s, report) = GraphSpec::from_yaml(&yaml, "na.yaml")
+        .unwrap()
+        .build()
+        .unwrap();
     assert_eq!(report.rate_transitions.len(), 2);
     s.tick(); // first tick outside the measurement (nothing is lazily initialised, but be fair)
     let info = allocation_counter::measure(|| {
@@ -358,10 +438,27 @@ mod mutated_graphs {
     }
 
     fn mutation() -> impl Strategy<Value = Mutation> {
-        let ch = prop::sample::select(vec![':', '-', ' ', '\n', '{', '}', '[', ']', '.', ',', '"', 'x', '0', '#', '&', '*', '!', '|', '\t']);
+        let ch = prop::sample::select(vec![
+            ':', '-', ' ', '\n', '{', '}', '[', ']', '.', ',', '"', 'x', '0', '#', '&', '*', '!',
+            '|', '\t',
+        ]);
         let num = prop::sample::select(vec![
-            "0", "-1", "1e308", "-1e308", ".nan", ".inf", "-.inf", "1e-320", "18446744073709551616", "abc", "~", "[]",
-            "{}", "3.5", "2", "1000000000000",
+            "0",
+            "-1",
+            "1e308",
+            "-1e308",
+            ".nan",
+            ".inf",
+            "-.inf",
+            "1e-320",
+            "18446744073709551616",
+            "abc",
+            "~",
+            "[]",
+            "{}",
+            "3.5",
+            "2",
+            "1000000000000",
         ])
         .prop_map(String::from);
         prop_oneof![
@@ -380,7 +477,12 @@ mod mutated_graphs {
         match m {
             Mutation::DeleteChar(i) => {
                 let i = i % chars.len();
-                chars.iter().enumerate().filter(|(j, _)| *j != i).map(|(_, c)| c).collect()
+                chars
+                    .iter()
+                    .enumerate()
+                    .filter(|(j, _)| *j != i)
+                    .map(|(_, c)| c)
+                    .collect()
             }
             Mutation::InsertChar(i, c) => {
                 let i = i % (chars.len() + 1);
@@ -415,7 +517,9 @@ mod mutated_graphs {
                 while idx < bytes.len() {
                     if bytes[idx].is_ascii_digit() {
                         let start = idx;
-                        while idx < bytes.len() && (bytes[idx].is_ascii_digit() || bytes[idx] == '.') {
+                        while idx < bytes.len()
+                            && (bytes[idx].is_ascii_digit() || bytes[idx] == '.')
+                        {
                             idx += 1;
                         }
                         if count == target {
@@ -443,12 +547,12 @@ mod mutated_graphs {
                 text = apply(&text, m);
             }
             // Parse, build, and run a few ticks: every outcome is a value, never a panic.
-            if let Ok(spec) = GraphSpec::from_yaml(&text, "mutated.yaml") {
-                if let Ok((mut s, _)) = spec.build() {
-                    s.step_n(s.ticks_total().min(100));
-                    let _ = s.check_finite();
-                    let _ = s.result();
-                }
+            if let Ok(spec) = GraphSpec::from_yaml(&text, "mutated.yaml")
+                && let Ok((mut s, _)) = spec.build()
+            {
+                s.step_n(s.ticks_total().min(100));
+                let _ = s.check_finite();
+                let _ = s.result();
             }
         }
     }

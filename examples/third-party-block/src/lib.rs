@@ -1,1 +1,92 @@
-//! placeholder
+//! A block defined **outside** nanomotion, usable from YAML by linking alone.
+//!
+//! This crate depends only on `nanomotion-core`, `serde` and `typetag`. It defines
+//! [`MovingAverage`] and registers it under `type: moving_average`. A program that
+//! links this crate (e.g. `use third_party_block as _;`) can load graphs that use it;
+//! nothing in nanomotion had to change.
+//!
+//! ```
+//! use third_party_block::MovingAverage;
+//! let mut ma = MovingAverage::new(4);
+//! let ys: Vec<f64> = [4.0, 4.0, 4.0, 4.0, 8.0].iter().map(|&x| ma.push(x)).collect();
+//! assert_eq!(ys, vec![1.0, 2.0, 3.0, 4.0, 5.0]);
+//! ```
+
+use nanomotion_core::block::check;
+use nanomotion_core::{Block, BlockDoc, BuildContext, ParamDoc, ParamError, Port, Role, Tick};
+use serde::{Deserialize, Serialize};
+
+/// Moving average over the last `window` samples (zeros before the start):
+/// y[k] = (1/n) Σ_{i=0}^{n-1} u[k-i].
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MovingAverage {
+    /// Number of samples averaged, n ≥ 1.
+    pub window: usize,
+    #[serde(skip)]
+    ring: Vec<f64>,
+    #[serde(skip)]
+    head: usize,
+    #[serde(skip)]
+    sum: f64,
+}
+
+impl MovingAverage {
+    /// A moving average over `window` samples.
+    pub fn new(window: usize) -> Self {
+        let mut m = Self {
+            window,
+            ring: Vec::new(),
+            head: 0,
+            sum: 0.0,
+        };
+        m.ring = vec![0.0; window.max(1)];
+        m
+    }
+
+    /// Push one sample, get the average of the last `window`.
+    pub fn push(&mut self, x: f64) -> f64 {
+        let old = std::mem::replace(&mut self.ring[self.head], x);
+        self.head = (self.head + 1) % self.ring.len();
+        // Recompute the sum exactly once per cycle so rounding cannot drift.
+        if self.head == 0 {
+            self.sum = self.ring.iter().sum();
+        } else {
+            self.sum += x - old;
+        }
+        self.sum / self.ring.len() as f64
+    }
+}
+
+#[typetag::serde(name = "moving_average")]
+impl Block for MovingAverage {
+    fn inputs(&self) -> Vec<Port> {
+        vec![Port::new("u", 1)]
+    }
+    fn outputs(&self) -> Vec<Port> {
+        vec![Port::new("y", 1)]
+    }
+    fn build(&mut self, _ctx: &BuildContext) -> Result<(), ParamError> {
+        check::at_least_one("window", self.window)?;
+        self.ring = vec![0.0; self.window];
+        self.head = 0;
+        self.sum = 0.0;
+        Ok(())
+    }
+    fn output(&mut self, _t: Tick, u: &[f64], y: &mut [f64]) {
+        y[0] = self.push(u[0]);
+    }
+    fn role(&self) -> Role {
+        Role::Math
+    }
+}
+
+nanomotion_core::submit_block_doc! {
+    BlockDoc {
+        type_name: "moving_average",
+        role: Role::Math,
+        summary: "moving average over the last `window` samples (example of a third-party block)",
+        params: &[ParamDoc { name: "window", doc: "samples averaged, n ≥ 1", default: None }],
+        ports: "u -> y",
+    }
+}

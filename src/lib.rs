@@ -1,0 +1,28 @@
+//! # nanomotion
+//!
+//! Performance-driven control of nano-motion systems — piezo-driven stages and
+//! optical-encoder systems that track nanometres — after R.J.E. Merry's PhD thesis
+//! (TU Eindhoven, 2009).
+//!
+//! This facade re-exports the core ([`core`]) and every plugin crate, and linking it
+//! registers every block type with the YAML loader. The `nanomotion` binary (see
+//! `nanomotion --help`) runs YAML controller graphs.
+//!
+//! ```
+//! use nanomotion::core::graph::GraphSpec;
+//! let yaml = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/examples/quickstart.yaml")).unwrap();
+//! let (mut sched, _report) = GraphSpec::from_yaml(&yaml, "quickstart.yaml").unwrap().build().unwrap();
+//! let result = sched.run(|_fraction_done| {});
+//! assert!(!result.scores.is_empty());
+//! ```
+
+pub use nanomotion_core as core;
+pub use nanomotion_core::{Block, GraphSpec, Scheduler};
+
+pub mod output;
+pub mod plot;
+
+/// Make sure every plugin crate is linked (typetag registers blocks through the
+/// linker: a plugin that is never referenced would silently miss from YAML).
+#[doc(hidden)]
+pub fn link_plugins() {}

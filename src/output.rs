@@ -1,0 +1,241 @@
+//! Writing a run's results: CSV signals, JSON metrics, SVG plots.
+
+use crate::plot::{Figure, PlotError, Scale, Series, draw_svg};
+use nanomotion_core::scheduler::{RunResult, SignalLog};
+use serde::Serialize;
+use std::path::{Path, PathBuf};
+
+/// Errors while writing results.
+#[derive(Debug, thiserror::Error)]
+pub enum OutputError {
+    /// A file or folder could not be written.
+    #[error(
+        "cannot write `{path}`: {source} (fix: check that the folder is writable, or pass another --out)"
+    )]
+    Io {
+        /// The path.
+        path: String,
+        /// The cause.
+        #[source]
+        source: std::io::Error,
+    },
+    /// A CSV file could not be written.
+    #[error("cannot write `{path}`: {message}")]
+    Csv {
+        /// The path.
+        path: String,
+        /// The cause.
+        message: String,
+    },
+    /// A plot could not be drawn.
+    #[error(transparent)]
+    Plot(#[from] PlotError),
+}
+
+fn io(path: &Path) -> impl FnOnce(std::io::Error) -> OutputError + '_ {
+    move |source| OutputError::Io {
+        path: path.display().to_string(),
+        source,
+    }
+}
+
+/// The metrics file.
+#[derive(Debug, Serialize)]
+pub struct MetricsFile<'a> {
+    /// Graph title.
+    pub title: &'a Option<String>,
+    /// Simulated time (s).
+    pub duration_s: f64,
+    /// Scores of the `score:` signals.
+    pub scores: &'a [nanomotion_core::scheduler::Score],
+    /// Rate transitions the loader inserted.
+    pub rate_transitions: &'a [String],
+    /// Cumulative-PSD end values (the squared rms seen through the spectrum) per
+    /// scored signal, for cross-checking the rms.
+    pub cumulative_psd_end: Vec<(String, f64)>,
+}
+
+/// File-name-safe form of a signal name.
+pub fn file_stem(name: &str) -> String {
+    name.chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || c == '-' || c == '_' {
+                c
+            } else {
+                '_'
+            }
+        })
+        .collect()
+}
+
+/// Column names of a log: `name` or `name[j]`.
+fn columns(log: &SignalLog) -> Vec<String> {
+    if log.width == 1 {
+        vec![log.name.clone()]
+    } else {
+        (0..log.width)
+            .map(|j| format!("{}[{j}]", log.name))
+            .collect()
+    }
+}
+
+/// Write signals grouped by rate: `signals.csv` if all logs share one rate, else one
+/// `signals_<rate>hz.csv` per rate. Returns the files written.
+pub fn write_csv(dir: &Path, logs: &[SignalLog]) -> Result<Vec<PathBuf>, OutputError> {
+    let mut rates: Vec<f64> = Vec::new();
+    for l in logs {
+        if !rates.contains(&l.rate_hz) {
+            rates.push(l.rate_hz);
+        }
+    }
+    let mut written = Vec::new();
+    for &rate in &rates {
+        let group: Vec<&SignalLog> = logs.iter().filter(|l| l.rate_hz == rate).collect();
+        let path = if rates.len() == 1 {
+            dir.join("signals.csv")
+        } else {
+            dir.join(format!("signals_{rate}hz.csv"))
+        };
+        let csv_err = |e: csv::Error| OutputError::Csv {
+            path: path.display().to_string(),
+            message: e.to_string(),
+        };
+        let mut w = csv::Writer::from_path(&path).map_err(csv_err)?;
+        let mut header = vec!["t_s".to_string()];
+        for l in &group {
+            header.extend(columns(l));
+        }
+        w.write_record(&header).map_err(csv_err)?;
+        let n = group.iter().map(|l| l.len()).max().unwrap_or(0);
+        let mut row: Vec<String> = Vec::with_capacity(header.len());
+        for i in 0..n {
+            row.clear();
+            row.push(format!("{}", i as f64 / rate));
+            for l in &group {
+                for j in 0..l.width {
+                    row.push(
+                        l.data
+                            .get(i * l.width + j)
+                            .map_or(String::new(), |v| format!("{v:e}")),
+                    );
+                }
+            }
+            w.write_record(&row).map_err(csv_err)?;
+        }
+        w.flush().map_err(io(&path))?;
+        written.push(path);
+    }
+    Ok(written)
+}
+
+/// Cumulative PSD (unit²) of `x` sampled at `fs_hz`: frequencies and the running
+/// integral of the one-sided Welch PSD. Its end value is the signal's variance.
+pub fn cumulative_psd(x: &[f64], fs_hz: f64) -> (Vec<f64>, Vec<f64>) {
+    use nanomotion_core::analysis::{WelchOptions, psd_welch};
+    // Segments of up to 2^14 samples (frequency resolution fs/16384), at least 8.
+    let seg = x.len().clamp(8, 1 << 14);
+    match psd_welch(x, fs_hz, &WelchOptions::new(seg)) {
+        Ok(p) => {
+            let c = p.cumulative();
+            (p.freq_hz, c)
+        }
+        Err(_) => (Vec::new(), Vec::new()),
+    }
+}
+
+/// Write everything about a run into `dir`: CSV, `metrics.json`, SVG plots.
+/// Returns the files written.
+pub fn write_all(
+    dir: &Path,
+    result: &RunResult,
+    rate_transitions: &[String],
+) -> Result<Vec<PathBuf>, OutputError> {
+    std::fs::create_dir_all(dir).map_err(io(dir))?;
+    let mut written = write_csv(dir, &result.logs)?;
+    let title = result
+        .title
+        .clone()
+        .unwrap_or_else(|| "nanomotion run".into());
+
+    // One trace plot per logged signal.
+    for log in &result.logs {
+        let t = log.times();
+        let series = (0..log.width)
+            .map(|j| Series {
+                label: columns(log)[j].clone(),
+                x: t.clone(),
+                y: log.column(j),
+            })
+            .collect();
+        let fig = Figure {
+            title: format!("{title}: {}", log.name),
+            x_label: "time (s)".into(),
+            y_label: log.name.clone(),
+            x_scale: Scale::Linear,
+            series,
+        };
+        let path = dir.join(format!("trace_{}.svg", file_stem(&log.name)));
+        draw_svg(&fig, &path)?;
+        written.push(path);
+    }
+
+    // Cumulative PSD of the scored signals (the thesis's way to judge a result).
+    let mut cps = Vec::new();
+    let mut cp_series = Vec::new();
+    for s in &result.scores {
+        let (base, j) = match s.signal.find('[') {
+            Some(p) => (
+                &s.signal[..p],
+                s.signal[p + 1..s.signal.len() - 1]
+                    .parse::<usize>()
+                    .unwrap_or(0),
+            ),
+            None => (s.signal.as_str(), 0),
+        };
+        let Some(log) = result.logs.iter().find(|l| l.name == base) else {
+            continue;
+        };
+        let first = (s.from_s * log.rate_hz - 1e-9).ceil().max(0.0) as usize;
+        let x: Vec<f64> = log.column(j).into_iter().skip(first).collect();
+        if x.len() < 16 {
+            continue;
+        }
+        let (f, c) = cumulative_psd(&x, log.rate_hz);
+        if let Some(&end) = c.last() {
+            cps.push((s.signal.clone(), end));
+            cp_series.push(Series {
+                label: format!("{} (end {:.3e})", s.signal, end),
+                x: f,
+                y: c,
+            });
+        }
+    }
+    if !cp_series.is_empty() {
+        let fig = Figure {
+            title: format!("{title}: cumulative PSD of the scored signals"),
+            x_label: "frequency (Hz)".into(),
+            y_label: "cumulative PSD (unit²)".into(),
+            x_scale: Scale::Log,
+            series: cp_series,
+        };
+        let path = dir.join("cumulative_psd.svg");
+        draw_svg(&fig, &path)?;
+        written.push(path);
+    }
+
+    let metrics = MetricsFile {
+        title: &result.title,
+        duration_s: result.duration_s,
+        scores: &result.scores,
+        rate_transitions,
+        cumulative_psd_end: cps,
+    };
+    let path = dir.join("metrics.json");
+    let text = serde_json::to_string_pretty(&metrics).map_err(|e| OutputError::Csv {
+        path: path.display().to_string(),
+        message: e.to_string(),
+    })?;
+    std::fs::write(&path, text).map_err(io(&path))?;
+    written.push(path);
+    Ok(written)
+}

@@ -1,0 +1,233 @@
+//! SVG plots (plotters' SVG backend: no fonts or system libraries needed).
+
+use plotters::prelude::*;
+use std::path::Path;
+
+/// One curve of a plot.
+#[derive(Debug, Clone)]
+pub struct Series {
+    /// Legend label.
+    pub label: String,
+    /// Abscissa.
+    pub x: Vec<f64>,
+    /// Ordinate.
+    pub y: Vec<f64>,
+}
+
+/// Axis scaling.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Scale {
+    /// Linear axis.
+    Linear,
+    /// Logarithmic axis (non-positive values are dropped).
+    Log,
+}
+
+/// A plot to draw.
+#[derive(Debug, Clone)]
+pub struct Figure {
+    /// Title on top.
+    pub title: String,
+    /// Label of the x axis, with unit.
+    pub x_label: String,
+    /// Label of the y axis, with unit.
+    pub y_label: String,
+    /// Scaling of the x axis.
+    pub x_scale: Scale,
+    /// The curves.
+    pub series: Vec<Series>,
+}
+
+/// Errors while drawing.
+#[derive(Debug, thiserror::Error)]
+#[error("cannot draw `{path}`: {message}")]
+pub struct PlotError {
+    /// File being written.
+    pub path: String,
+    /// What went wrong.
+    pub message: String,
+}
+
+/// Keep at most about `2·buckets` points, preserving each bucket's minimum and
+/// maximum so that peaks stay visible (an SVG of a million points is useless).
+pub fn decimate_min_max(x: &[f64], y: &[f64], buckets: usize) -> (Vec<f64>, Vec<f64>) {
+    let n = x.len().min(y.len());
+    if n <= 2 * buckets || buckets == 0 {
+        return (x[..n].to_vec(), y[..n].to_vec());
+    }
+    let mut xo = Vec::with_capacity(2 * buckets + 2);
+    let mut yo = Vec::with_capacity(2 * buckets + 2);
+    for b in 0..buckets {
+        let lo = b * n / buckets;
+        let hi = ((b + 1) * n / buckets).max(lo + 1);
+        let (mut imin, mut imax) = (lo, lo);
+        for i in lo..hi {
+            if y[i] < y[imin] {
+                imin = i;
+            }
+            if y[i] > y[imax] {
+                imax = i;
+            }
+        }
+        let (a, c) = if imin <= imax {
+            (imin, imax)
+        } else {
+            (imax, imin)
+        };
+        xo.push(x[a]);
+        yo.push(y[a]);
+        if c != a {
+            xo.push(x[c]);
+            yo.push(y[c]);
+        }
+    }
+    (xo, yo)
+}
+
+const COLORS: [RGBColor; 6] = [
+    RGBColor(31, 119, 180),
+    RGBColor(214, 39, 40),
+    RGBColor(44, 160, 44),
+    RGBColor(255, 127, 14),
+    RGBColor(148, 103, 189),
+    RGBColor(23, 190, 207),
+];
+
+/// Draw `fig` into an SVG file at `path` (800 × 450 px).
+pub fn draw_svg(fig: &Figure, path: &Path) -> Result<(), PlotError> {
+    let err = |m: String| PlotError {
+        path: path.display().to_string(),
+        message: m,
+    };
+    let keep = |v: f64, scale: Scale| v.is_finite() && (scale == Scale::Linear || v > 0.0);
+    let series: Vec<(String, Vec<(f64, f64)>)> = fig
+        .series
+        .iter()
+        .map(|s| {
+            let (x, y) = decimate_min_max(&s.x, &s.y, 1500);
+            let pts = x
+                .into_iter()
+                .zip(y)
+                .filter(|&(a, b)| keep(a, fig.x_scale) && b.is_finite())
+                .collect();
+            (s.label.clone(), pts)
+        })
+        .collect();
+    let all = series.iter().flat_map(|(_, p)| p.iter());
+    let (mut x0, mut x1, mut y0, mut y1) = (
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+    );
+    for &(x, y) in all {
+        x0 = x0.min(x);
+        x1 = x1.max(x);
+        y0 = y0.min(y);
+        y1 = y1.max(y);
+    }
+    if !(x0.is_finite() && y0.is_finite()) {
+        return Err(err("nothing finite to plot".into()));
+    }
+    if x1 <= x0 {
+        x1 = x0 + if fig.x_scale == Scale::Log { x0 } else { 1.0 };
+    }
+    let pad = if y1 > y0 {
+        0.05 * (y1 - y0)
+    } else {
+        y0.abs().max(1e-12) * 0.1
+    };
+    let (y0, y1) = (y0 - pad, y1 + pad);
+
+    let root = SVGBackend::new(path, (800, 450)).into_drawing_area();
+    root.fill(&WHITE).map_err(|e| err(e.to_string()))?;
+    macro_rules! body {
+        ($chart:expr) => {{
+            let mut chart = $chart;
+            chart
+                .configure_mesh()
+                .x_desc(fig.x_label.as_str())
+                .y_desc(fig.y_label.as_str())
+                .y_label_formatter(&|v| format!("{v:.3e}"))
+                .draw()
+                .map_err(|e| err(e.to_string()))?;
+            for (i, (label, pts)) in series.iter().enumerate() {
+                let color = COLORS[i % COLORS.len()];
+                chart
+                    .draw_series(LineSeries::new(pts.iter().copied(), color.stroke_width(1)))
+                    .map_err(|e| err(e.to_string()))?
+                    .label(label.as_str())
+                    .legend(move |(x, y)| {
+                        PathElement::new(vec![(x, y), (x + 16, y)], color.stroke_width(2))
+                    });
+            }
+            if series.len() > 1 || !series.is_empty() {
+                chart
+                    .configure_series_labels()
+                    .background_style(WHITE.mix(0.8))
+                    .border_style(BLACK)
+                    .draw()
+                    .map_err(|e| err(e.to_string()))?;
+            }
+        }};
+    }
+    let mut builder = ChartBuilder::on(&root);
+    builder
+        .caption(fig.title.as_str(), ("sans-serif", 18))
+        .margin(12)
+        .x_label_area_size(40)
+        .y_label_area_size(80);
+    match fig.x_scale {
+        Scale::Linear => body!(
+            builder
+                .build_cartesian_2d(x0..x1, y0..y1)
+                .map_err(|e| err(e.to_string()))?
+        ),
+        Scale::Log => body!(
+            builder
+                .build_cartesian_2d((x0..x1).log_scale(), y0..y1)
+                .map_err(|e| err(e.to_string()))?
+        ),
+    }
+    root.present().map_err(|e| err(e.to_string()))?;
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn decimation_keeps_extremes() {
+        let x: Vec<f64> = (0..100_000).map(|i| i as f64).collect();
+        let mut y = vec![0.0; 100_000];
+        y[54_321] = 7.0;
+        y[99] = -3.0;
+        let (xd, yd) = decimate_min_max(&x, &y, 100);
+        assert!(xd.len() <= 200);
+        assert!(yd.contains(&7.0) && yd.contains(&-3.0));
+        assert!(xd.windows(2).all(|w| w[0] < w[1]), "x stays sorted");
+    }
+
+    #[test]
+    fn svg_is_written() {
+        let dir = std::env::temp_dir().join(format!("nm-plot-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let p = dir.join("a.svg");
+        let fig = Figure {
+            title: "t".into(),
+            x_label: "time (s)".into(),
+            y_label: "y (m)".into(),
+            x_scale: Scale::Log,
+            series: vec![Series {
+                label: "s".into(),
+                x: vec![0.0, 1.0, 10.0],
+                y: vec![1.0, 2.0, 3.0],
+            }],
+        };
+        draw_svg(&fig, &p).unwrap();
+        let text = std::fs::read_to_string(&p).unwrap();
+        assert!(text.starts_with("<svg") && text.contains("<polyline"));
+        std::fs::remove_dir_all(dir).ok();
+    }
+}
