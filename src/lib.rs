@@ -16,6 +16,10 @@
 //! assert!(!result.scores.is_empty());
 //! ```
 
+#[doc = include_str!("../README.md")]
+#[cfg(doctest)]
+pub struct ReadmeDoctests;
+
 pub use nanomotion_core as core;
 pub use nanomotion_core::{Block, GraphSpec, Scheduler};
 

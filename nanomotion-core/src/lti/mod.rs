@@ -14,6 +14,7 @@
 //! - [`hinfnorm`]: H∞ norm and peak frequency (Hamiltonian / Bruinsma–Steinbuch);
 //! - [`fir_lowpass`], [`butter_lowpass`], [`SosCascade`]: filter design and
 //!   second-order-section simulation;
+//! - [`stability_margins`]: gain, phase and modulus margins of a loop gain;
 //! - [`zpetc()`]: Tomizuka's zero-phase-error tracking controller;
 //! - [`SsStepper`], [`lsim`], [`step_response`], [`impulse`]: allocation-free
 //!   simulation.
@@ -26,6 +27,7 @@ pub mod discretise;
 pub mod filters;
 pub mod hinf;
 pub mod linalg;
+pub mod margins;
 pub mod sim;
 pub mod ss;
 pub mod tf;
@@ -34,6 +36,7 @@ pub mod zpetc;
 pub use discretise::{C2dMethod, c2d};
 pub use filters::{SosCascade, butter_lowpass, fir_lowpass, fir2ss, sos_freqresp, sos2ss, ss2sos};
 pub use hinf::{HinfNorm, hinfnorm};
+pub use margins::{Margins, stability_margins};
 pub use sim::{SsStepper, impulse, lsim, lsim_siso, step_response};
 pub use ss::{append, delay, feedback, parallel, series, ss2tf, unwrap_phase};
 pub use tf::{tf2sos, tf2ss, zpk, zpk2sos, zpk2ss};
