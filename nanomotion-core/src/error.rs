@@ -116,7 +116,7 @@ pub enum GraphError {
     },
     /// A cycle of blocks with direct feed-through.
     #[error(
-        "algebraic loop: {cycle}; break it with a block without direct feed-through (e.g. `unit_delay`)"
+        "algebraic loop: {cycle}; break it with a block without direct feed-through (e.g. `delay` with d: 1, or a plant)"
     )]
     AlgebraicLoop { cycle: String },
     /// A graph-level setting is invalid.

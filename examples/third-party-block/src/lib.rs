@@ -17,7 +17,7 @@ use nanomotion_core::{Block, BlockDoc, BuildContext, ParamDoc, ParamError, Port,
 use serde::{Deserialize, Serialize};
 
 /// Moving average over the last `window` samples (zeros before the start):
-/// y[k] = (1/n) Σ_{i=0}^{n-1} u[k-i].
+/// `y[k] = (1/n) Σ_{i=0}^{n-1} u[k-i]`.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct MovingAverage {
