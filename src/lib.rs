@@ -20,13 +20,20 @@
 #[cfg(doctest)]
 pub struct ReadmeDoctests;
 
+pub use afm_stage;
 pub use nanomotion_core as core;
 pub use nanomotion_core::{Block, GraphSpec, Scheduler};
+pub use walking_piezo;
 
 pub mod output;
 pub mod plot;
 
 /// Make sure every plugin crate is linked (typetag registers blocks through the
-/// linker: a plugin that is never referenced would silently miss from YAML).
-#[doc(hidden)]
-pub fn link_plugins() {}
+/// linker: a plugin that is never referenced would silently miss from YAML). The
+/// `pub use` re-exports above reference each plugin; call this from a binary or
+/// test that uses only YAML to be explicit about it.
+pub fn link_plugins() {
+    // Referencing one item of each plugin keeps it in the link.
+    let _ = std::any::type_name::<walking_piezo::WalkingPiezoStage>();
+    let _ = std::any::type_name::<afm_stage::stage::AfmStage>();
+}

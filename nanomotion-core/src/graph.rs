@@ -534,6 +534,8 @@ fn compile(spec: GraphSpec) -> Result<(Scheduler, BuildReport), GraphError> {
         let out_len: usize = p.outputs.iter().map(|o| o.width).sum();
         nodes.push(Node {
             period: p.period,
+            countdown: 0,
+            due: false,
             dt: p.ctx.dt,
             k_local: 0,
             inputs: in_start..input_len,
@@ -590,6 +592,7 @@ fn compile(spec: GraphSpec) -> Result<(Scheduler, BuildReport), GraphError> {
         let samples = n_ticks.div_ceil(period) as usize;
         logs.push(LogChannel {
             name: reference.to_string(),
+            countdown: 0,
             offset,
             width,
             period,

@@ -29,6 +29,10 @@ use std::ops::Range;
 #[derive(Debug, Clone)]
 pub(crate) struct Node {
     pub period: u64,
+    /// Base ticks until this block is due again (0: due on this tick).
+    pub countdown: u64,
+    /// Whether the block ran its output phase on the current tick.
+    pub due: bool,
     pub dt: f64,
     pub k_local: u64,
     pub inputs: Range<usize>,
@@ -49,6 +53,8 @@ pub(crate) struct Gather {
 #[derive(Debug, Clone)]
 pub(crate) struct LogChannel {
     pub name: String,
+    /// Base ticks until the next sample is recorded.
+    pub countdown: u64,
     pub offset: usize,
     pub width: usize,
     pub period: u64,
@@ -226,9 +232,11 @@ impl Scheduler {
     }
 
     /// One base tick: output phase, update phase, logging. Allocation-free.
+    ///
+    /// Due blocks are found with per-block countdowns (no division per tick); inputs
+    /// are gathered by copies whose indices were resolved at build time.
     #[inline]
     pub fn tick(&mut self) {
-        let k = self.k;
         let Self {
             blocks,
             nodes,
@@ -241,49 +249,58 @@ impl Scheduler {
         } = self;
         // Phase 1: outputs in topological order.
         for (node, block) in nodes.iter_mut().zip(blocks.iter_mut()) {
-            if !k.is_multiple_of(node.period) {
+            if node.countdown != 0 {
+                node.countdown -= 1;
+                node.due = false;
                 continue;
             }
-            if node.feedthrough {
-                for g in &gathers[node.gathers.clone()] {
-                    inputs[g.dst..g.dst + g.len].copy_from_slice(&signals[g.src..g.src + g.len]);
-                }
-            }
+            node.countdown = node.period - 1;
+            node.due = true;
             let tick = Tick {
                 k: node.k_local,
                 t: node.k_local as f64 * node.dt,
                 dt: node.dt,
             };
-            block.output(
-                tick,
-                &inputs[node.inputs.clone()],
-                &mut signals[node.outputs.clone()],
-            );
+            if node.feedthrough {
+                gather(&gathers[node.gathers.clone()], signals, inputs);
+                block.output(
+                    tick,
+                    &inputs[node.inputs.clone()],
+                    &mut signals[node.outputs.clone()],
+                );
+                node.k_local += 1;
+            } else {
+                block.output(
+                    tick,
+                    &inputs[node.inputs.clone()],
+                    &mut signals[node.outputs.clone()],
+                );
+            }
         }
-        // Phase 2: state updates of blocks without feed-through.
+        // Phase 2: state updates of blocks without feed-through, with this sample's
+        // inputs (all outputs of this sample exist now).
         for &i in updaters.iter() {
-            let node = &nodes[i];
-            if !k.is_multiple_of(node.period) {
+            let node = &mut nodes[i];
+            if !node.due {
                 continue;
             }
-            for g in &gathers[node.gathers.clone()] {
-                inputs[g.dst..g.dst + g.len].copy_from_slice(&signals[g.src..g.src + g.len]);
-            }
+            gather(&gathers[node.gathers.clone()], signals, inputs);
             let tick = Tick {
                 k: node.k_local,
                 t: node.k_local as f64 * node.dt,
                 dt: node.dt,
             };
             blocks[i].update(tick, &inputs[node.inputs.clone()]);
-        }
-        for node in nodes.iter_mut() {
-            if k.is_multiple_of(node.period) {
-                node.k_local += 1;
-            }
+            node.k_local += 1;
         }
         // Phase 3: logging into preallocated buffers (capacity reserved at build).
         for log in logs.iter_mut() {
-            if k.is_multiple_of(log.period) && log.data.len() + log.width <= log.data.capacity() {
+            if log.countdown != 0 {
+                log.countdown -= 1;
+                continue;
+            }
+            log.countdown = log.period - 1;
+            if log.data.len() + log.width <= log.data.capacity() {
                 log.data
                     .extend_from_slice(&signals[log.offset..log.offset + log.width]);
             }
@@ -402,11 +419,14 @@ impl Scheduler {
         }
         for n in &mut self.nodes {
             n.k_local = 0;
+            n.countdown = 0;
+            n.due = false;
         }
         self.signals.iter_mut().for_each(|v| *v = 0.0);
         self.inputs.iter_mut().for_each(|v| *v = 0.0);
         for l in &mut self.logs {
             l.data.clear();
+            l.countdown = 0;
         }
         self.k = 0;
         self.non_finite = None;
@@ -492,6 +512,18 @@ impl Scheduler {
                 )
             })
             .collect()
+    }
+}
+
+/// Copy each gather's source values into the input buffer.
+#[inline(always)]
+fn gather(list: &[Gather], signals: &[f64], inputs: &mut [f64]) {
+    for g in list {
+        if g.len == 1 {
+            inputs[g.dst] = signals[g.src];
+        } else {
+            inputs[g.dst..g.dst + g.len].copy_from_slice(&signals[g.src..g.src + g.len]);
+        }
     }
 }
 

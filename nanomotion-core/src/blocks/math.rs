@@ -194,6 +194,11 @@ impl Sum {
     /// y = Σᵢ sᵢ·inᵢ; `u` holds the inputs concatenated (width n each).
     pub fn apply(&self, u: &[f64], y: &mut [f64]) {
         let n = self.width;
+        if n == 1 {
+            // Scalar fast path (the common `r − y`).
+            y[0] = u.iter().zip(&self.gains).map(|(ui, g)| g * ui).sum();
+            return;
+        }
         y.fill(0.0);
         for (input, &g) in u.chunks_exact(n.max(1)).zip(&self.gains) {
             for (yi, ui) in y.iter_mut().zip(input) {

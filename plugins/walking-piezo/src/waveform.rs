@@ -1,0 +1,167 @@
+//! A minimal drive-waveform source: the sinusoidal waveforms (2.2) at a fixed drive
+//! frequency f_α, so that the stage models can be run open loop. (The full driver
+//! with frequency input, asymmetric, rhombic and free waveforms belongs to the
+//! driver/waveform plugin.)
+//!
+//! u1 = A/2 sin α + A/2,           u2 = A/2 sin(α + π/2 + φ) + A/2,
+//! u3 = A/2 sin(α + π) + A/2,      u4 = A/2 sin(α + 3π/2 + φ) + A/2,
+//!
+//! with α(t) = α0 + 2π f_α t.
+
+use nanomotion_core::block::check;
+use nanomotion_core::{
+    Block, BlockDoc, BuildContext, ParamDoc, ParamError, Port, Role, Source, Tick,
+};
+use serde::{Deserialize, Serialize};
+use std::f64::consts::{FRAC_PI_2, PI, TAU};
+
+/// Sinusoidal walking waveforms (2.2) at a fixed drive frequency.
+///
+/// ```
+/// use walking_piezo::SinusoidalWaveform;
+/// use nanomotion_core::Source;
+/// let mut w = SinusoidalWaveform::default();
+/// let mut y = [0.0; 5];
+/// w.sample(0.0, &mut y);
+/// for (v, e) in y[..4].iter().zip([23.0, 46.0, 23.0, 0.0]) {   // α = 0, A = 46 V, φ = 0
+///     assert!((v - e).abs() < 1e-12);
+/// }
+/// assert_eq!(y[4], 0.0);                          // α
+/// ```
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SinusoidalWaveform {
+    /// Drive frequency f_α (Hz).
+    #[serde(default = "d_f")]
+    pub f_alpha_hz: f64,
+    /// Amplitude A (V), the peak-to-peak voltage of each waveform; in [0, 46] V.
+    #[serde(default = "d_a")]
+    pub amplitude_v: f64,
+    /// Additional phase φ (rad) of (2.2); 0 gives the largest step.
+    #[serde(default)]
+    pub phase_rad: f64,
+    /// Angle at t = 0 (rad).
+    #[serde(default)]
+    pub alpha0_rad: f64,
+}
+
+fn d_f() -> f64 {
+    10.0
+}
+fn d_a() -> f64 {
+    46.0
+}
+
+impl Default for SinusoidalWaveform {
+    fn default() -> Self {
+        Self {
+            f_alpha_hz: d_f(),
+            amplitude_v: d_a(),
+            phase_rad: 0.0,
+            alpha0_rad: 0.0,
+        }
+    }
+}
+
+impl SinusoidalWaveform {
+    /// Check the parameters (A ∈ [0, 46] V, finite f_α and φ).
+    pub fn validate(&self) -> Result<(), ParamError> {
+        check::finite("f_alpha_hz", self.f_alpha_hz)?;
+        check::in_range("amplitude_v", self.amplitude_v, 0.0, 46.0)?;
+        check::finite("phase_rad", self.phase_rad)?;
+        check::finite("alpha0_rad", self.alpha0_rad)
+    }
+    /// The four voltages (2.2) at angle `alpha` (rad).
+    pub fn voltages(&self, alpha: f64) -> [f64; 4] {
+        let h = 0.5 * self.amplitude_v;
+        let p = self.phase_rad;
+        [
+            h * alpha.sin() + h,
+            h * (alpha + FRAC_PI_2 + p).sin() + h,
+            h * (alpha + PI).sin() + h,
+            h * (alpha + 3.0 * FRAC_PI_2 + p).sin() + h,
+        ]
+    }
+    /// α(t) = α0 + 2π f_α t (rad), not wrapped.
+    pub fn alpha(&self, t: f64) -> f64 {
+        self.alpha0_rad + TAU * self.f_alpha_hz * t
+    }
+}
+
+impl Source for SinusoidalWaveform {
+    /// `y` = [u1, u2, u3, u4 (V), α (rad)].
+    fn sample(&mut self, t: f64, y: &mut [f64]) {
+        let a = self.alpha(t);
+        y[..4].copy_from_slice(&self.voltages(a));
+        y[4] = a;
+    }
+}
+
+/// Graph block `walking_waveform`: outputs `u` (4, V) and `alpha` (1, rad).
+#[derive(Debug, Clone, Default, Serialize, Deserialize)]
+#[serde(transparent)]
+pub struct WalkingWaveformBlock {
+    /// The waveform.
+    pub waveform: SinusoidalWaveform,
+}
+
+#[typetag::serde(name = "walking_waveform")]
+impl Block for WalkingWaveformBlock {
+    fn outputs(&self) -> Vec<Port> {
+        vec![Port::new("u", 4), Port::new("alpha", 1)]
+    }
+    fn build(&mut self, _ctx: &BuildContext) -> Result<(), ParamError> {
+        self.waveform.validate()
+    }
+    fn output(&mut self, tick: Tick, _u: &[f64], y: &mut [f64]) {
+        self.waveform.sample(tick.t, y);
+    }
+    fn role(&self) -> Role {
+        Role::Source
+    }
+}
+
+nanomotion_core::submit_block_doc! {
+    BlockDoc {
+        type_name: "walking_waveform",
+        role: Role::Source,
+        summary: "sinusoidal walking-piezo waveforms (2.2) at a fixed drive frequency f_α",
+        params: &[
+            ParamDoc { name: "f_alpha_hz", doc: "drive frequency f_α (Hz)", default: Some("10") },
+            ParamDoc { name: "amplitude_v", doc: "amplitude A (V), in [0, 46]", default: Some("46") },
+            ParamDoc { name: "phase_rad", doc: "additional phase φ (rad)", default: Some("0") },
+            ParamDoc { name: "alpha0_rad", doc: "angle at t = 0 (rad)", default: Some("0") },
+        ],
+        ports: "-> u[4] (V), alpha[1] (rad)",
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn pairs_are_in_antiphase_and_voltages_in_range() {
+        let w = SinusoidalWaveform {
+            phase_rad: 0.3,
+            ..Default::default()
+        };
+        for i in 0..100 {
+            let a = i as f64 * 0.0731;
+            let u = w.voltages(a);
+            let v = w.voltages(a + PI);
+            assert!((u[0] - v[2]).abs() < 1e-12 && (u[1] - v[3]).abs() < 1e-12);
+            assert!(u.iter().all(|x| (-1e-12..=46.0 + 1e-12).contains(x)));
+        }
+        assert_eq!(
+            SinusoidalWaveform {
+                amplitude_v: 50.0,
+                ..Default::default()
+            }
+            .validate()
+            .unwrap_err()
+            .field,
+            "amplitude_v"
+        );
+    }
+}

@@ -1,0 +1,91 @@
+//! The blocks from YAML: every tag registers and deserialises with its defaults,
+//! unknown fields and bad values are refused by name, and the shipped example graph
+//! runs.
+
+use nanomotion_core::graph::GraphSpec;
+use nanomotion_core::{Block, BuildContext};
+// Anchor: linking alone must register the blocks (see DEPENDENCIES.md).
+use walking_piezo as _;
+
+const TAGS: [&str; 6] = [
+    "walking_piezo_switched",
+    "walking_piezo_linear",
+    "walking_piezo_fitted",
+    "walking_piezo_legs",
+    "walking_piezo_stage",
+    "walking_waveform",
+];
+
+#[test]
+fn every_tag_deserialises_with_defaults_and_builds() {
+    let registered = nanomotion_core::block::registered_types();
+    let docs: Vec<&str> = nanomotion_core::block::block_docs()
+        .iter()
+        .map(|d| d.type_name)
+        .collect();
+    for tag in TAGS {
+        assert!(
+            registered.iter().any(|t| t == tag),
+            "{tag} not registered: {registered:?}"
+        );
+        assert!(docs.contains(&tag), "{tag} has no BlockDoc");
+        let mut b: Box<dyn Block> =
+            nanomotion_core::yaml::from_str(&format!("type: {tag}\n"), "test").unwrap();
+        b.build(&BuildContext::new("b", 1.0 / 4000.0, 1)).unwrap();
+        assert!(!b.outputs().is_empty());
+    }
+}
+
+#[test]
+fn unknown_fields_and_bad_values_name_the_field() {
+    let e = nanomotion_core::yaml::from_str::<Box<dyn Block>>(
+        "type: walking_piezo_stage\nmass_kg: 1.0\n",
+        "t",
+    )
+    .unwrap_err();
+    assert!(e.to_string().contains("mass_kg"), "{e}");
+    let mut b: Box<dyn Block> =
+        nanomotion_core::yaml::from_str("type: walking_piezo_stage\npreload_n: -5\n", "t").unwrap();
+    let e = b.build(&BuildContext::new("s", 25e-6, 0)).unwrap_err();
+    assert_eq!(e.field, "preload_n");
+}
+
+#[test]
+fn plant_blocks_expose_their_discrete_models() {
+    let mut b: Box<dyn Block> =
+        nanomotion_core::yaml::from_str("type: walking_piezo_fitted\n", "t").unwrap();
+    b.build(&BuildContext::new("g", 1.0 / 4000.0, 0)).unwrap();
+    let l = b.lti().unwrap();
+    assert_eq!(l.dt, Some(1.0 / 4000.0));
+    assert_eq!(l.nstates(), 8);
+    assert!(!b.direct_feedthrough());
+}
+
+#[test]
+fn example_graph_runs_and_walks() {
+    let path = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../examples/walking_piezo_open_loop.yaml"
+    );
+    let mut spec = GraphSpec::from_file(path).unwrap();
+    spec.duration_s = 0.2; // keep the test short
+    let (mut sched, _report) = spec.build().unwrap();
+    let res = sched.run(|_| {});
+    sched.check_finite().unwrap();
+    let x = res
+        .logs
+        .iter()
+        .find(|l| l.name == "stage.x_s")
+        .unwrap()
+        .column(0);
+    let nonconv = res
+        .logs
+        .iter()
+        .find(|l| l.name == "stage.nonconverged")
+        .unwrap()
+        .column(0);
+    // 0.2 s at 10 Hz: two cycles of several µm.
+    let travel = x.last().unwrap() - x[0];
+    assert!(travel > 4e-6 && travel < 20e-6, "travel {travel}");
+    assert_eq!(*nonconv.last().unwrap(), 0.0);
+}
