@@ -21,8 +21,10 @@
 pub struct ReadmeDoctests;
 
 pub use afm_stage;
+pub use hots;
 pub use nanomotion_core as core;
 pub use nanomotion_core::{Block, GraphSpec, Scheduler};
+pub use timestamp_encoder;
 pub use walking_piezo;
 
 pub mod output;
@@ -36,4 +38,6 @@ pub fn link_plugins() {
     // Referencing one item of each plugin keeps it in the link.
     let _ = std::any::type_name::<walking_piezo::WalkingPiezoStage>();
     let _ = std::any::type_name::<afm_stage::stage::AfmStage>();
+    let _ = std::any::type_name::<timestamp_encoder::TimestampEncoder>();
+    let _ = std::any::type_name::<hots::HotsEstimator>();
 }

@@ -1,0 +1,264 @@
+//! `timestamp_estimator`: position, velocity and acceleration at the sample instant
+//! from the encoder's event register, by the least-squares polynomial (8.1)–(8.4).
+//!
+//! At each sample t_c the valid register events (t_i, x_i) — optionally corrected by
+//! a slit calibration table, x_i + ê[x_i mod len] (see the `hots` crate) — are fitted
+//! by a polynomial of order m ([`crate::fit`]) and the polynomial and its first two
+//! derivatives are evaluated at t_c. Outputs are in input units: x̂ = Δ·x̂_counts.
+//!
+//! **Fallback (Sec. 8.3).** The count c says the true position lies in the cell
+//! [c, c + 1) counts, so the count's own estimate is the cell centre c + ½. If the
+//! extrapolated position leaves the band |x̂ − (c + ½)| ≤ `band_counts` (default 1
+//! count, the thesis's rule), the estimate is replaced by the cell centre, and the
+//! velocity and acceleration by 0 (status 1): an extrapolation that has left its
+//! cell means the polynomial no longer describes the motion, which in practice
+//! happens when the motion stopped or reversed since the newest event.
+//!
+//! **Standstill.** If the newest event is older than both `standstill_timeout_s`
+//! (default 10 ms, as the public phobos `encoderhots` inserts a pseudo-event after
+//! 10 ms without edges) and twice the window's mean time per count
+//! (T / max(|x_1 − x_n|, 1)), the output is the cell centre with zero velocity and
+//! acceleration (status 3). The second condition keeps a slow but steady motion
+//! (events further apart than the timeout) from being declared standstill. With no event at all: the cell centre, zero derivatives (status 2).
+//!
+//! **Reversals.** Events keep their edge level whichever the direction, so a window
+//! spanning a reversal holds a turning trajectory; an order m ≥ 2 follows it, m = 1
+//! cannot (its error near the turn is of the order of the window's curvature). The
+//! event rate drops near the turn, so the window grows and the truncation error with
+//! it; the band catches what the fit cannot follow.
+//!
+//! Output `y` = [x̂, ẋ̂, ẍ̂] (units, units/s, units/s²); output `status` as above
+//! (0 = fitted).
+
+use crate::fit::{MAX_M, MAX_N, fit_events};
+use nanomotion_core::block::check;
+use nanomotion_core::{
+    Block, BlockDoc, BuildContext, Estimator, ParamDoc, ParamError, Port, Role, Tick,
+};
+use serde::{Deserialize, Serialize};
+
+fn d_m() -> usize {
+    2
+}
+fn d_n() -> usize {
+    crate::encoder::DEFAULT_REGISTER_LEN
+}
+fn d_band() -> f64 {
+    1.0
+}
+fn d_timeout() -> f64 {
+    0.01
+}
+
+/// Why an estimate is what it is (the `status` output).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Status {
+    /// The polynomial fit, within the band.
+    Fitted = 0,
+    /// The fit left the ±band around the count: cell centre, zero derivatives.
+    OutOfBand = 1,
+    /// No event yet: cell centre, zero derivatives.
+    NoEvents = 2,
+    /// No event for longer than the standstill timeout: cell centre, zeros.
+    Standstill = 3,
+}
+
+/// The time-stamping estimator (8.1)–(8.4). Plain Rust:
+///
+/// ```
+/// use timestamp_encoder::{TimestampEncoder, TimestampEstimator};
+/// use nanomotion_core::{Estimator, Sensor};
+/// let mut enc = TimestampEncoder::default();
+/// enc.prepare(1).unwrap();
+/// let mut est = TimestampEstimator::new(2, 5, enc.resolution()).unwrap();
+/// let (mut reg, mut y) = (vec![0.0; enc.register_width()], [0.0; 3]);
+/// for k in 0..=200 {
+///     let t = k as f64 * 1e-3;
+///     enc.measure(t, &[50.0 * t * t, 100.0 * t], &mut reg); // 100 rad/s², from rest
+///     est.estimate(t, &reg, &mut y);
+/// }
+/// // At t = 0.2 s: x = 2 rad, v = 20 rad/s, a = 100 rad/s².
+/// assert!((y[0] - 2.0).abs() < 1e-4 && (y[1] - 20.0).abs() < 0.01 && (y[2] - 100.0).abs() < 5.0, "{y:?}");
+/// ```
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TimestampEstimator {
+    /// Polynomial order m (8.1), 0..=4, default 2.
+    #[serde(default = "d_m")]
+    pub order: usize,
+    /// Register length n (events) of the encoder feeding it, default 5; n > m.
+    #[serde(default = "d_n")]
+    pub register_len: usize,
+    /// Resolution Δ: units per count (2π/400 rad for the 100-line encoder).
+    pub resolution: f64,
+    /// Fallback band around the cell centre (counts), default 1 (Sec. 8.3).
+    #[serde(default = "d_band")]
+    pub band_counts: f64,
+    /// Minimum age of the newest event for standstill (s), default 0.01; 0
+    /// disables (see the module documentation for the full rule).
+    #[serde(default = "d_timeout")]
+    pub standstill_timeout_s: f64,
+    /// Slit calibration ê (counts) per edge, indexed by level mod its length
+    /// (normally 4N); added to each event before the fit. Default none.
+    #[serde(default)]
+    pub edge_offsets_counts: Vec<f64>,
+    #[serde(skip)]
+    status: Option<Status>,
+}
+
+impl TimestampEstimator {
+    /// An estimator of order `m` for a register of `n` events with resolution
+    /// `resolution` (units per count), other parameters at their defaults.
+    pub fn new(m: usize, n: usize, resolution: f64) -> Result<Self, ParamError> {
+        let e = Self {
+            order: m,
+            register_len: n,
+            resolution,
+            band_counts: d_band(),
+            standstill_timeout_s: d_timeout(),
+            edge_offsets_counts: Vec::new(),
+            status: None,
+        };
+        e.validate()?;
+        Ok(e)
+    }
+
+    /// Check the parameters.
+    pub fn validate(&self) -> Result<(), ParamError> {
+        if self.order > MAX_M {
+            return Err(ParamError::new(
+                "order",
+                format!("is {}, above {MAX_M}", self.order),
+                format!("give m ≤ {MAX_M}"),
+            ));
+        }
+        check::at_least_one("register_len", self.register_len)?;
+        if self.register_len > MAX_N {
+            return Err(ParamError::new(
+                "register_len",
+                format!("is {}, above {MAX_N}", self.register_len),
+                format!("give n ≤ {MAX_N}"),
+            ));
+        }
+        if self.register_len <= self.order {
+            return Err(ParamError::new(
+                "register_len",
+                format!(
+                    "n = {} ≤ m = {}: a least-squares fit needs n > m (8.4)",
+                    self.register_len, self.order
+                ),
+                format!("give register_len ≥ {} or a lower order", self.order + 1),
+            ));
+        }
+        check::positive("resolution", self.resolution)?;
+        check::positive("band_counts", self.band_counts)?;
+        check::non_negative("standstill_timeout_s", self.standstill_timeout_s)?;
+        check::all_finite("edge_offsets_counts", &self.edge_offsets_counts)?;
+        Ok(())
+    }
+
+    /// Width of the `register` input: 2 + 2n.
+    pub fn register_width(&self) -> usize {
+        2 + 2 * self.register_len
+    }
+
+    /// The status of the last estimate.
+    pub fn status(&self) -> Option<Status> {
+        self.status
+    }
+
+    /// Estimate [x̂, ẋ̂, ẍ̂] (units) at `t_c` from a register
+    /// `[c, n_valid, t_1, x_1, …]`; returns the status.
+    pub fn estimate_from_register(&mut self, t_c: f64, reg: &[f64], out: &mut [f64]) -> Status {
+        let c = reg[0];
+        let n_valid = (reg[1].max(0.0) as usize)
+            .min(self.register_len)
+            .min((reg.len() - 2) / 2);
+        let centre = c + 0.5;
+        let mut ts = [0.0; MAX_N];
+        let mut xs = [0.0; MAX_N];
+        let len = self.edge_offsets_counts.len() as i64;
+        for i in 0..n_valid {
+            ts[i] = reg[2 + 2 * i];
+            let x = reg[3 + 2 * i];
+            xs[i] = if len > 0 {
+                x + self.edge_offsets_counts[(x as i64).rem_euclid(len) as usize]
+            } else {
+                x
+            };
+        }
+        let d = self.resolution;
+        let status = if n_valid == 0 {
+            Status::NoEvents
+        } else if self.standstill_timeout_s > 0.0 && t_c - ts[0] > self.standstill_timeout_s && {
+            let span = ts[0] - ts[n_valid - 1];
+            let counts = (xs[0] - xs[n_valid - 1]).abs().max(1.0);
+            t_c - ts[0] > 2.0 * span / counts
+        } {
+            Status::Standstill
+        } else {
+            match fit_events(&ts[..n_valid], &xs[..n_valid], self.order, t_c) {
+                Some(f) if f.x.is_finite() && (f.x - centre).abs() <= self.band_counts => {
+                    out[0] = f.x * d;
+                    out[1] = f.v * d;
+                    out[2] = f.a * d;
+                    Status::Fitted
+                }
+                _ => Status::OutOfBand,
+            }
+        };
+        if status != Status::Fitted {
+            out[0] = centre * d;
+            out[1] = 0.0;
+            out[2] = 0.0;
+        }
+        self.status = Some(status);
+        status
+    }
+}
+
+impl Estimator for TimestampEstimator {
+    /// `measurement` = the register, `estimate` = [x̂, ẋ̂, ẍ̂].
+    fn estimate(&mut self, t: f64, measurement: &[f64], estimate: &mut [f64]) {
+        self.estimate_from_register(t, measurement, estimate);
+    }
+}
+
+#[typetag::serde(name = "timestamp_estimator")]
+impl Block for TimestampEstimator {
+    fn inputs(&self) -> Vec<Port> {
+        vec![Port::new("register", self.register_width())]
+    }
+    fn outputs(&self) -> Vec<Port> {
+        vec![Port::new("y", 3), Port::new("status", 1)]
+    }
+    fn build(&mut self, _ctx: &BuildContext) -> Result<(), ParamError> {
+        self.validate()?;
+        self.status = None;
+        Ok(())
+    }
+    fn output(&mut self, tick: Tick, u: &[f64], y: &mut [f64]) {
+        let s = self.estimate_from_register(tick.t, u, &mut y[..3]);
+        y[3] = s as u8 as f64;
+    }
+    fn role(&self) -> Role {
+        Role::Estimator
+    }
+}
+
+nanomotion_core::submit_block_doc! {
+    BlockDoc {
+        type_name: "timestamp_estimator",
+        role: Role::Estimator,
+        summary: "time-stamping estimator (8.1)-(8.4): LS polynomial of order m through the register's events, scaled time, extrapolated to the sample for x, v, a; count fallback outside ±band",
+        params: &[
+            ParamDoc { name: "order", doc: "polynomial order m (8.1), ≤ 4", default: Some("2") },
+            ParamDoc { name: "register_len", doc: "register length n of the encoder, n > m", default: Some("5") },
+            ParamDoc { name: "resolution", doc: "units per count Δ (2π/400 rad for 100 lines)", default: None },
+            ParamDoc { name: "band_counts", doc: "fallback band around the cell centre (counts)", default: Some("1") },
+            ParamDoc { name: "standstill_timeout_s", doc: "newest event older than this → standstill (s); 0 disables", default: Some("0.01") },
+            ParamDoc { name: "edge_offsets_counts", doc: "slit calibration ê per edge (counts), added to events (hots crate)", default: Some("[]") },
+        ],
+        ports: "register[2+2n] -> y[3] = [x, v, a] (units, /s, /s²), status (0 fit, 1 out of band, 2 no events, 3 standstill)",
+    }
+}

@@ -1,0 +1,444 @@
+//! Encoder events, register and estimator against closed forms.
+
+use nanomotion_core::{Block, BuildContext, Estimator, Sensor, Tick};
+use std::f64::consts::{FRAC_PI_2, PI, TAU};
+use timestamp_encoder::skip::register_indices;
+use timestamp_encoder::{Status, TimestampEncoder, TimestampEstimator};
+
+const CLOCK: f64 = 50e-9;
+
+/// Collect every event (t, level) of a run, newest-last.
+fn run_events(
+    enc: &mut TimestampEncoder,
+    ticks: usize,
+    dt: f64,
+    traj: impl Fn(f64) -> [f64; 3],
+) -> Vec<(f64, f64)> {
+    let w = enc.input_width();
+    let mut reg = vec![0.0; enc.register_width()];
+    let mut out = Vec::new();
+    let mut seen = 0;
+    for k in 0..=ticks {
+        let t = k as f64 * dt;
+        enc.measure(t, &traj(t)[..w], &mut reg);
+        for e in seen + 1..=enc.events_so_far() {
+            out.push(enc.event(e).expect("history holds every event of one tick"));
+        }
+        seen = enc.events_so_far();
+    }
+    out
+}
+
+#[test]
+fn crossing_times_of_a_cubic_with_reversals_are_exact_to_the_clock() {
+    // x(t) = 3t − 12t² + 10t³ (rad): turns at t ≈ 0.173 and 0.627 s.
+    let x = |t: f64| 3.0 * t - 12.0 * t * t + 10.0 * t * t * t;
+    let v = |t: f64| 3.0 - 24.0 * t + 30.0 * t * t;
+    let mut enc = TimestampEncoder {
+        register_len: 16,
+        ..Default::default()
+    };
+    enc.prepare(0).unwrap();
+    let d = enc.resolution();
+    let ev = run_events(&mut enc, 1000, 1e-3, |t| [x(t), v(t), 0.0]);
+    assert_eq!(ev.len(), 137, "13 up, 37 down, 87 up");
+    let (mut up, mut down) = (0, 0);
+    for (i, &(ts, level)) in ev.iter().enumerate() {
+        // The true crossing: bisection on x(t) − LΔ in the monotone branch around ts.
+        let target = level * d;
+        let (mut lo, mut hi) = (ts - 2e-6, ts + 2e-6);
+        let s = (x(hi) - x(lo)).signum();
+        if s > 0.0 {
+            up += 1
+        } else {
+            down += 1
+        }
+        for _ in 0..100 {
+            let mid = 0.5 * (lo + hi);
+            if s * (x(mid) - target) < 0.0 {
+                lo = mid
+            } else {
+                hi = mid
+            }
+        }
+        let t_true = 0.5 * (lo + hi);
+        let err = t_true - ts;
+        assert!(
+            (-1e-12..CLOCK + 1e-12).contains(&err),
+            "event {i}: level {level}, stamp {ts}, true {t_true}"
+        );
+        assert!(
+            (ts * 20e6 - (ts * 20e6).round()).abs() < 1e-3,
+            "on the 20 MHz grid"
+        );
+    }
+    assert_eq!((up, down), (100, 37));
+    // The final count is the cell of the final position.
+    assert_eq!(enc.count(), (x(1.0) / d).floor() as i64);
+}
+
+#[test]
+fn crossing_times_of_a_sinusoid_match_arcsin() {
+    // Sec. 8.5's motion: x = (π/2) sin(2π t) rad, quintic interpolation at 1 kHz.
+    let (a, w) = (FRAC_PI_2, TAU);
+    let mut enc = TimestampEncoder {
+        derivatives: 2,
+        register_len: 16,
+        ..Default::default()
+    };
+    enc.prepare(0).unwrap();
+    let d = enc.resolution();
+    let traj = |t: f64| {
+        [
+            a * (w * t).sin(),
+            a * w * (w * t).cos(),
+            -a * w * w * (w * t).sin(),
+        ]
+    };
+    let ev = run_events(&mut enc, 2000, 1e-3, traj);
+    // π/2 rad = 100 counts; per period 100 up, 200 down, 100 up: 800 events in two
+    // periods, less the edges at exactly ±100 counts that the peaks only touch.
+    assert!((796..=800).contains(&ev.len()), "{}", ev.len());
+    let mut worst: f64 = 0.0;
+    for &(ts, level) in &ev {
+        let y = (level * d / a).clamp(-1.0, 1.0);
+        let base = y.asin() / w;
+        let cands = [
+            base,
+            0.5 - base,
+            1.0 + base,
+            1.5 - base,
+            2.0 + base,
+            2.5 - base,
+        ];
+        let t_true = cands
+            .iter()
+            .copied()
+            .min_by(|p, q| (p - ts).abs().total_cmp(&(q - ts).abs()))
+            .unwrap();
+        let err = t_true - ts;
+        // Near the turning points the crossing is ill-conditioned (|ẋ| → 0): allow
+        // the interpolation error δx/|ẋ| with δx ~ 1e-13 rad.
+        let vel = (a * w * (w * t_true).cos()).abs();
+        let tol = 1e-12 + 1e-13 / vel.max(1e-12);
+        assert!(
+            err > -tol && err < CLOCK + tol,
+            "level {level}: err {err:e}"
+        );
+        worst = worst.max(err);
+    }
+    assert!(
+        worst > 0.5 * CLOCK,
+        "the clock quantisation shows: {worst:e}"
+    );
+}
+
+#[test]
+fn slit_errors_move_the_edges() {
+    // Constant velocity: edge L crosses at (L + e_L)Δ/w.
+    let table: Vec<f64> = (0..400)
+        .map(|l| 0.1 * ((l * 7919) % 13) as f64 / 13.0 - 0.05)
+        .collect();
+    let mut enc = TimestampEncoder {
+        register_len: 16,
+        slit_errors_counts: table,
+        quadrature_error_counts: 0.03,
+        duty_error_counts: -0.02,
+        eccentricity_counts: 0.05,
+        slit_error_std_counts: 0.02,
+        ..Default::default()
+    };
+    enc.prepare(3).unwrap();
+    let e = enc.edge_errors_counts().to_vec();
+    let d = enc.resolution();
+    let w = 3.0;
+    let ev = run_events(&mut enc, 2500, 1e-3, |t| [0.1 + w * t, w, 0.0]);
+    assert_eq!(ev.len(), 477, "7.5 rad at 400/2π counts per rad");
+    for &(ts, level) in &ev {
+        let l = level as i64;
+        let t_true = ((l as f64 + e[l.rem_euclid(400) as usize]) * d - 0.1) / w;
+        assert!((0.0..CLOCK + 1e-12).contains(&(t_true - ts)), "level {l}");
+    }
+    // The composition of the error sources: quadrature on odd edges.
+    let mut plain = TimestampEncoder {
+        quadrature_error_counts: 0.03,
+        ..Default::default()
+    };
+    plain.prepare(0).unwrap();
+    assert_eq!(plain.edge_errors_counts()[1], 0.03);
+    assert_eq!(plain.edge_errors_counts()[2], 0.0);
+}
+
+#[test]
+fn register_follows_the_skip_rule() {
+    for sigma in [0i64, 1, 2, 3, 5, 10] {
+        let mut enc = TimestampEncoder {
+            skip: sigma,
+            ..Default::default()
+        };
+        enc.prepare(0).unwrap();
+        let mut reg = vec![0.0; enc.register_width()];
+        let d = enc.resolution();
+        let mut idx = [0u64; 5];
+        for k in 0..=400 {
+            let t = k as f64 * 1e-3;
+            // Starts exactly on edge 0: event j is the crossing of level j.
+            enc.measure(t, &[0.7 * t, 0.7], &mut reg);
+            let n = register_indices(enc.events_so_far(), sigma as u64, &mut idx);
+            assert_eq!(reg[0], ((0.7 * t) / d + 1e-9).floor(), "count");
+            assert_eq!(reg[1] as usize, n);
+            for i in 0..n {
+                assert_eq!(
+                    reg[3 + 2 * i],
+                    idx[i] as f64,
+                    "σ {sigma}, tick {k}, entry {i}"
+                );
+                let t_edge = idx[i] as f64 * d / 0.7;
+                assert!((t_edge - reg[2 + 2 * i]).abs() < CLOCK + 1e-12);
+            }
+            for i in n..5 {
+                assert_eq!((reg[2 + 2 * i], reg[3 + 2 * i]), (0.0, 0.0));
+            }
+        }
+    }
+}
+
+#[test]
+fn a_jump_keeps_the_count_and_numbering_exact() {
+    let mut enc = TimestampEncoder::default();
+    enc.prepare(0).unwrap();
+    let mut reg = vec![0.0; enc.register_width()];
+    let d = enc.resolution();
+    enc.measure(0.0, &[0.0, 0.0], &mut reg);
+    enc.measure(1e-3, &[1e5 * d + 0.5 * d, 0.0], &mut reg);
+    assert_eq!(enc.count(), 100_000);
+    assert_eq!(enc.events_so_far(), 100_000);
+    assert_eq!(reg[3], 100_000.0);
+    assert_eq!(reg[5], 99_999.0);
+    // Back down.
+    enc.measure(2e-3, &[-3.5 * d, 0.0], &mut reg);
+    assert_eq!(enc.count(), -4);
+    assert_eq!(enc.events_so_far(), 200_004);
+    assert_eq!(
+        reg[3], -3.0,
+        "the newest edge crossed downwards is level −3"
+    );
+    // Non-finite input is ignored.
+    enc.measure(3e-3, &[f64::NAN, 0.0], &mut reg);
+    assert_eq!(enc.count(), -4);
+}
+
+#[test]
+fn estimator_recovers_a_quadratic_trajectory() {
+    // Ideal encoder, x = 0.3 + 2t + 1.5t² (rad): the events lie on an order-2
+    // polynomial up to the 50 ns stamps, so m = 2 recovers it to ~v·50 ns.
+    let mut enc = TimestampEncoder {
+        derivatives: 2,
+        ..Default::default()
+    };
+    enc.prepare(0).unwrap();
+    let mut est = TimestampEstimator::new(2, 5, enc.resolution()).unwrap();
+    let (mut reg, mut y) = (vec![0.0; 12], [0.0; 3]);
+    let d = enc.resolution();
+    for k in 0..=1000 {
+        let t = k as f64 * 1e-3;
+        let tr = [0.3 + 2.0 * t + 1.5 * t * t, 2.0 + 3.0 * t, 3.0];
+        enc.measure(t, &tr, &mut reg);
+        est.estimate(t, &reg, &mut y);
+        if k > 50 {
+            // Five events exist after ~40 ms.
+            assert_eq!(est.status(), Some(Status::Fitted));
+            // Clock error ≤ v·50 ns ≈ 2.5e-7 rad ≈ 1.6e-5 counts.
+            assert!(
+                (y[0] - tr[0]).abs() < 0.002 * d,
+                "x at {t}: {}",
+                (y[0] - tr[0]) / d
+            );
+            assert!(
+                (y[1] - tr[1]).abs() < 2e-3 * tr[1],
+                "v at {t}: {} vs {}",
+                y[1],
+                tr[1]
+            );
+            assert!(
+                (y[2] - tr[2]).abs() < 0.3,
+                "a at {t}: {} vs {}",
+                y[2],
+                tr[2]
+            );
+        }
+    }
+}
+
+#[test]
+fn standstill_and_reversal() {
+    let mut enc = TimestampEncoder::default();
+    enc.prepare(0).unwrap();
+    let d = enc.resolution();
+    let mut est = TimestampEstimator::new(2, 5, d).unwrap();
+    let (mut reg, mut y) = (vec![0.0; 12], [0.0; 3]);
+    // No events yet.
+    enc.measure(0.0, &[0.25 * d, 0.0], &mut reg);
+    est.estimate(0.0, &reg, &mut y);
+    assert_eq!(est.status(), Some(Status::NoEvents));
+    assert_eq!(y, [0.5 * d, 0.0, 0.0]);
+    // Move at 1 rad/s for 0.1 s, then stop dead (x held, v = 0).
+    let stop = 0.1 + 0.3 * d;
+    let mut statuses = Vec::new();
+    for k in 1..=200 {
+        let t = k as f64 * 1e-3;
+        let (x, v) = if t < 0.1 {
+            (0.3 * d + t, 1.0)
+        } else {
+            (stop, 0.0)
+        };
+        enc.measure(t, &[x, v], &mut reg);
+        est.estimate(t, &reg, &mut y);
+        statuses.push(est.status().unwrap());
+        let err = (y[0] - x) / d;
+        // Never worse than the count's own cell, whatever the status.
+        assert!(
+            err.abs() <= 1.0 + 1e-9,
+            "t {t}: err {err} counts, {:?}",
+            est.status()
+        );
+        if t > 0.1 + 0.04 {
+            assert_eq!(est.status(), Some(Status::Standstill), "t {t}");
+            assert_eq!(y[1], 0.0);
+            assert!((y[0] - x).abs() <= 0.5 * d);
+        }
+        if (0.05..0.099).contains(&t) {
+            assert_eq!(est.status(), Some(Status::Fitted));
+            assert!((y[1] - 1.0).abs() < 1e-3);
+        }
+    }
+    // Reversal of x = (π/2) sin(2πt) at t = 0.25 s: the order-2 fit follows the turn.
+    let mut enc = TimestampEncoder::default();
+    enc.prepare(0).unwrap();
+    let mut est = TimestampEstimator::new(2, 5, d).unwrap();
+    let mut worst: f64 = 0.0;
+    for k in 0..=500 {
+        let t = k as f64 * 1e-3;
+        let tr = [FRAC_PI_2 * (TAU * t).sin(), PI * PI * (TAU * t).cos()];
+        enc.measure(t, &tr, &mut reg);
+        est.estimate(t, &reg, &mut y);
+        if k > 5 {
+            worst = worst.max((y[0] - tr[0]).abs() / d);
+            assert!((y[0] - tr[0]).abs() <= 1.0 * d);
+        }
+    }
+    assert!(
+        worst < 0.5,
+        "worst position error around the reversals {worst} counts"
+    );
+}
+
+#[test]
+fn blocks_from_yaml_validate_and_run() {
+    let enc: Box<dyn Block> = nanomotion_core::yaml::from_str(
+        "type: timestamp_encoder\nlines: 100\nskip: 3\nregister_len: 5\nslit_error_std_counts: 0.02\n",
+        "t",
+    )
+    .unwrap();
+    let est: Box<dyn Block> = nanomotion_core::yaml::from_str(
+        "type: timestamp_estimator\norder: 2\nregister_len: 5\nresolution: 0.015707963267948967\n",
+        "t",
+    )
+    .unwrap();
+    let (mut enc, mut est) = (enc, est);
+    enc.build(&BuildContext::new("enc", 1e-3, 5)).unwrap();
+    est.build(&BuildContext::new("est", 1e-3, 6)).unwrap();
+    assert_eq!(enc.inputs()[0].width, 2);
+    assert_eq!(enc.outputs()[0].width, 12);
+    assert_eq!(est.inputs()[0].width, 12);
+    let (mut ey, mut sy) = ([0.0; 13], [0.0; 4]);
+    let mut last = [0.0; 3];
+    let info = allocation_counter::measure(|| {
+        for k in 0..10_000u64 {
+            let tick = Tick::new(k, 1e-3);
+            let t = tick.t;
+            let u = [FRAC_PI_2 * (TAU * t).sin(), PI * PI * (TAU * t).cos()];
+            enc.output(tick, &u, &mut ey);
+            est.output(tick, &ey[..12], &mut sy);
+            last.copy_from_slice(&sy[..3]);
+        }
+    });
+    assert_eq!(info.count_total, 0, "no allocation in 10 000 ticks");
+    assert!(last.iter().all(|v| v.is_finite()));
+    // Typed errors naming the field.
+    let err = |text: &str| {
+        let mut b: Box<dyn Block> = nanomotion_core::yaml::from_str(text, "t").unwrap();
+        b.build(&BuildContext::new("b", 1e-3, 0)).unwrap_err().field
+    };
+    assert_eq!(err("type: timestamp_encoder\nskip: -1\n"), "skip");
+    assert_eq!(err("type: timestamp_encoder\nclock_hz: 0\n"), "clock_hz");
+    assert_eq!(err("type: timestamp_encoder\nlines: 0\n"), "lines");
+    assert_eq!(
+        err("type: timestamp_encoder\nregister_len: 0\n"),
+        "register_len"
+    );
+    assert_eq!(
+        err("type: timestamp_encoder\nregister_len: 17\n"),
+        "register_len"
+    );
+    assert_eq!(
+        err("type: timestamp_encoder\nrevolution: -1\n"),
+        "revolution"
+    );
+    assert_eq!(
+        err("type: timestamp_encoder\nderivatives: 3\n"),
+        "derivatives"
+    );
+    assert_eq!(
+        err("type: timestamp_encoder\nslit_errors_counts: [0.1, 0.2]\n"),
+        "slit_errors_counts"
+    );
+    assert_eq!(
+        err("type: timestamp_encoder\nquadrature_error_counts: 0.7\nduty_error_counts: 0.7\n"),
+        "slit_errors_counts"
+    );
+    assert_eq!(
+        err("type: timestamp_encoder\neccentricity_counts: .nan\n"),
+        "eccentricity_counts"
+    );
+    assert_eq!(
+        err("type: timestamp_estimator\nresolution: 1\norder: 2\nregister_len: 2\n"),
+        "register_len"
+    );
+    assert_eq!(
+        err("type: timestamp_estimator\nresolution: 1\norder: 5\nregister_len: 8\n"),
+        "order"
+    );
+    assert_eq!(
+        err("type: timestamp_estimator\nresolution: 0\n"),
+        "resolution"
+    );
+    assert_eq!(
+        err("type: timestamp_estimator\nresolution: 1\nband_counts: -1\n"),
+        "band_counts"
+    );
+    assert!(
+        nanomotion_core::yaml::from_str::<Box<dyn Block>>("type: timestamp_encoder\nskp: 1\n", "t")
+            .is_err()
+    );
+    assert!(TimestampEstimator::new(2, 2, 1.0).is_err());
+}
+
+#[test]
+fn determinism_of_seeded_slit_errors() {
+    let make = |seed| {
+        let mut e = TimestampEncoder {
+            slit_error_std_counts: 0.05,
+            ..Default::default()
+        };
+        e.prepare(seed).unwrap();
+        e.edge_errors_counts().to_vec()
+    };
+    assert_eq!(make(4), make(4));
+    assert_ne!(make(4), make(5));
+    let e = make(4);
+    // Shared by the four edges of a slit.
+    assert_eq!(e[4], e[7]);
+    let rms = (e.iter().map(|v| v * v).sum::<f64>() / 400.0).sqrt();
+    assert!((0.035..0.065).contains(&rms), "{rms}");
+}
