@@ -63,7 +63,6 @@ pub mod identify;
 pub mod kinematics;
 pub mod leg_model;
 pub mod linear;
-mod ss_stepper;
 pub mod stage;
 pub mod variation;
 pub mod waveform;

@@ -13,10 +13,9 @@
 //! Both are discretised exactly (zero-order hold) at the block's period with
 //! `nanomotion_core::lti::c2d` and stepped without allocation.
 
-use crate::ss_stepper::DiscreteStepper;
 use nalgebra::DMatrix;
 use nanomotion_core::block::check;
-use nanomotion_core::lti::{C2dMethod, LtiError, StateSpace, series};
+use nanomotion_core::lti::{C2dMethod, LtiError, SsStepper, StateSpace, series};
 use nanomotion_core::{
     Block, BlockDoc, BuildContext, ParamDoc, ParamError, Plant, Port, Role, Tick,
 };
@@ -152,7 +151,7 @@ impl LinearStageParams {
 pub struct LinearStage {
     params: LinearStageParams,
     discrete: StateSpace,
-    stepper: DiscreteStepper,
+    stepper: SsStepper,
 }
 
 impl LinearStage {
@@ -164,7 +163,7 @@ impl LinearStage {
             .continuous()
             .c2d(dt, C2dMethod::Zoh)
             .map_err(|e| lti_to_param("f_res_hz", e))?;
-        let stepper = DiscreteStepper::new(&discrete);
+        let stepper = SsStepper::new(&discrete).map_err(|e| lti_to_param("f_res_hz", e))?;
         Ok(Self {
             params,
             discrete,
@@ -188,13 +187,14 @@ impl LinearStage {
 impl Plant for LinearStage {
     /// `y = [x_s (m), ẋ_s (m/s)]`.
     fn plant_output(&self, y: &mut [f64]) {
-        self.stepper.output(y);
+        // Strictly proper (D = 0): y = C x, the input slice is not read.
+        self.stepper.output(&[0.0], y);
     }
     /// `u = [f_α (Hz)]`; a non-finite input is ignored (state held) — use the
     /// block's `faults` output to see it.
     fn advance(&mut self, u: &[f64]) {
         if u[0].is_finite() {
-            self.stepper.advance(u);
+            self.stepper.update(u);
         }
     }
 }
@@ -361,7 +361,7 @@ impl Default for SwitchedStageParams {
 pub struct SwitchedStage {
     params: SwitchedStageParams,
     kin: crate::kinematics::LegKinematics,
-    stepper: DiscreteStepper,
+    stepper: SsStepper,
     pair: usize,
     offset: f64,
     x_p: f64,
@@ -396,7 +396,7 @@ impl SwitchedStage {
         Ok(Self {
             params,
             kin,
-            stepper: DiscreteStepper::new(&d),
+            stepper: SsStepper::new(&d).map_err(|e| lti_to_param("f_res_hz", e))?,
             pair: 0,
             offset: 0.0,
             x_p: 0.0,
@@ -416,7 +416,7 @@ impl SwitchedStage {
 impl Plant for SwitchedStage {
     /// `y = [x_s (m), X_p (m), driving pair (1 or 2)]`.
     fn plant_output(&self, y: &mut [f64]) {
-        self.stepper.output(&mut y[..1]);
+        self.stepper.output(&[0.0], &mut y[..1]);
         y[1] = self.x_p;
         y[2] = (self.pair + 1) as f64;
     }
@@ -437,7 +437,7 @@ impl Plant for SwitchedStage {
             self.pair = pair;
         }
         self.x_p = self.offset + t.x[pair];
-        self.stepper.advance(&[self.x_p]);
+        self.stepper.update(&[self.x_p]);
     }
 }
 
@@ -714,7 +714,7 @@ pub struct FittedStage {
     params: FittedStageParams,
     discrete: StateSpace,
     delay: usize,
-    stepper: DiscreteStepper,
+    stepper: SsStepper,
 }
 
 impl FittedStage {
@@ -722,7 +722,7 @@ impl FittedStage {
     pub fn new(params: FittedStageParams, dt: f64) -> Result<Self, ParamError> {
         let discrete = params.discrete(dt)?;
         let delay = params.delay_samples(dt)?;
-        let stepper = DiscreteStepper::new(&discrete);
+        let stepper = SsStepper::new(&discrete).map_err(|e| lti_to_param("f_p1_hz", e))?;
         Ok(Self {
             params,
             discrete,
@@ -751,12 +751,13 @@ impl FittedStage {
 impl Plant for FittedStage {
     /// `y = [x_s (m)]`.
     fn plant_output(&self, y: &mut [f64]) {
-        self.stepper.output(y);
+        // Strictly proper (D = 0): y = C x, the input slice is not read.
+        self.stepper.output(&[0.0], y);
     }
     /// `u = [f_α (Hz)]`; a non-finite input is ignored (state held).
     fn advance(&mut self, u: &[f64]) {
         if u[0].is_finite() {
-            self.stepper.advance(u);
+            self.stepper.update(u);
         }
     }
 }
