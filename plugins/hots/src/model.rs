@@ -26,9 +26,11 @@
 //! Averaged over j and age (Gauss–Legendre, 6 nodes, exact for the polynomial
 //! dependence on τ_c), the expected squared error of the r-th derivative is
 //!
+//! ```text
 //! E[e_r²] = |v|^{2r} (G_e + v²/(12 f_clk²) G_w) + (x^(m+1)/(m+1)!)² |v|^{−2(m+1−r)} H,
+//! ```
 //!
-//! with G_e = E[span^{−2r} wᵀCw], G_w = E[span^{−2r} wᵀw], H = E[span^{2(m+1−r)} ρ^{(r)}²]
+//! with `G_e = E[span^{−2r} wᵀCw]`, `G_w = E[span^{−2r} wᵀw]`, `H = E[span^{2(m+1−r)} ρ^{(r)}²]`
 //! depending only on (m, n, σ, r) and R. Where this exceeds what the estimator's
 //! fallback would give (1/12 count² in position, v² in velocity, a² in
 //! acceleration: the count, zero, zero), the fallback value is used. Over a
