@@ -113,6 +113,27 @@ pub fn draw_svg(fig: &Figure, path: &Path) -> Result<(), PlotError> {
             (s.label.clone(), pts)
         })
         .collect();
+    // Plot tiny quantities (m², nm) in engineering units so the axis gets ticks:
+    // y is divided by 10^e (e a multiple of 3) and the label says so.
+    let y_max = series
+        .iter()
+        .flat_map(|(_, p)| p.iter())
+        .fold(0.0f64, |m, &(_, y)| m.max(y.abs()));
+    let exponent = if y_max > 0.0 && y_max.is_finite() {
+        (y_max.log10() / 3.0).floor() as i32 * 3
+    } else {
+        0
+    };
+    let scale = 10f64.powi(-exponent);
+    let series: Vec<(String, Vec<(f64, f64)>)> = series
+        .into_iter()
+        .map(|(l, p)| (l, p.into_iter().map(|(x, y)| (x, y * scale)).collect()))
+        .collect();
+    let y_label = if exponent == 0 {
+        fig.y_label.clone()
+    } else {
+        format!("{} (×1e{exponent})", fig.y_label)
+    };
     let all = series.iter().flat_map(|(_, p)| p.iter());
     let (mut x0, mut x1, mut y0, mut y1) = (
         f64::INFINITY,
@@ -147,8 +168,8 @@ pub fn draw_svg(fig: &Figure, path: &Path) -> Result<(), PlotError> {
             chart
                 .configure_mesh()
                 .x_desc(fig.x_label.as_str())
-                .y_desc(fig.y_label.as_str())
-                .y_label_formatter(&|v| format!("{v:.3e}"))
+                .y_desc(y_label.as_str())
+                .y_label_formatter(&|v| format!("{v:.3}"))
                 .draw()
                 .map_err(|e| err(e.to_string()))?;
             for (i, (label, pts)) in series.iter().enumerate() {
@@ -161,9 +182,14 @@ pub fn draw_svg(fig: &Figure, path: &Path) -> Result<(), PlotError> {
                         PathElement::new(vec![(x, y), (x + 16, y)], color.stroke_width(2))
                     });
             }
-            if series.len() > 1 || !series.is_empty() {
+            if !series.is_empty() {
                 chart
                     .configure_series_labels()
+                    .position(if fig.x_scale == Scale::Log {
+                        SeriesLabelPosition::UpperLeft
+                    } else {
+                        SeriesLabelPosition::UpperRight
+                    })
                     .background_style(WHITE.mix(0.8))
                     .border_style(BLACK)
                     .draw()
