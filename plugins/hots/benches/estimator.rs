@@ -1,11 +1,14 @@
-//! Estimator step (m = 2, n = 5) and encoder event generation per control tick.
+//! Estimator step (m = 2, n = 5), the fit alone by its fast path (normal
+//! equations + LDLᵀ) and by Householder QR, and encoder event generation per
+//! control tick. Figures in `docs/plugins/hots.md` (Performance).
 //!
-//!     cargo bench -p nanomotion-hots --bench estimator
+//!     cargo bench -p nanomotion-hots --bench estimator -- --warm-up-time 1 --measurement-time 3
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use std::f64::consts::{FRAC_PI_2, TAU};
 use std::hint::black_box;
-use timestamp_encoder::{TimestampEncoder, TimestampEstimator};
+use timestamp_encoder::fit::{fit_events, fit_events_qr};
+use timestamp_encoder::{Status, TimestampEncoder, TimestampEstimator};
 
 fn bench(c: &mut Criterion) {
     let mut enc = TimestampEncoder {
@@ -20,10 +23,39 @@ fn bench(c: &mut Criterion) {
     }
     let mut est = TimestampEstimator::new(2, 5, enc.resolution()).unwrap();
     let mut y = [0.0; 3];
+    // The benchmarked read is a real fit (not a fallback), on 5 valid events.
+    assert_eq!(reg[1], 5.0);
+    assert_eq!(
+        est.estimate_from_register(0.3005, &reg, &mut y),
+        Status::Fitted
+    );
     c.bench_function("estimator m=2 n=5", |b| {
         b.iter(|| {
             est.estimate_from_register(black_box(0.3005), black_box(&reg), &mut y);
             black_box(y)
+        })
+    });
+    // The fit alone: fast path (normal equations, LDLᵀ) against Householder QR.
+    let ts: Vec<f64> = (0..5).map(|i| reg[2 + 2 * i]).collect();
+    let xs: Vec<f64> = (0..5).map(|i| reg[3 + 2 * i]).collect();
+    c.bench_function("fit m=2 n=5 (fast path)", |b| {
+        b.iter(|| {
+            black_box(fit_events(
+                black_box(&ts),
+                black_box(&xs),
+                2,
+                black_box(0.3005),
+            ))
+        })
+    });
+    c.bench_function("fit m=2 n=5 (Householder QR)", |b| {
+        b.iter(|| {
+            black_box(fit_events_qr(
+                black_box(&ts),
+                black_box(&xs),
+                2,
+                black_box(0.3005),
+            ))
         })
     });
     let mut k = 301u64;

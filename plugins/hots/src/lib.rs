@@ -19,7 +19,10 @@
 //! the comparison of Sec. 8.5 (Figs. 8.7–8.8 and the −54 % / −92 % claim, in shape):
 //! rms position/velocity/acceleration errors of differencing, time-stamping for each
 //! skip σ ∈ {0, …, 5, 10, 20}, and HOTS + calibration, on a 100-line encoder with
-//! the real US Digital E2 slit-error profile and without slit errors.
+//! the real US Digital E2 slit-error profile, with random slit errors and without
+//! slit errors — against the true trajectory and against the thesis's reference, a
+//! 5000-line encoder filtered forward-backward by a 5th-order 50 Hz Butterworth
+//! ([`sim::reference_encoder`]). Tables and discussion: `docs/encoders.md`.
 //!
 //! ```
 //! use hots::model::{optimise, sinusoid_samples, ErrorModel, Grid, Target};
