@@ -11,6 +11,7 @@
 //! | [`ident`] | Levenberg–Marquardt fit of (6.4) on reversal curves, accuracy measures, FORC CSV reader | Sec. 6.3.2 |
 //! | [`control`] | integral + low-pass controllers, margins, characteristic loci, the Sec. 6.5 scan | (6.5), Fig. 6.8, Sec. 6.5 |
 //! | [`blocks`] | `coleman_hodgdon`, `extended_coleman_hodgdon` blocks | (6.3), (6.4) |
+//! | [`experiments`] | Sec. 6.5 comparison and speed sweep, closed-loop MIMO FRF identification (G = GS·S⁻¹) | Fig. 6.11, Table 6.4, Figs. 6.4–6.5 |
 //!
 //! Block types: `afm_stage` (plant), `coleman_hodgdon`, `extended_coleman_hodgdon`
 //! (actuators), `hysteresis_feedforward`, `position_feedforward` (controllers).
@@ -41,6 +42,7 @@
 pub mod blocks;
 pub mod control;
 pub mod error;
+pub mod experiments;
 pub mod feedforward;
 pub mod hysteresis;
 pub mod ident;

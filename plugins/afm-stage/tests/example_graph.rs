@@ -23,3 +23,61 @@ fn afm_hysteresis_ff_example_runs() {
     assert!(s.rms < 10e-9, "rms {}", s.rms);
     assert!(s.samples > 40_000);
 }
+
+/// `examples/afm_constant_force.yaml`: in constant-force mode the z position images
+/// the grating: z_contact − z equals the topography h_s(x, y) under the tip, apart
+/// from the transients at the step edges.
+#[test]
+fn afm_constant_force_example_images_the_grating() {
+    use afm_stage::stage::Topography;
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../examples/afm_constant_force.yaml");
+    let spec = GraphSpec::from_file(&path).unwrap();
+    let (mut sched, _report) = spec.build().unwrap();
+    let res = sched.run(|_| {});
+    let defl = res.scores.iter().find(|s| s.signal == "err_z.y").unwrap();
+    let log = res
+        .logs
+        .iter()
+        .find(|l| l.name == "stage.true_pos")
+        .unwrap();
+    let (topo, z_contact, height) = (
+        Topography::Grating {
+            pitch_m: 10e-6,
+            height_m: 20e-9,
+            duty: 0.5,
+            angle_rad: 0.0,
+            offset_m: 0.0,
+        },
+        8.75e-6,
+        20e-9,
+    );
+    let n = log.len();
+    let (mut within, mut total, mut edges) = (0usize, 0usize, 0usize);
+    let mut last_h = None;
+    for i in n / 2..n {
+        let p = &log.data[3 * i..3 * i + 3];
+        let h = topo.height(p[0], p[1]);
+        if last_h.is_some_and(|l| l != h) {
+            edges += 1;
+        }
+        last_h = Some(h);
+        let h_rec = z_contact - p[2];
+        total += 1;
+        if (h_rec - h).abs() < height / 4.0 {
+            within += 1;
+        }
+    }
+    let frac = within as f64 / total as f64;
+    eprintln!(
+        "constant force: deflection error rms {:.2} nm, max {:.1} nm; {edges} step edges crossed; z images h_s within ±5 nm on {:.1} % of the samples",
+        defl.rms * 1e9,
+        defl.max_abs * 1e9,
+        100.0 * frac
+    );
+    // A ±18 µm line over a 10 µm pitch crosses about 7 edges per line, 2 lines.
+    assert!(edges >= 12, "{edges}");
+    // The deflection stays far below the step height except at the edges.
+    assert!(defl.rms < height / 4.0, "{}", defl.rms);
+    assert!(frac > 0.9, "{frac}");
+}
