@@ -15,6 +15,10 @@
 //! | leg kinematics u → tips | (4.2) (= (2.1) with equal coefficients) | [`LegKinematics`] | `walking_piezo_legs` |
 //! | nonlinear stage, u1..u4 → x_s, legs, normal forces, slip | (4.2)–(4.19) | [`WalkingPiezoStage`] | `walking_piezo_stage` |
 //! | sinusoidal drive waveforms | (2.2) | [`SinusoidalWaveform`] | `walking_waveform` |
+//! | driver: f_α → α, u1..u4; sinusoidal, asymmetric (exact, Fourier), rhombic, free waveforms | (2.2), (2.9), (4.21)–(4.22) | [`WaveformDriver`] | `walking_piezo_driver` |
+//! | PI design (2.10) on the linear model, margins | Sec. 2.4.2 | [`design_pi`] | (core `pi`) |
+//! | step-size feed-forward A, φ from the reference speed | (2.11)–(2.12) | [`StepSizeFeedForward`] | `walking_piezo_feedforward` |
+//! | gain variation with A, φ̄ by closed-loop FRF | Sec. 2.5.1, Fig. 2.14 | [`gain_id::identify_operating_point`] | — |
 //! | Ch. 3 leg model: n_m lumped layers, Lagrange, linearisation, c_x, c_y | (3.5)–(3.29) | [`leg_model::LegModel`] | — |
 //! | identification: particle swarm + Nelder–Mead on (4.20) | Sec. 4.4.1 | [`identify::identify`] | — |
 //!
@@ -45,6 +49,12 @@
 //! assert!(x > 3e-6 && x < 30e-6, "{x}");
 //! ```
 //!
+//! Closed loop: `examples/walking_piezo_jogging.yaml` (PI on f_α, asymmetric
+//! waveforms) and `examples/walking_piezo_ff_gs.yaml` (feed-forward and gain
+//! scheduling, needs the `gain-scheduling` plugin); `cargo run --release -p
+//! nanomotion-walking-piezo --example tables_2_2_2_3` (Tables 2.2 and 2.3 in shape),
+//! `--example gain_scheduling_id` (Fig. 2.14, (2.13)), `--example pi_design`.
+//!
 //! Examples: `examples/walking_piezo_open_loop.yaml` (repository root: the
 //! open-loop stage of Sec. 4.4 with sinusoidal waveforms, stage position, leg tips
 //! and slip as in Fig. 4.7), `cargo run -p nanomotion-walking-piezo --example
@@ -58,7 +68,10 @@
 //! [`StageParams`].
 
 pub mod contact;
+pub mod control;
+pub mod driver;
 pub mod friction;
+pub mod gain_id;
 pub mod identify;
 pub mod kinematics;
 pub mod leg_model;
@@ -67,6 +80,10 @@ pub mod stage;
 pub mod variation;
 pub mod waveform;
 
+pub use control::{PiDesign, StepSizeFeedForward, StepSizeFeedForwardBlock, design_pi, loop_gain};
+pub use driver::{
+    DriveError, DriverParams, Fourier4, WaveformDriver, WaveformDriverBlock, WaveformShape,
+};
 pub use kinematics::{LegKinematics, LegKinematicsBlock, LegTips};
 pub use linear::{
     FittedStage, FittedStageBlock, FittedStageParams, LinearStage, LinearStageBlock,

@@ -1,7 +1,7 @@
 //! A minimal drive-waveform source: the sinusoidal waveforms (2.2) at a fixed drive
 //! frequency f_α, so that the stage models can be run open loop. (The full driver
-//! with frequency input, asymmetric, rhombic and free waveforms belongs to the
-//! driver/waveform plugin.)
+//! with frequency input, asymmetric, rhombic and free waveforms is
+//! [`crate::driver::WaveformDriver`], block `walking_piezo_driver`.)
 //!
 //! u1 = A/2 sin α + A/2,           u2 = A/2 sin(α + π/2 + φ) + A/2,
 //! u3 = A/2 sin(α + π) + A/2,      u4 = A/2 sin(α + 3π/2 + φ) + A/2,

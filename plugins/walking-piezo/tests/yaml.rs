@@ -7,7 +7,8 @@ use nanomotion_core::{Block, BuildContext};
 // Anchor: linking alone must register the blocks (see DEPENDENCIES.md).
 use walking_piezo as _;
 
-const TAGS: [&str; 6] = [
+const TAGS: [&str; 7] = [
+    "walking_piezo_driver",
     "walking_piezo_switched",
     "walking_piezo_linear",
     "walking_piezo_fitted",
