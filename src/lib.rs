@@ -21,6 +21,7 @@
 pub struct ReadmeDoctests;
 
 pub use afm_stage;
+pub use dvrc;
 pub use gain_scheduling;
 pub use hots;
 pub use nanomotion_core as core;
@@ -42,4 +43,5 @@ pub fn link_plugins() {
     let _ = std::any::type_name::<timestamp_encoder::TimestampEncoder>();
     let _ = std::any::type_name::<hots::HotsEstimator>();
     let _ = std::any::type_name::<gain_scheduling::GainSchedule>();
+    let _ = std::any::type_name::<dvrc::check::RcCheckReport>();
 }

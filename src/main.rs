@@ -23,7 +23,7 @@ use std::time::{Duration, Instant};
     arg_required_else_help = true
 )]
 #[command(
-    after_help = "Examples:\n  nanomotion run examples/quickstart.yaml --out out/quickstart\n  nanomotion check examples/quickstart.yaml\n  nanomotion blocks"
+    after_help = "Examples:\n  nanomotion run examples/quickstart.yaml --out out/quickstart\n  nanomotion check examples/quickstart.yaml\n  nanomotion rc-check examples/rc_dvrc.yaml\n  nanomotion blocks"
 )]
 struct Cli {
     #[command(subcommand)]
@@ -56,6 +56,14 @@ enum Command {
         /// The graph file (YAML).
         graph: PathBuf,
     },
+    /// Check the stability criteria of the graph's repetitive controllers: (5.5) for
+    /// a fixed period N, (5.9) ‖Q(1 − T L z^l)‖∞ < 1/√(M − m + 1) for a delay varying
+    /// in [m, M] (DVRC), with the margin and the frequency where it is tightest.
+    /// Exits with status 2 when a criterion fails.
+    RcCheck {
+        /// The graph file (YAML).
+        graph: PathBuf,
+    },
     /// List the registered block types, with their ports and parameters.
     Blocks {
         /// Show only types whose name contains this text.
@@ -75,6 +83,16 @@ fn main() -> ExitCode {
             no_files,
         } => run(graph, out, seed, duration, no_files),
         Command::Check { graph } => check(graph),
+        Command::RcCheck { graph } => match nanomotion::dvrc::check::rc_check_file(&graph) {
+            Ok(report) => {
+                print!("{report}");
+                if !report.all_hold() {
+                    return ExitCode::from(2);
+                }
+                Ok(())
+            }
+            Err(e) => Err(e.to_string()),
+        },
         Command::Blocks { filter } => {
             blocks(filter.as_deref());
             Ok(())

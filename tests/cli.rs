@@ -78,3 +78,10 @@ fn bad_graph_gives_an_error_not_a_panic() {
     assert!(!ok && stderr.contains("cannot read"), "{stderr}");
     std::fs::remove_dir_all(dir).ok();
 }
+
+#[test]
+fn rc_check_reports_the_dvrc_criterion() {
+    let (ok, stdout, stderr) = out(nm().args(["rc-check", "examples/rc_dvrc.yaml"]));
+    assert!(ok, "{stdout}\n{stderr}");
+    assert!(stdout.contains("5.9"), "{stdout}");
+}
