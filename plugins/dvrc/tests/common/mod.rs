@@ -1,1 +1,2 @@
 pub mod table51;
+pub mod table51_nonlinear;
