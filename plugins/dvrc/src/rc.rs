@@ -216,6 +216,79 @@ impl TfModel {
     }
 }
 
+/// The plain-Rust sample methods (`step`, `output_w`, `learn`) and the
+/// [`Controller`]/[`Block`] adapters shared by the constant-delay RC blocks
+/// ([`RepetitiveControl`], [`HighOrderRc`]): both hold `n: usize` and
+/// `core: Option<MemoryLoop>` and differ only in how `prepare` builds the loop.
+macro_rules! fixed_delay_rc_adapters {
+    ($ty:ident, $tag:literal) => {
+        impl $ty {
+            /// One sample from plain Rust: returns w_k, then learns from e_k.
+            ///
+            /// An unbuilt block (neither [`Block::build`] nor a build-at-`dt`
+            /// constructor called) has no memory: it returns 0.0 and learns nothing.
+            pub fn step(&mut self, e: f64) -> f64 {
+                let w = self.output_w();
+                self.learn(e);
+                w
+            }
+            /// Phase 1 of a sample in a closed loop: w_k (depends on the past only).
+            /// 0.0 while the block is unbuilt.
+            pub fn output_w(&mut self) -> f64 {
+                let n = self.n;
+                self.core.as_mut().map_or(0.0, |c| c.output(n))
+            }
+            /// Phase 2: learn from the error e_k of the same sample. Does nothing
+            /// while the block is unbuilt.
+            pub fn learn(&mut self, e: f64) {
+                if let Some(c) = self.core.as_mut() {
+                    c.update(e);
+                }
+            }
+        }
+
+        impl Controller for $ty {
+            fn control(&mut self, e: &[f64], u: &mut [f64]) {
+                u[0] = self.step(e[0]);
+            }
+            fn reset(&mut self) {
+                if let Some(c) = self.core.as_mut() {
+                    c.reset();
+                }
+            }
+        }
+
+        #[typetag::serde(name = $tag)]
+        impl Block for $ty {
+            fn inputs(&self) -> Vec<Port> {
+                vec![Port::new("e", 1)]
+            }
+            fn outputs(&self) -> Vec<Port> {
+                vec![Port::new("w", 1)]
+            }
+            fn direct_feedthrough(&self) -> bool {
+                false
+            }
+            fn build(&mut self, ctx: &BuildContext) -> Result<(), ParamError> {
+                self.prepare(ctx.dt)
+            }
+            fn output(&mut self, _tick: Tick, _u: &[f64], y: &mut [f64]) {
+                if let Some(c) = self.core.as_mut() {
+                    y[0] = c.output(self.n);
+                }
+            }
+            fn update(&mut self, _tick: Tick, u: &[f64]) {
+                if let Some(c) = self.core.as_mut() {
+                    c.update(u[0]);
+                }
+            }
+            fn role(&self) -> Role {
+                Role::Controller
+            }
+        }
+    };
+}
+
 // ---------------------------------------------------------------------------------
 // repetitive_control
 // ---------------------------------------------------------------------------------
@@ -280,63 +353,9 @@ impl RepetitiveControl {
     pub fn memory_loop(&self) -> Option<&MemoryLoop> {
         self.core.as_ref()
     }
-    /// One sample from plain Rust: returns w_k, then learns from e_k. Needs a
-    /// built block.
-    pub fn step(&mut self, e: f64) -> f64 {
-        let w = self.output_w();
-        self.learn(e);
-        w
-    }
-    /// Phase 1 of a sample in a closed loop: w_k (depends on the past only).
-    pub fn output_w(&mut self) -> f64 {
-        let n = self.n;
-        self.core.as_mut().expect("build the block first").output(n)
-    }
-    /// Phase 2: learn from the error e_k of the same sample.
-    pub fn learn(&mut self, e: f64) {
-        self.core.as_mut().expect("build the block first").update(e);
-    }
 }
 
-impl Controller for RepetitiveControl {
-    fn control(&mut self, e: &[f64], u: &mut [f64]) {
-        u[0] = self.step(e[0]);
-    }
-    fn reset(&mut self) {
-        if let Some(c) = self.core.as_mut() {
-            c.reset();
-        }
-    }
-}
-
-#[typetag::serde(name = "repetitive_control")]
-impl Block for RepetitiveControl {
-    fn inputs(&self) -> Vec<Port> {
-        vec![Port::new("e", 1)]
-    }
-    fn outputs(&self) -> Vec<Port> {
-        vec![Port::new("w", 1)]
-    }
-    fn direct_feedthrough(&self) -> bool {
-        false
-    }
-    fn build(&mut self, ctx: &BuildContext) -> Result<(), ParamError> {
-        self.prepare(ctx.dt)
-    }
-    fn output(&mut self, _tick: Tick, _u: &[f64], y: &mut [f64]) {
-        if let Some(c) = self.core.as_mut() {
-            y[0] = c.output(self.n);
-        }
-    }
-    fn update(&mut self, _tick: Tick, u: &[f64]) {
-        if let Some(c) = self.core.as_mut() {
-            c.update(u[0]);
-        }
-    }
-    fn role(&self) -> Role {
-        Role::Controller
-    }
-}
+fixed_delay_rc_adapters!(RepetitiveControl, "repetitive_control");
 
 nanomotion_core::submit_block_doc! {
     BlockDoc {
@@ -410,62 +429,9 @@ impl HighOrderRc {
     pub fn build_dt(&mut self, dt: f64) -> Result<(), ParamError> {
         self.prepare(dt)
     }
-    /// One sample: returns w_k, then learns from e_k.
-    pub fn step(&mut self, e: f64) -> f64 {
-        let w = self.output_w();
-        self.learn(e);
-        w
-    }
-    /// Phase 1 of a sample in a closed loop: w_k (depends on the past only).
-    pub fn output_w(&mut self) -> f64 {
-        let n = self.n;
-        self.core.as_mut().expect("build the block first").output(n)
-    }
-    /// Phase 2: learn from the error e_k of the same sample.
-    pub fn learn(&mut self, e: f64) {
-        self.core.as_mut().expect("build the block first").update(e);
-    }
 }
 
-impl Controller for HighOrderRc {
-    fn control(&mut self, e: &[f64], u: &mut [f64]) {
-        u[0] = self.step(e[0]);
-    }
-    fn reset(&mut self) {
-        if let Some(c) = self.core.as_mut() {
-            c.reset();
-        }
-    }
-}
-
-#[typetag::serde(name = "high_order_rc")]
-impl Block for HighOrderRc {
-    fn inputs(&self) -> Vec<Port> {
-        vec![Port::new("e", 1)]
-    }
-    fn outputs(&self) -> Vec<Port> {
-        vec![Port::new("w", 1)]
-    }
-    fn direct_feedthrough(&self) -> bool {
-        false
-    }
-    fn build(&mut self, ctx: &BuildContext) -> Result<(), ParamError> {
-        self.prepare(ctx.dt)
-    }
-    fn output(&mut self, _tick: Tick, _u: &[f64], y: &mut [f64]) {
-        if let Some(c) = self.core.as_mut() {
-            y[0] = c.output(self.n);
-        }
-    }
-    fn update(&mut self, _tick: Tick, u: &[f64]) {
-        if let Some(c) = self.core.as_mut() {
-            c.update(u[0]);
-        }
-    }
-    fn role(&self) -> Role {
-        Role::Controller
-    }
-}
+fixed_delay_rc_adapters!(HighOrderRc, "high_order_rc");
 
 nanomotion_core::submit_block_doc! {
     BlockDoc {
@@ -572,6 +538,10 @@ impl Dvrc {
         self.prepare(dt)
     }
     /// One sample from plain Rust: α_k in, (w_k, N_k) out; then learns from e_k.
+    ///
+    /// An unbuilt block (no [`Block::build`] or [`build_dt`](Self::build_dt)) has
+    /// no memory: it returns (0.0, start-up delay `n_init`, default `n_max`) and
+    /// learns nothing.
     #[inline]
     pub fn step(&mut self, e: f64, alpha: f64) -> (f64, usize) {
         let r = self.output_w(alpha);
@@ -579,22 +549,24 @@ impl Dvrc {
         r
     }
     /// Phase 1 of a sample in a closed loop: record α_k, return (w_k, N_k); w_k
-    /// depends on past errors only.
+    /// depends on past errors only. (0.0, `n_init` or `n_max`) while unbuilt.
     #[inline]
     pub fn output_w(&mut self, alpha: f64) -> (f64, usize) {
-        let (m, a) = self.core.as_mut().expect("build the block first");
-        let n = a.next(alpha);
-        (m.output(n), n)
+        match self.core.as_mut() {
+            Some((m, a)) => {
+                let n = a.next(alpha);
+                (m.output(n), n)
+            }
+            None => (0.0, self.n_init.unwrap_or(self.n_max)),
+        }
     }
     /// Phase 2: learn from the error e_k of the same sample (call once after
-    /// each [`output_w`](Self::output_w)).
+    /// each [`output_w`](Self::output_w)). Does nothing while unbuilt.
     #[inline]
     pub fn learn(&mut self, e: f64) {
-        self.core
-            .as_mut()
-            .expect("build the block first")
-            .0
-            .update(e);
+        if let Some((m, _)) = self.core.as_mut() {
+            m.update(e);
+        }
     }
     /// The memory loop (after build).
     pub fn memory_loop(&self) -> Option<&MemoryLoop> {
@@ -658,5 +630,22 @@ nanomotion_core::submit_block_doc! {
             ParamDoc { name: "t_model", doc: "T(z) {num, den} for rc-check", default: Some("none") },
         ],
         ports: "e, alpha -> w, n",
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn unbuilt_blocks_output_zero_and_do_not_panic() {
+        let mut rc = RepetitiveControl::new(8, FilterSpec::Identity, FilterSpec::Identity);
+        assert_eq!(rc.step(1.0), 0.0);
+        let mut ho = HighOrderRc::new(8, FilterSpec::Identity, FilterSpec::Identity);
+        assert_eq!(ho.step(1.0), 0.0);
+        let mut dv = Dvrc::new(1.0, 4, 12, FilterSpec::Identity, FilterSpec::Identity);
+        assert_eq!(dv.step(1.0, 0.0), (0.0, 12));
+        let mut dv = dv.with_n_init(6);
+        assert_eq!(dv.step(1.0, 0.0), (0.0, 6));
     }
 }
