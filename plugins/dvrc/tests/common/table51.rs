@@ -130,13 +130,7 @@ pub fn run_with(
     let n_fixed = n_mean.round() as usize;
     let mut plant = SsStepper::new(&s.g).unwrap();
     let mut pi = Pi::new(s.kp, 5.0, DT).unwrap();
-    let (weights, n_period, lo, hi) = match which {
-        Rc::HighOrder => (vec![2.0, -1.0], n_fixed, n_fixed, n_fixed),
-        Rc::Dvrc => (vec![1.0], 0, m, mm),
-        _ => (vec![1.0], 0, n_fixed, n_fixed),
-    };
-    let mut ml = MemoryLoop::new(s.l.clone(), q.clone(), weights, n_period, lo, hi).unwrap();
-    let mut est = dvrc::AlphaDelay::new(j as f64 * TAU, m, mm, n_fixed.clamp(m, mm));
+    let mut rc = RcUnderTest::new(s, q, which, j, n_fixed, m, mm);
     let steps = (duration_s / DT) as usize;
     let mut alpha = 0.0;
     let mut y = [0.0];
@@ -148,19 +142,9 @@ pub fn run_with(
         let t = k as f64 * DT;
         plant.output(&[], &mut y);
         let e = v.position(t) - (y[0] + ripple_gain * ripple(alpha));
-        let nk = match which {
-            Rc::Dvrc => est.next(alpha),
-            _ => n_fixed,
-        };
-        let w = if which == Rc::None {
-            0.0
-        } else {
-            ml.output(nk)
-        };
+        let (nk, w) = rc.output(alpha);
         pi.control(&[e + w], &mut u);
-        if which != Rc::None {
-            ml.update(e);
-        }
+        rc.learn(e);
         plant.update(&u);
         alpha += TAU * u[0] * DT;
         if k >= steps * 3 / 4 {
@@ -175,4 +159,62 @@ pub fn run_with(
 /// The criterion for the DVRC range actually used.
 pub fn criterion_text(s: &Setup, q: &Filter, m: usize, mm: usize) -> String {
     rc_criterion(&s.t, &s.l, q, m, mm).unwrap().to_string()
+}
+
+/// The repetitive controller of one Table 5.1 run: the memory loop configured for
+/// `which`, and the α-based delay estimate used by DVRC. Shared by the linear and
+/// nonlinear harnesses so both run exactly the same RC.
+pub struct RcUnderTest {
+    which: Rc,
+    ml: MemoryLoop,
+    est: dvrc::AlphaDelay,
+    n_fixed: usize,
+}
+
+impl RcUnderTest {
+    /// `j` periods of α per repetition, fixed delay `n_fixed`, DVRC range [m, mm].
+    pub fn new(
+        s: &Setup,
+        q: &Filter,
+        which: Rc,
+        j: usize,
+        n_fixed: usize,
+        m: usize,
+        mm: usize,
+    ) -> Self {
+        let (weights, n_period, lo, hi) = match which {
+            Rc::HighOrder => (vec![2.0, -1.0], n_fixed, n_fixed, n_fixed),
+            Rc::Dvrc => (vec![1.0], 0, m, mm),
+            _ => (vec![1.0], 0, n_fixed, n_fixed),
+        };
+        let ml = MemoryLoop::new(s.l.clone(), q.clone(), weights, n_period, lo, hi).unwrap();
+        let est = dvrc::AlphaDelay::new(j as f64 * TAU, m, mm, n_fixed.clamp(m, mm));
+        Self {
+            which,
+            ml,
+            est,
+            n_fixed,
+        }
+    }
+
+    /// Phase 1 of a sample: the delay N_k used and the RC output w_k.
+    pub fn output(&mut self, alpha: f64) -> (usize, f64) {
+        let nk = match self.which {
+            Rc::Dvrc => self.est.next(alpha),
+            _ => self.n_fixed,
+        };
+        let w = if self.which == Rc::None {
+            0.0
+        } else {
+            self.ml.output(nk)
+        };
+        (nk, w)
+    }
+
+    /// Phase 2: learn from the error of the same sample.
+    pub fn learn(&mut self, e: f64) {
+        if self.which != Rc::None {
+            self.ml.update(e);
+        }
+    }
 }

@@ -7,14 +7,12 @@
 //! Shared by `tests/table_5_1_nonlinear.rs` and `examples/table_5_1_nonlinear.rs`.
 #![allow(dead_code)]
 
-use super::table51::{Rc, Setup, Velocity};
+use super::table51::{Rc, RcUnderTest, Setup, Velocity};
 use dvrc::filters::Filter;
-use dvrc::rc::MemoryLoop;
 use dvrc::stability::design_q_cutoff;
 use nanomotion_core::blocks::control::Pi;
 use nanomotion_core::lti::{Margins, series, stability_margins};
 use nanomotion_core::{Controller, LearningFilter};
-use std::f64::consts::TAU;
 use walking_piezo::driver::{DriverParams, WaveformDriver, WaveformShape};
 use walking_piezo::{StageParams, WalkingPiezoStage};
 
@@ -138,13 +136,7 @@ pub fn run_on(
     let mut stage = WalkingPiezoStage::new(p.clone(), DT, SEED).unwrap();
     let mut drv = driver();
     let mut pi = Pi::new(s.kp, 5.0, DT).unwrap();
-    let (weights, n_period, lo, hi) = match which {
-        Rc::HighOrder => (vec![2.0, -1.0], n_fixed, n_fixed, n_fixed),
-        Rc::Dvrc => (vec![1.0], 0, m, mm),
-        _ => (vec![1.0], 0, n_fixed, n_fixed),
-    };
-    let mut ml = MemoryLoop::new(s.l.clone(), q.clone(), weights, n_period, lo, hi).unwrap();
-    let mut est = dvrc::AlphaDelay::new(j as f64 * TAU, m, mm, n_fixed.clamp(m, mm));
+    let mut rc = RcUnderTest::new(s, q, which, j, n_fixed, m, mm);
     let steps = (duration_s / DT) as usize;
     let mut u = [0.0];
     let mut sq = 0.0;
@@ -155,19 +147,9 @@ pub fn run_on(
         let e = v.position(t) - stage.signals().x_s;
         // α of this sample (the driver integrates f_α after output).
         let alpha = drv.alpha();
-        let nk = match which {
-            Rc::Dvrc => est.next(alpha),
-            _ => n_fixed,
-        };
-        let w = if which == Rc::None {
-            0.0
-        } else {
-            ml.output(nk)
-        };
+        let (nk, w) = rc.output(alpha);
         pi.control(&[e + w], &mut u);
-        if which != Rc::None {
-            ml.update(e);
-        }
+        rc.learn(e);
         let (volts, _) = drv.try_drive(u[0], None, None).unwrap();
         let _ = stage.step(&volts, 0.0);
         if k >= steps * 3 / 4 {
