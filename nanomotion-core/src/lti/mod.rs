@@ -15,6 +15,8 @@
 //! - [`fir_lowpass`], [`butter_lowpass`], [`SosCascade`]: filter design and
 //!   second-order-section simulation;
 //! - [`stability_margins`]: gain, phase and modulus margins of a loop gain;
+//! - [`LmiProblem`]: a small dense LMI feasibility solver (Lyapunov and
+//!   switched-system LMIs such as the thesis's (5.16));
 //! - [`zpetc()`]: Tomizuka's zero-phase-error tracking controller;
 //! - [`SsStepper`], [`lsim`], [`step_response`], [`impulse`]: allocation-free
 //!   simulation.
@@ -27,6 +29,7 @@ pub mod discretise;
 pub mod filters;
 pub mod hinf;
 pub mod linalg;
+pub mod lmi;
 pub mod margins;
 pub mod sim;
 pub mod ss;
@@ -36,6 +39,7 @@ pub mod zpetc;
 pub use discretise::{C2dMethod, c2d};
 pub use filters::{SosCascade, butter_lowpass, fir_lowpass, fir2ss, sos_freqresp, sos2ss, ss2sos};
 pub use hinf::{HinfNorm, hinfnorm};
+pub use lmi::{LmiConstraint, LmiError, LmiOptions, LmiProblem, LmiSolution, LmiStatus, LmiVar};
 pub use margins::{Margins, stability_margins};
 pub use sim::{SsStepper, impulse, lsim, lsim_siso, step_response};
 pub use ss::{append, delay, feedback, parallel, series, ss2tf, unwrap_phase};

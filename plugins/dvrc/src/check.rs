@@ -6,8 +6,14 @@
 //! the filters are built at the block's rate and
 //!
 //! - `repetitive_control`: criterion (5.5) (fixed N);
-//! - `dvrc`: criterion (5.9) for N_k ∈ \[n_min, n_max\], plus the lifted check
-//!   (5.13)–(5.16) when the case is small;
+//! - `dvrc`: criterion (5.9) for N_k ∈ \[n_min, n_max\], plus, when the lifted
+//!   system (5.13)–(5.15) is small enough, its two independent checks: the joint
+//!   spectral radius bound ([`lifted_check`], lifted dimension ≤ 24 and at most 4
+//!   delays) and the LMIs (5.16) ([`lifted_lmi_check`], at most
+//!   [`LIFTED_LMI_MAX_UNKNOWNS`] scalar unknowns). A skipped check is reported with
+//!   its size and limit. A DVRC block counts as stable if (5.9) holds, or if S is
+//!   stable and a lifted check proves stability for every N_k ∈ \[m, M\] ((5.9)
+//!   is only sufficient);
 //! - `high_order_rc`: the small-gain condition ‖H‖∞·Σ|w_i| < 1 (sufficient; W(z)
 //!   has ‖W‖∞ = Σ|w_i|).
 //!
@@ -32,7 +38,10 @@
 
 use crate::filters::{Filter, FilterSpec};
 use crate::rc::{Dvrc, HighOrderRc, RepetitiveControl, TfModel};
-use crate::stability::{LiftedCheck, RcCriterion, lifted_check, loop_h, rc_criterion};
+use crate::stability::{
+    LIFTED_LMI_MAX_UNKNOWNS, LiftedCheck, LiftedLmi, LiftedLmiOptions, LiftedVerdict, RcCriterion,
+    lifted_check, lifted_lmi_check, lifted_lmi_unknowns, loop_h, rc_criterion,
+};
 use nanomotion_core::GraphSpec;
 use nanomotion_core::lti::{StateSpace, TransferFunction};
 use std::fmt;
@@ -48,18 +57,75 @@ pub struct BlockCheck {
     pub criterion: Result<RcCriterion, String>,
     /// High-order RC: Σ|w_i| (the criterion must hold with ‖H‖∞·Σ|w_i| < 1).
     pub weight_sum: Option<f64>,
-    /// The lifted check, for small DVRC cases.
+    /// The lifted joint-spectral-radius check, for small DVRC cases.
     pub lifted: Option<LiftedCheck>,
+    /// Why the joint-spectral-radius check was skipped (DVRC blocks only).
+    pub lifted_skipped: Option<String>,
+    /// The lifted LMI check (5.16) (DVRC blocks only).
+    pub lifted_lmi: Option<LiftedLmiOutcome>,
+}
+
+/// What happened to the LMI check (5.16) of a DVRC block.
+#[derive(Debug, Clone)]
+pub enum LiftedLmiOutcome {
+    /// Solved (feasible or not).
+    Solved(LiftedLmi),
+    /// Too large for the dense solver.
+    Skipped {
+        /// Lifted dimension n_H + M_D (M_D the largest delay of the delay block).
+        dim: usize,
+        /// Number of delays (P_N matrices).
+        n_delays: usize,
+        /// Scalar unknowns.
+        unknowns: usize,
+        /// The limit ([`LIFTED_LMI_MAX_UNKNOWNS`]).
+        limit: usize,
+    },
+    /// Could not be set up (e.g. n_min ≤ l + q) or the solver failed.
+    Failed(String),
+}
+
+impl fmt::Display for LiftedLmiOutcome {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            LiftedLmiOutcome::Solved(l) => write!(f, "{l}"),
+            LiftedLmiOutcome::Skipped {
+                dim,
+                n_delays,
+                unknowns,
+                limit,
+            } => write!(
+                f,
+                "lifted LMIs (5.16) skipped: too large ({n_delays} P_N of size {dim} = {unknowns} scalar unknowns > limit {limit}); small cases only, as in the thesis"
+            ),
+            LiftedLmiOutcome::Failed(e) => write!(f, "lifted LMIs (5.16) not evaluated: {e}"),
+        }
+    }
 }
 
 impl BlockCheck {
-    /// Whether stability is guaranteed.
+    /// Whether stability is guaranteed: the small-gain criterion holds, or (DVRC)
+    /// S is stable and a lifted check proves stability for every N_k ∈ \[m, M\].
     pub fn holds(&self) -> bool {
+        self.small_gain_holds() || self.lifted_proves()
+    }
+
+    /// The frequency-domain criterion: (5.5), (5.9), or ‖H‖∞·Σ|w_i| < 1.
+    pub fn small_gain_holds(&self) -> bool {
         match (&self.criterion, self.weight_sum) {
             (Ok(c), None) => c.holds(),
             (Ok(c), Some(ws)) => c.s_stable && c.hinf * ws < 1.0,
             (Err(_), _) => false,
         }
+    }
+
+    /// S is stable and the LMIs (5.16) are feasible or the joint spectral radius
+    /// is proved < 1 (DVRC blocks).
+    pub fn lifted_proves(&self) -> bool {
+        let s_stable = matches!(&self.criterion, Ok(c) if c.s_stable);
+        let lmi = matches!(&self.lifted_lmi, Some(LiftedLmiOutcome::Solved(l)) if l.feasible());
+        let jsr = matches!(&self.lifted, Some(l) if l.verdict == LiftedVerdict::Stable);
+        s_stable && self.weight_sum.is_none() && (lmi || jsr)
     }
 }
 
@@ -105,6 +171,18 @@ impl fmt::Display for RcCheckReport {
                     if let Some(l) = &b.lifted {
                         writeln!(f, "    {l}")?;
                     }
+                    if let Some(why) = &b.lifted_skipped {
+                        writeln!(f, "    {why}")?;
+                    }
+                    if let Some(l) = &b.lifted_lmi {
+                        writeln!(f, "    {l}")?;
+                    }
+                    if !b.small_gain_holds() && b.lifted_proves() {
+                        writeln!(
+                            f,
+                            "    → stability guaranteed by the lifted system although the small-gain criterion fails (it is only sufficient)"
+                        )?;
+                    }
                 }
                 Err(e) => writeln!(f, "cannot check: {e}")?,
             }
@@ -136,8 +214,12 @@ fn filters(l: &FilterSpec, q: &FilterSpec, dt: f64) -> Result<(Filter, Filter), 
     Ok((lf, qf))
 }
 
-/// Largest lifted case (delay-block states + H states) checked automatically.
+/// Largest lifted dimension (H states + delay-block states) for the automatic
+/// joint-spectral-radius check.
 const LIFTED_MAX_DIM: usize = 24;
+/// Most delays (M − m + 1) for the automatic joint-spectral-radius check (the
+/// branch and bound grows like delays^depth).
+const LIFTED_MAX_DELAYS: usize = 4;
 
 /// Check every RC block of `spec` (see the [module docs](self)).
 pub fn rc_check_graph(spec: &GraphSpec) -> RcCheckReport {
@@ -165,6 +247,8 @@ pub fn rc_check_graph(spec: &GraphSpec) -> RcCheckReport {
             criterion: Err(String::new()),
             weight_sum: None,
             lifted: None,
+            lifted_skipped: None,
+            lifted_lmi: None,
         };
         let res: Result<(), String> = (|| {
             match ty.as_str() {
@@ -192,9 +276,35 @@ pub fn rc_check_graph(spec: &GraphSpec) -> RcCheckReport {
                     if p.n_min > comp {
                         let h = loop_h(&t, &l, &q).map_err(|e| e.to_string())?;
                         let (dmin, dmax) = (p.n_min - comp, p.n_max - comp);
-                        if h.nstates() + dmax <= LIFTED_MAX_DIM && dmax - dmin <= 3 {
+                        let dim = h.nstates() + dmax;
+                        let n_delays = dmax - dmin + 1;
+                        if dim <= LIFTED_MAX_DIM && n_delays <= LIFTED_MAX_DELAYS {
                             check.lifted = Some(lifted_check(&h, dmin, dmax, 20_000));
+                        } else {
+                            check.lifted_skipped = Some(format!(
+                                "lifted joint-spectral-radius check skipped: too large (lifted dimension {dim}, limit {LIFTED_MAX_DIM}; {n_delays} delays, limit {LIFTED_MAX_DELAYS})"
+                            ));
                         }
+                        let unknowns = lifted_lmi_unknowns(h.nstates(), dmin, dmax);
+                        check.lifted_lmi = Some(if unknowns > LIFTED_LMI_MAX_UNKNOWNS {
+                            LiftedLmiOutcome::Skipped {
+                                dim,
+                                n_delays,
+                                unknowns,
+                                limit: LIFTED_LMI_MAX_UNKNOWNS,
+                            }
+                        } else {
+                            match lifted_lmi_check(&h, dmin, dmax, &LiftedLmiOptions::default()) {
+                                Ok(r) => LiftedLmiOutcome::Solved(r),
+                                Err(e) => LiftedLmiOutcome::Failed(e.to_string()),
+                            }
+                        });
+                    } else {
+                        let why = format!(
+                            "n_min = {} ≤ l + q = {comp}: the delay block would need a delay < 1",
+                            p.n_min
+                        );
+                        check.lifted_skipped = Some(format!("lifted checks skipped: {why}"));
                     }
                 }
             }

@@ -8,13 +8,20 @@
 //! - [`design_q_cutoff`]: picks the largest cut-off of a linear-phase FIR Q for
 //!   which (5.9) holds for a given M − m;
 //! - [`lifted_check`]: the lifted switched system (5.13)–(5.15) for small cases,
-//!   an independent and less conservative test (see its docs);
+//!   an independent and less conservative test by the joint spectral radius (see
+//!   its docs);
+//! - [`lifted_lmi_check`]: the same lifted system decided by the thesis's LMIs
+//!   (5.16) with the core's LMI solver ([`nanomotion_core::lti::lmi`]), returning
+//!   the certificate P_m … P_M;
 //! - [`worst_case_gain_input`]: the input and delay sequence of the proof of
 //!   Theorem 8.
 
 use crate::filters::Filter;
 use nalgebra::DMatrix;
 use nanomotion_core::LearningFilter;
+use nanomotion_core::lti::lmi::{
+    LmiConstraint, LmiError, LmiOptions, LmiProblem, LmiStatus, LmiVar,
+};
 use nanomotion_core::lti::{
     Complex, LtiError, StateSpace, delay, fir_lowpass, hinfnorm, parallel, series,
 };
@@ -522,6 +529,319 @@ pub fn lifted_check(h: &StateSpace, n_min: usize, n_max: usize, max_nodes: usize
         nodes,
         verdict,
     }
+}
+
+/// Default limit on the scalar unknowns of [`lifted_lmi_check`]:
+/// (M − m + 1)·d(d + 1)/2 with d = n_H + M. Problems near the limit (4 delays with
+/// a 16-state lifted system = 544 unknowns, 2 delays with 23 states = 552) take
+/// under a second even at the test profile (opt-level 1); the cost grows like the
+/// cube of the unknowns.
+pub const LIFTED_LMI_MAX_UNKNOWNS: usize = 600;
+
+/// Scalar unknowns of (5.16) for an `nx`-state H and delays in
+/// \[`n_min`, `n_max`\]: one symmetric P_N of size nx + M per delay.
+pub fn lifted_lmi_unknowns(nx: usize, n_min: usize, n_max: usize) -> usize {
+    let d = nx.saturating_add(n_max);
+    let per = d.saturating_mul(d.saturating_add(1)) / 2;
+    (n_max.saturating_sub(n_min).saturating_add(1)).saturating_mul(per)
+}
+
+/// How the LMIs (5.16) are posed to the solver (same feasibility set).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum LmiForm {
+    /// P_i ≻ 0 and P_i − Λ(i)ᵀP_jΛ(i) ≻ 0 (the Schur complement of (5.16); half
+    /// the matrix size, the default).
+    #[default]
+    Schur,
+    /// \[P_i, Λ(i)ᵀP_j; P_jΛ(i), P_j\] ≻ 0, literally (5.16).
+    Block,
+}
+
+/// Options of [`lifted_lmi_check`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LiftedLmiOptions {
+    /// Schur-complement or block form.
+    pub form: LmiForm,
+    /// Solver options; `bound` normalises P_i ⪯ bound·I (default 1, so the
+    /// margin is relative to ‖P_i‖ ≤ 1), `max_unknowns` defaults to
+    /// [`LIFTED_LMI_MAX_UNKNOWNS`].
+    pub solver: LmiOptions,
+}
+
+impl Default for LiftedLmiOptions {
+    fn default() -> Self {
+        Self {
+            form: LmiForm::Schur,
+            solver: LmiOptions {
+                max_unknowns: LIFTED_LMI_MAX_UNKNOWNS,
+                ..LmiOptions::default()
+            },
+        }
+    }
+}
+
+/// Result of [`lifted_lmi_check`].
+#[derive(Debug, Clone)]
+pub struct LiftedLmi {
+    /// Solver verdict: `Feasible` proves asymptotic stability of (5.13) for every
+    /// delay sequence N_k ∈ \[m, M\] (V = ξᵀP_{N_k}ξ decreases along every
+    /// trajectory); otherwise no such parameter-dependent quadratic Lyapunov
+    /// function with normalised margin above `t_upper` exists (which does not by
+    /// itself prove instability).
+    pub status: LmiStatus,
+    /// Verified min over all LMIs of λ_min (with P_i ⪯ I): > 0 when feasible.
+    pub margin: f64,
+    /// Upper bound on the normalised margin achievable (see
+    /// [`LmiSolution::t_upper`](nanomotion_core::lti::lmi::LmiSolution::t_upper)).
+    pub t_upper: f64,
+    /// Lifted state dimension n_H + M.
+    pub dim: usize,
+    /// Number of delays M − m + 1 (number of P_i).
+    pub n_delays: usize,
+    /// Scalar unknowns.
+    pub unknowns: usize,
+    /// Number of LMIs: (M − m + 1)² (plus M − m + 1 for P_i ≻ 0 in the Schur form).
+    pub n_lmis: usize,
+    /// Newton steps of the solver.
+    pub newton_steps: usize,
+    /// The form used.
+    pub form: LmiForm,
+    /// m (smallest delay).
+    pub n_min: usize,
+    /// The certificate P_m, …, P_M (when feasible; else the solver's last
+    /// iterate).
+    pub p: Vec<DMatrix<f64>>,
+    /// The bound on the joint spectral radius of {Λ(N)} that the certificate
+    /// proves ([`LiftedLmi::jsr_bound`]; < 1 when feasible, `None` otherwise).
+    pub jsr_upper: Option<f64>,
+}
+
+impl LiftedLmi {
+    /// Whether (5.16) is feasible (stability for every N_k ∈ \[m, M\] proved).
+    pub fn feasible(&self) -> bool {
+        self.status == LmiStatus::Feasible
+    }
+
+    /// The upper bound on the joint spectral radius that the certificate gives:
+    /// max_{i,j} ‖P_j^{1/2} Λ(i) P_i^{-1/2}‖₂ (< 1 when feasible). Computed with
+    /// the Λ(N) of `h` (the same `h` as the check); `None` if not feasible.
+    pub fn jsr_bound(&self, h: &StateSpace) -> Option<f64> {
+        if !self.feasible() {
+            return None;
+        }
+        let n_max = self.n_min + self.n_delays - 1;
+        let mut worst: f64 = 0.0;
+        for (i, pi) in self.p.iter().enumerate() {
+            let lam = lifted_matrix(h, self.n_min + i, n_max);
+            let li = pi.clone().cholesky()?.l(); // P_i = L Lᵀ
+            let li_inv = li.try_inverse()?;
+            for pj in &self.p {
+                // λ_max(L⁻¹ ΛᵀP_jΛ L⁻ᵀ) = ‖P_j^{1/2} Λ P_i^{-1/2}‖².
+                let m = &li_inv * lam.transpose() * pj * &lam * li_inv.transpose();
+                let m = (&m + m.transpose()) * 0.5;
+                let e = m
+                    .symmetric_eigenvalues()
+                    .iter()
+                    .copied()
+                    .fold(0.0, f64::max);
+                worst = worst.max(e.max(0.0).sqrt());
+            }
+        }
+        Some(worst)
+    }
+}
+
+impl fmt::Display for LiftedLmi {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(
+            f,
+            "lifted LMIs (5.16): {} P_N of size {} ({} unknowns, {} LMIs, {} Newton steps) → ",
+            self.n_delays, self.dim, self.unknowns, self.n_lmis, self.newton_steps
+        )?;
+        match self.status {
+            LmiStatus::Feasible => {
+                write!(f, "feasible, margin {:.2e} (P_N ⪯ I)", self.margin)?;
+                if let Some(b) = self.jsr_upper {
+                    write!(
+                        f,
+                        ", certificate bounds the joint spectral radius by {b:.4}"
+                    )?;
+                }
+                write!(f, ": stable for all N_k ∈ [m, M]")
+            }
+            LmiStatus::Infeasible | LmiStatus::InfeasibleWithinTolerance => write!(
+                f,
+                "infeasible (no parameter-dependent quadratic Lyapunov function with margin > {:.1e}): not proved",
+                self.t_upper.max(0.0)
+            ),
+            LmiStatus::Undecided => write!(f, "undecided (solver budget): not proved"),
+        }
+    }
+}
+
+fn lmi_err(e: LmiError) -> LtiError {
+    match e {
+        LmiError::TooLarge { unknowns, limit } => LtiError::Parameter {
+            name: "n_max",
+            problem: format!(
+                "lifted LMIs (5.16) too large: {unknowns} unknowns > limit {limit} (reduce n_max − n_min or the order of H)"
+            ),
+        },
+        other => LtiError::Parameter {
+            name: "lmi",
+            problem: other.to_string(),
+        },
+    }
+}
+
+/// The lifted switched-system test with the thesis's LMIs (5.16): find
+/// P_N ≻ 0, N ∈ \[`n_min`, `n_max`\], with
+///
+/// ```text
+/// [ P_i        Λ(i)ᵀP_j ]
+/// [ P_jΛ(i)    P_j      ]  ≻ 0   for all i, j ∈ [m, M]
+/// ```
+///
+/// (equivalently P_i − Λ(i)ᵀP_jΛ(i) ≻ 0), Λ(N) from [`lifted_matrix`] (5.14)–(5.15)
+/// for the loop `h` (from [`loop_h`]; delays of the delay block, D_k = N_k − q − l
+/// for an RC loop). Feasibility means V(N_k, ξ_k) = ξ_kᵀP_{N_k}ξ_k is a
+/// parameter-dependent Lyapunov function: the lifted system (5.13) is
+/// asymptotically stable for **every** delay sequence in \[m, M\]. Solved by the
+/// core's [`LmiProblem`] (primal barrier, certificate re-verified by eigenvalues);
+/// an independent test next to [`lifted_check`] (joint spectral radius) and less
+/// conservative than the small-gain criterion (5.9) (Remark 10 of the thesis).
+///
+/// Limits: for small cases only: (M − m + 1) unknown matrices of size n_H + M, i.e.
+/// [`lifted_lmi_unknowns`] scalar unknowns, refused above
+/// `opts.solver.max_unknowns` (default [`LIFTED_LMI_MAX_UNKNOWNS`]); the thesis
+/// makes the same remark (its M ≈ 55 and n_H ≈ 118 are far beyond). Errors: SISO
+/// discrete `h` and 1 ≤ `n_min` ≤ `n_max` required.
+pub fn lifted_lmi_check(
+    h: &StateSpace,
+    n_min: usize,
+    n_max: usize,
+    opts: &LiftedLmiOptions,
+) -> Result<LiftedLmi, LtiError> {
+    if h.dt.is_none() {
+        return Err(LtiError::Domain("H(z) must be discrete".into()));
+    }
+    if h.b.ncols() != 1 || h.c.nrows() != 1 {
+        return Err(LtiError::Dimension(format!(
+            "the lifted system needs a SISO H, got {} inputs and {} outputs",
+            h.b.ncols(),
+            h.c.nrows()
+        )));
+    }
+    let nx = h.a.nrows();
+    if h.a.ncols() != nx || h.b.nrows() != nx || h.c.ncols() != nx || h.d.shape() != (1, 1) {
+        return Err(LtiError::Dimension(format!(
+            "inconsistent H: A {:?}, B {:?}, C {:?}, D {:?}",
+            h.a.shape(),
+            h.b.shape(),
+            h.c.shape(),
+            h.d.shape()
+        )));
+    }
+    if n_min == 0 {
+        return Err(LtiError::Parameter {
+            name: "n_min",
+            problem: "the delay must be ≥ 1 sample".into(),
+        });
+    }
+    if n_max < n_min {
+        return Err(LtiError::Parameter {
+            name: "n_max",
+            problem: format!("{n_max} < n_min = {n_min}"),
+        });
+    }
+    let all_finite = [&h.a, &h.b, &h.c, &h.d]
+        .iter()
+        .all(|m| m.iter().all(|v| v.is_finite()));
+    if !all_finite {
+        return Err(LtiError::Parameter {
+            name: "h",
+            problem: "non-finite entries in the state-space matrices".into(),
+        });
+    }
+    let dim = h.nstates() + n_max;
+    let n_delays = n_max - n_min + 1;
+    let unknowns = lifted_lmi_unknowns(h.nstates(), n_min, n_max);
+    if unknowns > opts.solver.max_unknowns {
+        return Err(lmi_err(LmiError::TooLarge {
+            unknowns,
+            limit: opts.solver.max_unknowns,
+        }));
+    }
+    let lams: Vec<DMatrix<f64>> = (n_min..=n_max)
+        .map(|n| lifted_matrix(h, n, n_max))
+        .collect();
+    let mut lmi = LmiProblem::new();
+    let ps: Vec<LmiVar> = (n_min..=n_max)
+        .map(|n| lmi.variable(format!("P_{n}"), dim))
+        .collect::<Result<_, _>>()
+        .map_err(lmi_err)?;
+    let build = |lmi: &mut LmiProblem| -> Result<(), LmiError> {
+        match opts.form {
+            LmiForm::Schur => {
+                for (i, &pi) in ps.iter().enumerate() {
+                    let mut c = LmiConstraint::new(format!("P_{} ≻ 0", n_min + i), dim);
+                    c.var(pi, 1.0)?;
+                    lmi.add(c)?;
+                }
+                for (i, &pi) in ps.iter().enumerate() {
+                    for (j, &pj) in ps.iter().enumerate() {
+                        let mut c = LmiConstraint::new(
+                            format!(
+                                "P_{a} − Λ({a})ᵀP_{b}Λ({a}) ≻ 0",
+                                a = n_min + i,
+                                b = n_min + j
+                            ),
+                            dim,
+                        );
+                        c.var(pi, 1.0)?.congruence(pj, &lams[i], -1.0)?;
+                        lmi.add(c)?;
+                    }
+                }
+            }
+            LmiForm::Block => {
+                let e1 = DMatrix::<f64>::identity(dim, dim).resize_horizontally(2 * dim, 0.0);
+                let mut e2 = DMatrix::<f64>::zeros(dim, 2 * dim);
+                e2.view_mut((0, dim), (dim, dim)).fill_with_identity();
+                for (i, &pi) in ps.iter().enumerate() {
+                    let le1 = &lams[i] * &e1;
+                    for (j, &pj) in ps.iter().enumerate() {
+                        let mut c = LmiConstraint::new(
+                            format!("(5.16) i = {}, j = {}", n_min + i, n_min + j),
+                            2 * dim,
+                        );
+                        c.congruence(pi, &e1, 1.0)?
+                            .congruence(pj, &e2, 1.0)?
+                            .sym_product(pj, &e2, &le1, 1.0)?;
+                        lmi.add(c)?;
+                    }
+                }
+            }
+        }
+        Ok(())
+    };
+    build(&mut lmi).map_err(lmi_err)?;
+    let sol = lmi.solve(&opts.solver).map_err(lmi_err)?;
+    let mut out = LiftedLmi {
+        status: sol.status,
+        margin: sol.margin,
+        t_upper: sol.t_upper,
+        dim,
+        n_delays,
+        unknowns,
+        n_lmis: lmi.n_constraints(),
+        newton_steps: sol.newton_steps,
+        form: opts.form,
+        n_min,
+        p: sol.variables,
+        jsr_upper: None,
+    };
+    out.jsr_upper = out.jsr_bound(h);
+    Ok(out)
 }
 
 /// Simulate the interconnection of Fig. 5.2, x_{k+1} = A x + B v + E d,
