@@ -1,11 +1,14 @@
 //! Table 5.1-style comparison (issue 7 item 5) on the *nonlinear* walking piezo
-//! stage: `WaveformDriver` with the asymmetric waveforms (q = 1/3) driving
-//! `WalkingPiezoStage` (10 sub-steps of 25 µs per 4 kHz sample, seeded μ variation,
-//! unequal pairs), PI on f_α with 50 Hz bandwidth designed on the fitted linear
-//! model (5.31), L = ZPETC of the linear T, one 101-tap Q for all RC variants
-//! designed so (5.9) holds for the largest delay spread of the experiments. DVRC
-//! takes α from the driver. No ripple is added: the error is the model's stepping.
-//! See docs/repetitive-control.md.
+//! stage with a rough drive strip: `WaveformDriver` with the asymmetric waveforms
+//! (q = 1/3) driving `WalkingPiezoStage` (10 sub-steps of 25 µs per 4 kHz sample,
+//! seeded μ variation, unequal pairs, seeded strip height profile). The design
+//! follows the thesis (Sec. 5.5): closed-loop FRF of the stage (Fig. 2.8) →
+//! fitted model → PI (50 Hz), L = ZPETC of T and one 101-tap Q for all RC
+//! variants such that (5.9) holds for the delay ranges N(α) measured in runs
+//! without RC (Fig. 5.7). DVRC takes α from the driver. No ripple is added: the
+//! error is the model's stepping. Also: the high-order RC divergence of the
+//! nominal design, isolated on the linear model, and the sensitivity to the
+//! strip roughness. See docs/repetitive-control.md.
 //!
 //! Run: `cargo run --release -p nanomotion-dvrc --example table_5_1_nonlinear`
 
@@ -13,25 +16,70 @@
 mod table51;
 #[path = "../tests/common/table51_nonlinear.rs"]
 mod table51_nonlinear;
+use dvrc::stability::rc_criterion;
+use nanomotion_core::LearningFilter;
+use nanomotion_core::analysis::{WelchOptions, psd_welch};
 use std::f64::consts::TAU;
-use table51::{Rc, Velocity, criterion_text, setup};
+use table51::{Rc, Setup, Velocity, setup};
 use table51_nonlinear::*;
 
-/// Relative margin on [m, M] for the irregular stepping.
-const MARGIN: f64 = 0.25;
+/// Relative pad on the measured N(α) range for DVRC's window [m, M].
+const PAD: f64 = 0.02;
+
+fn stats(v: &[f64]) -> (f64, f64, f64, f64) {
+    let n = v.len() as f64;
+    let m = v.iter().sum::<f64>() / n;
+    let sd = (v.iter().map(|x| (x - m) * (x - m)).sum::<f64>() / n).sqrt();
+    let mn = v.iter().copied().fold(f64::INFINITY, f64::min);
+    let mx = v.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    (m, sd, mn, mx)
+}
 
 fn main() {
-    let s = setup();
+    let nominal = setup();
+    let p = stage_params_with(STRIP_RMS_M);
+    println!(
+        "Stage: defaults, strip profile σ_h = {:.0} nm, correlation {:.1} µm, leg pitch {:.1} mm, seed {SEED}",
+        p.strip_height_rms_m * 1e9,
+        p.strip_height_corr_m * 1e6,
+        p.strip_leg_pitch_m * 1e3
+    );
+    // 1. Irregular stepping, open loop, at the 10 µm/s drive frequency.
+    let f10 = 1e-5 / 7.02e-6;
+    for (name, pp) in [("flat strip", stage_params()), ("rough strip", p.clone())] {
+        let (m, sd, mn, mx) = stats(&open_loop_steps(&pp, f10, 40));
+        let (pm, pmin, pmax) = period_range(&pp, &nominal, Velocity::Constant(1e-5), 30.0);
+        println!(
+            "{name}: open-loop step per cycle at {f10:.3} Hz (40 cycles) {:.4} µm, sd {:.4} µm ({:.2} %), range [{:.3}, {:.3}] µm; \
+             PI-only at 10 µm/s: α period {pm:.1} samples, range [{pmin:.1}, {pmax:.1}]",
+            m * 1e6,
+            sd * 1e6,
+            100.0 * sd / m,
+            mn * 1e6,
+            mx * 1e6
+        );
+    }
+    // 2. Identification (Fig. 2.8) with the nominal PI, 10 µm/s, 30 Hz rms noise.
+    let frf = measure_frf(&p, nominal.kp, 1e-5, 30.0, 40.0);
+    let fit = identify(&frf, (5.0, 300.0));
+    println!(
+        "identified (5.31) structure, 5–300 Hz: c = {:.3} µm/cycle, delay {} samples (nominal model: c = {:.3}, 3 samples), rel. fit error {:.1} %",
+        fit.c * 1e6,
+        fit.delay,
+        nominal.c_m_per_cycle * 1e6,
+        100.0 * fit.rel_err
+    );
+    let s = design(fit.model(), fit.c);
     let mg = margins(&s);
     println!(
-        "PI (k_p = {:.4e} Hz/m, zero 5 Hz) on the fitted linear model: crossover {:.1} Hz, \
-         PM {:.1}°, GM {:.1} dB, modulus margin {:.2}",
+        "PI on the identified model: k_p = {:.4e} Hz/m, crossover {:.1} Hz, PM {:.1}°, GM {:.1} dB, modulus margin {:.2}",
         s.kp,
         mg.gain_crossover_rad_s / TAU,
         mg.phase_margin_deg,
         20.0 * mg.gain_margin.log10(),
         mg.modulus_margin
     );
+    // 3. N(α) ranges without RC (Fig. 5.7) → plans, one Q for the worst spread.
     let profiles = [
         ("1 µm/s", Velocity::Constant(1e-6), 300.0),
         ("10 µm/s", Velocity::Constant(1e-5), 60.0),
@@ -47,48 +95,46 @@ fn main() {
             100.0,
         ),
     ];
-    // Nominal step per α cycle of the nonlinear stage (open loop, at the nominal
-    // drive frequency of each profile, starting from c of the linear model).
-    let steps: Vec<f64> = profiles
+    // Smallest admissible N: l + q + 1 (Q has 101 taps, q = 50).
+    let comp = s.l.preview_samples() + 50 + 1;
+    let ranges: Vec<(f64, f64, f64)> = profiles
         .iter()
-        .map(|(_, v, _)| {
-            let (a, b) = v.range();
-            let f = 0.5 * (a + b) / s.c_m_per_cycle;
-            step_per_cycle(f, 8)
-        })
+        .map(|(_, v, d)| period_range(&p, &s, *v, f64::min(*d, 60.0)))
         .collect();
-    let comp = 56;
-    let spread = profiles
+    let plans: Vec<Plan> = ranges
         .iter()
-        .zip(&steps)
-        .map(|((_, v, _), &st)| {
-            let (_, _, m, mm) = delay_range(st, *v, comp, MARGIN);
-            mm - m
-        })
-        .max()
-        .unwrap();
+        .map(|r| plan_from_periods(*r, comp, PAD))
+        .collect();
+    let spread = plans.iter().map(|pl| pl.mm - pl.m).max().unwrap();
     let (q, fc) = q_for(&s, spread);
-    println!("Q: 101 taps, cut-off {fc:.1} Hz, designed for M − m = {spread}");
     println!(
-        "| reference | step/cycle (µm) | duration (s) | N (RC) | [m, M] | none (nm) | RC (nm) | high-order RC (nm) | DVRC (nm) | N_k seen by DVRC |"
+        "Q: 101 taps, cut-off {fc:.1} Hz, designed on the identified model for M − m = {spread}"
+    );
+    println!(
+        "| reference | N(α) without RC (samples) | N (RC) | [m, M] | (5.9) margin (dB) | none (nm) | RC (nm) | high-order RC (nm) | DVRC (nm) | N_k seen by DVRC |"
     );
     println!("|---|---|---|---|---|---|---|---|---|---|");
-    for ((name, v, dur), &st) in profiles.iter().zip(&steps) {
-        let (_, n, m, mm) = delay_range(st, *v, comp, MARGIN);
-        let r: Vec<Outcome> = [Rc::None, Rc::Standard, Rc::HighOrder, Rc::Dvrc]
+    for (((name, v, dur), r), pl) in profiles.iter().zip(&ranges).zip(&plans) {
+        let c = rc_criterion(&s.t, &s.l, &q, pl.m, pl.mm).unwrap();
+        let out: Vec<Outcome> = [Rc::None, Rc::Standard, Rc::HighOrder, Rc::Dvrc]
             .iter()
-            .map(|&w| run(&s, &q, st, MARGIN, *v, w, *dur))
+            .map(|&w| run_plan(&p, &s, &q, *pl, *v, w, *dur))
             .collect();
-        let nc: u64 = r.iter().map(|o| o.nonconverged).sum();
+        let nc: u64 = out.iter().map(|o| o.nonconverged).sum();
         println!(
-            "| {name} | {:.3} | {dur} | {} | [{m}, {mm}] | {:.3} | {:.3} | {:.3} | {:.3} | {:?} |{}",
-            st * 1e6,
-            n.round(),
-            r[0].rms * 1e9,
-            r[1].rms * 1e9,
-            r[2].rms * 1e9,
-            r[3].rms * 1e9,
-            r[3].seen,
+            "| {name} | {:.0} … {:.0} | {} | [{}, {}] | {:+.2} | {:.3} | {:.3} | {:.3} | {:.3} | {} … {} |{}",
+            pl.j as f64 * r.1,
+            pl.j as f64 * r.2,
+            pl.n_fixed,
+            pl.m,
+            pl.mm,
+            c.margin_db(),
+            out[0].rms * 1e9,
+            out[1].rms * 1e9,
+            out[2].rms * 1e9,
+            out[3].rms * 1e9,
+            out[3].seen.0,
+            out[3].seen.1,
             if nc > 0 {
                 format!(" ({nc} non-converged sub-steps)")
             } else {
@@ -96,44 +142,185 @@ fn main() {
             }
         );
     }
-    println!("{}", criterion_text(&s, &q, comp, comp + spread));
-    // Sensitivity (not part of Table 5.1): lower nominal μ (same relative
-    // variation) to look for irregular stepping at 10 µm/s, same Q and L.
+    // What part of each error is periodic in α (removable by RC in α in
+    // principle) and what is not, over the last quarter.
     println!(
-        "\n| μ (10 µm/s) | step/cycle (µm) | N (RC) | none (nm) | RC (nm) | DVRC (nm) | N_k seen by DVRC |"
+        "\n| reference | controller | rms (nm) | α-periodic part (nm) | rest (nm) |\n|---|---|---|---|---|"
     );
-    println!("|---|---|---|---|---|---|---|");
-    for mu in [0.2, 0.05, 0.02, 0.01, 0.005] {
-        let p = walking_piezo::StageParams {
-            mu,
-            ..stage_params()
-        };
-        let v = Velocity::Constant(1e-5);
-        let st = step_per_cycle_on(&p, 1e-5 / s.c_m_per_cycle, 8);
-        let (_, n, _, _) = delay_range(st, v, comp, MARGIN);
-        let r: Vec<Outcome> = [Rc::None, Rc::Standard, Rc::Dvrc]
-            .iter()
-            .map(|&w| run_on(&p, &s, &q, st, MARGIN, v, w, 60.0))
-            .collect();
+    for i in [1usize, 2] {
+        let (name, v, dur) = profiles[i];
+        for (wname, w) in [
+            ("none", Rc::None),
+            ("RC", Rc::Standard),
+            ("high-order RC", Rc::HighOrder),
+            ("DVRC", Rc::Dvrc),
+        ] {
+            let steps = (dur / DT) as usize;
+            let (mut es, mut als) = (Vec::new(), Vec::new());
+            run_plan_traced(&p, &s, &q, plans[i], v, w, dur, |k, e, a| {
+                if k >= steps * 3 / 4 {
+                    es.push(e);
+                    als.push(a);
+                }
+            });
+            let (t, per, rest) = alpha_periodic_split(&es, &als, 256);
+            println!(
+                "| {name} | {wname} | {:.3} | {:.3} | {:.3} |",
+                t * 1e9,
+                per * 1e9,
+                rest * 1e9
+            );
+        }
+    }
+    let worst = plans.iter().max_by_key(|pl| pl.mm - pl.m).unwrap();
+    println!(
+        "criterion on the identified model: {}",
+        rc_criterion(&s.t, &s.l, &q, worst.m, worst.mm).unwrap()
+    );
+    let (hm, fm) = criterion_on_measured(&s, &q, &frf, 1000.0);
+    println!(
+        "on the measured FRF (bins ≤ 1 kHz, coherence ≥ 0.8): max |Q(1 − T̂ L z^l)| = {hm:.4} at {fm:.0} Hz \
+         (bound for M − m = {spread}: {:.4}; standard RC needs < 1, W = 2 − z^-N needs < 1/3)",
+        1.0 / ((spread + 1) as f64).sqrt()
+    );
+
+    // 4. High-order RC with the nominal design (L from (5.31) with c = 7.91 µm and
+    //    3 samples delay, Q for M − m = 14040 as before): the criterion on the
+    //    measured FRF, and growth with the run length.
+    let (q_old, fc_old) = q_for(&nominal, 14040);
+    let (ho, fo) = criterion_on_measured(&nominal, &q_old, &frf, 1000.0);
+    println!(
+        "\nnominal design (Q {fc_old:.1} Hz): max |Q(1 − T̂ L z^l)| on the measured FRF = {ho:.4} at {fo:.0} Hz → 3·{ho:.3} = {:.2} (W = 2 − z^-N: small gain needs < 1); identified design: 3·{hm:.3} = {:.2}",
+        3.0 * ho,
+        3.0 * hm
+    );
+    let v10 = Velocity::Constant(1e-5);
+    let pl_old = plan_from_step(7.02e-6, v10, 56, 0.25);
+    println!(
+        "flat strip, 10 µm/s:\n| run length (s) | high-order RC, nominal design (nm) | high-order RC, identified design (nm) | RC, nominal design (nm) |"
+    );
+    println!("|---|---|---|---|");
+    // Same flat-strip stage for both designs (the original finding).
+    let pl_flat = plan_from_periods(period_range(&stage_params(), &s, v10, 30.0), comp, PAD);
+    for dur in [20.0, 40.0, 80.0] {
+        let a = run_plan(
+            &stage_params(),
+            &nominal,
+            &q_old,
+            pl_old,
+            v10,
+            Rc::HighOrder,
+            dur,
+        );
+        let b = run_plan(&stage_params(), &s, &q, pl_flat, v10, Rc::HighOrder, dur);
+        let c = run_plan(
+            &stage_params(),
+            &nominal,
+            &q_old,
+            pl_old,
+            v10,
+            Rc::Standard,
+            dur,
+        );
         println!(
-            "| {mu} | {:.3} | {} | {:.3} | {:.3} | {:.3} | {:?} |",
-            st * 1e6,
-            n.round(),
-            r[0].rms * 1e9,
-            r[1].rms * 1e9,
-            r[2].rms * 1e9,
-            r[2].seen
+            "| {dur} | {:.3} | {:.3} | {:.3} |",
+            a.rms * 1e9,
+            b.rms * 1e9,
+            c.rms * 1e9
         );
     }
-    // The same Q and L against T with c = the nonlinear stage's step per cycle:
-    // the fixed-N criterion (5.5) (m = M) as seen by the loop that actually runs.
-    let t_nl = t_with_gain(&s, steps[1]);
-    let c = dvrc::stability::rc_criterion(&t_nl, &s.l, &q, 2808, 2808).unwrap();
+    // Where the growing error of the nominal high-order RC sits in frequency.
+    {
+        let dur = 80.0;
+        let steps = (dur / DT) as usize;
+        let mut es = Vec::new();
+        run_plan_traced(
+            &stage_params(),
+            &nominal,
+            &q_old,
+            pl_old,
+            v10,
+            Rc::HighOrder,
+            dur,
+            |k, e, _| {
+                if k >= steps * 3 / 4 {
+                    es.push(e);
+                }
+            },
+        );
+        let psd = psd_welch(&es, 1.0 / DT, &WelchOptions::new(4000)).unwrap();
+        let (mut fpk, mut spk) = (0.0, 0.0);
+        for (f, d) in psd.freq_hz.iter().zip(&psd.density) {
+            if *f > 2.0 && *d > spk {
+                (fpk, spk) = (*f, *d);
+            }
+        }
+        println!(
+            "nominal high-order RC, 80 s: error PSD peak at {fpk:.0} Hz; {:.1} % of the mean square in 100–200 Hz",
+            100.0 * psd.band_mean_square(100.0, 200.0) / psd.mean_square()
+        );
+    }
+    // Isolation on the *linear* model: plant = (5.31) with the identified c and
+    // delay, ripple d(α) of the linear table; L and Q of the nominal design.
+    let plant = Setup {
+        g: fit.model(),
+        c_m_per_cycle: fit.c,
+        ..setup()
+    };
     println!(
-        "with c = {:.3} µm/cycle: ‖Q(1 − T L z^l)‖∞ = {:.4} at {:.1} Hz (standard RC needs < 1; \
-         the high-order W = 2 − z^-N has Σ|w_i| = 3, so the small-gain test needs < 1/3 = 0.333)",
-        steps[1] * 1e6,
-        c.hinf,
-        c.peak_hz
+        "linear plant = identified model, nominal L and Q (0.1 mm/s, ripple of the linear table):"
     );
+    for dur in [5.0, 10.0, 20.0] {
+        let (ho, _) = table51::run_mixed(
+            &plant,
+            &nominal,
+            &q_old,
+            Velocity::Constant(1e-4),
+            Rc::HighOrder,
+            dur,
+        );
+        let (rc, _) = table51::run_mixed(
+            &plant,
+            &nominal,
+            &q_old,
+            Velocity::Constant(1e-4),
+            Rc::Standard,
+            dur,
+        );
+        println!(
+            "  {dur} s: high-order RC {:.3} nm, RC {:.3} nm",
+            ho * 1e9,
+            rc * 1e9
+        );
+    }
+
+    // 5. Sensitivity to the strip roughness (10 µm/s, 60 s, same L and Q; each
+    //    strip gets its own [m, M] from its own run without RC).
+    println!(
+        "\n| σ_h (10 µm/s) | N(α) without RC | none (nm) | RC (nm) | high-order RC (nm) | DVRC (nm) | N_k seen by DVRC | (5.9) margin (dB) |"
+    );
+    println!("|---|---|---|---|---|---|---|---|");
+    for rms in [0.0, 50e-9, STRIP_RMS_M, 200e-9, 300e-9] {
+        let pp = stage_params_with(rms);
+        let r = period_range(&pp, &s, v10, 60.0);
+        let pl = plan_from_periods(r, comp, PAD);
+        let c = rc_criterion(&s.t, &s.l, &q, pl.m, pl.mm).unwrap();
+        let out: Vec<Outcome> = [Rc::None, Rc::Standard, Rc::HighOrder, Rc::Dvrc]
+            .iter()
+            .map(|&w| run_plan(&pp, &s, &q, pl, v10, w, 60.0))
+            .collect();
+        println!(
+            "| {:.0} nm | {:.0} … {:.0} | {:.3} | {:.3} | {:.3} | {:.3} | {} … {} | {:+.2} |",
+            rms * 1e9,
+            r.1,
+            r.2,
+            out[0].rms * 1e9,
+            out[1].rms * 1e9,
+            out[2].rms * 1e9,
+            out[3].rms * 1e9,
+            out[3].seen.0,
+            out[3].seen.1,
+            c.margin_db()
+        );
+    }
 }

@@ -10,7 +10,13 @@
 //!    ([`crate::friction`]).
 //!
 //! The friction coefficient varies (seeded) per pair, along the strip and in time
-//! ([`crate::variation`]), so the stage steps irregularly as the real one does.
+//! ([`crate::variation`]). With the default parameters the loaded pair never
+//! reaches its friction limit, so that variation does not change the step. The
+//! optional drive-strip height profile (`strip_height_rms_m`, off by default,
+//! [`crate::variation::StripProfile`]) shifts each pair's contact (hence the
+//! preload split and the take-over point) and tilts its contact normal (hence
+//! where a pair slips), so the step per α cycle varies from cycle to cycle as on
+//! the real stage ("roughness of the drive strip, contamination", Sec. 4.4).
 //!
 //! [`WalkingPiezoStage`] is the plain Rust model; [`WalkingPiezoStageBlock`] is the
 //! graph block `walking_piezo_stage`.
@@ -18,7 +24,7 @@
 use crate::contact::{ContactLaw, YSolution, solve_y};
 use crate::friction::{FixedPointSettings, XCoefficients, XState, step_x};
 use crate::kinematics::{C_X_M_PER_V, C_Y_M_PER_V, LegKinematics};
-use crate::variation::{MuVariation, MuVariationParams};
+use crate::variation::{MuVariation, MuVariationParams, StripProfile, StripProfileParams};
 use nanomotion_core::block::check;
 use nanomotion_core::{
     Block, BlockDoc, BuildContext, ParamDoc, ParamError, Plant, Port, Role, Tick,
@@ -91,6 +97,24 @@ pub struct StageParams {
     /// Correlation time of μ in time (s).
     #[serde(default = "d_mu_tau")]
     pub mu_temporal_tau_s: f64,
+    /// rms height σ_h (m) of the drive strip's surface profile (roughness and
+    /// waviness, seeded; [`crate::variation::StripProfile`]). Default 0: a flat
+    /// strip, the model as identified in Ch. 4. A height h under a pair shifts
+    /// its contact by h (penetration s = housing + leg − h), which moves the
+    /// preload split between the pairs and the take-over point; the slope h'
+    /// tilts the contact normal (x-force −F_N·h' on the stage, reacted on the
+    /// leg), which decides when a pair slips on a steep spot. So the step per α
+    /// cycle varies from cycle to cycle.
+    #[serde(default)]
+    pub strip_height_rms_m: f64,
+    /// Correlation length of the strip profile (m); default 2 µm, a fraction of
+    /// a step (≈ 7 µm per cycle), so each touch-down lands on a fresh height.
+    #[serde(default = "d_strip_corr")]
+    pub strip_height_corr_m: f64,
+    /// Pitch of the four legs A, B, C, D along the strip (m); default 2 mm. The
+    /// pair {A, D} sees the mean height under A and D, {B, C} under B and C.
+    #[serde(default = "d_strip_pitch")]
+    pub strip_leg_pitch_m: f64,
     /// Internal sub-steps per block period (the thesis's Δt = 25 µs is one step at
     /// 40 kHz, or 10 sub-steps at 4 kHz).
     #[serde(default = "d_substeps")]
@@ -160,6 +184,12 @@ fn d_mu_temporal() -> f64 {
 fn d_mu_tau() -> f64 {
     0.5
 }
+fn d_strip_corr() -> f64 {
+    2e-6
+}
+fn d_strip_pitch() -> f64 {
+    2e-3
+}
 fn d_substeps() -> u32 {
     1
 }
@@ -189,6 +219,9 @@ impl Default for StageParams {
             mu_spatial_corr_m: d_mu_corr(),
             mu_temporal_rel: d_mu_temporal(),
             mu_temporal_tau_s: d_mu_tau(),
+            strip_height_rms_m: 0.0,
+            strip_height_corr_m: d_strip_corr(),
+            strip_leg_pitch_m: d_strip_pitch(),
             substeps: d_substeps(),
             prox_r: None,
             tol_n: d_tol(),
@@ -266,6 +299,9 @@ impl StageParams {
         check::positive("mu_spatial_corr_m", self.mu_spatial_corr_m)?;
         check::non_negative("mu_temporal_rel", self.mu_temporal_rel)?;
         check::positive("mu_temporal_tau_s", self.mu_temporal_tau_s)?;
+        check::non_negative("strip_height_rms_m", self.strip_height_rms_m)?;
+        check::positive("strip_height_corr_m", self.strip_height_corr_m)?;
+        check::non_negative("strip_leg_pitch_m", self.strip_leg_pitch_m)?;
         if self.substeps == 0 {
             return Err(ParamError::new("substeps", "is 0", "give at least 1"));
         }
@@ -398,6 +434,9 @@ pub struct WalkingPiezoStage {
     xc: XCoefficients,
     fp: FixedPointSettings,
     mu_var: MuVariation,
+    strip: Option<StripProfile>,
+    strip_z: [f64; 2],
+    strip_f: [f64; 2],
     seed: u64,
     x: XState,
     y: YSolution,
@@ -422,12 +461,16 @@ impl WalkingPiezoStage {
             max_iter: params.max_iter,
         };
         let mu_var = MuVariation::new(Self::mu_params(&params), dt_sub, seed);
+        let strip = Self::strip_profile(&params, seed);
         let mut s = Self {
             kin: params.kinematics(),
             law: params.contact_law(),
             xc,
             fp,
             mu_var,
+            strip,
+            strip_z: [0.0; 2],
+            strip_f: [0.0; 2],
             seed,
             dt_sub,
             params,
@@ -441,6 +484,70 @@ impl WalkingPiezoStage {
         };
         s.reset();
         Ok(s)
+    }
+
+    /// The strip profile of `p`, or `None` for a flat strip.
+    fn strip_profile(p: &StageParams, seed: u64) -> Option<StripProfile> {
+        (p.strip_height_rms_m > 0.0).then(|| {
+            StripProfile::new(
+                StripProfileParams {
+                    rms_m: p.strip_height_rms_m,
+                    corr_m: p.strip_height_corr_m,
+                    leg_pitch_m: p.strip_leg_pitch_m,
+                },
+                seed,
+            )
+        })
+    }
+
+    /// Strip heights (m) under the pairs with the x-state `x` (0 on a flat strip).
+    #[inline]
+    fn heights_at(strip: &Option<StripProfile>, x: &XState) -> [f64; 2] {
+        match strip {
+            Some(sp) => sp.pair_heights([x.x_leg[0] - x.x_s, x.x_leg[1] - x.x_s]),
+            None => [0.0; 2],
+        }
+    }
+
+    /// The y-solve (4.13)–(4.15) on a strip whose surface under pair i is set back
+    /// by `z[i]`: with e'_i = e_i − z_i the penetration is s_i = h + e'_i and
+    /// k e' + d(e' − (e_A − z))/Δt = k(y_p − z) − F_c, i.e. the flat-strip solve
+    /// with y_p − z and e_A − z; the leg lengths e = e' + z are stored.
+    #[allow(clippy::too_many_arguments)]
+    fn solve_y_on_strip(
+        law: &ContactLaw,
+        p: &StageParams,
+        y_p: [f64; 2],
+        e_a: [f64; 2],
+        z: [f64; 2],
+        dt: f64,
+        f1_guess: f64,
+        flat: bool,
+    ) -> YSolution {
+        if flat {
+            return solve_y(
+                law,
+                p.preload_n,
+                p.leg_stiffness_y_n_m,
+                p.leg_damping_y_ns_m,
+                y_p,
+                e_a,
+                dt,
+                f1_guess,
+            );
+        }
+        let mut y = solve_y(
+            law,
+            p.preload_n,
+            p.leg_stiffness_y_n_m,
+            p.leg_damping_y_ns_m,
+            [y_p[0] - z[0], y_p[1] - z[1]],
+            [e_a[0] - z[0], e_a[1] - z[1]],
+            dt,
+            f1_guess,
+        );
+        y.e = [y.e[0] + z[0], y.e[1] + z[1]];
+        y
     }
 
     fn mu_params(p: &StageParams) -> MuVariationParams {
@@ -457,18 +564,21 @@ impl WalkingPiezoStage {
     /// Back to rest at zero voltage (static equilibrium), same seed.
     pub fn reset(&mut self) {
         let p = &self.params;
-        // Static equilibrium of the y-model at u = 0 (infinite step: no damping).
-        self.y = solve_y(
+        // Static equilibrium of the y-model at u = 0 (infinite step: no damping),
+        // on the strip heights under the legs at rest.
+        self.x = XState::default();
+        self.strip_z = Self::heights_at(&self.strip, &self.x);
+        self.strip_f = [0.0; 2];
+        self.y = Self::solve_y_on_strip(
             &self.law,
-            p.preload_n,
-            p.leg_stiffness_y_n_m,
-            p.leg_damping_y_ns_m,
+            p,
             [0.0; 2],
             [0.0; 2],
+            self.strip_z,
             f64::INFINITY,
             0.5 * p.preload_n,
+            self.strip.is_none(),
         );
-        self.x = XState::default();
         self.lambda = [0.0; 2];
         self.slip = [0.0; 2];
         self.mu_var = MuVariation::new(Self::mu_params(p), self.dt_sub, self.seed);
@@ -508,6 +618,20 @@ impl WalkingPiezoStage {
     pub fn last_report(&self) -> StepReport {
         self.last
     }
+    /// Strip heights (m) under pair 1 and pair 2 used in the last sub-step (0 on
+    /// a flat strip, `strip_height_rms_m` = 0).
+    pub fn strip_heights(&self) -> [f64; 2] {
+        self.strip_z
+    }
+    /// x-forces (N) on the stage from the tilted strip surface under pair 1 and
+    /// pair 2 in the last sub-step, −F_Ni·h'(p_i) (0 on a flat strip).
+    pub fn strip_forces(&self) -> [f64; 2] {
+        self.strip_f
+    }
+    /// The drive-strip profile, if `strip_height_rms_m` > 0.
+    pub fn strip_profile_model(&self) -> Option<&StripProfile> {
+        self.strip.as_ref()
+    }
 
     /// All signals at the current state.
     pub fn signals(&self) -> StageSignals {
@@ -537,7 +661,15 @@ impl WalkingPiezoStage {
                 return Err(StepError::NonFiniteInput { index, value });
             }
         }
-        let saved = (self.x, self.y, self.lambda, self.slip, self.mu);
+        let saved = (
+            self.x,
+            self.y,
+            self.lambda,
+            self.slip,
+            self.mu,
+            self.strip_z,
+            self.strip_f,
+        );
         let p = &self.params;
         let tips = self.kin.tips(u);
         let f_x = [
@@ -547,28 +679,47 @@ impl WalkingPiezoStage {
         let mut report = StepReport::default();
         let mut worst: Option<(u32, f64)> = None;
         for _ in 0..p.substeps {
-            // Step 2: normal forces at t_E.
-            self.y = solve_y(
+            // Step 2: normal forces at t_E, on the strip heights under the tips
+            // at t_A (strip coordinates as for μ).
+            self.strip_z = Self::heights_at(&self.strip, &self.x);
+            self.y = Self::solve_y_on_strip(
                 &self.law,
-                p.preload_n,
-                p.leg_stiffness_y_n_m,
-                p.leg_damping_y_ns_m,
+                p,
                 tips.y,
                 self.y.e,
+                self.strip_z,
                 self.dt_sub,
                 self.y.f_n[0],
+                self.strip.is_none(),
             );
             // μ at the strip coordinates under the tips.
             self.mu = self
                 .mu_var
                 .next([self.x.x_leg[0] - self.x.x_s, self.x.x_leg[1] - self.x.x_s]);
             let bound = [self.mu[0] * self.y.f_n[0], self.mu[1] * self.y.f_n[1]];
+            // On a rough strip the contact normal of pair i is tilted by the
+            // local slope h'(p_i): its x-component −F_Ni·h' acts on the stage and,
+            // reacted, on the leg (first order in the slope). While the pair
+            // sticks it only shifts λ; it decides *when* the pair slips
+            // (|λ| reaches μF_Ni, the friction cone tilted by the slope).
+            let (f_x_eff, f_ext_eff) = match &self.strip {
+                Some(sp) => {
+                    let sl = sp
+                        .pair_slopes([self.x.x_leg[0] - self.x.x_s, self.x.x_leg[1] - self.x.x_s]);
+                    self.strip_f = [-self.y.f_n[0] * sl[0], -self.y.f_n[1] * sl[1]];
+                    (
+                        [f_x[0] - self.strip_f[0], f_x[1] - self.strip_f[1]],
+                        f_ext + self.strip_f[0] + self.strip_f[1],
+                    )
+                }
+                None => (f_x, f_ext),
+            };
             // Steps 3–4: fixed point from the previous λ.
             let s = step_x(
                 &self.xc,
                 &self.x,
-                &f_x,
-                f_ext,
+                &f_x_eff,
+                f_ext_eff,
                 &bound,
                 &self.lambda,
                 &self.fp,
@@ -595,7 +746,15 @@ impl WalkingPiezoStage {
                 .all(|v| v.is_finite())
             && self.y.h.is_finite();
         if !finite {
-            (self.x, self.y, self.lambda, self.slip, self.mu) = saved;
+            (
+                self.x,
+                self.y,
+                self.lambda,
+                self.slip,
+                self.mu,
+                self.strip_z,
+                self.strip_f,
+            ) = saved;
             self.counters.faults += 1;
             return Err(StepError::NonFiniteState);
         }
@@ -749,6 +908,9 @@ nanomotion_core::submit_block_doc! {
             ParamDoc { name: "mu_spatial_corr_m", doc: "correlation length of μ along the strip (m)", default: Some("20e-6") },
             ParamDoc { name: "mu_temporal_rel", doc: "relative std of μ in time", default: Some("0.05") },
             ParamDoc { name: "mu_temporal_tau_s", doc: "correlation time of μ (s)", default: Some("0.5") },
+            ParamDoc { name: "strip_height_rms_m", doc: "rms height of the seeded drive-strip profile (m); 0 = flat strip", default: Some("0") },
+            ParamDoc { name: "strip_height_corr_m", doc: "correlation length of the strip profile (m)", default: Some("2e-6") },
+            ParamDoc { name: "strip_leg_pitch_m", doc: "pitch of the legs A, B, C, D along the strip (m)", default: Some("2e-3") },
             ParamDoc { name: "substeps", doc: "internal sub-steps per block period", default: Some("1") },
             ParamDoc { name: "prox_r", doc: "r of (4.18) (N·s/m), below 2/λ_max(W)", default: Some("optimal r* = 2/(λ_min+λ_max)") },
             ParamDoc { name: "tol_n", doc: "fixed-point tolerance ε (N)", default: Some("1e-10") },

@@ -156,6 +156,46 @@ pub fn run_with(
     ((sq / cnt as f64).sqrt(), seen)
 }
 
+/// [`run`] with the plant of `plant` (its `g`; N from its `c_m_per_cycle`) and
+/// the PI, L of `design`: the loop with a model mismatch.
+pub fn run_mixed(
+    plant: &Setup,
+    design: &Setup,
+    q: &Filter,
+    v: Velocity,
+    which: Rc,
+    duration_s: f64,
+) -> (f64, (usize, usize)) {
+    let comp = design.l.preview_samples() + q.preview_samples();
+    let (j, n_mean, m, mm) = delay_range(plant, v, comp + 1);
+    let n_fixed = n_mean.round() as usize;
+    let mut g = SsStepper::new(&plant.g).unwrap();
+    let mut pi = Pi::new(design.kp, 5.0, DT).unwrap();
+    let mut rc = RcUnderTest::new(design, q, which, j, n_fixed, m, mm);
+    let steps = (duration_s / DT) as usize;
+    let mut alpha = 0.0;
+    let mut y = [0.0];
+    let mut u = [0.0];
+    let mut sq = 0.0;
+    let mut cnt = 0usize;
+    let mut seen = (usize::MAX, 0usize);
+    for k in 0..steps {
+        g.output(&[], &mut y);
+        let e = v.position(k as f64 * DT) - (y[0] + ripple(alpha));
+        let (nk, w) = rc.output(alpha);
+        pi.control(&[e + w], &mut u);
+        rc.learn(e);
+        g.update(&u);
+        alpha += TAU * u[0] * DT;
+        if k >= steps * 3 / 4 {
+            sq += e * e;
+            cnt += 1;
+            seen = (seen.0.min(nk), seen.1.max(nk));
+        }
+    }
+    ((sq / cnt as f64).sqrt(), seen)
+}
+
 /// The criterion for the DVRC range actually used.
 pub fn criterion_text(s: &Setup, q: &Filter, m: usize, mm: usize) -> String {
     rc_criterion(&s.t, &s.l, q, m, mm).unwrap().to_string()

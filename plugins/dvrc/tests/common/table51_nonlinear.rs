@@ -1,36 +1,64 @@
 //! Table 5.1-style experiment (issue 7 item 5) on the *nonlinear* walking piezo
 //! stage: `WaveformDriver` (asymmetric waveforms, q = 1/3) → `WalkingPiezoStage`
 //! (10 sub-steps of 25 µs inside the 4 kHz loop, seeded μ variation with unequal
-//! pairs), PI on f_α designed on the fitted linear model (5.31), the RC memory loop
-//! with L = ZPETC of the linear T and a 101-tap FIR Q, DVRC driven by the driver's
-//! α. No ripple is added: the error is what the stepping of the model produces.
+//! pairs, optionally a rough drive strip), PI on f_α, the RC memory loop with
+//! L = ZPETC of T and a 101-tap FIR Q, DVRC driven by the driver's α. No ripple is
+//! added: the error is what the stepping of the model produces.
+//!
+//! Design path as in the thesis (Sec. 5.5): measure the plant's FRF in closed loop
+//! (Fig. 2.8), fit a parametric model ([`identify`]), design the 50 Hz PI, L and
+//! Q on that model ([`design`]), with [m, M] from the delays N(α) seen in runs
+//! without RC (Fig. 5.7, [`period_range`]).
 //! Shared by `tests/table_5_1_nonlinear.rs` and `examples/table_5_1_nonlinear.rs`.
 #![allow(dead_code)]
 
 use super::table51::{Rc, RcUnderTest, Setup, Velocity};
 use dvrc::filters::Filter;
 use dvrc::stability::design_q_cutoff;
+use nalgebra::DMatrix;
+use nanomotion_core::analysis::{WelchOptions, frf_closed_loop};
 use nanomotion_core::blocks::control::Pi;
-use nanomotion_core::lti::{Margins, series, stability_margins};
+use nanomotion_core::lti::{
+    Complex, Margins, StateSpace, delay, feedback, series, stability_margins, zpetc_ss,
+};
+use nanomotion_core::rng::Rng;
 use nanomotion_core::{Controller, LearningFilter};
+use std::f64::consts::TAU;
 use walking_piezo::driver::{DriverParams, WaveformDriver, WaveformShape};
 use walking_piezo::{StageParams, WalkingPiezoStage};
 
 pub const DT: f64 = super::table51::DT;
-/// Seed of the stage's friction variation.
+/// Seed of the stage's friction variation and strip profile.
 pub const SEED: u64 = 7;
+/// rms height of the rough drive strip used for Table 5.1 (m): a lapped ceramic
+/// strip, Ra ≈ 80 nm (σ ≈ 1.25 Ra for a Gaussian surface). Not fitted to any
+/// result; the examples also show 0, 50 and 200 nm.
+pub const STRIP_RMS_M: f64 = 100e-9;
 
-/// Margins of the PI (k_p from `setup`, zero 5 Hz) on the fitted linear model.
-pub fn margins(s: &Setup) -> Margins {
-    let k = Pi::new(s.kp, 5.0, DT).unwrap().as_pid().state_space();
-    stability_margins(&series(&k, &s.g).unwrap()).unwrap()
+/// Margins of the PI `kp` (zero 5 Hz) on the model `g`.
+pub fn margins_on(g: &StateSpace, kp: f64) -> Margins {
+    let k = Pi::new(kp, 5.0, DT).unwrap().as_pid().state_space();
+    stability_margins(&series(&k, g).unwrap()).unwrap()
 }
 
-pub fn stage_params() -> StageParams {
+/// Margins of the PI of `s` on its design model.
+pub fn margins(s: &Setup) -> Margins {
+    margins_on(&s.g, s.kp)
+}
+
+/// The stage of the table: default parameters, 10 sub-steps, a strip of rms
+/// height `strip_rms_m` (0: flat, the default model).
+pub fn stage_params_with(strip_rms_m: f64) -> StageParams {
     StageParams {
         substeps: 10,
+        strip_height_rms_m: strip_rms_m,
         ..StageParams::default()
     }
+}
+
+/// The flat-strip stage (the model's defaults, 10 sub-steps).
+pub fn stage_params() -> StageParams {
+    stage_params_with(0.0)
 }
 
 pub fn driver() -> WaveformDriver {
@@ -46,7 +74,7 @@ pub fn driver() -> WaveformDriver {
     .unwrap()
 }
 
-/// Open-loop step per α cycle (m) of the nonlinear stage with this driver at
+/// Open-loop step per α cycle (m) of the flat-strip stage with this driver at
 /// `f_alpha_hz` (after one run-in cycle, over `cycles` cycles).
 pub fn step_per_cycle(f_alpha_hz: f64, cycles: usize) -> f64 {
     step_per_cycle_on(&stage_params(), f_alpha_hz, cycles)
@@ -54,22 +82,260 @@ pub fn step_per_cycle(f_alpha_hz: f64, cycles: usize) -> f64 {
 
 /// [`step_per_cycle`] for other stage parameters.
 pub fn step_per_cycle_on(p: &StageParams, f_alpha_hz: f64, cycles: usize) -> f64 {
+    let s = open_loop_steps(p, f_alpha_hz, cycles);
+    s.iter().sum::<f64>() / s.len() as f64
+}
+
+/// Open-loop stage travel (m) in each of `cycles` α cycles at `f_alpha_hz`, after
+/// one run-in cycle.
+pub fn open_loop_steps(p: &StageParams, f_alpha_hz: f64, cycles: usize) -> Vec<f64> {
     let mut d = driver();
     let mut st = WalkingPiezoStage::new(p.clone(), DT, SEED).unwrap();
     let per = (1.0 / (f_alpha_hz * DT)).round() as usize;
-    let mut x0 = 0.0;
+    let mut out = Vec::with_capacity(cycles);
+    let mut last = 0.0;
     for k in 0..per * (cycles + 1) {
-        if k == per {
-            x0 = st.signals().x_s;
-        }
         let (u, _) = d.try_drive(f_alpha_hz, None, None).unwrap();
         let _ = st.step(&u, 0.0);
+        if (k + 1) % per == 0 {
+            let x = st.signals().x_s;
+            if k + 1 > per {
+                out.push(x - last);
+            }
+            last = x;
+        }
     }
-    (st.signals().x_s - x0) / cycles as f64
+    out
+}
+
+// ---------------------------------------------------------------------------
+// Identification (Fig. 2.8) and the model the design uses
+// ---------------------------------------------------------------------------
+
+/// The parametric model fitted to the measured FRF: the structure of (5.31)
+/// (integrator, the thesis's resonance/anti-resonance/resonance, ZOH at 4 kHz)
+/// with the step per cycle c and the pure delay (samples) identified.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PlantFit {
+    /// Step per α cycle c (m).
+    pub c: f64,
+    /// Delay (samples).
+    pub delay: usize,
+    /// Coherence-weighted relative rms fit error |P̂ − G|/|P̂| over the fit band.
+    pub rel_err: f64,
+}
+
+impl PlantFit {
+    pub fn model(&self) -> StateSpace {
+        walking_piezo::FittedStageParams {
+            gain_m_per_cycle: self.c,
+            delay_s: self.delay as f64 * DT,
+            ..Default::default()
+        }
+        .discrete(DT)
+        .unwrap()
+    }
+}
+
+/// A non-parametric plant FRF P̂(f) = Ŝ_P/Ŝ with its coherence.
+#[derive(Debug, Clone)]
+pub struct MeasuredFrf {
+    pub f_hz: Vec<f64>,
+    pub p: Vec<Complex<f64>>,
+    pub coh: Vec<f64>,
+}
+
+/// Closed-loop FRF measurement (Fig. 2.8) on the nonlinear stage `p`: PI `kp`
+/// (zero 5 Hz) tracking `v` (m/s), white noise of `noise_hz` rms added to f_α,
+/// `dur_s` recorded after 1 s, Welch segments of 1 s.
+pub fn measure_frf(p: &StageParams, kp: f64, v: f64, noise_hz: f64, dur_s: f64) -> MeasuredFrf {
+    let mut st = WalkingPiezoStage::new(p.clone(), DT, SEED).unwrap();
+    let mut drv = driver();
+    let mut pi = Pi::new(kp, 5.0, DT).unwrap();
+    let mut rng = Rng::new(SEED ^ 0xF4F);
+    let settle = (1.0 / DT) as usize;
+    let steps = settle + (dur_s / DT) as usize;
+    let mut u = [0.0];
+    let (mut dv, mut uv, mut yv) = (vec![], vec![], vec![]);
+    for k in 0..steps {
+        let x = st.signals().x_s;
+        pi.control(&[v * k as f64 * DT - x], &mut u);
+        let d = noise_hz * rng.normal();
+        let f = u[0] + d;
+        if k >= settle {
+            dv.push(d);
+            uv.push(f);
+            yv.push(x);
+        }
+        let (volts, _) = drv.try_drive(f, None, None).unwrap();
+        let _ = st.step(&volts, 0.0);
+    }
+    let r = frf_closed_loop(&dv, &uv, &yv, 1.0 / DT, &WelchOptions::new(4000)).unwrap();
+    let pf = r.plant_frf();
+    MeasuredFrf {
+        f_hz: pf.freq_hz,
+        p: pf.response,
+        coh: pf.coherence,
+    }
+}
+
+/// Fit [`PlantFit`] to `m` over `band` (Hz) where the coherence is ≥ 0.8: for
+/// each delay 0…4 samples, c by coherence-weighted least squares on the relative
+/// error; the delay with the smallest error wins.
+pub fn identify(m: &MeasuredFrf, band: (f64, f64)) -> PlantFit {
+    let idx: Vec<usize> = (0..m.f_hz.len())
+        .filter(|&i| m.f_hz[i] >= band.0 && m.f_hz[i] <= band.1 && m.coh[i] >= 0.8)
+        .collect();
+    let mut best = PlantFit {
+        c: 0.0,
+        delay: 0,
+        rel_err: f64::INFINITY,
+    };
+    for delay in 0..=4 {
+        let unit = PlantFit {
+            c: 1.0,
+            delay,
+            rel_err: 0.0,
+        }
+        .model();
+        let g1: Vec<Complex<f64>> = idx
+            .iter()
+            .map(|&i| unit.freqresp_siso_at(TAU * m.f_hz[i]))
+            .collect();
+        // min Σ w |P̂ − c G1|²/|P̂|² over real c.
+        let (mut num, mut den) = (0.0, 0.0);
+        for (g, &i) in g1.iter().zip(&idx) {
+            let w = m.coh[i] / m.p[i].norm_sqr();
+            num += w * (g.conj() * m.p[i]).re;
+            den += w * g.norm_sqr();
+        }
+        let c = num / den;
+        let (mut e, mut wsum) = (0.0, 0.0);
+        for (g, &i) in g1.iter().zip(&idx) {
+            e += m.coh[i] * (m.p[i] - g * c).norm_sqr() / m.p[i].norm_sqr();
+            wsum += m.coh[i];
+        }
+        let rel_err = (e / wsum).sqrt();
+        if rel_err < best.rel_err {
+            best = PlantFit { c, delay, rel_err };
+        }
+    }
+    best
+}
+
+/// PI (50 Hz crossover: k_p = 2π·50/c, zero 5 Hz), T and L = ZPETC of T on the
+/// design model `g` with gain `c`.
+pub fn design(g: StateSpace, c: f64) -> Setup {
+    let kp = TAU * 50.0 / c;
+    let k = Pi::new(kp, 5.0, DT).unwrap().as_pid().state_space();
+    let one = StateSpace::gain(DMatrix::from_element(1, 1, 1.0), Some(DT));
+    let t = feedback(&series(&k, &g).unwrap(), &one, -1.0).unwrap();
+    // ZPETC of z⁻¹T (preview l + 1) is the same causal filter as a ZPETC of T
+    // with preview l. The core's `zpetc_ss` fails or returns a wrong inverse for
+    // T of the delay-free (5.31) structure (|1 − T L z^l| ≈ 0.95 at 1 Hz), but
+    // is exact with one sample of delay in front; so invert z⁻¹T and declare
+    // preview l.
+    let z = zpetc_ss(&series(&t, &delay(1, DT)).unwrap()).unwrap();
+    let l = Filter::from_ss(z.to_ss().unwrap(), z.preview - 1).unwrap();
+    Setup {
+        g,
+        kp,
+        t,
+        l,
+        c_m_per_cycle: c,
+    }
+}
+
+/// |Q(1 − T̂ L z^l)| on the measured FRF, T̂ = P̂C/(1 + P̂C) with the PI of `s`:
+/// the (5.5)/(5.9) quantity for the plant that runs, at the bins up to `f_max`
+/// where the coherence is ≥ 0.8. Returns (max, frequency of the max).
+pub fn criterion_on_measured(s: &Setup, q: &Filter, m: &MeasuredFrf, f_max: f64) -> (f64, f64) {
+    let k = Pi::new(s.kp, 5.0, DT).unwrap().as_pid().state_space();
+    let mut best = (0.0, 0.0);
+    for i in 0..m.f_hz.len() {
+        let f = m.f_hz[i];
+        if f <= 0.0 || f > f_max || m.coh[i] < 0.8 {
+            continue;
+        }
+        let w = TAU * f;
+        let lp = m.p[i] * k.freqresp_siso_at(w);
+        let t = lp / (lp + 1.0);
+        let tl = t
+            * s.l.freqresp_at(w)
+            * Complex::from_polar(1.0, w * DT * s.l.preview_samples() as f64);
+        let h = (q.freqresp_at(w) * (Complex::new(1.0, 0.0) - tl)).norm();
+        if h > best.0 {
+            best = (h, f);
+        }
+    }
+    best
+}
+
+// ---------------------------------------------------------------------------
+// Delay ranges and runs
+// ---------------------------------------------------------------------------
+
+/// Memory-loop plan of one run: j α periods per repetition, the fixed N of RC and
+/// high-order RC, and DVRC's window [m, M].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Plan {
+    pub j: usize,
+    pub n_fixed: usize,
+    pub m: usize,
+    pub mm: usize,
+}
+
+/// Samples per α period, cycle by cycle (fractional crossings of 2π multiples),
+/// of a run with the PI of `s` only, over the last three quarters of `dur_s`
+/// (Fig. 5.7: N(α) measured without RC). Returns (mean, min, max).
+pub fn period_range(p: &StageParams, s: &Setup, v: Velocity, dur_s: f64) -> (f64, f64, f64) {
+    let mut st = WalkingPiezoStage::new(p.clone(), DT, SEED).unwrap();
+    let mut drv = driver();
+    let mut pi = Pi::new(s.kp, 5.0, DT).unwrap();
+    let steps = (dur_s / DT) as usize;
+    let mut u = [0.0];
+    let mut next = TAU;
+    let mut last = f64::NAN;
+    let mut prev = 0.0;
+    let mut per = Vec::new();
+    for k in 0..steps {
+        let a = drv.alpha();
+        while a >= next {
+            let kc = (k - 1) as f64 + (next - prev) / (a - prev);
+            if k >= steps / 4 && last.is_finite() {
+                per.push(kc - last);
+            }
+            last = kc;
+            next += TAU;
+        }
+        prev = a;
+        pi.control(&[v.position(k as f64 * DT) - st.signals().x_s], &mut u);
+        let (volts, _) = drv.try_drive(u[0], None, None).unwrap();
+        let _ = st.step(&volts, 0.0);
+    }
+    let mean = per.iter().sum::<f64>() / per.len() as f64;
+    let min = per.iter().copied().fold(f64::INFINITY, f64::min);
+    let max = per.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    (mean, min, max)
+}
+
+/// The plan from a measured period range (samples per α period): j so that
+/// j·min ≥ `n_needed`, N = j·mean, [m, M] = [j·min, j·max] widened by `pad`
+/// (relative) on each side.
+pub fn plan_from_periods(range: (f64, f64, f64), n_needed: usize, pad: f64) -> Plan {
+    let (mean, min, max) = range;
+    let j = ((n_needed as f64 / ((1.0 - pad) * min)).ceil() as usize).max(1);
+    let jf = j as f64;
+    Plan {
+        j,
+        n_fixed: (jf * mean).round() as usize,
+        m: ((jf * min * (1.0 - pad)).floor() as usize).max(n_needed),
+        mm: ((jf * max * (1.0 + pad)).ceil() as usize).max(n_needed + 1),
+    }
 }
 
 /// Periods j of α per memory-loop period (N ≥ `n_needed` at the highest speed),
-/// the nominal N, and [m, M] with a relative `margin` for irregular stepping.
+/// the nominal N, and [m, M] with a relative `margin`, from a step per cycle.
 pub fn delay_range(
     step_m: f64,
     v: Velocity,
@@ -89,6 +355,17 @@ pub fn delay_range(
     )
 }
 
+/// [`delay_range`] as a [`Plan`].
+pub fn plan_from_step(step_m: f64, v: Velocity, n_needed: usize, margin: f64) -> Plan {
+    let (j, n, m, mm) = delay_range(step_m, v, n_needed, margin);
+    Plan {
+        j,
+        n_fixed: n.round() as usize,
+        m,
+        mm,
+    }
+}
+
 pub fn q_for(s: &Setup, spread: usize) -> (Filter, f64) {
     let d = design_q_cutoff(&s.t, &s.l, 101, spread, 0.05).unwrap();
     (Filter::fir(d.taps, 50, DT), d.cutoff_hz)
@@ -105,38 +382,36 @@ pub struct Outcome {
     pub nonconverged: u64,
 }
 
-/// Run one experiment of `duration_s` on the nonlinear stage.
-pub fn run(
-    s: &Setup,
-    q: &Filter,
-    step_m: f64,
-    margin: f64,
-    v: Velocity,
-    which: Rc,
-    duration_s: f64,
-) -> Outcome {
-    run_on(&stage_params(), s, q, step_m, margin, v, which, duration_s)
-}
-
-/// [`run`] on a stage with parameters `p`.
-#[allow(clippy::too_many_arguments)]
-pub fn run_on(
+/// Run one experiment of `duration_s` on the nonlinear stage `p`, with the
+/// design `s`, robustness filter `q` and memory-loop plan `plan`.
+pub fn run_plan(
     p: &StageParams,
     s: &Setup,
     q: &Filter,
-    step_m: f64,
-    margin: f64,
+    plan: Plan,
     v: Velocity,
     which: Rc,
     duration_s: f64,
 ) -> Outcome {
-    let comp = s.l.preview_samples() + q.preview_samples();
-    let (j, n_mean, m, mm) = delay_range(step_m, v, comp + 1, margin);
-    let n_fixed = n_mean.round() as usize;
+    run_plan_traced(p, s, q, plan, v, which, duration_s, |_, _, _| {})
+}
+
+/// [`run_plan`] calling `trace(k, e_k, α_k)` every sample.
+#[allow(clippy::too_many_arguments)]
+pub fn run_plan_traced(
+    p: &StageParams,
+    s: &Setup,
+    q: &Filter,
+    plan: Plan,
+    v: Velocity,
+    which: Rc,
+    duration_s: f64,
+    mut trace: impl FnMut(usize, f64, f64),
+) -> Outcome {
     let mut stage = WalkingPiezoStage::new(p.clone(), DT, SEED).unwrap();
     let mut drv = driver();
     let mut pi = Pi::new(s.kp, 5.0, DT).unwrap();
-    let mut rc = RcUnderTest::new(s, q, which, j, n_fixed, m, mm);
+    let mut rc = RcUnderTest::new(s, q, which, plan.j, plan.n_fixed, plan.m, plan.mm);
     let steps = (duration_s / DT) as usize;
     let mut u = [0.0];
     let mut sq = 0.0;
@@ -147,6 +422,7 @@ pub fn run_on(
         let e = v.position(t) - stage.signals().x_s;
         // α of this sample (the driver integrates f_α after output).
         let alpha = drv.alpha();
+        trace(k, e, alpha);
         let (nk, w) = rc.output(alpha);
         pi.control(&[e + w], &mut u);
         rc.learn(e);
@@ -166,16 +442,42 @@ pub fn run_on(
 }
 
 /// T(z) of the PI loop on the fitted linear model with its gain c replaced by
-/// `c_m_per_cycle` (e.g. the nonlinear stage's measured step per cycle): for
-/// checking the criteria against the plant the loop actually runs on.
-pub fn t_with_gain(s: &Setup, c_m_per_cycle: f64) -> nanomotion_core::lti::StateSpace {
-    use nanomotion_core::lti::{StateSpace, feedback};
+/// `c_m_per_cycle`, with the PI of `s`.
+pub fn t_with_gain(s: &Setup, c_m_per_cycle: f64) -> StateSpace {
     let p = walking_piezo::FittedStageParams {
         gain_m_per_cycle: c_m_per_cycle,
         ..Default::default()
     };
     let g = p.discrete(DT).unwrap();
     let k = Pi::new(s.kp, 5.0, DT).unwrap().as_pid().state_space();
-    let one = StateSpace::gain(nalgebra::DMatrix::from_element(1, 1, 1.0), Some(DT));
+    let one = StateSpace::gain(DMatrix::from_element(1, 1, 1.0), Some(DT));
     feedback(&series(&k, &g).unwrap(), &one, -1.0).unwrap()
+}
+
+/// Split the rms of `e` into the part periodic in α (the α-synchronous average:
+/// mean of e over `bins` bins of α mod 2π, the content any RC in α could remove)
+/// and the rest. Returns (total, periodic, rest) rms.
+pub fn alpha_periodic_split(e: &[f64], alpha: &[f64], bins: usize) -> (f64, f64, f64) {
+    let mut sum = vec![0.0; bins];
+    let mut cnt = vec![0usize; bins];
+    let bin = |a: f64| (((a.rem_euclid(TAU)) / TAU * bins as f64) as usize).min(bins - 1);
+    for (&x, &a) in e.iter().zip(alpha) {
+        let b = bin(a);
+        sum[b] += x;
+        cnt[b] += 1;
+    }
+    let n = e.len() as f64;
+    let total = (e.iter().map(|x| x * x).sum::<f64>() / n).sqrt();
+    let periodic = (alpha
+        .iter()
+        .map(|&a| {
+            let b = bin(a);
+            let m = sum[b] / cnt[b] as f64;
+            m * m
+        })
+        .sum::<f64>()
+        / n)
+        .sqrt();
+    let rest = (total * total - periodic * periodic).max(0.0).sqrt();
+    (total, periodic, rest)
 }
