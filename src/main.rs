@@ -1,5 +1,7 @@
 //! The `nanomotion` command: run, check and inspect YAML controller graphs.
 
+mod optimize_cmd;
+
 use clap::{Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 use nanomotion::core::block::{block_docs, registered_types};
@@ -23,7 +25,7 @@ use std::time::{Duration, Instant};
     arg_required_else_help = true
 )]
 #[command(
-    after_help = "Examples:\n  nanomotion run examples/quickstart.yaml --out out/quickstart\n  nanomotion check examples/quickstart.yaml\n  nanomotion rc-check examples/rc_dvrc.yaml\n  nanomotion blocks"
+    after_help = "Examples:\n  nanomotion run examples/quickstart.yaml --out out/quickstart\n  nanomotion check examples/quickstart.yaml\n  nanomotion rc-check examples/rc_dvrc.yaml\n  nanomotion optimize-waveform examples/optimize_waveform/model.yaml --budget 0.1\n  nanomotion blocks"
 )]
 struct Cli {
     #[command(subcommand)]
@@ -64,6 +66,20 @@ enum Command {
         /// The graph file (YAML).
         graph: PathBuf,
     },
+    /// Optimise the walking-piezo drive waveforms (thesis Sec. 4.5): 32 points by
+    /// simulated annealing and particle swarm, then Nelder–Mead, on the model-based
+    /// (4.23) or data-based (4.25) objective. Writes `run.json` (resumable: run the
+    /// same command again to continue) and `waveform.yaml` (a driver fragment).
+    OptimizeWaveform {
+        /// The optimisation config (YAML), e.g. examples/optimize_waveform/model.yaml.
+        config: PathBuf,
+        /// Output folder (created if missing).
+        #[arg(long, short, default_value = "out/optimize_waveform")]
+        out: PathBuf,
+        /// Scale every phase's iterations per chunk by this factor (e.g. 0.1).
+        #[arg(long)]
+        budget: Option<f64>,
+    },
     /// List the registered block types, with their ports and parameters.
     Blocks {
         /// Show only types whose name contains this text.
@@ -93,6 +109,11 @@ fn main() -> ExitCode {
             }
             Err(e) => Err(e.to_string()),
         },
+        Command::OptimizeWaveform {
+            config,
+            out,
+            budget,
+        } => optimize_cmd::optimize_waveform(&config, &out, budget),
         Command::Blocks { filter } => {
             blocks(filter.as_deref());
             Ok(())

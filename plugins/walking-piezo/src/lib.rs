@@ -21,6 +21,7 @@
 //! | gain variation with A, φ̄ by closed-loop FRF | Sec. 2.5.1, Fig. 2.14 | [`gain_id::identify_operating_point`] | — |
 //! | Ch. 3 leg model: n_m lumped layers, Lagrange, linearisation, c_x, c_y | (3.5)–(3.29) | [`leg_model::LegModel`] | — |
 //! | identification: particle swarm + Nelder–Mead on (4.20) | Sec. 4.4.1 | [`identify::identify`] | — |
+//! | waveform optimisation: objectives (4.23)–(4.25), SA / PSO (argmin) + Nelder–Mead, resumable | Sec. 4.5 | [`optimize::optimize`] | — (`nanomotion optimize-waveform`) |
 //!
 //! The nonlinear model is the heart: massless legs, a stage mass driven only by
 //! **set-valued Coulomb friction** λ ∈ μF_N Sign(v_rel) whose normal forces come
@@ -76,6 +77,7 @@ pub mod identify;
 pub mod kinematics;
 pub mod leg_model;
 pub mod linear;
+pub mod optimize;
 pub mod stage;
 pub mod variation;
 pub mod waveform;
