@@ -254,8 +254,11 @@ impl StateSpace {
     }
 
     /// SISO transfer function of the model (python-control `ss2tf`), for low
-    /// orders: den = det(xI − A), num = det(xI − A + BC) − det(xI − A) + D·den.
-    /// High orders lose accuracy in the coefficients (keep those as state space).
+    /// and moderate orders: den = det(xI − A) from the eigenvalues; the numerator
+    /// from the frequency response (discrete: interpolated on a circle around
+    /// the poles; continuous: det(xI − A + BC) − det(xI − A) + D·den on the
+    /// balanced realisation). High orders lose accuracy in the coefficients
+    /// (keep those as state space).
     pub fn to_tf(&self) -> Result<TransferFunction, LtiError> {
         ss2tf(self)
     }
@@ -296,41 +299,49 @@ pub fn unwrap_phase(phase: &[f64]) -> Vec<f64> {
 
 /// SISO state space to transfer function (python-control `ss2tf`); see
 /// [`StateSpace::to_tf`].
+///
+/// The numerator of a **discrete** model is interpolated from its exact values
+/// num(z_k) = G(z_k)·den(z_k) at n + 1 points z_k = ρ e^{i(2πk + ½)/(n+1)} on a
+/// circle of radius ρ = 1.25·max(1, max|λ(A)|) (an inverse DFT): G(z_k) comes from a
+/// pivoted linear solve, which does not care how the states are scaled. The
+/// determinant identity C adj(xI − A) B = det(xI − A + BC) − det(xI − A) used for
+/// continuous models cancels two nearly equal polynomials and loses everything
+/// when B and C weigh different states (a closed loop of a PI and a stage model
+/// at 4 kHz lost its whole numerator that way; test
+/// `ss2tf_survives_bad_state_scaling`).
 pub fn ss2tf(sys: &StateSpace) -> Result<TransferFunction, LtiError> {
     if !sys.is_siso() {
         return Err(LtiError::Dimension("ss2tf needs a SISO system".into()));
     }
-    // Normalise B and C so that the cancellation below works on unit-scale
-    // numbers whatever the system's gain.
-    let bal = sys;
-    let nb = bal.b.norm();
-    let nc = bal.c.norm();
     let d = sys.d[(0, 0)];
-    if nb == 0.0 || nc == 0.0 {
+    if sys.b.norm() == 0.0 || sys.c.norm() == 0.0 || sys.nstates() == 0 {
         return Ok(TransferFunction {
             num: vec![d],
             den: vec![1.0],
             dt: sys.dt,
         });
     }
-    let b = &bal.b / nb;
-    let c = &bal.c / nc;
-    let gain = nb * nc;
-    let den = poly_from_roots(&eigvals(&bal.a));
-    let p1 = poly_from_roots(&eigvals(&(&bal.a - &b * &c)));
-    let mut num: Vec<f64> = p1
-        .iter()
-        .zip(&den)
-        .map(|(x, y)| (x - y) * gain + d * y)
-        .collect();
-    // The leading coefficients come from cancellation (det(xI − A + BC) −
-    // det(xI − A)) and carry round-off where they should vanish: fix them from
-    // the Markov parameters h₀ = D, h_k = C A^{k−1} B. With den monic, num[k] =
-    // h_k for the first non-zero h_k and num[j] = 0 before it.
-    let n = sys.nstates();
+    let bal = sys.balanced();
+    let n = bal.nstates();
+    let poles = eigvals(&bal.a);
+    if poles.iter().any(|p| !p.re.is_finite() || !p.im.is_finite()) {
+        return Err(LtiError::Singular(
+            "ss2tf: the eigenvalues of A did not converge".into(),
+        ));
+    }
+    let den = poly_from_roots(&poles);
+    let mut num = if bal.dt.is_some() {
+        numerator_on_circle(&bal, &poles, &den)?
+    } else {
+        numerator_by_determinants(&bal, &den)
+    };
+    // The leading coefficients should vanish up to the relative degree but
+    // carry round-off: fix them from the Markov parameters h₀ = D,
+    // h_k = C A^{k−1} B. With den monic, num[k] = h_k for the first non-zero h_k
+    // and num[j] = 0 before it.
     let scale = num.iter().map(|v| v.abs()).fold(0.0, f64::max);
     let mut first = (d != 0.0).then_some((0, d));
-    let mut akb = b.clone(); // A^{k−1} B
+    let mut akb = bal.b.clone(); // A^{k−1} B
     for k in 1..=n {
         if first.is_some() {
             break;
@@ -338,7 +349,7 @@ pub fn ss2tf(sys: &StateSpace) -> Result<TransferFunction, LtiError> {
         if k > 1 {
             akb = &bal.a * akb;
         }
-        let h = (&c * &akb)[(0, 0)] * gain;
+        let h = (&bal.c * &akb)[(0, 0)];
         if h.abs() > 1e-9 * scale {
             first = Some((k, h));
         }
@@ -356,6 +367,65 @@ pub fn ss2tf(sys: &StateSpace) -> Result<TransferFunction, LtiError> {
         den,
         dt: sys.dt,
     })
+}
+
+/// Numerator coefficients (descending powers, length n + 1) of a discrete SISO
+/// model from num(z_k) = G(z_k)·den(z_k) on a circle outside every pole.
+fn numerator_on_circle(
+    sys: &StateSpace,
+    poles: &[Complex<f64>],
+    den: &[f64],
+) -> Result<Vec<f64>, LtiError> {
+    let n = sys.nstates();
+    let m = n + 1;
+    let rho = 1.25 * poles.iter().map(|p| p.norm()).fold(1.0, f64::max);
+    let eval_den = |z: Complex<f64>| {
+        den.iter()
+            .fold(Complex::new(0.0, 0.0), |acc, &c| acc * z + c)
+    };
+    // Angles offset by half a step so that no point lies on the real axis.
+    let angle = |k: usize| 2.0 * PI * (k as f64 + 0.5) / m as f64;
+    let mut values = Vec::with_capacity(m);
+    for k in 0..m {
+        let z = Complex::from_polar(rho, angle(k));
+        let g = sys.evalfr(z)[(0, 0)];
+        if !(g.re.is_finite() && g.im.is_finite()) {
+            return Err(LtiError::Singular(format!(
+                "ss2tf: G(z) is singular at z = {z} (|z| = {rho:.3e}, outside every pole)"
+            )));
+        }
+        values.push(g * eval_den(z));
+    }
+    // values[k] = Σ_j a_j z_k^j with a_j the coefficient of z^j:
+    // a_j ρ^j e^{ijπ/m} = (1/m) Σ_k values[k] e^{−2πijk/m}.
+    let mut ascending = vec![0.0; m];
+    for (j, a) in ascending.iter_mut().enumerate() {
+        let mut acc = Complex::new(0.0, 0.0);
+        for (k, v) in values.iter().enumerate() {
+            acc += v * Complex::from_polar(1.0, -angle(k) * j as f64);
+        }
+        *a = acc.re / (m as f64 * rho.powi(j as i32));
+    }
+    ascending.reverse();
+    Ok(ascending)
+}
+
+/// Numerator coefficients (descending) of a continuous SISO model:
+/// C adj(sI − A) B + D·den = det(sI − A + BC) − det(sI − A) + D·den, with B and C
+/// scaled to the size of A so that the difference is not lost to round-off.
+fn numerator_by_determinants(sys: &StateSpace, den: &[f64]) -> Vec<f64> {
+    let (nb, nc) = (sys.b.norm(), sys.c.norm());
+    let gamma = sys.a.norm().max(1.0);
+    // det(sI − A + γ b̂ĉ) − det(sI − A) = γ ĉ adj(sI − A) b̂ (matrix determinant
+    // lemma), b̂ = B/‖B‖, ĉ = C/‖C‖.
+    let bc = (&sys.b / nb) * (&sys.c / nc) * gamma;
+    let p1 = poly_from_roots(&eigvals(&(&sys.a - bc)));
+    let gain = nb * nc / gamma;
+    let d = sys.d[(0, 0)];
+    p1.iter()
+        .zip(den)
+        .map(|(x, y)| (x - y) * gain + d * y)
+        .collect()
 }
 
 /// Series connection: `sys1` followed by `sys2`, i.e. G = G₂·G₁ (python-control

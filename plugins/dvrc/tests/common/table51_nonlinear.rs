@@ -19,7 +19,7 @@ use nalgebra::DMatrix;
 use nanomotion_core::analysis::{WelchOptions, frf_closed_loop};
 use nanomotion_core::blocks::control::Pi;
 use nanomotion_core::lti::{
-    Complex, Margins, StateSpace, delay, feedback, series, stability_margins, zpetc_ss,
+    Complex, Margins, StateSpace, feedback, series, stability_margins, zpetc_ss,
 };
 use nanomotion_core::rng::Rng;
 use nanomotion_core::{Controller, LearningFilter};
@@ -230,13 +230,8 @@ pub fn design(g: StateSpace, c: f64) -> Setup {
     let k = Pi::new(kp, 5.0, DT).unwrap().as_pid().state_space();
     let one = StateSpace::gain(DMatrix::from_element(1, 1, 1.0), Some(DT));
     let t = feedback(&series(&k, &g).unwrap(), &one, -1.0).unwrap();
-    // ZPETC of z⁻¹T (preview l + 1) is the same causal filter as a ZPETC of T
-    // with preview l. The core's `zpetc_ss` fails or returns a wrong inverse for
-    // T of the delay-free (5.31) structure (|1 − T L z^l| ≈ 0.95 at 1 Hz), but
-    // is exact with one sample of delay in front; so invert z⁻¹T and declare
-    // preview l.
-    let z = zpetc_ss(&series(&t, &delay(1, DT)).unwrap()).unwrap();
-    let l = Filter::from_ss(z.to_ss().unwrap(), z.preview - 1).unwrap();
+    let z = zpetc_ss(&t).unwrap();
+    let l = Filter::from_ss(z.to_ss().unwrap(), z.preview).unwrap();
     Setup {
         g,
         kp,
