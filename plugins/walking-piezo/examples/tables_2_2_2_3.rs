@@ -15,6 +15,11 @@ use walking_piezo as _;
 
 type Logs = Vec<(String, Vec<f64>)>;
 
+/// "No FF": the feed-forward pinned at A_min = A_max = 46 V and φ̄_min = φ̄_max = π/2,
+/// so A, φ and K(A, φ̄) = 1 stay constant before, during and after the move.
+const NO_FF: &str =
+    "v_max_m_s: 1.0\n    amplitude_min_v: 46.0\n    phase_diff_min_rad: 1.5707963267948966";
+
 fn run(file: &str, duration_s: f64, edit: impl Fn(String) -> String) -> Logs {
     let path = format!("{}/../../examples/{file}", env!("CARGO_MANIFEST_DIR"));
     let text = edit(std::fs::read_to_string(path).expect("example file"));
@@ -75,7 +80,11 @@ fn main() {
                     .replace("duration_s: 1.0\n", &format!("duration_s: {t_move}\n"))
                     .replace(
                         "v_max_m_s: 1.875e-4",
-                        &format!("v_max_m_s: {:e}", if ff { vmax } else { 1e-12 }),
+                        &if ff {
+                            format!("v_max_m_s: {vmax:e}")
+                        } else {
+                            NO_FF.to_string()
+                        },
                     )
             });
             let x = col(&logs, "stage.x_s");
