@@ -182,6 +182,14 @@ mod ch5_plant_tests {
     /// Discrete plant: series of the sections (anti-resonance merged with the
     /// second resonance to stay proper), ZOH at 4 kHz, 3 samples output delay.
     fn plant() -> StateSpace {
+        c2d(&continuous_plant(), DT, C2dMethod::Zoh)
+            .unwrap()
+            .with_output_delay(3)
+            .unwrap()
+    }
+
+    /// The continuous series of the sections, no delay.
+    fn continuous_plant() -> StateSpace {
         let s = sections();
         let res2 = TransferFunction {
             num: s[2]
@@ -192,15 +200,11 @@ mod ch5_plant_tests {
             den: s[3].den.clone(),
             dt: None,
         };
-        let cont = series(
+        series(
             &series(&s[0].to_ss().unwrap(), &s[1].to_ss().unwrap()).unwrap(),
             &res2.to_ss().unwrap(),
         )
-        .unwrap();
-        c2d(&cont, DT, C2dMethod::Zoh)
-            .unwrap()
-            .with_output_delay(3)
-            .unwrap()
+        .unwrap()
     }
 
     /// Independent ZOH equivalent by partial fractions of P(s)/s:
@@ -274,25 +278,8 @@ mod ch5_plant_tests {
     #[test]
     fn zpetc_of_the_delay_free_pi_loop_is_exact_in_the_passband() {
         let p = plant();
-        // Drop the three delay states: the plant without output delay.
-        let cont = {
-            let s = sections();
-            let res2 = TransferFunction {
-                num: s[2]
-                    .num
-                    .iter()
-                    .map(|c| c * s[3].num[0] / s[2].den[0])
-                    .collect(),
-                den: s[3].den.clone(),
-                dt: None,
-            };
-            series(
-                &series(&s[0].to_ss().unwrap(), &s[1].to_ss().unwrap()).unwrap(),
-                &res2.to_ss().unwrap(),
-            )
-            .unwrap()
-        };
-        let g = c2d(&cont, DT, C2dMethod::Zoh).unwrap();
+        // The plant without its three samples of output delay.
+        let g = c2d(&continuous_plant(), DT, C2dMethod::Zoh).unwrap();
         assert_eq!(g.nstates() + 3, p.nstates());
         // PI: u = kp (e + 2π·2 ∫e), discretised by ZOH of the integrator.
         let kp = w(20.0) / K;

@@ -125,35 +125,7 @@ pub fn run_with(
     duration_s: f64,
     ripple_gain: f64,
 ) -> (f64, (usize, usize)) {
-    let comp = s.l.preview_samples() + q.preview_samples();
-    let (j, n_mean, m, mm) = delay_range(s, v, comp + 1);
-    let n_fixed = n_mean.round() as usize;
-    let mut plant = SsStepper::new(&s.g).unwrap();
-    let mut pi = Pi::new(s.kp, 5.0, DT).unwrap();
-    let mut rc = RcUnderTest::new(s, q, which, j, n_fixed, m, mm);
-    let steps = (duration_s / DT) as usize;
-    let mut alpha = 0.0;
-    let mut y = [0.0];
-    let mut u = [0.0];
-    let mut sq = 0.0;
-    let mut cnt = 0usize;
-    let mut seen = (usize::MAX, 0usize);
-    for k in 0..steps {
-        let t = k as f64 * DT;
-        plant.output(&[], &mut y);
-        let e = v.position(t) - (y[0] + ripple_gain * ripple(alpha));
-        let (nk, w) = rc.output(alpha);
-        pi.control(&[e + w], &mut u);
-        rc.learn(e);
-        plant.update(&u);
-        alpha += TAU * u[0] * DT;
-        if k >= steps * 3 / 4 {
-            sq += e * e;
-            cnt += 1;
-            seen = (seen.0.min(nk), seen.1.max(nk));
-        }
-    }
-    ((sq / cnt as f64).sqrt(), seen)
+    run_loop(s, s, q, v, which, duration_s, ripple_gain)
 }
 
 /// [`run`] with the plant of `plant` (its `g`; N from its `c_m_per_cycle`) and
@@ -165,6 +137,20 @@ pub fn run_mixed(
     v: Velocity,
     which: Rc,
     duration_s: f64,
+) -> (f64, (usize, usize)) {
+    run_loop(plant, design, q, v, which, duration_s, 1.0)
+}
+
+/// The loop of [`run_with`] and [`run_mixed`]: plant `plant.g`, PI and RC of
+/// `design`, ripple scaled by `ripple_gain`.
+fn run_loop(
+    plant: &Setup,
+    design: &Setup,
+    q: &Filter,
+    v: Velocity,
+    which: Rc,
+    duration_s: f64,
+    ripple_gain: f64,
 ) -> (f64, (usize, usize)) {
     let comp = design.l.preview_samples() + q.preview_samples();
     let (j, n_mean, m, mm) = delay_range(plant, v, comp + 1);
@@ -181,7 +167,7 @@ pub fn run_mixed(
     let mut seen = (usize::MAX, 0usize);
     for k in 0..steps {
         g.output(&[], &mut y);
-        let e = v.position(k as f64 * DT) - (y[0] + ripple(alpha));
+        let e = v.position(k as f64 * DT) - (y[0] + ripple_gain * ripple(alpha));
         let (nk, w) = rc.output(alpha);
         pi.control(&[e + w], &mut u);
         rc.learn(e);

@@ -521,6 +521,20 @@ pub fn run_search(
     Ok(true)
 }
 
+/// The best point and the evaluation count of the problem `argmin` hands back.
+fn best_of(
+    problem: Option<BoxProblem<'_>>,
+    phase: Phase,
+    chunk: u32,
+) -> Result<((Vec<f64>, f64), u64), SearchError> {
+    let p = problem.ok_or_else(|| SearchError::Solver {
+        phase: phase.name(),
+        chunk,
+        message: "the problem was not returned".into(),
+    })?;
+    Ok((p.best.into_inner(), p.evals.get()))
+}
+
 #[allow(clippy::too_many_arguments)]
 fn run_chunk(
     cost: &dyn Fn(&[f64]) -> f64,
@@ -567,12 +581,7 @@ fn run_chunk(
                 })
                 .run()
                 .map_err(err)?;
-            let p = res.problem.problem.ok_or_else(|| SearchError::Solver {
-                phase: phase.name(),
-                chunk,
-                message: "the problem was not returned".into(),
-            })?;
-            (p.best.into_inner(), p.evals.get())
+            best_of(res.problem.problem, phase, chunk)?
         }
         Phase::ParticleSwarm => {
             let b = budget.pso;
@@ -607,12 +616,7 @@ fn run_chunk(
                 .configure(|s| s.population(particles).max_iters(u64::from(b.iterations)))
                 .run()
                 .map_err(err)?;
-            let p = res.problem.problem.ok_or_else(|| SearchError::Solver {
-                phase: phase.name(),
-                chunk,
-                message: "the problem was not returned".into(),
-            })?;
-            (p.best.into_inner(), p.evals.get())
+            best_of(res.problem.problem, phase, chunk)?
         }
         Phase::Local => {
             let b = budget.local;
@@ -635,12 +639,7 @@ fn run_chunk(
                 .configure(|s| s.max_iters(u64::from(b.iterations)))
                 .run()
                 .map_err(err)?;
-            let p = res.problem.problem.ok_or_else(|| SearchError::Solver {
-                phase: phase.name(),
-                chunk,
-                message: "the problem was not returned".into(),
-            })?;
-            (p.best.into_inner(), p.evals.get())
+            best_of(res.problem.problem, phase, chunk)?
         }
     };
     Ok(out)
