@@ -60,8 +60,10 @@ enum Command {
     },
     /// Check the stability criteria of the graph's repetitive controllers: (5.5) for
     /// a fixed period N, (5.9) ‖Q(1 − T L z^l)‖∞ < 1/√(M − m + 1) for a delay varying
-    /// in [m, M] (DVRC), with the margin and the frequency where it is tightest.
-    /// Exits with status 2 when a criterion fails.
+    /// in [m, M] (DVRC), with the margin and the frequency where it is tightest; for
+    /// small DVRC loops also the lifted switched system (5.13)–(5.16) (LMIs and a
+    /// joint-spectral-radius bound), which can prove what (5.9) cannot. Exits with
+    /// status 2 when stability is not guaranteed.
     RcCheck {
         /// The graph file (YAML).
         graph: PathBuf,
