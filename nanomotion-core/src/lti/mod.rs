@@ -15,6 +15,8 @@
 //! - [`fir_lowpass`], [`butter_lowpass`], [`SosCascade`]: filter design and
 //!   second-order-section simulation;
 //! - [`stability_margins`]: gain, phase and modulus margins of a loop gain;
+//! - [`care`], [`care_general`], [`dare`], [`lyap`], [`dlyap`]: stabilising
+//!   Riccati solutions (sign function, doubling) and Lyapunov equations;
 //! - [`LmiProblem`]: a small dense LMI feasibility solver (Lyapunov and
 //!   switched-system LMIs such as the thesis's (5.16));
 //! - [`zpetc()`]: Tomizuka's zero-phase-error tracking controller;
@@ -31,6 +33,7 @@ pub mod hinf;
 pub mod linalg;
 pub mod lmi;
 pub mod margins;
+pub mod riccati;
 pub mod sim;
 pub mod ss;
 pub mod tf;
@@ -41,6 +44,7 @@ pub use filters::{SosCascade, butter_lowpass, fir_lowpass, fir2ss, sos_freqresp,
 pub use hinf::{HinfNorm, hinfnorm};
 pub use lmi::{LmiConstraint, LmiError, LmiOptions, LmiProblem, LmiSolution, LmiStatus, LmiVar};
 pub use margins::{Margins, stability_margins};
+pub use riccati::{RiccatiSolution, care, care_general, dare, dlyap, lyap};
 pub use sim::{SsStepper, impulse, lsim, lsim_siso, step_response};
 pub use ss::{append, delay, feedback, parallel, series, ss2tf, unwrap_phase};
 pub use tf::{tf2sos, tf2ss, zpk, zpk2sos, zpk2ss};
