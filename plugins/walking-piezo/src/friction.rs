@@ -22,9 +22,17 @@
 //!
 //! Because g depends affinely on λ, g = a − Wλ with the constant symmetric
 //! positive-definite W = diag(1/(d_xi + k_xi Δt)) + (Δt/M_s)·11ᵀ, the iteration is a
-//! projected gradient method on a strictly convex quadratic over a box: it
-//! converges for 0 < r < 2/λ_max(W) and fastest near r* = 2/(λ_min + λ_max), the
-//! default ([`XCoefficients::optimal_r`]).
+//! projected gradient method on a strictly convex quadratic over a box.
+//!
+//! **One r per contact.** Contact i uses r_i = r·s_i with s_i = tr W/(2W_ii)
+//! (Jacobi scaling; the time-stepping literature allows an r_i per contact). Pairs
+//! with equal legs have W₁₁ = W₂₂, s_i = 1 exactly and the scalar iteration of
+//! (4.18). Pairs whose dampings differ by orders of magnitude make W badly
+//! conditioned, and a single r then needs thousands of iterations; the scaling
+//! makes the rate depend only on the coupling W₁₂/√(W₁₁W₂₂). The iteration
+//! converges for 0 < r < 2/λ_max(S^½WS^½) ([`XCoefficients::max_r`]) and fastest
+//! near r* = 2/(λ_min + λ_max) of that matrix = 2/tr W, the default
+//! ([`XCoefficients::optimal_r`]).
 
 /// Mechanical state of the x-model.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -69,8 +77,27 @@ impl XCoefficients {
         (m - r, m + r)
     }
 
-    /// r* = 2/(λ_min(W) + λ_max(W)) (N·s/m), the fastest contraction of the
-    /// fixed-point iteration for the linear part.
+    /// The per-contact factors s_i = tr W/(2W_ii) of r_i = r·s_i (both exactly 1
+    /// for equal legs).
+    pub fn contact_scale(&self) -> [f64; 2] {
+        let (a, _, c) = self.w();
+        let tr = a + c;
+        [tr / (2.0 * a), tr / (2.0 * c)]
+    }
+
+    /// Eigenvalues (λ_min, λ_max) of the scaled S^½WS^½, S = diag(s_i): the
+    /// matrix whose condition sets the iteration's rate.
+    pub fn scaled_w_eigenvalues(&self) -> (f64, f64) {
+        let (a, b, c) = self.w();
+        let s = self.contact_scale();
+        let (a, b, c) = (a * s[0], b * (s[0] * s[1]).sqrt(), c * s[1]);
+        let m = 0.5 * (a + c);
+        let r = (0.25 * (a - c) * (a - c) + b * b).sqrt();
+        (m - r, m + r)
+    }
+
+    /// r* = 2/(λ_min + λ_max) of S^½WS^½ = 2/tr W (N·s/m), the fastest
+    /// contraction of the fixed-point iteration for the linear part.
     pub fn optimal_r(&self) -> f64 {
         let (lo, hi) = self.w_eigenvalues();
         2.0 / (lo + hi)
@@ -78,7 +105,7 @@ impl XCoefficients {
 
     /// Largest r (N·s/m) for which the iteration is guaranteed to converge.
     pub fn max_r(&self) -> f64 {
-        2.0 / self.w_eigenvalues().1
+        2.0 / self.scaled_w_eigenvalues().1
     }
 }
 
@@ -158,6 +185,8 @@ pub fn step_x(
         lambda0[0].clamp(-bound[0], bound[0]),
         lambda0[1].clamp(-bound[1], bound[1]),
     ];
+    let scale = c.contact_scale();
+    let r = [s.r * scale[0], s.r * scale[1]];
     let mut iterations = 0;
     let mut residual = f64::INFINITY;
     let mut converged = false;
@@ -165,8 +194,8 @@ pub fn step_x(
         iterations += 1;
         let (_, _, g) = evaluate(c, a, f_x, f_ext, &lam);
         let next = [
-            (lam[0] + s.r * g[0]).clamp(-bound[0], bound[0]),
-            (lam[1] + s.r * g[1]).clamp(-bound[1], bound[1]),
+            (lam[0] + r[0] * g[0]).clamp(-bound[0], bound[0]),
+            (lam[1] + r[1] * g[1]).clamp(-bound[1], bound[1]),
         ];
         residual = (next[0] - lam[0]).abs().max((next[1] - lam[1]).abs());
         lam = next;
@@ -357,6 +386,43 @@ mod tests {
         assert!((st.x_leg[0] - 0.8 * bound[0] / c.k[0]).abs() < 1e-3 * 0.8 * bound[0] / c.k[0]);
     }
 
+    /// Found by the property test below: pairs whose dampings differ 1000×
+    /// (W₁₁/W₂₂ ≈ 1/500) needed ≈ 7000 iterations with one r; with an r per
+    /// contact a handful, and the exact box-QP solution.
+    #[test]
+    fn very_unequal_legs_converge_with_an_r_per_contact() {
+        let c = XCoefficients {
+            dt: 1e-6,
+            mass: 0.2,
+            k: [1e6, 1e6],
+            d: [989.7755895329329, 1.0],
+        };
+        let set = FixedPointSettings {
+            r: c.optimal_r(),
+            tol_n: 1e-10,
+            max_iter: 500,
+        };
+        let b = [0.0, 0.452625830816647 * 55.0];
+        let s = step_x(
+            &c,
+            &XState::default(),
+            &[0.0; 2],
+            -0.19375207252955423,
+            &b,
+            &[0.0; 2],
+            &set,
+        );
+        assert!(s.converged && s.iterations < 10, "{s:?}");
+        let ex = exact(&c, &XState::default(), &[0.0; 2], -0.19375207252955423, &b);
+        assert!(
+            (s.lambda[1] - ex[1]).abs() < 1e-9 && s.lambda[0] == 0.0,
+            "{:?} vs {ex:?}",
+            s.lambda
+        );
+        // Equal legs: the factors are exactly 1 (the scalar iteration of (4.18)).
+        assert_eq!(coeffs(25e-6).contact_scale(), [1.0, 1.0]);
+    }
+
     #[test]
     fn too_large_r_is_reported_not_hidden() {
         let c = coeffs(25e-6);
@@ -394,9 +460,12 @@ mod tests {
         ) {
             let c = XCoefficients { dt, mass, k: [k1, k2], d: [d1, d2] };
             let set = FixedPointSettings { r: c.optimal_r(), tol_n: 1e-10, max_iter: 500 };
-            // The contraction factor (κ−1)/(κ+1) of W bounds the iterations needed.
-            let (lmin, lmax) = c.w_eigenvalues();
+            // The contraction factor (κ−1)/(κ+1) of the scaled S^½WS^½ bounds the
+            // iterations needed.
+            let (lmin, lmax) = c.scaled_w_eigenvalues();
             let rate = (lmax - lmin) / (lmax + lmin);
+            let sc = c.contact_scale();
+            let spread = sc[0].max(sc[1]) / sc[0].min(sc[1]);
             let a = XState { x_s: 0.0, v_s: v, x_leg: [x1, x2] };
             let b = [mu * fn1, mu * (55.0 - fn1)];
             let s = step_x(&c, &a, &[fx1, fx2], fext, &b, &[0.0; 2], &set);
@@ -404,8 +473,9 @@ mod tests {
             let predicted = ((set.tol_n / 200.0).ln() / rate.ln()).ceil().max(1.0) + 2.0;
             prop_assert!(f64::from(s.iterations) <= predicted, "{} > {}", s.iterations, predicted);
             let ex = exact(&c, &a, &[fx1, fx2], fext, &b);
-            // Distance to the exact solution ≤ residual/(r·λ_min) (contraction bound).
-            let tol = 10.0 * set.tol_n / (set.r * lmin) + 1e-12 * (b[0] + b[1]);
+            // Distance to the exact solution ≤ residual/(r·λ_min) in the norm
+            // weighted by S⁻¹ (contraction bound); `spread` converts to max-norm.
+            let tol = 10.0 * spread * set.tol_n / (set.r * lmin) + 1e-12 * (b[0] + b[1]);
             prop_assert!((s.lambda[0] - ex[0]).abs() < tol && (s.lambda[1] - ex[1]).abs() < tol,
                 "{:?} vs {:?}", s.lambda, ex);
         }
