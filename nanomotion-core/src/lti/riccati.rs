@@ -484,36 +484,18 @@ mod tests {
             (0.0, 2.0, 1.0, 5.0),
         ];
         for &(a, b, q, r) in &cases {
+            let [am, bm, qm, rm] = [a, b, q, r].map(|v| m(1, 1, &[v]));
             // CARE: 2ax − b²x²/r + q = 0, positive root.
             let want = (a * r + (a * a * r * r + b * b * q * r).sqrt()) / (b * b);
-            let s = care(
-                &m(1, 1, &[a]),
-                &m(1, 1, &[b]),
-                &m(1, 1, &[q]),
-                &m(1, 1, &[r]),
-                None,
-            )
-            .unwrap();
-            assert!(
-                (s.x[(0, 0)] - want).abs() < 1e-12 * want.max(1.0),
-                "{a} {b} {q} {r}"
-            );
+            let s = care(&am, &bm, &qm, &rm, None).unwrap();
+            let close = |x: f64, want: f64| (x - want).abs() < 1e-12 * want.max(1.0);
+            assert!(close(s.x[(0, 0)], want), "CARE {a} {b} {q} {r}");
             assert!(s.closed_loop_poles[0].re < 0.0);
             // DARE: x = a²x r/(r + b²x) + q ⇔ b²x² + (r − a²r − qb²)x − qr = 0.
             let (qa, qb, qc) = (b * b, r - a * a * r - q * b * b, -q * r);
             let want = (-qb + (qb * qb - 4.0 * qa * qc).sqrt()) / (2.0 * qa);
-            let s = dare(
-                &m(1, 1, &[a]),
-                &m(1, 1, &[b]),
-                &m(1, 1, &[q]),
-                &m(1, 1, &[r]),
-                None,
-            )
-            .unwrap();
-            assert!(
-                (s.x[(0, 0)] - want).abs() < 1e-12 * want.max(1.0),
-                "{a} {b} {q} {r}"
-            );
+            let s = dare(&am, &bm, &qm, &rm, None).unwrap();
+            assert!(close(s.x[(0, 0)], want), "DARE {a} {b} {q} {r}");
             assert!(s.closed_loop_poles[0].norm() < 1.0);
         }
     }
