@@ -17,6 +17,8 @@
 //! - [`stability_margins`]: gain, phase and modulus margins of a loop gain;
 //! - [`care`], [`care_general`], [`dare`], [`lyap`], [`dlyap`]: stabilising
 //!   Riccati solutions (sign function, doubling) and Lyapunov equations;
+//! - [`hinfsyn()`], [`augw`], [`lft`]: H∞ output-feedback synthesis by
+//!   γ-iteration on the two DGKF Riccati equations, mixed-sensitivity plants;
 //! - [`LmiProblem`]: a small dense LMI feasibility solver (Lyapunov and
 //!   switched-system LMIs such as the thesis's (5.16));
 //! - [`zpetc()`]: Tomizuka's zero-phase-error tracking controller;
@@ -30,6 +32,7 @@ use thiserror::Error;
 pub mod discretise;
 pub mod filters;
 pub mod hinf;
+pub mod hinfsyn;
 pub mod linalg;
 pub mod lmi;
 pub mod margins;
@@ -42,6 +45,7 @@ pub mod zpetc;
 pub use discretise::{C2dMethod, c2d};
 pub use filters::{SosCascade, butter_lowpass, fir_lowpass, fir2ss, sos_freqresp, sos2ss, ss2sos};
 pub use hinf::{HinfNorm, hinfnorm};
+pub use hinfsyn::{HinfSyn, HinfSynOptions, augw, hinfsyn, lft};
 pub use lmi::{LmiConstraint, LmiError, LmiOptions, LmiProblem, LmiSolution, LmiStatus, LmiVar};
 pub use margins::{Margins, stability_margins};
 pub use riccati::{RiccatiSolution, care, care_general, dare, dlyap, lyap};

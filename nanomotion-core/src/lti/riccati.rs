@@ -210,6 +210,14 @@ pub fn care_general(
     if n == 0 {
         return Ok((DMatrix::zeros(0, 0), 0));
     }
+    // Q = 0 with A Hurwitz: X = 0 is the stabilising solution, exactly (A − G·0 =
+    // A). The sign iteration would return round-off instead, which no relative
+    // residual can judge (every term of the equation is then round-off too).
+    // This is the Y equation of every mixed-sensitivity H∞ problem with y = e.
+    let data = a.norm() + g.norm();
+    if q.iter().all(|v| v.abs() <= f64::EPSILON * data) && eigvals(a).iter().all(|l| l.re < 0.0) {
+        return Ok((DMatrix::zeros(n, n), 0));
+    }
     // Hamiltonian H = [A, −G; −Q, −Aᵀ].
     let mut z = DMatrix::zeros(2 * n, 2 * n);
     z.view_mut((0, 0), (n, n)).copy_from(a);
@@ -680,6 +688,19 @@ mod tests {
         let (x, _) = care_general(&m(1, 1, &[2.0]), &m(1, 1, &[-1.0]), &m(1, 1, &[1.0])).unwrap();
         let want = (2.0 + 3f64.sqrt()) / -1.0;
         assert!((x[(0, 0)] - want).abs() < 1e-12, "{x} vs {want}");
+    }
+
+    #[test]
+    fn zero_q_with_hurwitz_a_gives_exactly_zero() {
+        // The Hamiltonian's eigenvalues ±0.001 sit next to the axis; X = 0 is
+        // exact and stabilising.
+        let a = m(2, 2, &[-0.001, 0.0, 1.0, -0.5]);
+        let g = m(2, 2, &[1.0, 0.2, 0.2, -0.3]);
+        let (x, it) = care_general(&a, &g, &DMatrix::zeros(2, 2)).unwrap();
+        assert_eq!((x, it), (DMatrix::zeros(2, 2), 0));
+        // With A unstable, Q = 0 still needs the iteration (X ≠ 0 stabilises).
+        let (x, _) = care_general(&m(1, 1, &[1.0]), &m(1, 1, &[1.0]), &m(1, 1, &[0.0])).unwrap();
+        assert!((x[(0, 0)] - 2.0).abs() < 1e-12, "{x}");
     }
 
     #[test]
