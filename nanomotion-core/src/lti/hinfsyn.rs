@@ -40,7 +40,7 @@
 //! [`hinfsyn`] bisects γ between a bound where the conditions fail and one where
 //! they hold, to a relative tolerance, and returns the controller at the feasible
 //! end together with the closed loop and its H∞ norm computed **independently**
-//! by [`hinfnorm`](super::hinfnorm) — a returned design always has
+//! by [`hinfnorm`] — a returned design always has
 //! ‖T_zw‖∞ ≤ γ (checked).
 //!
 //! ```
@@ -91,7 +91,7 @@ pub struct HinfSyn {
     pub gamma_infeasible: f64,
     /// Closed loop T_zw = F_l(P, K).
     pub closed_loop: StateSpace,
-    /// ‖T_zw‖∞ by [`hinfnorm`](super::hinfnorm) (≤ γ).
+    /// ‖T_zw‖∞ by [`hinfnorm`] (≤ γ).
     pub closed_loop_norm: f64,
     /// The Riccati solutions X∞, Y∞ at γ.
     pub x: DMatrix<f64>,
@@ -331,8 +331,16 @@ pub fn lft(p: &StateSpace, k: &StateSpace, ny: usize, nu: usize) -> Result<State
         )));
     }
     let (nw, nz) = (ni - nu, no - ny);
-    if p.d.view((nz, nw), (ny, nu)).iter().any(|v| *v != 0.0) {
-        return Err(LtiError::param("p.d", "lft needs D22 = 0"));
+    let dmax = p.d.iter().fold(0.0f64, |m, v| m.max(v.abs())).max(1.0);
+    if p.d
+        .view((nz, nw), (ny, nu))
+        .iter()
+        .any(|v| v.abs() > 1e-12 * dmax)
+    {
+        return Err(LtiError::param(
+            "p.d",
+            "lft needs D22 = 0 (a strictly proper plant)",
+        ));
     }
     let a = &p.a;
     let b1 = p.b.view((0, 0), (n, nw));
