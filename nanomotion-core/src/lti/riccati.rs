@@ -162,6 +162,23 @@ fn without_cross_term(
     }
 }
 
+/// Checks of (A, B, Q, R, S), R⁻¹ and the problem without cross term:
+/// (n, R⁻¹, A − BR⁻¹Sᵀ, Q − SR⁻¹Sᵀ).
+type PreparedLq = (usize, DMatrix<f64>, DMatrix<f64>, DMatrix<f64>);
+
+fn prepare_lq(
+    a: &DMatrix<f64>,
+    b: &DMatrix<f64>,
+    q: &DMatrix<f64>,
+    r: &DMatrix<f64>,
+    s: Option<&DMatrix<f64>>,
+) -> Result<PreparedLq, LtiError> {
+    let (n, _) = check_lq(a, b, q, r, s)?;
+    let r_inv = inverse_pd("r", r)?;
+    let (a0, q0) = without_cross_term(a, b, q, &r_inv, s);
+    Ok((n, r_inv, a0, q0))
+}
+
 /// Continuous algebraic Riccati equation with cross term `s` (see the
 /// [module docs](self)); `r` must be positive definite.
 pub fn care(
@@ -171,9 +188,7 @@ pub fn care(
     r: &DMatrix<f64>,
     s: Option<&DMatrix<f64>>,
 ) -> Result<RiccatiSolution, LtiError> {
-    check_lq(a, b, q, r, s)?;
-    let r_inv = inverse_pd("r", r)?;
-    let (a0, q0) = without_cross_term(a, b, q, &r_inv, s);
+    let (_, r_inv, a0, q0) = prepare_lq(a, b, q, r, s)?;
     let g = symmetrise(&(b * &r_inv * b.transpose()));
     let (x, iterations) = care_general(&a0, &g, &q0)?;
     let xb_s = match s {
@@ -343,9 +358,7 @@ pub fn dare(
     r: &DMatrix<f64>,
     s: Option<&DMatrix<f64>>,
 ) -> Result<RiccatiSolution, LtiError> {
-    let (n, _) = check_lq(a, b, q, r, s)?;
-    let r_inv = inverse_pd("r", r)?;
-    let (a0, q0) = without_cross_term(a, b, q, &r_inv, s);
+    let (n, r_inv, a0, q0) = prepare_lq(a, b, q, r, s)?;
     let no_solution = |why: String| {
         LtiError::Singular(format!(
             "DARE has no stabilising solution: {why} (an unstable mode that B cannot reach or Q does not see, or a closed-loop pole on the unit circle)"

@@ -11,6 +11,7 @@
 //! - m = M: (5.16) is one Lyapunov LMI, feasible ⇔ ρ(Λ(m)) < 1;
 //! - every certificate re-verified here by eigenvalues of P_i − Λ(i)ᵀP_jΛ(i).
 
+mod support;
 use dvrc::check::{LiftedLmiOutcome, rc_check_graph};
 use dvrc::stability::{
     LIFTED_LMI_MAX_UNKNOWNS, LiftedLmi, LiftedLmiOptions, LiftedVerdict, LmiForm, lifted_check,
@@ -19,33 +20,20 @@ use dvrc::stability::{
 use nalgebra::DMatrix;
 use nanomotion_core::GraphSpec;
 use nanomotion_core::lti::lmi::LmiStatus;
-use nanomotion_core::lti::{StateSpace, TransferFunction, hinfnorm};
+use nanomotion_core::lti::{StateSpace, hinfnorm};
 use nanomotion_core::rng::Rng;
+use support::spectral_radius;
 
 const DT: f64 = 1e-3;
 
-/// H(z) = g z⁻¹/(1 − 2r cos θ z⁻¹ + r² z⁻²) scaled to ‖H‖∞ = `norm`.
 fn resonant_h(r: f64, th: f64, norm: f64) -> StateSpace {
-    let den = vec![1.0, -2.0 * r * th.cos(), r * r];
-    let ss = TransferFunction::new(vec![0.0, 1.0, 0.0], den, Some(DT))
-        .unwrap()
-        .to_ss()
-        .unwrap();
-    let n = hinfnorm(&ss).unwrap().norm;
-    ss.scaled(norm / n)
+    support::resonant_h(r, th, norm, DT)
 }
 
 /// H(z) = c z⁻¹ (one state).
 fn gain_h(c: f64) -> StateSpace {
     let m = |v: f64| DMatrix::from_element(1, 1, v);
     StateSpace::new(m(0.0), m(1.0), m(c), m(0.0), Some(DT)).unwrap()
-}
-
-fn spectral_radius(a: &DMatrix<f64>) -> f64 {
-    nanomotion_core::lti::linalg::eigvals(a)
-        .iter()
-        .map(|z| z.norm())
-        .fold(0.0, f64::max)
 }
 
 fn min_eig(m: &DMatrix<f64>) -> f64 {

@@ -2,6 +2,7 @@
 //! loops satisfying (5.9) under random delay sequences (Corollary 7), the lifted
 //! check, and a counterexample when (5.9) is violated widely.
 
+mod support;
 use dvrc::delay::{AlphaDelay, VaryingDelay};
 use dvrc::filters::{Filter, FilterSpec};
 use dvrc::rc::MemoryLoop;
@@ -13,6 +14,7 @@ use nalgebra::DMatrix;
 use nanomotion_core::LearningFilter;
 use nanomotion_core::lti::{SsStepper, StateSpace, TransferFunction, hinfnorm};
 use proptest::prelude::*;
+use support::spectral_radius;
 
 const DT: f64 = 1.0 / 4000.0;
 
@@ -226,22 +228,8 @@ proptest! {
     }
 }
 
-/// H(z) = g z^-1/(1 − 2r cos θ z^-1 + r² z^-2) scaled to ‖H‖∞ = `norm`.
 fn resonant_h(r: f64, th: f64, norm: f64) -> StateSpace {
-    let den = vec![1.0, -2.0 * r * th.cos(), r * r];
-    let ss = TransferFunction::new(vec![0.0, 1.0, 0.0], den, Some(DT))
-        .unwrap()
-        .to_ss()
-        .unwrap();
-    let n = hinfnorm(&ss).unwrap().norm;
-    ss.scaled(norm / n)
-}
-
-fn spectral_radius(a: &DMatrix<f64>) -> f64 {
-    nanomotion_core::lti::linalg::eigvals(a)
-        .iter()
-        .map(|z| z.norm())
-        .fold(0.0, f64::max)
+    support::resonant_h(r, th, norm, DT)
 }
 
 #[test]

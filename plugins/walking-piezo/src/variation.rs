@@ -187,15 +187,21 @@ impl StripProfile {
         self.p
     }
 
+    /// The Catmull-Rom segment under `pos_m`: the local parameter t ∈ [0, 1) and
+    /// the four knots around it.
+    #[inline]
+    fn segment(&self, pos_m: f64) -> (f64, [f64; 4]) {
+        let u = pos_m / self.p.corr_m;
+        let fl = u.floor();
+        let base = (fl as i64).rem_euclid(STRIP_KNOTS as i64) as usize;
+        let knot = |j: usize| self.knots[(base + j + STRIP_KNOTS - 1) % STRIP_KNOTS];
+        (u - fl, [knot(0), knot(1), knot(2), knot(3)])
+    }
+
     /// Strip height h (m) at strip coordinate `pos_m` (m).
     #[inline]
     pub fn height(&self, pos_m: f64) -> f64 {
-        let u = pos_m / self.p.corr_m;
-        let fl = u.floor();
-        let t = u - fl;
-        let base = (fl as i64).rem_euclid(STRIP_KNOTS as i64) as usize;
-        let knot = |j: usize| self.knots[(base + j + STRIP_KNOTS - 1) % STRIP_KNOTS];
-        let (p0, p1, p2, p3) = (knot(0), knot(1), knot(2), knot(3));
+        let (t, [p0, p1, p2, p3]) = self.segment(pos_m);
         0.5 * (2.0 * p1
             + (-p0 + p2) * t
             + (2.0 * p0 - 5.0 * p1 + 4.0 * p2 - p3) * t * t
@@ -206,12 +212,7 @@ impl StripProfile {
     /// derivative of the interpolant.
     #[inline]
     pub fn slope(&self, pos_m: f64) -> f64 {
-        let u = pos_m / self.p.corr_m;
-        let fl = u.floor();
-        let t = u - fl;
-        let base = (fl as i64).rem_euclid(STRIP_KNOTS as i64) as usize;
-        let knot = |j: usize| self.knots[(base + j + STRIP_KNOTS - 1) % STRIP_KNOTS];
-        let (p0, p1, p2, p3) = (knot(0), knot(1), knot(2), knot(3));
+        let (t, [p0, p1, p2, p3]) = self.segment(pos_m);
         0.5 * ((-p0 + p2)
             + 2.0 * (2.0 * p0 - 5.0 * p1 + 4.0 * p2 - p3) * t
             + 3.0 * (-p0 + 3.0 * p1 - 3.0 * p2 + p3) * t * t)
