@@ -99,17 +99,42 @@ pub struct BuildContext {
     /// A seed for this block's random numbers, derived from the graph seed and the
     /// block name: same graph, same seed, same bits.
     pub seed: u64,
+    /// Measured data attached to the graph (`nanomotion run --data`,
+    /// [`GraphSpec::build_with_data`](crate::graph::GraphSpec::build_with_data)),
+    /// for blocks that play recorded signals.
+    pub data: Option<std::sync::Arc<crate::data::Dataset>>,
 }
 
 impl BuildContext {
-    /// A context for block `name` with period `dt` (s) and seed `seed`.
+    /// A context for block `name` with period `dt` (s) and seed `seed`, without data.
     pub fn new(name: impl Into<String>, dt: f64, seed: u64) -> Self {
         Self {
             name: name.into(),
             dt,
             seed,
+            data: None,
         }
     }
+
+    /// The same context with measured data attached.
+    pub fn with_data(mut self, data: Option<std::sync::Arc<crate::data::Dataset>>) -> Self {
+        self.data = data;
+        self
+    }
+}
+
+/// A block whose parameters can be read and changed as one vector between runs,
+/// without rebuilding the graph: what identification and the discrepancy workflow
+/// fit. After [`Tunable::set_params`] the caller rebuilds the block
+/// ([`Scheduler::reset`](crate::scheduler::Scheduler::reset) does) so that derived
+/// coefficients follow.
+pub trait Tunable {
+    /// Names of the parameters, in vector order (as spelled in YAML).
+    fn param_names(&self) -> Vec<String>;
+    /// The parameter vector.
+    fn params(&self) -> Vec<f64>;
+    /// Set the parameter vector; errors name the field and leave the block unchanged.
+    fn set_params(&mut self, p: &[f64]) -> Result<(), ParamError>;
 }
 
 /// The role a block plays in a loop (for listings and documentation).
@@ -188,6 +213,14 @@ pub trait Block: Send + Debug {
     /// The role the block plays.
     fn role(&self) -> Role {
         Role::Math
+    }
+    /// The block's fittable parameters, if it has any (see [`Tunable`]).
+    fn tunable(&self) -> Option<&dyn Tunable> {
+        None
+    }
+    /// Mutable access to the block's fittable parameters.
+    fn tunable_mut(&mut self) -> Option<&mut dyn Tunable> {
+        None
     }
 }
 

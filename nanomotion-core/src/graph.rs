@@ -69,6 +69,17 @@ pub struct ScoreSpec {
     pub from_s: f64,
 }
 
+/// A model output paired with a measured column (`nanomotion run --data`,
+/// `nanomotion diagnose`): the residual is `measured − model`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CompareSpec {
+    /// The model signal, `block.port` of an output of width 1.
+    pub signal: String,
+    /// The measured column of the data file.
+    pub column: String,
+}
+
 /// A whole graph as written in YAML.
 #[derive(Debug, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -99,6 +110,9 @@ pub struct GraphSpec {
     /// Error signals to score.
     #[serde(default)]
     pub score: Vec<ScoreSpec>,
+    /// Model outputs to compare with measured columns (needs data: `--data`).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub compare: Vec<CompareSpec>,
 }
 
 /// What the loader did on its own initiative, for the user to see.
@@ -130,6 +144,7 @@ impl GraphSpec {
             connections: Vec::new(),
             log: Vec::new(),
             score: Vec::new(),
+            compare: Vec::new(),
         }
     }
 
@@ -186,7 +201,16 @@ impl GraphSpec {
     /// Validate the graph, build every block, resolve ports, rates and order, and
     /// return the ready-to-run scheduler with a report of what was inserted.
     pub fn build(self) -> Result<(Scheduler, BuildReport), GraphError> {
-        compile(self)
+        compile(self, None)
+    }
+
+    /// [`GraphSpec::build`] with measured data attached: blocks that play recorded
+    /// signals (`data_column`) read it when they are built.
+    pub fn build_with_data(
+        self,
+        data: std::sync::Arc<crate::data::Dataset>,
+    ) -> Result<(Scheduler, BuildReport), GraphError> {
+        compile(self, Some(data))
     }
 }
 
@@ -275,7 +299,10 @@ fn valid_name(name: &str) -> bool {
             .all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-' || c == ':')
 }
 
-fn compile(spec: GraphSpec) -> Result<(Scheduler, BuildReport), GraphError> {
+fn compile(
+    spec: GraphSpec,
+    data: Option<std::sync::Arc<crate::data::Dataset>>,
+) -> Result<(Scheduler, BuildReport), GraphError> {
     let GraphSpec {
         title,
         base_rate_hz,
@@ -286,6 +313,7 @@ fn compile(spec: GraphSpec) -> Result<(Scheduler, BuildReport), GraphError> {
         connections,
         log,
         score,
+        compare,
     } = spec;
     if !(base_rate_hz.is_finite() && base_rate_hz > 0.0) {
         return Err(setting(
@@ -346,7 +374,8 @@ fn compile(spec: GraphSpec) -> Result<(Scheduler, BuildReport), GraphError> {
         let dt = period as f64 * base_dt;
         let type_name = b.block.typetag_name().to_string();
         let mut block = b.block;
-        let ctx = BuildContext::new(b.name.clone(), dt, derive_seed(seed, &b.name));
+        let ctx = BuildContext::new(b.name.clone(), dt, derive_seed(seed, &b.name))
+            .with_data(data.clone());
         block.build(&ctx).map_err(|source| GraphError::Param {
             block: b.name.clone(),
             type_name: type_name.clone(),
@@ -623,6 +652,12 @@ fn compile(spec: GraphSpec) -> Result<(Scheduler, BuildReport), GraphError> {
         });
     }
 
+    let mut compares = Vec::new();
+    for c in &compare {
+        let channel = add_log(&c.signal, "compare", &mut logs)?;
+        compares.push((c.signal.clone(), c.column.clone(), channel));
+    }
+
     let sched = Scheduler::new_internal(crate::scheduler::Parts {
         title,
         base_rate_hz,
@@ -638,6 +673,7 @@ fn compile(spec: GraphSpec) -> Result<(Scheduler, BuildReport), GraphError> {
         ports: port_tables,
         logs,
         scores,
+        compares,
         rate_transitions: report.rate_transitions.clone(),
     });
     Ok((sched, report))

@@ -26,6 +26,7 @@
 pub mod analysis;
 pub mod block;
 pub mod blocks;
+pub mod data;
 pub mod error;
 pub mod graph;
 pub mod lti;
@@ -34,7 +35,7 @@ pub mod roles;
 pub mod scheduler;
 pub mod yaml;
 
-pub use block::{Block, BlockDoc, BuildContext, ParamDoc, Port, Role, Tick};
+pub use block::{Block, BlockDoc, BuildContext, ParamDoc, Port, Role, Tick, Tunable};
 pub use error::{GraphError, ParamError};
 pub use graph::{Graph, GraphSpec};
 pub use roles::{Actuator, Controller, Estimator, LearningFilter, Plant, Sensor, Source};

@@ -85,6 +85,8 @@ pub(crate) struct Parts {
     pub ports: Vec<(Vec<Port>, Vec<Port>, Vec<usize>)>,
     pub logs: Vec<LogChannel>,
     pub scores: Vec<ScoreChannel>,
+    /// `(signal, measured column, log channel)` of each `compare:` entry.
+    pub compares: Vec<(String, String, usize)>,
     pub rate_transitions: Vec<String>,
 }
 
@@ -183,6 +185,7 @@ pub struct Scheduler {
     ports: Vec<(Vec<Port>, Vec<Port>, Vec<usize>)>,
     logs: Vec<LogChannel>,
     scores: Vec<ScoreChannel>,
+    compares: Vec<(String, String, usize)>,
     rate_transitions: Vec<String>,
     /// Indices (execution order) of blocks without feed-through.
     updaters: Vec<usize>,
@@ -225,6 +228,7 @@ impl Scheduler {
             ports: p.ports,
             logs: p.logs,
             scores: p.scores,
+            compares: p.compares,
             rate_transitions: p.rate_transitions,
             updaters,
             non_finite: None,
@@ -431,6 +435,46 @@ impl Scheduler {
         self.k = 0;
         self.non_finite = None;
         Ok(())
+    }
+
+    /// The `compare:` entries: `(signal, measured column)` in graph order.
+    pub fn compares(&self) -> impl Iterator<Item = (&str, &str)> {
+        self.compares
+            .iter()
+            .map(|(s, c, _)| (s.as_str(), c.as_str()))
+    }
+
+    /// The samples recorded so far of the `i`-th `compare:` signal and their rate
+    /// (Hz), without copying.
+    pub fn compare_log(&self, i: usize) -> Option<(&[f64], f64)> {
+        let (_, _, ch) = self.compares.get(i)?;
+        let l = &self.logs[*ch];
+        Some((&l.data, l.rate_hz))
+    }
+
+    /// The samples recorded so far of log channel `name` (`block.port`), their
+    /// width and rate (Hz), without copying.
+    pub fn log_view(&self, name: &str) -> Option<(&[f64], usize, f64)> {
+        let l = self.logs.iter().find(|l| l.name == name)?;
+        Some((&l.data, l.width, l.rate_hz))
+    }
+
+    /// Index of block `name` in execution order (resolve once, then use
+    /// [`Scheduler::block_at_mut`] without look-ups).
+    pub fn block_index(&self, name: &str) -> Option<usize> {
+        self.names.iter().position(|n| n == name)
+    }
+
+    /// The block at execution index `i`, mutable (to change a [`Tunable`](crate::block::Tunable)
+    /// block's parameters between runs; call [`Scheduler::reset`] afterwards).
+    pub fn block_at_mut(&mut self, i: usize) -> Option<&mut dyn Block> {
+        Some(self.blocks.get_mut(i)?.as_mut())
+    }
+
+    /// The block called `name`, mutable.
+    pub fn block_mut(&mut self, name: &str) -> Option<&mut dyn Block> {
+        let i = self.block_index(name)?;
+        self.block_at_mut(i)
     }
 
     /// Resolve `block.port` to a handle for [`Scheduler::read`].

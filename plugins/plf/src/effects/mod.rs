@@ -1,0 +1,1 @@
+//! Effect blocks of the PLF vocabulary.
