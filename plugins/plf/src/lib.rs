@@ -10,3 +10,4 @@
 //!   entry), each [`Tunable`](nanomotion_core::Tunable) so the workflow can fit it.
 
 pub mod effects;
+pub mod stats;

@@ -1,0 +1,603 @@
+//! Statistics the workflow decides with, written out and tested against closed
+//! forms: normal, χ² and Student-t distributions; residual whiteness (Ljung–Box);
+//! residual–input cross-correlation with Bartlett's variance; Fisher's g test for a
+//! periodic line; a batch-means test that one residual beats another on held-out
+//! data; a robust noise-floor estimate; linear least squares with covariance.
+
+use std::f64::consts::PI;
+
+/// ln Γ(x) for x > 0 (Lanczos, g = 7, n = 9; |error| < 1e-14 relative).
+pub fn ln_gamma(x: f64) -> f64 {
+    const G: f64 = 7.0;
+    const C: [f64; 9] = [
+        0.999_999_999_999_809_9,
+        676.520_368_121_885_1,
+        -1_259.139_216_722_402_8,
+        771.323_428_777_653_1,
+        -176.615_029_162_140_6,
+        12.507_343_278_686_905,
+        -0.138_571_095_265_720_12,
+        9.984_369_578_019_572e-6,
+        1.505_632_735_149_311_6e-7,
+    ];
+    if x < 0.5 {
+        // Reflection.
+        return (PI / (PI * x).sin()).ln() - ln_gamma(1.0 - x);
+    }
+    let x = x - 1.0;
+    let mut a = C[0];
+    let t = x + G + 0.5;
+    for (i, c) in C.iter().enumerate().skip(1) {
+        a += c / (x + i as f64);
+    }
+    0.5 * (2.0 * PI).ln() + (x + 0.5) * t.ln() - t + a.ln()
+}
+
+/// Regularised upper incomplete gamma Q(a, x) = Γ(a, x)/Γ(a).
+pub fn gamma_q(a: f64, x: f64) -> f64 {
+    if x <= 0.0 {
+        return 1.0;
+    }
+    if x < a + 1.0 {
+        // Series for P.
+        let mut sum = 1.0 / a;
+        let mut term = sum;
+        let mut ap = a;
+        for _ in 0..1000 {
+            ap += 1.0;
+            term *= x / ap;
+            sum += term;
+            if term.abs() < sum.abs() * 1e-16 {
+                break;
+            }
+        }
+        let p = sum * (-x + a * x.ln() - ln_gamma(a)).exp();
+        (1.0 - p).clamp(0.0, 1.0)
+    } else {
+        // Continued fraction (modified Lentz) for Q.
+        let tiny = 1e-300;
+        let mut b = x + 1.0 - a;
+        let mut c = 1.0 / tiny;
+        let mut d = 1.0 / b;
+        let mut h = d;
+        for i in 1..1000 {
+            let an = -(i as f64) * (i as f64 - a);
+            b += 2.0;
+            d = an * d + b;
+            if d.abs() < tiny {
+                d = tiny;
+            }
+            c = b + an / c;
+            if c.abs() < tiny {
+                c = tiny;
+            }
+            d = 1.0 / d;
+            let del = d * c;
+            h *= del;
+            if (del - 1.0).abs() < 1e-16 {
+                break;
+            }
+        }
+        ((-x + a * x.ln() - ln_gamma(a)).exp() * h).clamp(0.0, 1.0)
+    }
+}
+
+/// P(χ²_k > x): survival function of the χ² distribution with k degrees of freedom.
+pub fn chi2_sf(x: f64, k: f64) -> f64 {
+    gamma_q(0.5 * k, 0.5 * x)
+}
+
+/// Complementary error function, erfc(x) = Q(1/2, x²) for x ≥ 0 (accurate to
+/// round-off through [`gamma_q`]).
+pub fn erfc(x: f64) -> f64 {
+    let q = gamma_q(0.5, x * x);
+    if x >= 0.0 { q } else { 2.0 - q }
+}
+
+/// P(Z > z) for a standard normal Z.
+pub fn normal_sf(z: f64) -> f64 {
+    0.5 * erfc(z / std::f64::consts::SQRT_2)
+}
+
+/// Regularised incomplete beta I_x(a, b) (continued fraction).
+pub fn beta_inc(a: f64, b: f64, x: f64) -> f64 {
+    if x <= 0.0 {
+        return 0.0;
+    }
+    if x >= 1.0 {
+        return 1.0;
+    }
+    let ln_front = ln_gamma(a + b) - ln_gamma(a) - ln_gamma(b) + a * x.ln() + b * (1.0 - x).ln();
+    let cf = |a: f64, b: f64, x: f64| -> f64 {
+        let tiny = 1e-300;
+        let (qab, qap, qam) = (a + b, a + 1.0, a - 1.0);
+        let mut c = 1.0;
+        let mut d = 1.0 - qab * x / qap;
+        if d.abs() < tiny {
+            d = tiny;
+        }
+        d = 1.0 / d;
+        let mut h = d;
+        for m in 1..1000 {
+            let m = m as f64;
+            let m2 = 2.0 * m;
+            let aa = m * (b - m) * x / ((qam + m2) * (a + m2));
+            d = 1.0 + aa * d;
+            if d.abs() < tiny {
+                d = tiny;
+            }
+            c = 1.0 + aa / c;
+            if c.abs() < tiny {
+                c = tiny;
+            }
+            d = 1.0 / d;
+            h *= d * c;
+            let aa = -(a + m) * (qab + m) * x / ((a + m2) * (qap + m2));
+            d = 1.0 + aa * d;
+            if d.abs() < tiny {
+                d = tiny;
+            }
+            c = 1.0 + aa / c;
+            if c.abs() < tiny {
+                c = tiny;
+            }
+            d = 1.0 / d;
+            let del = d * c;
+            h *= del;
+            if (del - 1.0).abs() < 1e-15 {
+                break;
+            }
+        }
+        h
+    };
+    if x < (a + 1.0) / (a + b + 2.0) {
+        ln_front.exp() * cf(a, b, x) / a
+    } else {
+        1.0 - ln_front.exp() * cf(b, a, 1.0 - x) / b
+    }
+}
+
+/// P(T > t) for Student's t with `dof` degrees of freedom.
+pub fn student_t_sf(t: f64, dof: f64) -> f64 {
+    let x = dof / (dof + t * t);
+    let tail = 0.5 * beta_inc(0.5 * dof, 0.5, x);
+    if t >= 0.0 { tail } else { 1.0 - tail }
+}
+
+/// Mean of `x` (0 for an empty slice).
+pub fn mean(x: &[f64]) -> f64 {
+    if x.is_empty() {
+        0.0
+    } else {
+        x.iter().sum::<f64>() / x.len() as f64
+    }
+}
+
+/// Mean square of `x`.
+pub fn mean_square(x: &[f64]) -> f64 {
+    if x.is_empty() {
+        0.0
+    } else {
+        x.iter().map(|v| v * v).sum::<f64>() / x.len() as f64
+    }
+}
+
+/// Normalised sample autocorrelation ρ(0..=max_lag) (biased estimator, mean removed).
+pub fn autocorrelation(x: &[f64], max_lag: usize) -> Vec<f64> {
+    let n = x.len();
+    let m = mean(x);
+    let c0: f64 = x.iter().map(|v| (v - m) * (v - m)).sum();
+    (0..=max_lag.min(n.saturating_sub(1)))
+        .map(|k| {
+            if c0 == 0.0 {
+                return if k == 0 { 1.0 } else { 0.0 };
+            }
+            let mut s = 0.0;
+            for i in k..n {
+                s += (x[i] - m) * (x[i - k] - m);
+            }
+            s / c0
+        })
+        .collect()
+}
+
+/// Normalised cross-correlation ρ_xy(τ) = Σ x(t+τ) y(t) / √(Σx² Σy²) for τ in
+/// −max_lag..=max_lag (means removed), returned with index τ + max_lag.
+pub fn cross_correlation(x: &[f64], y: &[f64], max_lag: usize) -> Vec<f64> {
+    let n = x.len().min(y.len());
+    let (mx, my) = (mean(&x[..n]), mean(&y[..n]));
+    let sx: f64 = x[..n].iter().map(|v| (v - mx) * (v - mx)).sum();
+    let sy: f64 = y[..n].iter().map(|v| (v - my) * (v - my)).sum();
+    let norm = (sx * sy).sqrt();
+    let lags = max_lag as isize;
+    (-lags..=lags)
+        .map(|tau| {
+            if norm == 0.0 {
+                return 0.0;
+            }
+            let mut s = 0.0;
+            for t in 0..n as isize {
+                let i = t + tau;
+                if i >= 0 && (i as usize) < n {
+                    s += (x[i as usize] - mx) * (y[t as usize] - my);
+                }
+            }
+            s / norm
+        })
+        .collect()
+}
+
+/// Result of a hypothesis test.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct Test {
+    /// The test statistic.
+    pub statistic: f64,
+    /// Its p-value under the null hypothesis.
+    pub p_value: f64,
+}
+
+/// Ljung–Box test of whiteness on lags 1..=lags: Q = N(N+2) Σ ρ_k²/(N−k) ~ χ²(lags)
+/// for a white residual.
+pub fn ljung_box(r: &[f64], lags: usize) -> Test {
+    let n = r.len() as f64;
+    let rho = autocorrelation(r, lags);
+    let q: f64 = rho
+        .iter()
+        .enumerate()
+        .skip(1)
+        .map(|(k, p)| p * p / (n - k as f64))
+        .sum::<f64>()
+        * n
+        * (n + 2.0);
+    let dof = (rho.len().saturating_sub(1)).max(1) as f64;
+    Test {
+        statistic: q,
+        p_value: chi2_sf(q, dof),
+    }
+}
+
+/// Residual–input independence test over lags −max_lag..=max_lag: each
+/// ρ̂_ru(τ) is compared with its standard deviation under independence from
+/// Bartlett's formula, √(Σ_k ρ_rr(k) ρ_uu(k) / N), so that neither signal needs to
+/// be white; the statistic is the largest |z| and the p-value is Bonferroni
+/// corrected over the lags. Returns the test and the lag of the largest |z| (in
+/// samples; positive: the residual follows the input).
+pub fn input_correlation(r: &[f64], u: &[f64], max_lag: usize) -> (Test, isize) {
+    let n = r.len().min(u.len());
+    let k_max = (4 * max_lag).min(n.saturating_sub(1));
+    let rr = autocorrelation(&r[..n], k_max);
+    let uu = autocorrelation(&u[..n], k_max);
+    let mut p_sum = 1.0;
+    for k in 1..rr.len().min(uu.len()) {
+        p_sum += 2.0 * rr[k] * uu[k];
+    }
+    let sd = (p_sum.max(1.0 / n as f64) / n as f64).sqrt();
+    let xc = cross_correlation(&r[..n], &u[..n], max_lag);
+    let (mut best, mut lag) = (0.0f64, 0isize);
+    for (i, c) in xc.iter().enumerate() {
+        let z = (c / sd).abs();
+        if z > best {
+            best = z;
+            lag = i as isize - max_lag as isize;
+        }
+    }
+    let p = (2.0 * normal_sf(best) * xc.len() as f64).min(1.0);
+    (
+        Test {
+            statistic: best,
+            p_value: p,
+        },
+        lag,
+    )
+}
+
+/// Periodogram of `x` at the Fourier frequencies k/N (k = 1..N/2), mean removed,
+/// by a direct DFT over the ones asked for — `bins` of them, evenly spaced.
+fn periodogram(x: &[f64]) -> Vec<f64> {
+    use rustfft::{FftPlanner, num_complex::Complex};
+    let n = x.len();
+    let m = mean(x);
+    let mut buf: Vec<Complex<f64>> = x.iter().map(|v| Complex::new(v - m, 0.0)).collect();
+    FftPlanner::new().plan_fft_forward(n).process(&mut buf);
+    (1..n.div_ceil(2))
+        .map(|k| buf[k].norm_sqr() / n as f64)
+        .collect()
+}
+
+/// Fisher's g test for one periodic line hidden in white noise: g = max I_k / Σ I_k
+/// over the periodogram, p ≈ m(1 − g)^{m−1} (first term of the exact series).
+/// Returns the test and the frequency of the line as a fraction of the sample
+/// rate.
+pub fn fisher_g(x: &[f64]) -> (Test, f64) {
+    let per = periodogram(x);
+    let m = per.len();
+    if m < 2 {
+        return (
+            Test {
+                statistic: 0.0,
+                p_value: 1.0,
+            },
+            0.0,
+        );
+    }
+    let total: f64 = per.iter().sum();
+    let (k, peak) = per.iter().enumerate().fold(
+        (0, 0.0),
+        |(bk, bv), (k, &v)| if v > bv { (k, v) } else { (bk, bv) },
+    );
+    let g = if total > 0.0 { peak / total } else { 0.0 };
+    let p = (m as f64 * (1.0 - g).powf(m as f64 - 1.0)).min(1.0);
+    (
+        Test {
+            statistic: g,
+            p_value: p,
+        },
+        (k + 1) as f64 / x.len() as f64,
+    )
+}
+
+/// Test whether squared residual `better` is smaller than `worse` on held-out data,
+/// robust to autocorrelation: the loss difference d = worse² − better² is averaged
+/// over `batches` contiguous batches and the batch means get a one-sided Student
+/// t-test with batches − 1 degrees of freedom (batch means; valid while a batch is
+/// longer than the residuals' correlation time). Returns the test (p small: the
+/// improvement is real) and the relative reduction of the mean square.
+pub fn improvement_test(worse: &[f64], better: &[f64], batches: usize) -> (Test, f64) {
+    let n = worse.len().min(better.len());
+    let b = batches.clamp(2, n.max(2));
+    let len = n / b;
+    let ms_w = mean_square(&worse[..n]);
+    let ms_b = mean_square(&better[..n]);
+    let rel = if ms_w > 0.0 { 1.0 - ms_b / ms_w } else { 0.0 };
+    if len == 0 {
+        return (
+            Test {
+                statistic: 0.0,
+                p_value: 1.0,
+            },
+            rel,
+        );
+    }
+    let means: Vec<f64> = (0..b)
+        .map(|i| {
+            let s = i * len;
+            (s..s + len)
+                .map(|k| worse[k] * worse[k] - better[k] * better[k])
+                .sum::<f64>()
+                / len as f64
+        })
+        .collect();
+    let m = mean(&means);
+    let var = means.iter().map(|v| (v - m) * (v - m)).sum::<f64>() / (b - 1) as f64;
+    let se = (var / b as f64).sqrt();
+    let t = if se > 0.0 {
+        m / se
+    } else if m > 0.0 {
+        f64::INFINITY
+    } else {
+        0.0
+    };
+    let p = if t.is_infinite() {
+        0.0
+    } else {
+        student_t_sf(t, (b - 1) as f64)
+    };
+    (
+        Test {
+            statistic: t,
+            p_value: p,
+        },
+        rel,
+    )
+}
+
+/// Robust estimate of the standard deviation of the white part of `r`: the
+/// median absolute first difference, scaled for a normal variable
+/// (σ ≈ 1.4826·MAD(Δr)/√2). A smooth (low-frequency) misfit hardly moves it, so it
+/// tells how far a residual is above its noise floor.
+pub fn noise_floor(r: &[f64]) -> f64 {
+    if r.len() < 3 {
+        return 0.0;
+    }
+    let mut d: Vec<f64> = r.windows(2).map(|w| w[1] - w[0]).collect();
+    let med = median(&mut d);
+    let mut dev: Vec<f64> = d.iter().map(|v| (v - med).abs()).collect();
+    1.4826 * median(&mut dev) / std::f64::consts::SQRT_2
+}
+
+/// Median (reorders the slice).
+pub fn median(x: &mut [f64]) -> f64 {
+    if x.is_empty() {
+        return 0.0;
+    }
+    let mid = x.len() / 2;
+    x.select_nth_unstable_by(mid, |a, b| a.total_cmp(b));
+    x[mid]
+}
+
+/// Linear least squares y ≈ Φθ by QR on the column-scaled regressors; returns θ
+/// and the covariance σ²(ΦᵀΦ)⁻¹ with σ² = SSE/(N − p). `None` if Φ is rank
+/// deficient.
+pub fn least_squares(
+    phi: &nalgebra::DMatrix<f64>,
+    y: &[f64],
+) -> Option<(Vec<f64>, nalgebra::DMatrix<f64>)> {
+    let (n, p) = phi.shape();
+    if n <= p || p == 0 {
+        return None;
+    }
+    let scales: Vec<f64> = (0..p)
+        .map(|j| {
+            let s = phi.column(j).norm();
+            if s > 0.0 { s } else { 1.0 }
+        })
+        .collect();
+    let mut a = phi.clone();
+    for (j, s) in scales.iter().enumerate() {
+        a.column_mut(j).scale_mut(1.0 / s);
+    }
+    let svd = a.clone().svd(true, true);
+    let smax = svd.singular_values.max();
+    if svd.singular_values.min() <= smax * 1e-12 {
+        return None;
+    }
+    let yv = nalgebra::DVector::from_column_slice(y);
+    let z = svd.solve(&yv, 0.0).ok()?;
+    let resid = &yv - &a * &z;
+    let sigma2 = resid.norm_squared() / (n - p) as f64;
+    let ata_inv = (a.transpose() * &a).try_inverse()?;
+    let mut theta = vec![0.0; p];
+    let mut cov = nalgebra::DMatrix::zeros(p, p);
+    for i in 0..p {
+        theta[i] = z[i] / scales[i];
+        for j in 0..p {
+            cov[(i, j)] = sigma2 * ata_inv[(i, j)] / (scales[i] * scales[j]);
+        }
+    }
+    Some((theta, cov))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nanomotion_core::rng::Rng;
+
+    #[test]
+    fn special_functions_match_closed_forms() {
+        // Γ(5) = 24, Γ(1/2) = √π.
+        assert!((ln_gamma(5.0) - 24f64.ln()).abs() < 1e-13);
+        assert!((ln_gamma(0.5) - PI.sqrt().ln()).abs() < 1e-13);
+        // χ²(2) survival is e^{−x/2}.
+        for x in [0.1, 1.0, 3.0, 10.0, 40.0] {
+            assert!((chi2_sf(x, 2.0) - (-x / 2.0).exp()).abs() < 1e-12, "{x}");
+        }
+        // χ²(1): P(χ² > 3.841459) = 0.05.
+        assert!((chi2_sf(3.841_458_820_694_124, 1.0) - 0.05).abs() < 1e-6);
+        assert!((normal_sf(1.959_963_984_540_054) - 0.025).abs() < 1e-7);
+        assert!((normal_sf(0.0) - 0.5).abs() < 1e-9);
+        // Student t with 1 dof is Cauchy: P(T > t) = 1/2 − atan(t)/π.
+        for t in [-2.0, 0.3, 1.0, 5.0] {
+            assert!(
+                (student_t_sf(t, 1.0) - (0.5 - f64::atan(t) / PI)).abs() < 1e-10,
+                "{t}"
+            );
+        }
+        // Large dof approaches the normal.
+        assert!((student_t_sf(1.5, 1e6) - normal_sf(1.5)).abs() < 1e-5);
+        // I_x(1, 1) = x; I_x(a, 1) = x^a.
+        assert!((beta_inc(1.0, 1.0, 0.3) - 0.3).abs() < 1e-13);
+        assert!((beta_inc(2.5, 1.0, 0.4) - 0.4f64.powf(2.5)).abs() < 1e-13);
+    }
+
+    fn white(n: usize, seed: u64) -> Vec<f64> {
+        let mut rng = Rng::new(seed);
+        (0..n).map(|_| rng.normal()).collect()
+    }
+
+    #[test]
+    fn whiteness_test_has_its_nominal_false_alarm_rate_and_power() {
+        // 400 white records: about 5 % fall below p = 0.05.
+        let alarms = (0..400)
+            .filter(|&s| ljung_box(&white(2000, s), 20).p_value < 0.05)
+            .count();
+        assert!((8..=36).contains(&alarms), "{alarms} of 400");
+        // AR(1) with a = 0.3 is found every time.
+        let e = white(2000, 7);
+        let mut x = vec![0.0; e.len()];
+        for k in 1..e.len() {
+            x[k] = 0.3 * x[k - 1] + e[k];
+        }
+        assert!(ljung_box(&x, 20).p_value < 1e-10);
+    }
+
+    #[test]
+    fn input_correlation_finds_a_delayed_copy_and_not_independent_coloured_signals() {
+        let u = white(4000, 1);
+        let e = white(4000, 2);
+        let r: Vec<f64> = (0..4000)
+            .map(|k| e[k] + if k >= 5 { 0.3 * u[k - 5] } else { 0.0 })
+            .collect();
+        let (t, lag) = input_correlation(&r, &u, 20);
+        assert!(t.p_value < 1e-6);
+        assert_eq!(lag, 5);
+        // Two independent, strongly coloured signals: false alarms near nominal.
+        let colour = |x: Vec<f64>| {
+            let mut y = vec![0.0; x.len()];
+            for k in 1..x.len() {
+                y[k] = 0.95 * y[k - 1] + x[k];
+            }
+            y
+        };
+        let alarms = (0..200)
+            .filter(|&s| {
+                let a = colour(white(2000, 100 + s));
+                let b = colour(white(2000, 500 + s));
+                input_correlation(&a, &b, 10).0.p_value < 0.05
+            })
+            .count();
+        assert!(alarms <= 24, "{alarms} of 200 at nominal 5 %");
+    }
+
+    #[test]
+    fn fisher_g_finds_a_line() {
+        let e = white(1024, 3);
+        let x: Vec<f64> = (0..1024)
+            .map(|k| e[k] + 0.5 * (2.0 * PI * 50.0 * k as f64 / 1024.0).sin())
+            .collect();
+        let (t, f) = fisher_g(&x);
+        assert!(t.p_value < 1e-10);
+        assert!((f - 50.0 / 1024.0).abs() < 1e-12);
+        let alarms = (0..200)
+            .filter(|&s| fisher_g(&white(512, 900 + s)).0.p_value < 0.05)
+            .count();
+        assert!(alarms <= 20, "{alarms}");
+    }
+
+    #[test]
+    fn improvement_test_detects_a_real_cut_and_not_noise() {
+        let a = white(5000, 4);
+        let b: Vec<f64> = a.iter().map(|v| 0.8 * v).collect();
+        let (t, rel) = improvement_test(&a, &b, 10);
+        assert!(t.p_value < 1e-6);
+        assert!((rel - 0.36).abs() < 1e-12);
+        let alarms = (0..200)
+            .filter(|&s| {
+                improvement_test(&white(2000, 10 + s), &white(2000, 2000 + s), 10)
+                    .0
+                    .p_value
+                    < 0.05
+            })
+            .count();
+        assert!(alarms <= 20, "{alarms}");
+    }
+
+    #[test]
+    fn noise_floor_ignores_smooth_misfit() {
+        let e = white(20000, 5);
+        let r: Vec<f64> = (0..20000)
+            .map(|k| 0.01 * e[k] + (k as f64 * 1e-3).sin())
+            .collect();
+        let s = noise_floor(&r);
+        assert!((s / 0.01 - 1.0).abs() < 0.05, "{s}");
+    }
+
+    #[test]
+    fn least_squares_recovers_a_line_with_honest_uncertainty() {
+        let e = white(1000, 6);
+        let n = 1000;
+        let phi =
+            nalgebra::DMatrix::from_fn(n, 2, |i, j| if j == 0 { 1.0 } else { i as f64 * 1e-3 });
+        let y: Vec<f64> = (0..n)
+            .map(|i| 2.0 + 3.0 * i as f64 * 1e-3 + 0.1 * e[i])
+            .collect();
+        let (th, cov) = least_squares(&phi, &y).unwrap();
+        assert!((th[0] - 2.0).abs() < 4.0 * cov[(0, 0)].sqrt());
+        assert!((th[1] - 3.0).abs() < 4.0 * cov[(1, 1)].sqrt());
+        // Standard error of the slope for unit-spaced x on [0, 1): σ√(12/N).
+        let se = cov[(1, 1)].sqrt();
+        assert!(
+            (se / (0.1 * (12.0f64 / n as f64).sqrt()) - 1.0).abs() < 0.1,
+            "{se}"
+        );
+    }
+}
