@@ -8,6 +8,35 @@
 //!
 //! - [`effects`]: the effect blocks (one registered block type per vocabulary
 //!   entry), each [`Tunable`](nanomotion_core::Tunable) so the workflow can fit it.
+//! - [`stats`]: the statistics it decides with (whiteness, input correlation,
+//!   periodic lines, held-out improvement), tested for their false-alarm rates.
+//! - [`surgery`]: where an effect can enter a graph, and inserting it.
+//! - [`fit`]: parameter fitting by re-simulation (Levenberg–Marquardt).
+//! - [`diagnose()`]: the workflow itself.
 
+pub mod diagnose;
 pub mod effects;
+pub mod fit;
 pub mod stats;
+pub mod surgery;
+
+pub use diagnose::{Options, Report, diagnose};
+
+/// What can go wrong in the workflow.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum PlfError {
+    /// The model graph cannot be used as it is (names the problem and the fix).
+    #[error("model: {0}")]
+    Model(String),
+    /// The measured data cannot be used.
+    #[error("data: {0}")]
+    Data(String),
+    /// An option is out of range.
+    #[error("option `{option}`: {problem}")]
+    Option {
+        /// The option.
+        option: &'static str,
+        /// What is wrong and how to fix it.
+        problem: String,
+    },
+}

@@ -1,0 +1,1447 @@
+//! The workflow: nominal residual → candidate effects fitted at every place they
+//! can enter → the one that cuts the held-out residual most, significantly, is
+//! named and inserted → repeat with earlier effects refitted jointly → stop when
+//! nothing significant is left.
+//!
+//! Decisions, in the order they are taken:
+//! 1. The record is split in time: the first `1 − holdout` part estimates
+//!    parameters, the rest only scores them.
+//! 2. Every candidate (effect × site) is fitted on the estimation part
+//!    (Levenberg–Marquardt, several starts for the non-convex parameters such as
+//!    delays, periods and hysteresis rates), earlier effects held.
+//! 3. Candidates are ranked by their held-out mean square times a BIC-like
+//!    flexibility factor (1 + k·ln N/N)·(1 + k/√N_hold) — a harmonic series or a
+//!    resonance pays for every parameter.
+//! 4. The best is refitted jointly with the effects named before (so an effect
+//!    fitted first cannot keep what belongs to another) and accepted only if the
+//!    held-out improvement is significant (batch-means t-test at α / number of
+//!    candidates, Bonferroni) *and* it removes at least `min_excess_cut` of the
+//!    residual's mean square above its noise floor — what stops padding.
+//! 5. It stops after `max_effects`, when the residual is at its noise floor, or
+//!    when no candidate passes step 4.
+
+use crate::PlfError;
+use crate::fit::{BlockEvaluator, Evaluator, FreeParam, Problem, Scale, levenberg_marquardt};
+use crate::stats;
+use crate::surgery::{self, Channel, Site};
+use nanomotion_core::data::Dataset;
+use nanomotion_core::graph::GraphSpec;
+use serde::Serialize;
+use serde_json::json;
+use std::collections::BTreeMap;
+use std::sync::Arc;
+
+/// The vocabulary, exactly these strings.
+pub const VOCABULARY: [&str; 13] = [
+    "hysteresis",
+    "friction",
+    "time_delay",
+    "repetitive_disturbance",
+    "position_dependent_gain",
+    "quantization",
+    "unmodeled_resonance",
+    "drift",
+    "creep",
+    "axis_coupling",
+    "encoder_slit_error",
+    "saturation",
+    "backlash",
+];
+
+/// Options of [`diagnose`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct Options {
+    /// At most this many effects (default 3).
+    pub max_effects: usize,
+    /// Fraction of the record, at its end, held out for scoring (default 0.3).
+    pub holdout: f64,
+    /// Seed (the workflow itself is deterministic; the seed is passed to the graph).
+    pub seed: Option<u64>,
+    /// Family-wise false-alarm level of a step (default 0.01).
+    pub alpha: f64,
+    /// Share of the mean square above the noise floor an effect must remove
+    /// (default 0.2).
+    pub min_excess_cut: f64,
+    /// Restrict the candidates to these vocabulary names (empty: all).
+    pub effects: Vec<String>,
+    /// Worker threads for candidate fits (default 2).
+    pub threads: usize,
+}
+
+impl Default for Options {
+    fn default() -> Self {
+        Self {
+            max_effects: 3,
+            holdout: 0.3,
+            seed: None,
+            alpha: 0.01,
+            min_excess_cut: 0.2,
+            effects: Vec::new(),
+            threads: 2,
+        }
+    }
+}
+
+/// Scores of one compared output.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct OutputScore {
+    /// Model signal.
+    pub signal: String,
+    /// Measured column.
+    pub column: String,
+    /// rms of the residual over the whole record.
+    pub rms: f64,
+    /// rms over the held-out part.
+    pub holdout_rms: f64,
+    /// 100(1 − ‖y − ŷ‖/‖y − ȳ‖) over the whole record.
+    pub fit_percent: f64,
+}
+
+/// Scores of a model against the record.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Scores {
+    /// √(mean over outputs of the squared rms).
+    pub rms: f64,
+    /// The same over the held-out part.
+    pub holdout_rms: f64,
+    /// Mean fit % over the outputs.
+    pub fit_percent: f64,
+    /// Per output.
+    pub per_output: Vec<OutputScore>,
+}
+
+/// Residual tests of one output.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ResidualTests {
+    /// The output.
+    pub signal: String,
+    /// Ljung–Box on 20 lags: statistic and p-value (small p: not white).
+    pub whiteness: stats::Test,
+    /// Largest residual–input cross-correlation (|z| with Bartlett's variance),
+    /// Bonferroni p-value, at `input_lag` samples, against `input`.
+    pub input_correlation: stats::Test,
+    /// The input tested against.
+    pub input: String,
+    /// Lag of the largest correlation (samples).
+    pub input_lag: isize,
+    /// Fisher's g test for a periodic line; `line_hz` its frequency.
+    pub periodic_line: stats::Test,
+    /// Frequency of the strongest line (Hz).
+    pub line_hz: f64,
+    /// Robust noise-floor estimate (σ of the white part).
+    pub noise_floor: f64,
+    /// rms of the residual (estimation part).
+    pub rms: f64,
+}
+
+/// One candidate tried in a step.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Candidate {
+    /// Vocabulary name.
+    pub effect: String,
+    /// Where it was inserted.
+    pub site: String,
+    /// Number of fitted parameters.
+    pub n_params: usize,
+    /// Held-out rms with it (NaN when the fit failed).
+    pub holdout_rms: f64,
+    /// Ranking score (weighted held-out mean square × flexibility factor).
+    pub score: f64,
+    /// Why it failed, if it did.
+    pub note: Option<String>,
+}
+
+/// The inserted block.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct BlockRef {
+    /// Its name in the augmented graph.
+    pub name: String,
+    /// Its `type:`.
+    #[serde(rename = "type")]
+    pub type_name: String,
+}
+
+/// A named effect.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Step {
+    /// Vocabulary name.
+    pub effect: String,
+    /// The inserted block.
+    pub block: BlockRef,
+    /// Where it entered.
+    pub site: String,
+    /// Fitted parameters (all of the block's tunable parameters).
+    pub params: BTreeMap<String, f64>,
+    /// One standard deviation of the fitted parameters (from the Jacobian).
+    pub uncertainty: BTreeMap<String, f64>,
+    /// One line a person can check.
+    pub evidence: String,
+    /// Held-out rms before and after.
+    pub holdout_rms_before: f64,
+    /// Held-out rms after.
+    pub holdout_rms_after: f64,
+    /// Cut of the held-out rms (%).
+    pub cut_percent: f64,
+    /// p-value of the held-out improvement test.
+    pub p_value: f64,
+    /// Scores per output after the step.
+    pub per_output: Vec<OutputScore>,
+    /// Every candidate tried, best first.
+    pub candidates: Vec<Candidate>,
+}
+
+/// Data behind a plot (the CLI draws it).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct PlotData {
+    /// File stem.
+    pub name: String,
+    /// Title.
+    pub title: String,
+    /// x label.
+    pub x_label: String,
+    /// y label.
+    pub y_label: String,
+    /// Draw points instead of lines.
+    pub scatter: bool,
+    /// (label, x, y).
+    pub series: Vec<(String, Vec<f64>, Vec<f64>)>,
+}
+
+/// What [`diagnose`] found.
+#[derive(Debug, Serialize)]
+pub struct Report {
+    /// The nominal model's scores.
+    pub nominal: Scores,
+    /// Residual tests of the nominal model.
+    pub nominal_tests: Vec<ResidualTests>,
+    /// Names of the effects found, in order.
+    pub found: Vec<String>,
+    /// The steps.
+    pub steps: Vec<Step>,
+    /// Scores of the augmented model.
+    #[serde(rename = "final")]
+    pub final_scores: Scores,
+    /// Residual tests of the augmented model.
+    pub final_tests: Vec<ResidualTests>,
+    /// Why the workflow stopped.
+    pub stopped_because: String,
+    /// Samples used for estimation and held out.
+    pub estimation_samples: usize,
+    /// Held-out samples.
+    pub holdout_samples: usize,
+    /// Graph runs spent.
+    pub runs: usize,
+    /// The augmented model (the nominal graph plus the inserted effect blocks).
+    #[serde(skip)]
+    pub augmented: Option<GraphSpec>,
+    /// Evidence plots (one per step) and residuals before/after.
+    #[serde(skip)]
+    pub plots: Vec<PlotData>,
+    /// Residual (per output) of the nominal and the augmented model, for PSD plots.
+    #[serde(skip)]
+    pub residuals: Vec<(String, Vec<f64>, Vec<f64>)>,
+    /// Data rate (Hz).
+    #[serde(skip)]
+    pub rate_hz: f64,
+}
+
+/// Progress of a diagnosis: (what is being done, fraction of the step done).
+pub type Progress<'a> = &'a mut dyn FnMut(&str, f64);
+
+/// Run the workflow. See the [module documentation](self).
+pub fn diagnose(spec: &GraphSpec, data: &Dataset, opts: &Options) -> Result<Report, PlfError> {
+    diagnose_with_progress(spec, data, opts, &mut |_, _| {})
+}
+
+/// The state of the model between steps.
+struct Current {
+    /// The graph in its serde form (shareable between threads; blocks are not `Sync`).
+    graph: serde_json::Value,
+    /// Inserted effects: (block name, free parameters).
+    free: Vec<FreeParam>,
+    residual: Vec<Vec<f64>>,
+    model: Vec<Vec<f64>>,
+}
+
+struct Ctx<'a> {
+    data: &'a Arc<Dataset>,
+    channels: Vec<Channel>,
+    n: usize,
+    n_est: usize,
+    fs: f64,
+}
+
+/// [`diagnose`] with a progress callback.
+pub fn diagnose_with_progress(
+    spec: &GraphSpec,
+    data: &Dataset,
+    opts: &Options,
+    progress: Progress<'_>,
+) -> Result<Report, PlfError> {
+    if !(0.05..=0.8).contains(&opts.holdout) {
+        return Err(PlfError::Option {
+            option: "holdout",
+            problem: format!(
+                "is {}; give a fraction in [0.05, 0.8] (0.3 holds out the last 30 %)",
+                opts.holdout
+            ),
+        });
+    }
+    if opts.max_effects > 13 {
+        return Err(PlfError::Option {
+            option: "max-effects",
+            problem: format!("is {}; at most 13 (the vocabulary)", opts.max_effects),
+        });
+    }
+    for e in &opts.effects {
+        if !VOCABULARY.contains(&e.as_str()) {
+            return Err(PlfError::Option {
+                option: "effects",
+                problem: format!("`{e}` is not in the vocabulary: {}", VOCABULARY.join(", ")),
+            });
+        }
+    }
+    if spec.compare.is_empty() {
+        return Err(PlfError::Model(
+            "the graph has no `compare:` entries; add e.g. `compare: [{ signal: stage.y, column: y }]`".into(),
+        ));
+    }
+    let n = data.len();
+    if n < 200 {
+        return Err(PlfError::Data(format!(
+            "{} has {n} samples; the workflow needs at least 200 to estimate and hold out",
+            data.origin()
+        )));
+    }
+    let data = Arc::new(data.clone());
+    let fs = data.rate_hz();
+    let n_est = ((1.0 - opts.holdout) * n as f64).round() as usize;
+    let mut nominal = surgery::clone_spec(spec)?;
+    nominal.duration_s = n as f64 / fs;
+    if let Some(s) = opts.seed {
+        nominal.seed = s;
+    }
+    let channels = surgery::channels(&nominal)?;
+    let ctx = Ctx {
+        data: &data,
+        channels,
+        n,
+        n_est,
+        fs,
+    };
+    let mut runs = 0usize;
+    let mut cur = evaluate_current(&ctx, nominal, Vec::new(), &mut runs)?;
+    let nominal_scores = scores(&ctx, &cur);
+    let nominal_tests = tests(&ctx, &cur)?;
+    let first_residuals = cur.residual.clone();
+    let mut steps: Vec<Step> = Vec::new();
+    let mut plots = Vec::new();
+    let mut stopped = format!("reached --max-effects {}", opts.max_effects);
+    for step_no in 0..opts.max_effects {
+        // At the noise floor already?
+        let excess = excess_ms(&ctx, &cur);
+        if excess.iter().all(|&(ms, floor)| ms <= 1.2 * floor * floor) {
+            stopped = "the held-out residual is at its noise floor (mean square within 20 % of the white-noise estimate)".into();
+            break;
+        }
+        let cands = enumerate(&ctx, &cur, opts)?;
+        let total = cands.len();
+        let mut results: Vec<Option<Fitted>> = Vec::with_capacity(total);
+        let threads = opts.threads.max(1);
+        for (chunk_no, chunk) in cands.chunks(threads).enumerate() {
+            progress(
+                &format!("step {}: fitting candidates", step_no + 1),
+                (chunk_no * threads) as f64 / total as f64,
+            );
+            let out: Vec<Result<Fitted, String>> = std::thread::scope(|sc| {
+                let handles: Vec<_> = chunk
+                    .iter()
+                    .map(|c| sc.spawn(|| fit_candidate(&ctx, &cur, c)))
+                    .collect();
+                handles
+                    .into_iter()
+                    .map(|h| h.join().unwrap_or_else(|_| Err("the fit panicked".into())))
+                    .collect()
+            });
+            for (c, r) in chunk.iter().zip(out) {
+                match r {
+                    Ok(f) => {
+                        runs += f.runs;
+                        results.push(Some(f));
+                    }
+                    Err(e) => {
+                        tracing::debug!(effect = c.effect, site = %c.site.describe(), "candidate failed: {e}");
+                        results.push(None);
+                        let _ = c;
+                    }
+                }
+            }
+        }
+        progress(&format!("step {}: deciding", step_no + 1), 1.0);
+        let before_ms = weighted_holdout_ms(&ctx, &cur.residual);
+        let mut table: Vec<Candidate> = cands
+            .iter()
+            .zip(&results)
+            .map(|(c, r)| match r {
+                Some(f) => Candidate {
+                    effect: c.effect.to_string(),
+                    site: c.site.describe(),
+                    n_params: c.free.len(),
+                    holdout_rms: holdout_rms(&ctx, &f.residual),
+                    score: f.score,
+                    note: None,
+                },
+                None => Candidate {
+                    effect: c.effect.to_string(),
+                    site: c.site.describe(),
+                    n_params: c.free.len(),
+                    holdout_rms: f64::NAN,
+                    score: f64::INFINITY,
+                    note: Some(
+                        "fit failed (refused parameters or diverging runs at every start)".into(),
+                    ),
+                },
+            })
+            .collect();
+        let best = results
+            .iter()
+            .enumerate()
+            .filter_map(|(i, r)| r.as_ref().map(|f| (i, f.score)))
+            .min_by(|a, b| a.1.total_cmp(&b.1));
+        table.sort_by(|a, b| a.score.total_cmp(&b.score));
+        let Some((bi, _)) = best else {
+            stopped = "no candidate could be fitted".into();
+            break;
+        };
+        let mut win = results[bi].take().expect("best exists");
+        let cand = &cands[bi];
+        // Joint refit with the effects named before.
+        if !cur.free.is_empty() {
+            if let Ok(j) = joint_refit(&ctx, &win, &mut runs) {
+                if weighted_holdout_ms(&ctx, &j.residual) < weighted_holdout_ms(&ctx, &win.residual)
+                {
+                    win = j;
+                }
+            }
+        }
+        let after_ms = weighted_holdout_ms(&ctx, &win.residual);
+        let (worse, better) = holdout_weighted_vectors(&ctx, &cur.residual, &win.residual);
+        let (test, _rel) = stats::improvement_test(&worse, &better, 10);
+        let level = opts.alpha / total.max(1) as f64;
+        let floor_ms: f64 = excess
+            .iter()
+            .zip(&ctx.channels)
+            .enumerate()
+            .map(|(i, (&(_, f), _))| f * f * weight(&ctx, i).powi(2))
+            .sum();
+        let excess_before = (before_ms - floor_ms).max(0.0);
+        let excess_cut = if excess_before > 0.0 {
+            (before_ms - after_ms) / excess_before
+        } else {
+            0.0
+        };
+        let hb = holdout_rms(&ctx, &cur.residual);
+        let ha = holdout_rms(&ctx, &win.residual);
+        if test.p_value >= level || excess_cut < opts.min_excess_cut {
+            stopped = format!(
+                "no candidate cut the held-out residual significantly: best was {} ({}), held-out rms {:.4e} -> {:.4e}, p = {:.2e} (needed < {:.1e}), {:.0} % of the excess over the noise floor (needed {:.0} %)",
+                cand.effect,
+                cand.site.describe(),
+                hb,
+                ha,
+                test.p_value,
+                level,
+                100.0 * excess_cut,
+                100.0 * opts.min_excess_cut
+            );
+            break;
+        }
+        // Accept.
+        let evidence = format!(
+            "{}; fitted {} {}: held-out rms {:.4e} -> {:.4e} (p = {:.1e})",
+            evidence(&ctx, &cur, cand),
+            cand.effect,
+            cand.site.describe(),
+            hb,
+            ha,
+            test.p_value
+        );
+        plots.push(evidence_plot(&ctx, &cur, cand, &win, step_no + 1));
+        let new = evaluate_current(&ctx, win.spec, win.free.clone(), &mut runs)?;
+        let new_spec = new.spec()?;
+        let block = new_spec
+            .blocks
+            .iter()
+            .find(|b| b.name == win.block_name)
+            .ok_or_else(|| PlfError::Model("inserted block vanished".into()))?;
+        let tun = block.block.tunable();
+        let names = tun.map(|t| t.param_names()).unwrap_or_default();
+        let values = tun.map(|t| t.params()).unwrap_or_default();
+        let mut params = BTreeMap::new();
+        let mut unc = BTreeMap::new();
+        for (k, (nm, v)) in names.iter().zip(&values).enumerate() {
+            params.insert(nm.clone(), *v);
+            if let Some(pos) = win.free_indices.iter().position(|&i| i == k) {
+                if let Some(s) = win.std.get(pos) {
+                    if s.is_finite() {
+                        unc.insert(nm.clone(), *s);
+                    }
+                }
+            }
+        }
+        let sc = scores(&ctx, &new);
+        steps.push(Step {
+            effect: cand.effect.to_string(),
+            block: BlockRef {
+                name: win.block_name.clone(),
+                type_name: block.block.typetag_name().to_string(),
+            },
+            site: cand.site.describe(),
+            params,
+            uncertainty: unc,
+            evidence,
+            holdout_rms_before: hb,
+            holdout_rms_after: sc.holdout_rms,
+            cut_percent: 100.0 * (1.0 - sc.holdout_rms / hb),
+            p_value: test.p_value,
+            per_output: sc.per_output,
+            candidates: table,
+        });
+        cur = new;
+    }
+    let final_scores = scores(&ctx, &cur);
+    let final_tests = tests(&ctx, &cur)?;
+    let residuals = ctx
+        .channels
+        .iter()
+        .enumerate()
+        .map(|(i, c)| {
+            (
+                c.signal.clone(),
+                first_residuals[i].clone(),
+                cur.residual[i].clone(),
+            )
+        })
+        .collect();
+    Ok(Report {
+        nominal: nominal_scores,
+        nominal_tests,
+        found: steps.iter().map(|s| s.effect.clone()).collect(),
+        steps,
+        final_scores,
+        final_tests,
+        stopped_because: stopped,
+        estimation_samples: n_est,
+        holdout_samples: n - n_est,
+        runs,
+        augmented: Some(cur.spec()?),
+        plots,
+        residuals,
+        rate_hz: fs,
+    })
+}
+
+fn weight(ctx: &Ctx<'_>, i: usize) -> f64 {
+    let col = ctx.data.column(&ctx.channels[i].column).unwrap_or(&[]);
+    let m = stats::mean(col);
+    let sd = stats::mean_square(&col.iter().map(|v| v - m).collect::<Vec<_>>()).sqrt();
+    if sd > 0.0 { 1.0 / sd } else { 1.0 }
+}
+
+impl Current {
+    fn spec(&self) -> Result<GraphSpec, PlfError> {
+        serde_json::from_value(self.graph.clone())
+            .map_err(|e| PlfError::Model(format!("cannot copy the graph: {e}")))
+    }
+}
+
+/// Run the whole record on `spec` and record residuals and model outputs.
+fn evaluate_current(
+    ctx: &Ctx<'_>,
+    spec: GraphSpec,
+    free: Vec<FreeParam>,
+    runs: &mut usize,
+) -> Result<Current, PlfError> {
+    let graph = serde_json::to_value(&spec)
+        .map_err(|e| PlfError::Model(format!("cannot copy the graph: {e}")))?;
+    let mut run_spec = surgery::clone_spec(&spec)?;
+    // Log every signal a candidate may need.
+    for c in &ctx.channels {
+        for sig in std::iter::once(&c.position).chain(c.plant_inputs.iter().map(|(f, _)| f)) {
+            if !run_spec.log.contains(sig) {
+                run_spec.log.push(sig.clone());
+            }
+        }
+    }
+    let mut ev = Evaluator::new(run_spec, ctx.data, &[], 0)?;
+    *runs += 1;
+    if !ev.run(&[], ctx.n) {
+        return Err(PlfError::Model(
+            "the model does not run on this data (a non-finite output): check the graph with `nanomotion run --data`".into(),
+        ));
+    }
+    let residual = (0..ev.outputs())
+        .map(|i| ev.residual(i, 0..ctx.n))
+        .collect();
+    let model = (0..ev.outputs())
+        .map(|i| ev.model_series(i, 0..ctx.n))
+        .collect();
+    Ok(Current {
+        graph,
+        free,
+        residual,
+        model,
+    })
+}
+
+/// A signal of the current model at the data rate (re-run with it logged).
+fn signal(ctx: &Ctx<'_>, cur: &Current, name: &str) -> Result<Vec<f64>, PlfError> {
+    let mut s = cur.spec()?;
+    if !s.log.iter().any(|l| l == name) {
+        s.log.push(name.to_string());
+    }
+    let mut ev = Evaluator::new(s, ctx.data, &[], 0)?;
+    if !ev.run(&[], ctx.n) {
+        return Err(PlfError::Model(
+            "the model does not run on this data".into(),
+        ));
+    }
+    ev.log_series(name)
+        .map(|mut v| {
+            v.resize(ctx.n, *v.last().unwrap_or(&0.0));
+            v
+        })
+        .ok_or_else(|| PlfError::Model(format!("signal {name} is not a scalar signal")))
+}
+
+fn scores(ctx: &Ctx<'_>, cur: &Current) -> Scores {
+    let per_output: Vec<OutputScore> = ctx
+        .channels
+        .iter()
+        .enumerate()
+        .map(|(i, c)| {
+            let r = &cur.residual[i];
+            let y = ctx.data.column(&c.column).unwrap_or(&[]);
+            let ym = stats::mean(y);
+            let dev: f64 = y.iter().map(|v| (v - ym) * (v - ym)).sum::<f64>().sqrt();
+            let err: f64 = r.iter().map(|v| v * v).sum::<f64>().sqrt();
+            OutputScore {
+                signal: c.signal.clone(),
+                column: c.column.clone(),
+                rms: stats::mean_square(r).sqrt(),
+                holdout_rms: stats::mean_square(&r[ctx.n_est..]).sqrt(),
+                fit_percent: if dev > 0.0 {
+                    100.0 * (1.0 - err / dev)
+                } else {
+                    f64::NAN
+                },
+            }
+        })
+        .collect();
+    let k = per_output.len() as f64;
+    Scores {
+        rms: (per_output.iter().map(|o| o.rms * o.rms).sum::<f64>() / k).sqrt(),
+        holdout_rms: (per_output
+            .iter()
+            .map(|o| o.holdout_rms * o.holdout_rms)
+            .sum::<f64>()
+            / k)
+            .sqrt(),
+        fit_percent: per_output.iter().map(|o| o.fit_percent).sum::<f64>() / k,
+        per_output,
+    }
+}
+
+fn holdout_rms(ctx: &Ctx<'_>, residual: &[Vec<f64>]) -> f64 {
+    let k = residual.len() as f64;
+    (residual
+        .iter()
+        .map(|r| stats::mean_square(&r[ctx.n_est..]))
+        .sum::<f64>()
+        / k)
+        .sqrt()
+}
+
+fn weighted_holdout_ms(ctx: &Ctx<'_>, residual: &[Vec<f64>]) -> f64 {
+    residual
+        .iter()
+        .enumerate()
+        .map(|(i, r)| stats::mean_square(&r[ctx.n_est..]) * weight(ctx, i).powi(2))
+        .sum()
+}
+
+/// Held-out residuals of all outputs, weighted, as one vector per model (outputs
+/// interleaved sample by sample so that batches span every output).
+fn holdout_weighted_vectors(ctx: &Ctx<'_>, a: &[Vec<f64>], b: &[Vec<f64>]) -> (Vec<f64>, Vec<f64>) {
+    let mut va = Vec::new();
+    let mut vb = Vec::new();
+    for k in ctx.n_est..ctx.n {
+        for i in 0..a.len() {
+            let w = weight(ctx, i);
+            va.push(a[i][k] * w);
+            vb.push(b[i][k] * w);
+        }
+    }
+    (va, vb)
+}
+
+/// (held-out mean square, noise floor σ) per output.
+fn excess_ms(ctx: &Ctx<'_>, cur: &Current) -> Vec<(f64, f64)> {
+    cur.residual
+        .iter()
+        .map(|r| {
+            (
+                stats::mean_square(&r[ctx.n_est..]),
+                stats::noise_floor(&r[..ctx.n_est]),
+            )
+        })
+        .collect()
+}
+
+fn tests(ctx: &Ctx<'_>, cur: &Current) -> Result<Vec<ResidualTests>, PlfError> {
+    let mut out = Vec::new();
+    for (i, c) in ctx.channels.iter().enumerate() {
+        let r = &cur.residual[i][..ctx.n_est];
+        let (input, u) = match c.plant_inputs.first() {
+            Some((from, _)) => (from.clone(), signal(ctx, cur, from)?),
+            None => (c.signal.clone(), cur.model[i].clone()),
+        };
+        let (ic, lag) = stats::input_correlation(r, &u[..ctx.n_est], 50);
+        let (line, f) = stats::fisher_g(r);
+        out.push(ResidualTests {
+            signal: c.signal.clone(),
+            whiteness: stats::ljung_box(r, 20),
+            input_correlation: ic,
+            input,
+            input_lag: lag,
+            periodic_line: line,
+            line_hz: f * ctx.fs,
+            noise_floor: stats::noise_floor(r),
+            rms: stats::mean_square(r).sqrt(),
+        });
+    }
+    Ok(out)
+}
+
+/// A candidate: an effect at a site with start values.
+struct Cand {
+    effect: &'static str,
+    site: Site,
+    /// Output index for output sites.
+    output: Option<usize>,
+    /// Full block JSON per start.
+    starts: Vec<serde_json::Value>,
+    /// Free parameters: (tunable index, scale).
+    free: Vec<(usize, Scale)>,
+    /// Signals wired to port `s`.
+    s: Vec<String>,
+    /// Rate of the inserted block.
+    rate_hz: Option<f64>,
+}
+
+struct Fitted {
+    spec: GraphSpec,
+    block_name: String,
+    free: Vec<FreeParam>,
+    free_indices: Vec<usize>,
+    std: Vec<f64>,
+    residual: Vec<Vec<f64>>,
+    score: f64,
+    runs: usize,
+}
+
+fn range(x: &[f64]) -> f64 {
+    let (lo, hi) = x
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
+            (a.min(v), b.max(v))
+        });
+    (hi - lo).max(f64::MIN_POSITIVE)
+}
+
+fn std_of(x: &[f64]) -> f64 {
+    let m = stats::mean(x);
+    stats::mean_square(&x.iter().map(|v| v - m).collect::<Vec<_>>()).sqrt()
+}
+
+/// The period (in samples) of the strongest line of `r`, if any.
+fn line_period(r: &[f64]) -> Option<f64> {
+    let (_, f) = stats::fisher_g(r);
+    (f > 0.0).then(|| 1.0 / f)
+}
+
+/// The spatial period of `r` as a function of `pos` (binned on a uniform grid).
+fn position_period(r: &[f64], pos: &[f64]) -> Option<f64> {
+    let bins = 512usize;
+    let (lo, span) = (
+        pos.iter().copied().fold(f64::INFINITY, f64::min),
+        range(pos),
+    );
+    let mut sum = vec![0.0; bins];
+    let mut cnt = vec![0usize; bins];
+    for (v, p) in r.iter().zip(pos) {
+        let b = (((p - lo) / span) * (bins - 1) as f64).round() as usize;
+        sum[b.min(bins - 1)] += v;
+        cnt[b.min(bins - 1)] += 1;
+    }
+    let filled: Vec<f64> = sum
+        .iter()
+        .zip(&cnt)
+        .map(|(s, &c)| if c > 0 { s / c as f64 } else { 0.0 })
+        .collect();
+    let (t, f) = stats::fisher_g(&filled);
+    (t.p_value < 0.01 && f > 0.0).then(|| span / (bins - 1) as f64 / f)
+}
+
+fn enumerate(ctx: &Ctx<'_>, cur: &Current, opts: &Options) -> Result<Vec<Cand>, PlfError> {
+    let want = |e: &str| opts.effects.is_empty() || opts.effects.iter().any(|x| x == e);
+    let mut out = Vec::new();
+    let fs = ctx.fs;
+    let t_len = ctx.n as f64 / fs;
+    for (i, ch) in ctx.channels.iter().enumerate() {
+        let r = &cur.residual[i][..ctx.n_est];
+        let yhat = &cur.model[i];
+        let pos = signal(ctx, cur, &ch.position)?;
+        let (sr, sy) = (std_of(r).max(1e-300), std_of(&pos).max(1e-300));
+        let out_site = Site::Output {
+            compare: i,
+            signal: ch.signal.clone(),
+        };
+        let out_rate = Some(fs);
+        // Output side.
+        if want("drift") {
+            out.push(Cand {
+                effect: "drift",
+                site: out_site.clone(),
+                output: Some(i),
+                starts: vec![
+                    json!({"type": "drift", "offset": 0.0, "rate": 0.0, "curvature": 0.0}),
+                ],
+                free: vec![(0, Scale::Linear(sr)), (1, Scale::Linear(sr / t_len))],
+                s: vec![],
+                rate_hz: out_rate,
+            });
+        }
+        if want("repetitive_disturbance") {
+            if let Some(p) = line_period(r) {
+                let h = 3;
+                out.push(Cand {
+                    effect: "repetitive_disturbance",
+                    site: out_site.clone(),
+                    output: Some(i),
+                    starts: vec![json!({"type": "repetitive_disturbance", "period": p / fs, "variable": "time", "cos": vec![0.0; h], "sin": vec![0.0; h]})],
+                    free: std::iter::once((0, Scale::Log)).chain((1..=2 * h).map(|k| (k, Scale::Linear(sr)))).collect(),
+                    s: vec![],
+                    rate_hz: out_rate,
+                });
+            }
+            if let Some(p) = position_period(r, &pos[..ctx.n_est]) {
+                let h = 3;
+                out.push(Cand {
+                    effect: "repetitive_disturbance",
+                    site: out_site.clone(),
+                    output: Some(i),
+                    starts: vec![json!({"type": "repetitive_disturbance", "period": p, "variable": "signal", "cos": vec![0.0; h], "sin": vec![0.0; h]})],
+                    free: std::iter::once((0, Scale::Log)).chain((1..=2 * h).map(|k| (k, Scale::Linear(sr)))).collect(),
+                    s: vec![ch.position.clone()],
+                    rate_hz: out_rate,
+                });
+            }
+        }
+        if want("quantization") {
+            let q0 = range(r).max(1e-300);
+            out.push(Cand {
+                effect: "quantization",
+                site: out_site.clone(),
+                output: Some(i),
+                starts: [0.5, 0.8, 1.0, 1.3]
+                    .iter()
+                    .map(|f| json!({"type": "quantizer", "lsb": q0 * f}))
+                    .collect(),
+                free: vec![(0, Scale::Log)],
+                s: vec![],
+                rate_hz: out_rate,
+            });
+        }
+        if want("position_dependent_gain") {
+            out.push(Cand {
+                effect: "position_dependent_gain",
+                site: out_site.clone(),
+                output: Some(i),
+                starts: vec![json!({"type": "position_dependent_gain", "variable": "input", "center": stats::mean(yhat), "scale": range(yhat) / 2.0, "coeffs": [0.0, 0.0]})],
+                free: vec![(0, Scale::Linear(0.01)), (1, Scale::Linear(0.01))],
+                s: vec![],
+                rate_hz: out_rate,
+            });
+        }
+        if want("time_delay") {
+            out.push(Cand {
+                effect: "time_delay",
+                site: out_site.clone(),
+                output: Some(i),
+                starts: [0.5, 2.0, 6.0, 20.0]
+                    .iter()
+                    .map(|d| json!({"type": "time_delay", "max_delay_s": 200.0 / fs, "delay_s": d / fs}))
+                    .collect(),
+                free: vec![(0, Scale::Linear(1.0 / fs))],
+                s: vec![],
+                rate_hz: out_rate,
+            });
+        }
+        if want("unmodeled_resonance") {
+            out.push(resonance(r, fs, out_site.clone(), Some(i), out_rate));
+        }
+        if want("encoder_slit_error") {
+            if let Some(lsb) = quantizer_lsb(&cur.spec()?, &ch.signal) {
+                let slits = (range(yhat) / lsb).round() as usize;
+                if let Some(nn) = slit_count(r, &yhat[..ctx.n_est], lsb, slits) {
+                    out.push(Cand {
+                        effect: "encoder_slit_error",
+                        site: out_site.clone(),
+                        output: Some(i),
+                        starts: vec![json!({"type": "encoder_slit_error", "pitch": lsb, "origin": -0.5 * lsb, "errors": vec![0.0; nn]})],
+                        free: (0..nn).map(|k| (k, Scale::Linear(sr))).collect(),
+                        s: vec![],
+                        rate_hz: out_rate,
+                    });
+                }
+            }
+        }
+        if want("axis_coupling") && ctx.channels.len() > 1 {
+            let others: Vec<String> = ctx
+                .channels
+                .iter()
+                .enumerate()
+                .filter(|(j, _)| *j != i)
+                .map(|(_, c)| c.signal.clone())
+                .collect();
+            let so = others.len();
+            out.push(Cand {
+                effect: "axis_coupling",
+                site: out_site.clone(),
+                output: Some(i),
+                starts: vec![json!({"type": "axis_coupling", "coupling": vec![0.0; so]})],
+                free: (0..so).map(|k| (k, Scale::Linear(sr / sy))).collect(),
+                s: others,
+                rate_hz: out_rate,
+            });
+        }
+        // Input side and inside the loop, for every scalar input of the plant.
+        for (from, to) in &ch.plant_inputs {
+            let u = signal(ctx, cur, from)?;
+            let (ru, su) = (range(&u), std_of(&u).max(1e-300));
+            let inp = Site::Input {
+                from: from.clone(),
+                to: to.clone(),
+            };
+            let fb = Site::Feedback {
+                from: from.clone(),
+                to: to.clone(),
+                position: ch.position.clone(),
+            };
+            let g = su / sy;
+            if want("hysteresis") {
+                out.push(Cand {
+                    effect: "hysteresis",
+                    site: inp.clone(),
+                    output: None,
+                    starts: [1.0, 4.0, 15.0]
+                        .iter()
+                        .map(|a| json!({"type": "hysteresis", "alpha": a / ru, "b": 1.0, "c": 0.8}))
+                        .collect(),
+                    free: vec![
+                        (0, Scale::Log),
+                        (1, Scale::Linear(0.1)),
+                        (2, Scale::Linear(0.1)),
+                    ],
+                    s: vec![],
+                    rate_hz: None,
+                });
+                let ry = range(&pos);
+                out.push(Cand {
+                    effect: "hysteresis",
+                    site: fb.clone(),
+                    output: None,
+                    starts: [1.0, 4.0, 15.0]
+                        .iter()
+                        .map(|a| json!({"type": "hysteresis", "alpha": a / ry, "b": 0.0, "c": -0.1 * g}))
+                        .collect(),
+                    free: vec![(0, Scale::Log), (1, Scale::Linear(0.1 * g)), (2, Scale::Linear(0.1 * g))],
+                    s: vec![],
+                    rate_hz: None,
+                });
+            }
+            if want("friction") {
+                let v: Vec<f64> = pos.windows(2).map(|w| (w[1] - w[0]) * fs).collect();
+                let sv = std_of(&v).max(1e-300);
+                out.push(Cand {
+                    effect: "friction",
+                    site: fb.clone(),
+                    output: None,
+                    starts: [0.01, 0.1]
+                        .iter()
+                        .map(|f| json!({"type": "friction", "coulomb": f * su, "stribeck": 0.0, "v_stribeck": sv, "viscous": 0.0, "v_eps": 0.01 * sv}))
+                        .collect(),
+                    free: vec![(0, Scale::Log), (3, Scale::Linear(0.1 * su / sv))],
+                    s: vec![],
+                    rate_hz: None,
+                });
+            }
+            if want("time_delay") {
+                out.push(Cand {
+                    effect: "time_delay",
+                    site: inp.clone(),
+                    output: None,
+                    starts: [0.5, 2.0, 6.0, 20.0]
+                        .iter()
+                        .map(|d| json!({"type": "time_delay", "max_delay_s": 200.0 / fs, "delay_s": d / fs}))
+                        .collect(),
+                    free: vec![(0, Scale::Linear(1.0 / fs))],
+                    s: vec![],
+                    rate_hz: None,
+                });
+            }
+            if want("saturation") {
+                let (lo, hi) = u
+                    .iter()
+                    .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
+                        (a.min(v), b.max(v))
+                    });
+                let mid = 0.5 * (lo + hi);
+                out.push(Cand {
+                    effect: "saturation",
+                    site: inp.clone(),
+                    output: None,
+                    starts: [0.95, 0.8, 0.6]
+                        .iter()
+                        .map(|f| json!({"type": "saturation", "lower": mid - f * (mid - lo), "upper": mid + f * (hi - mid)}))
+                        .collect(),
+                    free: vec![(0, Scale::Linear(0.02 * ru)), (1, Scale::Linear(0.02 * ru))],
+                    s: vec![],
+                    rate_hz: None,
+                });
+            }
+            if want("backlash") {
+                out.push(Cand {
+                    effect: "backlash",
+                    site: inp.clone(),
+                    output: None,
+                    starts: [0.01, 0.05, 0.15]
+                        .iter()
+                        .map(|f| json!({"type": "backlash", "width": f * ru}))
+                        .collect(),
+                    free: vec![(0, Scale::Log)],
+                    s: vec![],
+                    rate_hz: None,
+                });
+            }
+            if want("creep") {
+                out.push(Cand {
+                    effect: "creep",
+                    site: inp.clone(),
+                    output: None,
+                    starts: [50.0, 10.0, 3.0]
+                        .iter()
+                        .map(|d| json!({"type": "creep", "terms": [{"gain": 0.01, "tau_s": t_len / d}]}))
+                        .collect(),
+                    free: vec![(0, Scale::Linear(0.05)), (1, Scale::Log)],
+                    s: vec![],
+                    rate_hz: None,
+                });
+            }
+            if want("position_dependent_gain") {
+                out.push(Cand {
+                    effect: "position_dependent_gain",
+                    site: inp.clone(),
+                    output: None,
+                    starts: vec![json!({"type": "position_dependent_gain", "variable": "signal", "center": stats::mean(&pos), "scale": range(&pos) / 2.0, "coeffs": [0.0, 0.0]})],
+                    free: vec![(0, Scale::Linear(0.05)), (1, Scale::Linear(0.05))],
+                    s: vec![ch.position.clone()],
+                    rate_hz: None,
+                });
+            }
+            if want("unmodeled_resonance") {
+                out.push(resonance(r, fs, inp.clone(), None, None));
+            }
+            if want("repetitive_disturbance") {
+                if let Some(p) = line_period(r) {
+                    let h = 3;
+                    out.push(Cand {
+                        effect: "repetitive_disturbance",
+                        site: inp.clone(),
+                        output: None,
+                        starts: vec![json!({"type": "repetitive_disturbance", "period": p / fs, "variable": "time", "cos": vec![0.0; h], "sin": vec![0.0; h]})],
+                        free: std::iter::once((0, Scale::Log)).chain((1..=2 * h).map(|k| (k, Scale::Linear(0.1 * su)))).collect(),
+                        s: vec![],
+                        rate_hz: None,
+                    });
+                }
+            }
+        }
+    }
+    Ok(out)
+}
+
+fn resonance(r: &[f64], fs: f64, site: Site, output: Option<usize>, rate_hz: Option<f64>) -> Cand {
+    let (_, f) = stats::fisher_g(r);
+    let fp = (f * fs).clamp(fs * 1e-4, 0.4 * fs);
+    Cand {
+        effect: "unmodeled_resonance",
+        site,
+        output,
+        starts: [0.7, 1.4]
+            .iter()
+            .map(|k| {
+                json!({"type": "unmodeled_resonance", "f_pole_hz": fp, "zeta_pole": 0.05, "f_zero_hz": (k * fp).min(0.45 * fs), "zeta_zero": 0.05})
+            })
+            .collect(),
+        free: vec![(0, Scale::Log), (1, Scale::Log), (2, Scale::Log), (3, Scale::Log)],
+        s: vec![],
+        rate_hz,
+    }
+}
+
+/// The lsb of a `quantizer` producing `signal`, if one does.
+fn quantizer_lsb(spec: &GraphSpec, signal: &str) -> Option<f64> {
+    let (b, _) = signal.split_once('.')?;
+    let blk = spec.blocks.iter().find(|x| x.name == b)?;
+    if blk.block.typetag_name() != "quantizer" {
+        return None;
+    }
+    surgery::block_to_json(blk.block.as_ref())
+        .get("lsb")?
+        .as_f64()
+}
+
+/// The number of slits per period of the slit errors: the N (2..=min(512, slits/3))
+/// whose per-slit-index means explain the residual best by BIC; `None` if no N
+/// beats "no slit error".
+fn slit_count(r: &[f64], y: &[f64], pitch: f64, slits: usize) -> Option<usize> {
+    let n = r.len() as f64;
+    let sse0: f64 = r.iter().map(|v| v * v).sum();
+    let mut best: Option<(usize, f64)> = None;
+    let bic0 = n * (sse0 / n).ln();
+    for nn in 2..=(slits / 3).min(512) {
+        let mut sum = vec![0.0; nn];
+        let mut cnt = vec![0usize; nn];
+        for (v, p) in r.iter().zip(y) {
+            let idx = ((p + 0.5 * pitch) / pitch).floor() as i64;
+            let k = idx.rem_euclid(nn as i64) as usize;
+            sum[k] += v;
+            cnt[k] += 1;
+        }
+        let sse: f64 = sse0
+            - sum
+                .iter()
+                .zip(&cnt)
+                .map(|(s, &c)| if c > 0 { s * s / c as f64 } else { 0.0 })
+                .sum::<f64>();
+        let bic = n * (sse.max(1e-300) / n).ln() + nn as f64 * n.ln();
+        if bic < bic0 - 10.0 && best.is_none_or(|(_, b)| bic < b) {
+            best = Some((nn, bic));
+        }
+    }
+    best.map(|(nn, _)| nn)
+}
+
+fn fit_candidate(ctx: &Ctx<'_>, cur: &Current, c: &Cand) -> Result<Fitted, String> {
+    let mut best: Option<(
+        f64,
+        GraphSpec,
+        String,
+        Vec<FreeParam>,
+        Vec<f64>,
+        Vec<Vec<f64>>,
+        usize,
+    )> = None;
+    let mut runs = 0;
+    for start in &c.starts {
+        let block = surgery::block_from_json(start.clone()).map_err(|e| e.to_string())?;
+        let mut spec = cur.spec().map_err(|e| e.to_string())?;
+        let stem = format!("plf_{}", c.effect);
+        let name = surgery::insert(&mut spec, &stem, block, &c.site, &c.s, c.rate_hz)
+            .map_err(|e| e.to_string())?;
+        let new_free: Vec<FreeParam> = c
+            .free
+            .iter()
+            .map(|&(index, scale)| FreeParam {
+                block: name.clone(),
+                index,
+                scale,
+            })
+            .collect();
+        let (cost, std, residual) = if let Some(i) = c.output {
+            // Output side: the effect alone on the current model output.
+            let mut inputs = vec![cur.model[i].clone()];
+            for sname in &c.s {
+                let j = ctx.channels.iter().position(|ch| &ch.signal == sname);
+                inputs.push(match j {
+                    Some(j) => cur.model[j].clone(),
+                    None => signal(ctx, cur, sname).map_err(|e| e.to_string())?,
+                });
+            }
+            let measured = ctx
+                .data
+                .column(&ctx.channels[i].column)
+                .unwrap_or(&[])
+                .to_vec();
+            let block = surgery::block_from_json(start.clone()).map_err(|e| e.to_string())?;
+            let mut be = BlockEvaluator::new(
+                block,
+                &c.free,
+                inputs,
+                measured.clone(),
+                weight(ctx, i),
+                ctx.fs,
+                0,
+            )
+            .map_err(|e| e.to_string())?;
+            let z0 = vec![0.0; c.free.len()];
+            let Some(fit) = levenberg_marquardt(&mut be, &z0, ctx.n_est, 30) else {
+                continue;
+            };
+            runs += fit.runs;
+            if !be.run(&fit.z, ctx.n) {
+                continue;
+            }
+            // Write the fitted values into the inserted block of the spec.
+            let theta = be.theta(&fit.z);
+            let b = spec
+                .blocks
+                .iter_mut()
+                .find(|b| b.name == name)
+                .expect("inserted");
+            let t = b.block.tunable_mut().ok_or("effect block is not tunable")?;
+            let mut p = t.params();
+            for (k, &(idx, _)) in c.free.iter().enumerate() {
+                p[idx] = theta[k];
+            }
+            t.set_params(&p).map_err(|e| e.to_string())?;
+            let mut residual = cur.residual.clone();
+            residual[i] = measured.iter().zip(&be.y).map(|(m, y)| m - y).collect();
+            (fit.cost, fit.std, residual)
+        } else {
+            let mut ev = Evaluator::new(
+                surgery::clone_spec(&spec).map_err(|e| e.to_string())?,
+                ctx.data,
+                &new_free,
+                0,
+            )
+            .map_err(|e| e.to_string())?;
+            let z0 = vec![0.0; new_free.len()];
+            let Some(fit) = levenberg_marquardt(&mut ev, &z0, ctx.n_est, 25) else {
+                continue;
+            };
+            runs += fit.runs + 1;
+            ev.export(&fit.z, &mut spec).map_err(|e| e.to_string())?;
+            if !ev.run(&fit.z, ctx.n) {
+                continue;
+            }
+            let residual = (0..ev.outputs())
+                .map(|i| ev.residual(i, 0..ctx.n))
+                .collect();
+            (fit.cost, fit.std, residual)
+        };
+        if best.as_ref().is_none_or(|b| cost < b.0) {
+            best = Some((cost, spec, name, new_free, std, residual, 0));
+        }
+    }
+    let (_, spec, name, new_free, std, residual, _) = best.ok_or("no start could be fitted")?;
+    let k = c.free.len() as f64;
+    let ne = ctx.n_est as f64;
+    let nh = (ctx.n - ctx.n_est) as f64;
+    let score =
+        weighted_holdout_ms(ctx, &residual) * (1.0 + k * ne.ln() / ne) * (1.0 + k / nh.sqrt());
+    let mut free = cur.free.clone();
+    free.extend(new_free);
+    Ok(Fitted {
+        spec,
+        block_name: name,
+        free_indices: c.free.iter().map(|&(i, _)| i).collect(),
+        free,
+        std,
+        residual,
+        score,
+        runs,
+    })
+}
+
+/// Refit all effects' free parameters together on the full graph.
+fn joint_refit(ctx: &Ctx<'_>, win: &Fitted, runs: &mut usize) -> Result<Fitted, PlfError> {
+    let mut spec = surgery::clone_spec(&win.spec)?;
+    let mut ev = Evaluator::new(surgery::clone_spec(&spec)?, ctx.data, &win.free, 0)?;
+    let z0 = vec![0.0; win.free.len()];
+    let fit = levenberg_marquardt(&mut ev, &z0, ctx.n_est, 15)
+        .ok_or_else(|| PlfError::Model("joint refit could not run".into()))?;
+    *runs += fit.runs + 1;
+    ev.export(&fit.z, &mut spec)?;
+    if !ev.run(&fit.z, ctx.n) {
+        return Err(PlfError::Model(
+            "joint refit diverges on the held-out part".into(),
+        ));
+    }
+    let residual = (0..ev.outputs())
+        .map(|i| ev.residual(i, 0..ctx.n))
+        .collect();
+    let k0 = win.free.len() - win.free_indices.len();
+    Ok(Fitted {
+        spec,
+        block_name: win.block_name.clone(),
+        free: win.free.clone(),
+        free_indices: win.free_indices.clone(),
+        std: fit.std[k0..].to_vec(),
+        residual,
+        score: win.score,
+        runs: fit.runs,
+    })
+}
+
+/// The variable an effect shows itself against, its label, and its values.
+fn revealing_variable(ctx: &Ctx<'_>, cur: &Current, c: &Cand) -> (String, Vec<f64>) {
+    let i = c.output.unwrap_or(0);
+    let t: Vec<f64> = (0..ctx.n).map(|k| k as f64 / ctx.fs).collect();
+    let input = |site: &Site| -> Option<(String, Vec<f64>)> {
+        match site {
+            Site::Input { from, .. } => signal(ctx, cur, from).ok().map(|v| (from.clone(), v)),
+            Site::Feedback { position, .. } => signal(ctx, cur, position)
+                .ok()
+                .map(|v| (position.clone(), v)),
+            Site::Output { .. } => None,
+        }
+    };
+    match c.effect {
+        "hysteresis" | "backlash" | "saturation" | "position_dependent_gain" => {
+            input(&c.site).unwrap_or_else(|| (ctx.channels[i].signal.clone(), cur.model[i].clone()))
+        }
+        "friction" => {
+            let p = signal(ctx, cur, &ctx.channels[i].position).unwrap_or_default();
+            let mut v: Vec<f64> = p.windows(2).map(|w| (w[1] - w[0]) * ctx.fs).collect();
+            v.insert(0, 0.0);
+            (format!("velocity d({})/dt", ctx.channels[i].position), v)
+        }
+        "quantization" | "encoder_slit_error" => {
+            (ctx.channels[i].signal.clone(), cur.model[i].clone())
+        }
+        "axis_coupling" => {
+            let j = (i + 1) % ctx.channels.len();
+            (ctx.channels[j].signal.clone(), cur.model[j].clone())
+        }
+        _ => ("time (s)".into(), t),
+    }
+}
+
+fn evidence(ctx: &Ctx<'_>, cur: &Current, c: &Cand) -> String {
+    let i = c.output.unwrap_or(0);
+    let r = &cur.residual[i][..ctx.n_est];
+    let (var, x) = revealing_variable(ctx, cur, c);
+    let x = &x[..ctx.n_est.min(x.len())];
+    match c.effect {
+        "hysteresis" | "backlash" => {
+            // Branch gap: residual on rising vs falling x, binned over x.
+            let bins = 20;
+            let (lo, span) = (x.iter().copied().fold(f64::INFINITY, f64::min), range(x));
+            let mut acc = vec![[0.0f64; 4]; bins];
+            for k in 1..x.len().min(r.len()) {
+                let b = ((((x[k] - lo) / span) * bins as f64) as usize).min(bins - 1);
+                let up = usize::from(x[k] < x[k - 1]) * 2;
+                acc[b][up] += r[k];
+                acc[b][up + 1] += 1.0;
+            }
+            let gaps: Vec<f64> = acc
+                .iter()
+                .filter(|a| a[1] > 0.0 && a[3] > 0.0)
+                .map(|a| a[0] / a[1] - a[2] / a[3])
+                .collect();
+            let gap = stats::mean_square(&gaps).sqrt();
+            format!(
+                "the residual differs by {gap:.3e} (rms over {} bins of {var}) between rising and falling {var} — a loop, not a curve (residual rms {:.3e})",
+                gaps.len(),
+                std_of(r)
+            )
+        }
+        "friction" => {
+            let near: Vec<usize> = (1..x.len())
+                .filter(|&k| x[k].signum() != x[k - 1].signum())
+                .collect();
+            let mut mask = vec![false; x.len()];
+            for &k in &near {
+                for m in k.saturating_sub(5)..(k + 5).min(x.len()) {
+                    mask[m] = true;
+                }
+            }
+            let (a, b): (Vec<f64>, Vec<f64>) = (0..r.len().min(x.len()))
+                .map(|k| (mask[k], r[k]))
+                .fold((Vec::new(), Vec::new()), |(mut a, mut b), (m, v)| {
+                    if m {
+                        a.push(v)
+                    } else {
+                        b.push(v)
+                    }
+                    (a, b)
+                });
+            format!(
+                "{} velocity reversals; residual rms within 5 samples of one is {:.2}x the rms elsewhere",
+                near.len(),
+                stats::mean_square(&a).sqrt() / stats::mean_square(&b).sqrt().max(1e-300)
+            )
+        }
+        "time_delay" => {
+            let dx: Vec<f64> = cur.model[i].windows(2).map(|w| w[1] - w[0]).collect();
+            let (t, lag) = stats::input_correlation(&r[1..], &dx[..r.len() - 1], 30);
+            format!(
+                "the residual correlates with the model output's rate of change (|z| = {:.1}, p = {:.1e}, lag {lag} samples)",
+                t.statistic, t.p_value
+            )
+        }
+        "repetitive_disturbance" | "unmodeled_resonance" => {
+            let (t, f) = stats::fisher_g(r);
+            format!(
+                "a periodic line at {:.4} Hz holds {:.0} % of the residual's periodogram (Fisher g, p = {:.1e})",
+                f * ctx.fs,
+                100.0 * t.statistic,
+                t.p_value
+            )
+        }
+        "drift" => {
+            let phi = nalgebra::DMatrix::from_fn(r.len(), 2, |k, j| {
+                if j == 0 { 1.0 } else { k as f64 / ctx.fs }
+            });
+            match stats::least_squares(&phi, r) {
+                Some((th, cov)) => format!(
+                    "the residual trends by {:.3e} per second (t = {:.1})",
+                    th[1],
+                    th[1] / cov[(1, 1)].sqrt()
+                ),
+                None => "the residual trends".into(),
+            }
+        }
+        _ => {
+            let w = stats::ljung_box(r, 20);
+            format!(
+                "residual not white (Ljung–Box Q = {:.0}, p = {:.1e}); best explained against {var}",
+                w.statistic, w.p_value
+            )
+        }
+    }
+}
+
+fn evidence_plot(ctx: &Ctx<'_>, cur: &Current, c: &Cand, win: &Fitted, step: usize) -> PlotData {
+    let i = c.output.unwrap_or(0);
+    let (var, x) = revealing_variable(ctx, cur, c);
+    let n = x.len().min(ctx.n);
+    // At most 4000 points per series.
+    let stride = (n / 4000).max(1);
+    let pick = |v: &[f64]| -> Vec<f64> { v.iter().take(n).step_by(stride).copied().collect() };
+    let xs = pick(&x);
+    PlotData {
+        name: format!("step{step}_{}", c.effect),
+        title: format!("step {step}: {} ({})", c.effect, c.site.describe()),
+        x_label: var,
+        y_label: format!("residual {} (measured − model)", ctx.channels[i].column),
+        scatter: true,
+        series: vec![
+            ("before".into(), xs.clone(), pick(&cur.residual[i])),
+            ("after".into(), xs, pick(&win.residual[i])),
+        ],
+    }
+}

@@ -1,0 +1,584 @@
+//! Fitting effect parameters by re-simulating the graph: an [`Evaluator`] owns a
+//! built scheduler with the measured data attached and turns a parameter vector
+//! into the residual `measured − model` of every compared output; [`levenberg_marquardt`]
+//! minimises its sum of squares with a finite-difference Jacobian and returns the
+//! parameters with their uncertainty from the final Jacobian.
+//!
+//! Nothing is parsed or allocated per sample inside a run: parameters are written
+//! into the [`Tunable`](nanomotion_core::Tunable) blocks, the scheduler is reset and
+//! stepped, and the compared logs are read in place.
+
+use crate::PlfError;
+use nanomotion_core::Scheduler;
+use nanomotion_core::data::Dataset;
+use nanomotion_core::graph::GraphSpec;
+use std::sync::Arc;
+
+/// How a fitted parameter is moved by the optimiser.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Scale {
+    /// θ = θ₀ + s·z: a signed parameter with typical size s.
+    Linear(f64),
+    /// θ = θ₀·e^z: a strictly positive parameter.
+    Log,
+}
+
+/// One free parameter: parameter `index` of the tunable block `block`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FreeParam {
+    /// The block's name.
+    pub block: String,
+    /// Index in the block's [`Tunable::params`](nanomotion_core::Tunable::params) vector.
+    pub index: usize,
+    /// How the optimiser moves it.
+    pub scale: Scale,
+}
+
+/// A least-squares problem over optimiser coordinates `z`.
+pub trait Problem {
+    /// Parameter values for coordinates `z` (z = 0: the start values).
+    fn theta(&self, z: &[f64]) -> Vec<f64>;
+    /// dθ/dz at `z`, element-wise.
+    fn dtheta_dz(&self, z: &[f64]) -> Vec<f64>;
+    /// The weighted residuals over the first `n` samples, `None` if the model
+    /// refuses the parameters or diverges.
+    fn weighted_residuals(&mut self, z: &[f64], n: usize) -> Option<Vec<f64>>;
+}
+
+fn theta_of(free: &[(Scale, f64)], z: &[f64]) -> Vec<f64> {
+    free.iter()
+        .zip(z)
+        .map(|(&(scale, v0), &zi)| match scale {
+            Scale::Linear(s) => v0 + s * zi,
+            Scale::Log => v0 * zi.exp(),
+        })
+        .collect()
+}
+
+fn dtheta_of(free: &[(Scale, f64)], z: &[f64]) -> Vec<f64> {
+    free.iter()
+        .zip(z)
+        .map(|(&(scale, v0), &zi)| match scale {
+            Scale::Linear(s) => s,
+            Scale::Log => v0 * zi.exp(),
+        })
+        .collect()
+}
+
+/// One effect block run on its own on fixed input sequences (an effect on a
+/// compared output does not change the rest of the graph, so its fit needs no
+/// simulation of the graph).
+pub struct BlockEvaluator {
+    block: Box<dyn nanomotion_core::Block>,
+    free: Vec<(usize, Scale, f64)>,
+    inputs: Vec<Vec<f64>>,
+    measured: Vec<f64>,
+    weight: f64,
+    dt: f64,
+    skip: usize,
+    u_buf: Vec<f64>,
+    /// Output of the last run.
+    pub y: Vec<f64>,
+}
+
+impl BlockEvaluator {
+    /// `block` with its port `u` fed by `inputs[0]` and port `s` (if any) by the
+    /// rest, at sample rate `fs_hz`, compared with `measured`.
+    pub fn new(
+        block: Box<dyn nanomotion_core::Block>,
+        free: &[(usize, Scale)],
+        inputs: Vec<Vec<f64>>,
+        measured: Vec<f64>,
+        weight: f64,
+        fs_hz: f64,
+        skip: usize,
+    ) -> Result<Self, PlfError> {
+        let mut block = block;
+        let p = block
+            .tunable()
+            .map(|t| t.params())
+            .ok_or_else(|| PlfError::Model("effect block has no fittable parameters".into()))?;
+        let free = free
+            .iter()
+            .map(|&(i, s)| (i, s, p.get(i).copied().unwrap_or(0.0)))
+            .collect();
+        let ctx = nanomotion_core::BuildContext::new("effect", 1.0 / fs_hz, 0);
+        block
+            .build(&ctx)
+            .map_err(|e| PlfError::Model(e.to_string()))?;
+        let width: usize = block.inputs().iter().map(|q| q.width).sum();
+        if width != inputs.len() {
+            return Err(PlfError::Model(format!(
+                "effect block takes {width} input values, {} signals given",
+                inputs.len()
+            )));
+        }
+        Ok(Self {
+            block,
+            free,
+            u_buf: vec![0.0; width],
+            y: Vec::new(),
+            inputs,
+            measured,
+            weight,
+            dt: 1.0 / fs_hz,
+            skip,
+        })
+    }
+
+    fn free_scales(&self) -> Vec<(Scale, f64)> {
+        self.free.iter().map(|&(_, s, v)| (s, v)).collect()
+    }
+
+    /// Run the block on the first `n` samples with coordinates `z`.
+    pub fn run(&mut self, z: &[f64], n: usize) -> bool {
+        let theta = theta_of(&self.free_scales(), z);
+        let Some(t) = self.block.tunable_mut() else {
+            return false;
+        };
+        let mut p = t.params();
+        for (k, &(i, _, _)) in self.free.iter().enumerate() {
+            p[i] = theta[k];
+        }
+        if t.set_params(&p).is_err() {
+            return false;
+        }
+        let ctx = nanomotion_core::BuildContext::new("effect", self.dt, 0);
+        if self.block.build(&ctx).is_err() {
+            return false;
+        }
+        let n = n.min(self.measured.len());
+        self.y.clear();
+        self.y.resize(n, 0.0);
+        let ft = self.block.direct_feedthrough();
+        let mut out = [0.0];
+        for k in 0..n {
+            for (j, col) in self.inputs.iter().enumerate() {
+                self.u_buf[j] = col[k];
+            }
+            let tick = nanomotion_core::Tick::new(k as u64, self.dt);
+            self.block.output(tick, &self.u_buf, &mut out);
+            if !ft {
+                self.block.update(tick, &self.u_buf);
+            }
+            if !out[0].is_finite() {
+                return false;
+            }
+            self.y[k] = out[0];
+        }
+        true
+    }
+}
+
+impl Problem for BlockEvaluator {
+    fn theta(&self, z: &[f64]) -> Vec<f64> {
+        theta_of(&self.free_scales(), z)
+    }
+    fn dtheta_dz(&self, z: &[f64]) -> Vec<f64> {
+        dtheta_of(&self.free_scales(), z)
+    }
+    fn weighted_residuals(&mut self, z: &[f64], n: usize) -> Option<Vec<f64>> {
+        if !self.run(z, n) {
+            return None;
+        }
+        Some(
+            (self.skip..self.y.len())
+                .map(|k| (self.measured[k] - self.y[k]) * self.weight)
+                .collect(),
+        )
+    }
+}
+
+/// A built graph with data, ready to be evaluated for many parameter vectors.
+pub struct Evaluator {
+    sched: Scheduler,
+    /// (execution index of block, parameter index, scale, start value).
+    free: Vec<(usize, usize, Scale, f64)>,
+    measured: Vec<Vec<f64>>,
+    /// Log samples per data sample, per compared output.
+    decim: Vec<usize>,
+    /// Normalisation of each output's residual (its measured standard deviation).
+    weight: Vec<f64>,
+    /// Base ticks per data sample.
+    ticks_per_sample: u64,
+    n_total: usize,
+    /// Data samples at the start excluded from every cost (initial transient).
+    skip: usize,
+}
+
+impl Evaluator {
+    /// Build `spec` with `data` and prepare to vary `free`.
+    pub fn new(
+        spec: GraphSpec,
+        data: &Arc<Dataset>,
+        free: &[FreeParam],
+        skip: usize,
+    ) -> Result<Self, PlfError> {
+        let base = spec.base_rate_hz;
+        let ratio = base / data.rate_hz();
+        let tps = ratio.round();
+        if (ratio - tps).abs() > 1e-9 * ratio || tps < 1.0 {
+            return Err(PlfError::Model(format!(
+                "the graph's base rate {base} Hz is not an integer multiple of the data rate {} Hz",
+                data.rate_hz()
+            )));
+        }
+        let (sched, _) = spec
+            .build_with_data(data.clone())
+            .map_err(|e| PlfError::Model(e.to_string()))?;
+        let mut measured = Vec::new();
+        let mut decim = Vec::new();
+        let mut weight = Vec::new();
+        let compares: Vec<(String, String)> = sched
+            .compares()
+            .map(|(s, c)| (s.to_string(), c.to_string()))
+            .collect();
+        if compares.is_empty() {
+            return Err(PlfError::Model(
+                "the graph has no `compare:` entries: pair a model output with a measured column"
+                    .into(),
+            ));
+        }
+        for (i, (signal, column)) in compares.iter().enumerate() {
+            let col = data
+                .require(column)
+                .map_err(|e| PlfError::Data(e.to_string()))?;
+            let (_, rate) = sched.compare_log(i).expect("compare index in range");
+            let m = rate / data.rate_hz();
+            let mr = m.round();
+            if (m - mr).abs() > 1e-9 * m || mr < 1.0 {
+                return Err(PlfError::Model(format!(
+                    "compared signal {signal} runs at {rate} Hz, not an integer multiple of the data rate {} Hz",
+                    data.rate_hz()
+                )));
+            }
+            let sd = crate::stats::mean_square(
+                &col.iter()
+                    .map(|v| v - crate::stats::mean(col))
+                    .collect::<Vec<_>>(),
+            )
+            .sqrt();
+            weight.push(if sd > 0.0 { 1.0 / sd } else { 1.0 });
+            measured.push(col.to_vec());
+            decim.push(mr as usize);
+        }
+        let mut me = Self {
+            sched,
+            free: Vec::new(),
+            measured,
+            decim,
+            weight,
+            ticks_per_sample: tps as u64,
+            n_total: data.len(),
+            skip,
+        };
+        for f in free {
+            let bi = me
+                .sched
+                .block_index(&f.block)
+                .ok_or_else(|| PlfError::Model(format!("no block `{}` to fit", f.block)))?;
+            let tun = me
+                .sched
+                .block_at_mut(bi)
+                .and_then(|b| b.tunable_mut())
+                .ok_or_else(|| {
+                    PlfError::Model(format!("block `{}` has no fittable parameters", f.block))
+                })?;
+            let p = tun.params();
+            let v = *p.get(f.index).ok_or_else(|| {
+                PlfError::Model(format!("block `{}` has no parameter {}", f.block, f.index))
+            })?;
+            me.free.push((bi, f.index, f.scale, v));
+        }
+        Ok(me)
+    }
+
+    /// Number of free parameters.
+    pub fn dim(&self) -> usize {
+        self.free.len()
+    }
+
+    /// Number of compared outputs.
+    pub fn outputs(&self) -> usize {
+        self.measured.len()
+    }
+
+    /// Data samples in the record.
+    pub fn len(&self) -> usize {
+        self.n_total
+    }
+
+    /// Whether the record is empty.
+    pub fn is_empty(&self) -> bool {
+        self.n_total == 0
+    }
+
+    fn free_scales(&self) -> Vec<(Scale, f64)> {
+        self.free.iter().map(|&(_, _, s, v)| (s, v)).collect()
+    }
+
+    /// Write the fitted values for `z` into the matching blocks of `spec` (a graph
+    /// with the same block names), so it can be saved or run on its own.
+    pub fn export(&self, z: &[f64], spec: &mut GraphSpec) -> Result<(), PlfError> {
+        let theta = self.theta(z);
+        for (k, &(bi, pi, _, _)) in self.free.iter().enumerate() {
+            let name = &self.sched.block_names()[bi];
+            let b = spec
+                .blocks
+                .iter_mut()
+                .find(|b| &b.name == name)
+                .ok_or_else(|| {
+                    PlfError::Model(format!("no block `{name}` in the graph to export to"))
+                })?;
+            let t = b
+                .block
+                .tunable_mut()
+                .ok_or_else(|| PlfError::Model(format!("block `{name}` is not tunable")))?;
+            let mut p = t.params();
+            p[pi] = theta[k];
+            t.set_params(&p)
+                .map_err(|e| PlfError::Model(format!("block `{name}`: {e}")))?;
+        }
+        Ok(())
+    }
+
+    /// A logged signal (`block.port`, width 1) of the last run at the data rate.
+    pub fn log_series(&self, name: &str) -> Option<Vec<f64>> {
+        let (data, width, rate) = self.sched.log_view(name)?;
+        if width != 1 {
+            return None;
+        }
+        let m = (rate * self.ticks_per_sample as f64 / self.sched.base_rate_hz())
+            .round()
+            .max(1.0) as usize;
+        Some(data.iter().step_by(m).copied().collect())
+    }
+
+    /// The measured column of output `i`.
+    pub fn measured(&self, i: usize) -> &[f64] {
+        &self.measured[i]
+    }
+
+    /// The weight (1/σ of the measured signal) of output `i`.
+    pub fn weight(&self, i: usize) -> f64 {
+        self.weight[i]
+    }
+
+    /// Write the parameters for `z` into the blocks. `false` if a block refuses them.
+    fn apply(&mut self, z: &[f64]) -> bool {
+        let theta = theta_of(&self.free_scales(), z);
+        for (k, &(bi, pi, _, _)) in self.free.clone().iter().enumerate() {
+            let Some(t) = self.sched.block_at_mut(bi).and_then(|b| b.tunable_mut()) else {
+                return false;
+            };
+            let mut p = t.params();
+            p[pi] = theta[k];
+            if t.set_params(&p).is_err() {
+                return false;
+            }
+        }
+        true
+    }
+
+    /// Run the first `n` data samples with parameters `z`; `false` if the
+    /// parameters were refused, the graph could not restart, or an output is not
+    /// finite.
+    pub fn run(&mut self, z: &[f64], n: usize) -> bool {
+        if !self.apply(z) || self.sched.reset().is_err() {
+            return false;
+        }
+        self.sched
+            .step_n(n.min(self.n_total) as u64 * self.ticks_per_sample);
+        self.sched.check_finite().is_ok()
+    }
+
+    /// The model output `i` at data sample `k` of the last run.
+    #[inline]
+    pub fn model(&self, i: usize, k: usize) -> f64 {
+        let (log, _) = self.sched.compare_log(i).expect("compare index");
+        log.get(k * self.decim[i]).copied().unwrap_or(f64::NAN)
+    }
+
+    /// Residuals `measured − model` of output `i` over data samples `range`, from the last run.
+    pub fn residual(&self, i: usize, range: std::ops::Range<usize>) -> Vec<f64> {
+        range
+            .map(|k| self.measured[i][k] - self.model(i, k))
+            .collect()
+    }
+
+    /// Model output `i` over `range`, from the last run.
+    pub fn model_series(&self, i: usize, range: std::ops::Range<usize>) -> Vec<f64> {
+        range.map(|k| self.model(i, k)).collect()
+    }
+}
+
+impl Problem for Evaluator {
+    fn theta(&self, z: &[f64]) -> Vec<f64> {
+        theta_of(&self.free_scales(), z)
+    }
+    fn dtheta_dz(&self, z: &[f64]) -> Vec<f64> {
+        dtheta_of(&self.free_scales(), z)
+    }
+    /// Weighted residual vector (all outputs, samples `skip..n`) for `z`, or `None`
+    /// when the run fails.
+    fn weighted_residuals(&mut self, z: &[f64], n: usize) -> Option<Vec<f64>> {
+        if !self.run(z, n) {
+            return None;
+        }
+        let mut r = Vec::with_capacity(self.outputs() * n);
+        for i in 0..self.outputs() {
+            for k in self.skip..n {
+                let v = (self.measured[i][k] - self.model(i, k)) * self.weight[i];
+                if !v.is_finite() {
+                    return None;
+                }
+                r.push(v);
+            }
+        }
+        Some(r)
+    }
+}
+
+/// Result of a fit.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Fit {
+    /// Optimiser coordinates of the optimum.
+    pub z: Vec<f64>,
+    /// Parameter values.
+    pub theta: Vec<f64>,
+    /// One standard deviation of each parameter, from σ²(JᵀJ)⁻¹ at the optimum
+    /// (NaN where the Jacobian is rank deficient).
+    pub std: Vec<f64>,
+    /// Sum of squared weighted residuals at the optimum.
+    pub cost: f64,
+    /// Number of residuals.
+    pub n: usize,
+    /// Graph runs used.
+    pub runs: usize,
+}
+
+/// Levenberg–Marquardt (Marquardt's diagonal scaling, Nielsen's damping update) on
+/// the evaluator's weighted residuals over the first `n` data samples, from `z0`.
+/// Steps whose run fails (refused parameters, divergence) are rejected like steps
+/// that increase the cost. `None` if even `z0` cannot be run.
+///
+/// Why our own and not the `levenberg-marquardt` crate: every residual evaluation is
+/// a simulation that may diverge for a trial step; here such a step is simply
+/// rejected and the damping raised, and the run count is bounded.
+pub fn levenberg_marquardt<P: Problem>(
+    ev: &mut P,
+    z0: &[f64],
+    n: usize,
+    max_iter: usize,
+) -> Option<Fit> {
+    let p = z0.len();
+    let mut z = z0.to_vec();
+    let mut r = ev.weighted_residuals(&z, n)?;
+    let mut cost: f64 = r.iter().map(|v| v * v).sum();
+    let mut runs = 1;
+    let mut lambda = 1e-3;
+    let mut nu = 2.0;
+    let h = 1e-6;
+    let mut jac = nalgebra::DMatrix::<f64>::zeros(r.len(), p);
+    let mut have_jac = false;
+    for _ in 0..max_iter {
+        if p == 0 {
+            break;
+        }
+        // Forward-difference Jacobian.
+        let mut ok = true;
+        for j in 0..p {
+            let mut zj = z.clone();
+            zj[j] += h;
+            runs += 1;
+            match ev.weighted_residuals(&zj, n) {
+                Some(rj) => {
+                    for (i, (a, b)) in rj.iter().zip(&r).enumerate() {
+                        jac[(i, j)] = (a - b) / h;
+                    }
+                }
+                None => {
+                    ok = false;
+                    break;
+                }
+            }
+        }
+        if !ok {
+            break;
+        }
+        have_jac = true;
+        let jt = jac.transpose();
+        let jtj = &jt * &jac;
+        let g = &jt * nalgebra::DVector::from_column_slice(&r);
+        let mut improved = false;
+        for _ in 0..12 {
+            let mut a = jtj.clone();
+            for i in 0..p {
+                a[(i, i)] += lambda * jtj[(i, i)].max(1e-12);
+            }
+            let Some(step) = a.cholesky().map(|c| c.solve(&(-&g))) else {
+                lambda *= nu;
+                nu *= 2.0;
+                continue;
+            };
+            let zn: Vec<f64> = z.iter().zip(step.iter()).map(|(a, b)| a + b).collect();
+            runs += 1;
+            if let Some(rn) = ev.weighted_residuals(&zn, n) {
+                let cn: f64 = rn.iter().map(|v| v * v).sum();
+                if cn < cost {
+                    let rel = (cost - cn) / cost.max(1e-300);
+                    z = zn;
+                    r = rn;
+                    cost = cn;
+                    lambda = (lambda / 3.0).max(1e-12);
+                    nu = 2.0;
+                    improved = true;
+                    if rel < 1e-9 {
+                        return Some(finish(ev, z, cost, r.len(), runs, &jac, have_jac));
+                    }
+                    break;
+                }
+            }
+            lambda *= nu;
+            nu *= 2.0;
+        }
+        if !improved {
+            break;
+        }
+    }
+    Some(finish(ev, z, cost, r.len(), runs, &jac, have_jac))
+}
+
+fn finish<P: Problem>(
+    ev: &P,
+    z: Vec<f64>,
+    cost: f64,
+    n: usize,
+    runs: usize,
+    jac: &nalgebra::DMatrix<f64>,
+    have_jac: bool,
+) -> Fit {
+    let p = z.len();
+    let theta = ev.theta(&z);
+    let dz = ev.dtheta_dz(&z);
+    let mut std = vec![f64::NAN; p];
+    if have_jac && n > p {
+        let sigma2 = cost / (n - p) as f64;
+        if let Some(inv) = (jac.transpose() * jac).try_inverse() {
+            for i in 0..p {
+                let v = sigma2 * inv[(i, i)];
+                if v >= 0.0 {
+                    std[i] = v.sqrt() * dz[i].abs();
+                }
+            }
+        }
+    }
+    Fit {
+        z,
+        theta,
+        std,
+        cost,
+        n,
+        runs,
+    }
+}
