@@ -17,6 +17,7 @@
 pub mod diagnose;
 pub mod effects;
 pub mod fit;
+pub mod generate;
 pub mod stats;
 pub mod surgery;
 

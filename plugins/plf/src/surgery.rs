@@ -134,10 +134,10 @@ pub fn channels(spec: &GraphSpec) -> Result<Vec<Channel>, PlfError> {
     for c in &spec.compare {
         let (mut block, _) = split(&c.signal);
         let mut position = c.signal.clone();
-        // Walk up through sensor/math blocks with a single input to the plant.
+        // Walk up through sensor blocks (quantisers, measurement noise) with a
+        // single input to the plant.
         for _ in 0..8 {
-            let role = role_of(block);
-            if matches!(role, Some(Role::Plant) | Some(Role::Actuator)) {
+            if role_of(block) != Some(Role::Sensor) {
                 break;
             }
             let feeding: Vec<&Connection> = spec
@@ -145,7 +145,7 @@ pub fn channels(spec: &GraphSpec) -> Result<Vec<Channel>, PlfError> {
                 .iter()
                 .filter(|k| split(&k.to).0 == block)
                 .collect();
-            if feeding.len() != 1 || !matches!(role, Some(Role::Sensor) | Some(Role::Math)) {
+            if feeding.len() != 1 {
                 break;
             }
             position = feeding[0].from.clone();

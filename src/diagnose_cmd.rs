@@ -1,0 +1,267 @@
+//! `nanomotion diagnose`: the model-discrepancy workflow from the command line.
+
+use indicatif::{ProgressBar, ProgressStyle};
+use nanomotion::core::data::Dataset;
+use nanomotion::core::graph::GraphSpec;
+use nanomotion::plf::diagnose::{Options, PlotData, Report, diagnose_with_progress};
+use nanomotion::plot::{Figure, Scale, Series, draw_svg};
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+/// Arguments of the command.
+pub struct Args {
+    pub model: PathBuf,
+    pub data: PathBuf,
+    pub out: Option<PathBuf>,
+    pub json: Option<PathBuf>,
+    pub max_effects: usize,
+    pub holdout: f64,
+    pub seed: Option<u64>,
+    pub effects: Vec<String>,
+}
+
+pub fn run(a: Args) -> Result<(), String> {
+    let spec = GraphSpec::from_file(&a.model).map_err(|e| e.to_string())?;
+    let data = Dataset::from_file(&a.data).map_err(|e| e.to_string())?;
+    let out = a.out.clone().unwrap_or_else(|| {
+        PathBuf::from("out").join(format!(
+            "diagnose_{}",
+            a.model.file_stem().map(|s| s.to_string_lossy().to_string()).unwrap_or_default()
+        ))
+    });
+    std::fs::create_dir_all(&out).map_err(|e| format!("cannot create {}: {e}", out.display()))?;
+    let opts = Options {
+        max_effects: a.max_effects,
+        holdout: a.holdout,
+        seed: a.seed,
+        effects: a.effects.clone(),
+        ..Options::default()
+    };
+    println!(
+        "diagnosing {} against {} ({} samples at {} Hz; last {:.0} % held out)",
+        a.model.display(),
+        a.data.display(),
+        data.len(),
+        data.rate_hz(),
+        100.0 * a.holdout
+    );
+    let start = Instant::now();
+    let mut bar: Option<ProgressBar> = None;
+    let report = diagnose_with_progress(&spec, &data, &opts, &mut |what, frac| {
+        if bar.is_none() && start.elapsed() > Duration::from_millis(500) {
+            let b = ProgressBar::new(1000);
+            b.set_style(
+                ProgressStyle::with_template("{spinner} {msg} [{bar:30}] {percent:>3}% ({elapsed})")
+                    .expect("static template")
+                    .progress_chars("=> "),
+            );
+            bar = Some(b);
+        }
+        if let Some(b) = &bar {
+            b.set_message(what.to_string());
+            b.set_position((frac * 1000.0) as u64);
+        }
+    })
+    .map_err(|e| e.to_string())?;
+    if let Some(b) = bar {
+        b.finish_and_clear();
+    }
+    print_report(&report);
+    println!("({} graph runs in {:.1} s)", report.runs, start.elapsed().as_secs_f64());
+    let files = write(&out, &report, &a)?;
+    println!("wrote {} files to {}", files.len(), out.display());
+    println!(
+        "re-run the augmented model: nanomotion run {} --data {}",
+        out.join("model_augmented.yaml").display(),
+        a.data.display()
+    );
+    Ok(())
+}
+
+fn print_report(r: &Report) {
+    println!("\nnominal model:");
+    println!(
+        "  rms {:.4e}, held-out rms {:.4e}, fit {:.1} %",
+        r.nominal.rms, r.nominal.holdout_rms, r.nominal.fit_percent
+    );
+    for t in &r.nominal_tests {
+        println!(
+            "  {}: whiteness Ljung–Box Q = {:.0} (p = {:.1e}{}); input correlation with {} |z| = {:.1} at lag {} (p = {:.1e}{}); strongest line {:.3} Hz (Fisher g p = {:.1e}); noise floor ≈ {:.3e}",
+            t.signal,
+            t.whiteness.statistic,
+            t.whiteness.p_value,
+            if t.whiteness.p_value < 0.01 { ": not white" } else { ": white at 1 %" },
+            t.input,
+            t.input_correlation.statistic,
+            t.input_lag,
+            t.input_correlation.p_value,
+            if t.input_correlation.p_value < 0.01 { ": the model misses an input-driven effect" } else { "" },
+            t.line_hz,
+            t.periodic_line.p_value,
+            t.noise_floor
+        );
+    }
+    for (k, s) in r.steps.iter().enumerate() {
+        println!("\nstep {}: candidates tried (best first):", k + 1);
+        for c in s.candidates.iter().take(8) {
+            match &c.note {
+                None => println!(
+                    "  {:<24} {:<52} {:>2} params  held-out rms {:.4e}",
+                    c.effect, c.site, c.n_params, c.holdout_rms
+                ),
+                Some(n) => println!("  {:<24} {:<52} {n}", c.effect, c.site),
+            }
+        }
+        if s.candidates.len() > 8 {
+            println!("  ... and {} more (see the JSON report)", s.candidates.len() - 8);
+        }
+        println!("  => named: {} (block `{}`, type `{}`), {}", s.effect, s.block.name, s.block.type_name, s.site);
+        println!("     evidence: {}", s.evidence);
+        let params: Vec<String> = s
+            .params
+            .iter()
+            .map(|(k, v)| match s.uncertainty.get(k) {
+                Some(u) => format!("{k} = {v:.4e} ± {u:.1e}"),
+                None => format!("{k} = {v:.4e}"),
+            })
+            .collect();
+        println!("     parameters: {}", params.join(", "));
+        println!(
+            "     held-out rms {:.4e} -> {:.4e} ({:.1} % cut, p = {:.1e})",
+            s.holdout_rms_before, s.holdout_rms_after, s.cut_percent, s.p_value
+        );
+    }
+    println!(
+        "\nfound: [{}]",
+        r.found.iter().map(|f| format!("\"{f}\"")).collect::<Vec<_>>().join(", ")
+    );
+    println!(
+        "final: rms {:.4e}, held-out rms {:.4e}, fit {:.1} % (nominal held-out {:.4e}: {:.1} % cut)",
+        r.final_scores.rms,
+        r.final_scores.holdout_rms,
+        r.final_scores.fit_percent,
+        r.nominal.holdout_rms,
+        100.0 * (1.0 - r.final_scores.holdout_rms / r.nominal.holdout_rms)
+    );
+    println!("stopped because {}", r.stopped_because);
+}
+
+fn plot(p: &PlotData, path: &Path) -> Result<(), String> {
+    // Loops (hysteresis, backlash) read in time order; other clouds sorted by x.
+    let loops = p.name.contains("hysteresis") || p.name.contains("backlash");
+    let series = p
+        .series
+        .iter()
+        .map(|(label, x, y)| {
+            let (mut x, mut y) = (x.clone(), y.clone());
+            if !loops {
+                let mut idx: Vec<usize> = (0..x.len()).collect();
+                idx.sort_by(|&a, &b| x[a].total_cmp(&x[b]));
+                let xx = x.clone();
+                x = idx.iter().map(|&i| xx[i]).collect();
+                let yy = y.clone();
+                y = idx.iter().map(|&i| yy[i]).collect();
+            }
+            Series {
+                label: label.clone(),
+                x,
+                y,
+            }
+        })
+        .collect();
+    draw_svg(
+        &Figure {
+            title: p.title.clone(),
+            x_label: p.x_label.clone(),
+            y_label: p.y_label.clone(),
+            x_scale: Scale::Linear,
+            series,
+        },
+        path,
+    )
+    .map_err(|e| e.to_string())
+}
+
+fn write(out: &Path, r: &Report, a: &Args) -> Result<Vec<PathBuf>, String> {
+    let mut files = Vec::new();
+    let io = |p: &Path| {
+        let p = p.display().to_string();
+        move |e: std::io::Error| format!("cannot write {p}: {e}")
+    };
+    if let Some(spec) = &r.augmented {
+        let yaml = nanomotion::core::yaml::to_string(spec).map_err(|e| e.to_string())?;
+        let path = out.join("model_augmented.yaml");
+        let header = format!(
+            "# Written by `nanomotion diagnose {} {}`: the nominal graph plus the effects found ({}).\n",
+            a.model.display(),
+            a.data.display(),
+            if r.found.is_empty() { "none".to_string() } else { r.found.join(", ") }
+        );
+        std::fs::write(&path, header + &yaml).map_err(io(&path))?;
+        files.push(path);
+    }
+    let json = serde_json::to_string_pretty(r).map_err(|e| e.to_string())?;
+    let path = a.json.clone().unwrap_or_else(|| out.join("report.json"));
+    std::fs::write(&path, json).map_err(io(&path))?;
+    files.push(path);
+    for p in &r.plots {
+        let path = out.join(format!("evidence_{}.svg", p.name));
+        plot(p, &path)?;
+        files.push(path);
+    }
+    for (signal, before, after) in &r.residuals {
+        let stem = nanomotion::output::file_stem(signal);
+        let t: Vec<f64> = (0..before.len()).map(|k| k as f64 / r.rate_hz).collect();
+        let path = out.join(format!("residual_{stem}.svg"));
+        draw_svg(
+            &Figure {
+                title: format!("residual of {signal}, before and after"),
+                x_label: "time (s)".into(),
+                y_label: "measured − model".into(),
+                x_scale: Scale::Linear,
+                series: vec![
+                    Series {
+                        label: "nominal".into(),
+                        x: t.clone(),
+                        y: before.clone(),
+                    },
+                    Series {
+                        label: "augmented".into(),
+                        x: t,
+                        y: after.clone(),
+                    },
+                ],
+            },
+            &path,
+        )
+        .map_err(|e| e.to_string())?;
+        files.push(path);
+        let (f0, c0) = nanomotion::output::cumulative_psd(before, r.rate_hz);
+        let (f1, c1) = nanomotion::output::cumulative_psd(after, r.rate_hz);
+        let path = out.join(format!("residual_cpsd_{stem}.svg"));
+        draw_svg(
+            &Figure {
+                title: format!("cumulative PSD of the residual of {signal}"),
+                x_label: "frequency (Hz)".into(),
+                y_label: "cumulative PSD (unit²)".into(),
+                x_scale: Scale::Log,
+                series: vec![
+                    Series {
+                        label: "nominal".into(),
+                        x: f0,
+                        y: c0,
+                    },
+                    Series {
+                        label: "augmented".into(),
+                        x: f1,
+                        y: c1,
+                    },
+                ],
+            },
+            &path,
+        )
+        .map_err(|e| e.to_string())?;
+        files.push(path);
+    }
+    Ok(files)
+}
