@@ -172,94 +172,102 @@ pub fn second_order(
             (a.min(v), b.max(v))
         });
     let ru = uhi - ulo;
-    let truth = match hidden {
-        "none" => Truth::None,
-        "hysteresis" => Truth::Hysteresis {
-            beta: rng.uniform_in(2.0, 6.0) / ru,
-            gamma: rng.uniform_in(-1.0, 1.0) / ru,
-            h: rng.uniform_in(0.25, 0.5),
-        },
-        "friction" => {
-            let fc = rng.uniform_in(0.04, 0.1) * f_amp;
-            Truth::Friction {
-                fc,
-                fs: fc * rng.uniform_in(1.0, 1.5),
-                vs: rng.uniform_in(0.5, 2.0) * x_amp,
-                veps: 0.01 * x_amp,
+    let draw = |name: &str, rng: &mut Rng| -> Result<Truth, DataError> {
+        Ok(match name {
+            "none" => Truth::None,
+            "hysteresis" => Truth::Hysteresis {
+                beta: rng.uniform_in(2.0, 6.0) / ru,
+                gamma: rng.uniform_in(-1.0, 1.0) / ru,
+                h: rng.uniform_in(0.25, 0.5),
+            },
+            "friction" => {
+                let fc = rng.uniform_in(0.04, 0.1) * f_amp;
+                Truth::Friction {
+                    fc,
+                    fs: fc * rng.uniform_in(1.0, 1.5),
+                    vs: rng.uniform_in(0.5, 2.0) * x_amp,
+                    veps: 0.01 * x_amp,
+                }
             }
-        }
-        "time_delay" => Truth::Delay {
-            fine_steps: (rng.uniform_in(1.0, 4.0) * OVERSAMPLE as f64).round() as usize,
-        },
-        "repetitive_disturbance" => Truth::Repetitive {
-            f: rng.uniform_in(5.0, 40.0),
-            amps: [
-                rng.uniform_in(0.1, 0.2) * x_amp,
-                rng.uniform_in(0.0, 0.08) * x_amp,
-                rng.uniform_in(0.0, 0.05) * x_amp,
-            ],
-            phases: [
-                rng.uniform_in(0.0, 6.28),
-                rng.uniform_in(0.0, 6.28),
-                rng.uniform_in(0.0, 6.28),
-            ],
-        },
-        "position_dependent_gain" => Truth::PositionGain {
-            g: rng.uniform_in(0.2, 0.4) * if rng.uniform() < 0.5 { -1.0 } else { 1.0 },
-            center: 0.0,
-            scale: x_amp,
-        },
-        "quantization" => Truth::Quantization {
-            q: rng.uniform_in(0.15, 0.3) * x_amp,
-        },
-        "unmodeled_resonance" => {
-            let fp = rng.uniform_in(150.0, 350.0);
-            Truth::Resonance {
-                fp,
-                zp: rng.uniform_in(0.01, 0.04),
-                fz: fp * rng.uniform_in(0.6, 0.8),
-                zz: rng.uniform_in(0.01, 0.04),
+            "time_delay" => Truth::Delay {
+                fine_steps: (rng.uniform_in(1.0, 4.0) * OVERSAMPLE as f64).round() as usize,
+            },
+            "repetitive_disturbance" => Truth::Repetitive {
+                f: rng.uniform_in(5.0, 40.0),
+                amps: [
+                    rng.uniform_in(0.1, 0.2) * x_amp,
+                    rng.uniform_in(0.0, 0.08) * x_amp,
+                    rng.uniform_in(0.0, 0.05) * x_amp,
+                ],
+                phases: [
+                    rng.uniform_in(0.0, 6.28),
+                    rng.uniform_in(0.0, 6.28),
+                    rng.uniform_in(0.0, 6.28),
+                ],
+            },
+            "position_dependent_gain" => Truth::PositionGain {
+                g: rng.uniform_in(0.2, 0.4) * if rng.uniform() < 0.5 { -1.0 } else { 1.0 },
+                center: 0.0,
+                scale: x_amp,
+            },
+            "quantization" => Truth::Quantization {
+                q: rng.uniform_in(0.15, 0.3) * x_amp,
+            },
+            "unmodeled_resonance" => {
+                let fp = rng.uniform_in(150.0, 350.0);
+                Truth::Resonance {
+                    fp,
+                    zp: rng.uniform_in(0.01, 0.04),
+                    fz: fp * rng.uniform_in(0.6, 0.8),
+                    zz: rng.uniform_in(0.01, 0.04),
+                }
             }
-        }
-        "drift" => Truth::Drift {
-            a: rng.uniform_in(-0.1, 0.1) * x_amp,
-            b: rng.uniform_in(0.02, 0.05) * x_amp * if rng.uniform() < 0.5 { -1.0 } else { 1.0 },
-            c: rng.uniform_in(-0.002, 0.002) * x_amp,
-        },
-        "creep" => Truth::Creep {
-            gains: [
-                rng.uniform_in(0.03, 0.06),
-                rng.uniform_in(0.03, 0.06),
-                rng.uniform_in(0.02, 0.05),
-            ],
-            taus: [0.05, 0.5, 5.0],
-        },
-        "encoder_slit_error" => {
-            let q = 0.02 * x_amp;
-            let nn = [8usize, 12, 16, 20][(rng.uniform() * 4.0) as usize % 4];
-            Truth::SlitError {
-                q,
-                errors: (0..nn).map(|_| rng.normal() * 0.4 * q).collect(),
+            "drift" => Truth::Drift {
+                a: rng.uniform_in(-0.1, 0.1) * x_amp,
+                b: rng.uniform_in(0.02, 0.05)
+                    * x_amp
+                    * if rng.uniform() < 0.5 { -1.0 } else { 1.0 },
+                c: rng.uniform_in(-0.002, 0.002) * x_amp,
+            },
+            "creep" => Truth::Creep {
+                gains: [
+                    rng.uniform_in(0.03, 0.06),
+                    rng.uniform_in(0.03, 0.06),
+                    rng.uniform_in(0.02, 0.05),
+                ],
+                taus: [0.05, 0.5, 5.0],
+            },
+            "encoder_slit_error" => {
+                let q = 0.02 * x_amp;
+                let nn = [8usize, 12, 16, 20][(rng.uniform() * 4.0) as usize % 4];
+                Truth::SlitError {
+                    q,
+                    errors: (0..nn).map(|_| rng.normal() * 0.4 * q).collect(),
+                }
             }
-        }
-        "saturation" => {
-            let f = rng.uniform_in(0.6, 0.8);
-            Truth::Saturation {
-                lo: ulo * f,
-                hi: uhi * f,
+            "saturation" => {
+                let f = rng.uniform_in(0.6, 0.8);
+                Truth::Saturation {
+                    lo: ulo * f,
+                    hi: uhi * f,
+                }
             }
-        }
-        "backlash" => Truth::Backlash {
-            w: rng.uniform_in(0.05, 0.12) * ru,
-        },
-        other => {
-            return Err(DataError::new(
-                "generator",
-                format!("no single-axis generator for `{other}`"),
-                "use one of the vocabulary names (axis_coupling: two_axis)",
-            ));
-        }
+            "backlash" => Truth::Backlash {
+                w: rng.uniform_in(0.05, 0.12) * ru,
+            },
+            other => {
+                return Err(DataError::new(
+                    "generator",
+                    format!("no single-axis generator for `{other}`"),
+                    "use one of the vocabulary names (axis_coupling: two_axis)",
+                ));
+            }
+        })
     };
+    let mut truths = Vec::new();
+    for name in hidden.split('+') {
+        truths.push(draw(name.trim(), &mut rng)?);
+    }
     let (k, c, m) = (stage.k(), stage.c(), stage.m);
     let dt = 1.0 / (RATE_HZ * OVERSAMPLE as f64);
     // States: x, v, Bouc–Wen z, creep filters, resonance filter.
@@ -276,31 +284,36 @@ pub fn second_order(
     let sigma = 0.01 * x_amp;
     for (kk, &uk) in u.iter().enumerate() {
         // Sample at t_k (before this interval's input acts).
-        let meas_x = match &truth {
-            Truth::Resonance { fp, zp, fz, zz } => {
+        let mut meas_x = x;
+        for truth in &truths {
+            if let Truth::Resonance { fp, zp, fz, zz } = truth {
                 // y = (ωp²/ωz²)(r̈ + 2ζz ωz ṙ + ωz² r), r̈ + 2ζp ωp ṙ + ωp² r = x.
                 let (wp, wz) = (2.0 * PI * fp, 2.0 * PI * fz);
                 let rdd = x - 2.0 * zp * wp * res[1] - wp * wp * res[0];
-                (wp * wp / (wz * wz)) * (rdd + 2.0 * zz * wz * res[1] + wz * wz * res[0])
+                meas_x = (wp * wp / (wz * wz)) * (rdd + 2.0 * zz * wz * res[1] + wz * wz * res[0]);
             }
-            _ => x,
-        };
+        }
         let t = kk as f64 / RATE_HZ;
-        let mut ym = match &truth {
-            Truth::Repetitive { f, amps, phases } => {
-                meas_x
-                    + (0..3)
-                        .map(|h| amps[h] * (2.0 * PI * (h + 1) as f64 * f * t + phases[h]).sin())
-                        .sum::<f64>()
-            }
-            Truth::Quantization { q } => q * (meas_x / q).round(),
-            Truth::Drift { a, b, c } => meas_x + a + b * t + c * t * t,
-            Truth::SlitError { q, errors } => {
-                let idx = (meas_x / q).round();
-                q * idx + errors[(idx as i64).rem_euclid(errors.len() as i64) as usize]
-            }
-            _ => meas_x,
-        };
+        let mut ym = meas_x;
+        for truth in &truths {
+            ym = match truth {
+                Truth::Repetitive { f, amps, phases } => {
+                    meas_x
+                        + (0..3)
+                            .map(|h| {
+                                amps[h] * (2.0 * PI * (h + 1) as f64 * f * t + phases[h]).sin()
+                            })
+                            .sum::<f64>()
+                }
+                Truth::Quantization { q } => q * (ym / q).round(),
+                Truth::Drift { a, b, c } => ym + a + b * t + c * t * t,
+                Truth::SlitError { q, errors } => {
+                    let idx = (ym / q).round();
+                    q * idx + errors[(idx as i64).rem_euclid(errors.len() as i64) as usize]
+                }
+                _ => ym,
+            };
+        }
         noise_state = 0.98 * noise_state + rng.normal() * (1.0 - 0.98f64 * 0.98).sqrt();
         ym += sigma * rng.normal()
             + if coloured_noise {
@@ -314,50 +327,61 @@ pub fn second_order(
             let du = uk - u_prev;
             u_prev = uk;
             // Input-side effects.
-            let f = match &truth {
-                Truth::Hysteresis { beta, gamma, h } => {
-                    z += du - beta * du.abs() * z - gamma * du * z.abs();
-                    (1.0 - h) * uk + h * z
-                }
-                Truth::Delay { fine_steps } => {
-                    delay_line.rotate_right(1);
-                    delay_line[0] = uk;
-                    delay_line[*fine_steps]
-                }
-                Truth::PositionGain { g, center, scale } => uk * (1.0 + g * (x - center) / scale),
-                Truth::Creep { gains, taus } => {
-                    let mut s = uk;
-                    for i in 0..3 {
-                        creep[i] += (uk - creep[i]) * (1.0 - (-dt / taus[i]).exp());
-                        s += gains[i] * creep[i];
+            let mut f = uk;
+            for truth in &truths {
+                f = match truth {
+                    Truth::Hysteresis { beta, gamma, h } => {
+                        z += du - beta * du.abs() * z - gamma * du * z.abs();
+                        (1.0 - h) * uk + h * z
                     }
-                    s
-                }
-                Truth::Saturation { lo, hi } => uk.clamp(*lo, *hi),
-                Truth::Backlash { w } => {
-                    if uk - play > w / 2.0 {
-                        play = uk - w / 2.0;
-                    } else if play - uk > w / 2.0 {
-                        play = uk + w / 2.0;
+                    Truth::Delay { fine_steps } => {
+                        delay_line.rotate_right(1);
+                        delay_line[0] = uk;
+                        delay_line[*fine_steps]
                     }
-                    play
-                }
-                _ => uk,
-            };
+                    Truth::PositionGain { g, center, scale } => {
+                        f * (1.0 + g * (x - center) / scale)
+                    }
+                    Truth::Creep { gains, taus } => {
+                        let mut s = uk;
+                        for i in 0..3 {
+                            creep[i] += (uk - creep[i]) * (1.0 - (-dt / taus[i]).exp());
+                            s += gains[i] * creep[i];
+                        }
+                        s
+                    }
+                    Truth::Saturation { lo, hi } => f.clamp(*lo, *hi),
+                    Truth::Backlash { w } => {
+                        if uk - play > w / 2.0 {
+                            play = uk - w / 2.0;
+                        } else if play - uk > w / 2.0 {
+                            play = uk + w / 2.0;
+                        }
+                        play
+                    }
+                    _ => f,
+                };
+            }
             let friction = |v: f64| -> f64 {
-                match &truth {
-                    Truth::Friction { fc, fs, vs, veps } => {
-                        (fc + (fs - fc) * (-(v / vs).powi(2)).exp()) * (v / veps).tanh()
-                    }
-                    _ => 0.0,
-                }
+                truths
+                    .iter()
+                    .map(|truth| match truth {
+                        Truth::Friction { fc, fs, vs, veps } => {
+                            (fc + (fs - fc) * (-(v / vs).powi(2)).exp()) * (v / veps).tanh()
+                        }
+                        _ => 0.0,
+                    })
+                    .sum::<f64>()
             };
             // RK4 on (x, v, r, ṙ) with f held (friction evaluated inside; r is the
             // resonance filter's state, driven by x).
-            let (wp, zp) = match truth {
-                Truth::Resonance { fp, zp, .. } => (2.0 * PI * fp, zp),
-                _ => (0.0, 0.0),
-            };
+            let (wp, zp) = truths
+                .iter()
+                .find_map(|t| match t {
+                    Truth::Resonance { fp, zp, .. } => Some((2.0 * PI * fp, *zp)),
+                    _ => None,
+                })
+                .unwrap_or((0.0, 0.0));
             let deriv = |s: [f64; 4]| -> [f64; 4] {
                 [
                     s[1],
@@ -388,31 +412,28 @@ pub fn second_order(
             res = [s1[2], s1[3]];
         }
     }
+    let slit = truths.iter().find_map(|t| match t {
+        Truth::SlitError { q, .. } => Some(*q),
+        _ => None,
+    });
     let nominal_yaml = format!(
         "title: second-order stage (nominal, no {hidden})\nbase_rate_hz: {RATE_HZ}\nduration_s: {}\nblocks:\n  - {{ name: drive, type: data_column, column: u }}\n{}{}connections:\n  - {{ from: drive.y, to: stage.u }}\n{}compare:\n  - {{ signal: {}, column: y }}\n",
         n as f64 / RATE_HZ,
         stage.yaml_block("stage"),
-        if matches!(truth, Truth::SlitError { .. }) {
-            if let Truth::SlitError { q, .. } = &truth {
-                format!("  - {{ name: encoder, type: quantizer, lsb: {q:?} }}\n")
-            } else {
-                String::new()
-            }
-        } else {
-            String::new()
-        },
-        if matches!(truth, Truth::SlitError { .. }) {
+        slit.map(|q| format!("  - {{ name: encoder, type: quantizer, lsb: {q:?} }}\n"))
+            .unwrap_or_default(),
+        if slit.is_some() {
             "  - { from: stage.y, to: encoder.u }\n"
         } else {
             ""
         },
-        if matches!(truth, Truth::SlitError { .. }) {
+        if slit.is_some() {
             "encoder.y"
         } else {
             "stage.y"
         },
     );
-    let truth_text = match &truth {
+    let describe = |truth: &Truth| match truth {
         Truth::None => "no hidden effect".to_string(),
         Truth::Hysteresis { beta, gamma, h } => {
             format!("Bouc–Wen input hysteresis β = {beta:.3e}, γ = {gamma:.3e}, share {h:.2}")
@@ -440,6 +461,7 @@ pub fn second_order(
         Truth::Saturation { lo, hi } => format!("drive saturation [{lo:.3e}, {hi:.3e}] N"),
         Truth::Backlash { w } => format!("drive backlash width {w:.3e} N"),
     };
+    let truth_text = truths.iter().map(describe).collect::<Vec<_>>().join("; ");
     let data = Dataset::from_columns(
         "generated",
         RATE_HZ,
@@ -455,5 +477,102 @@ pub fn second_order(
             vec![hidden.to_string()]
         },
         truth: truth_text,
+    })
+}
+
+/// A two-axis record (`u`, `u2` drives; `y`, `y2` positions) of two independent
+/// second-order stages whose measured first axis sees the second one through a
+/// hidden static coupling y = x₁ + κ·x₂ (`axis_coupling`), or no coupling
+/// (`"none"`), seeded.
+pub fn two_axis(hidden: &str, seed: u64, n: usize) -> Result<Record, DataError> {
+    let mut rng = Rng::new(seed ^ 0x2a_c0de);
+    let stages = [
+        Stage {
+            f0: rng.uniform_in(20.0, 60.0),
+            zeta: rng.uniform_in(0.03, 0.15),
+            m: rng.uniform_in(0.2, 2.0),
+        },
+        Stage {
+            f0: rng.uniform_in(20.0, 60.0),
+            zeta: rng.uniform_in(0.03, 0.15),
+            m: rng.uniform_in(0.2, 2.0),
+        },
+    ];
+    let kappa = match hidden {
+        "none" => 0.0,
+        "axis_coupling" => {
+            rng.uniform_in(0.05, 0.15) * if rng.uniform() < 0.5 { -1.0 } else { 1.0 }
+        }
+        other => {
+            return Err(DataError::new(
+                "generator",
+                format!("no two-axis generator for `{other}`"),
+                "use axis_coupling or none",
+            ));
+        }
+    };
+    let x_amp = 1e-6;
+    let dt = 1.0 / (RATE_HZ * OVERSAMPLE as f64);
+    let mut us = Vec::new();
+    let mut xs = Vec::new();
+    for st in &stages {
+        let u = drive(&mut rng, n, st.k() * x_amp);
+        let (k, c, m) = (st.k(), st.c(), st.m);
+        let (mut x, mut v) = (0.0, 0.0);
+        let mut xk = Vec::with_capacity(n);
+        for &uk in &u {
+            xk.push(x);
+            for _ in 0..OVERSAMPLE {
+                let acc = |x: f64, v: f64| (uk - k * x - c * v) / m;
+                let (k1x, k1v) = (v, acc(x, v));
+                let (k2x, k2v) = (
+                    v + 0.5 * dt * k1v,
+                    acc(x + 0.5 * dt * k1x, v + 0.5 * dt * k1v),
+                );
+                let (k3x, k3v) = (
+                    v + 0.5 * dt * k2v,
+                    acc(x + 0.5 * dt * k2x, v + 0.5 * dt * k2v),
+                );
+                let (k4x, k4v) = (v + dt * k3v, acc(x + dt * k3x, v + dt * k3v));
+                x += dt / 6.0 * (k1x + 2.0 * k2x + 2.0 * k3x + k4x);
+                v += dt / 6.0 * (k1v + 2.0 * k2v + 2.0 * k3v + k4v);
+            }
+        }
+        us.push(u);
+        xs.push(xk);
+    }
+    let sigma = 0.01 * x_amp;
+    let y1: Vec<f64> = (0..n)
+        .map(|k| xs[0][k] + kappa * xs[1][k] + sigma * rng.normal())
+        .collect();
+    let y2: Vec<f64> = (0..n).map(|k| xs[1][k] + sigma * rng.normal()).collect();
+    let nominal_yaml = format!(
+        "title: two-axis stage (nominal, axes independent)\nbase_rate_hz: {RATE_HZ}\nduration_s: {}\nblocks:\n  - {{ name: drive_x, type: data_column, column: u }}\n  - {{ name: drive_y, type: data_column, column: u2 }}\n{}{}connections:\n  - {{ from: drive_x.y, to: stage_x.u }}\n  - {{ from: drive_y.y, to: stage_y.u }}\ncompare:\n  - {{ signal: stage_x.y, column: y }}\n  - {{ signal: stage_y.y, column: y2 }}\n",
+        n as f64 / RATE_HZ,
+        stages[0].yaml_block("stage_x"),
+        stages[1].yaml_block("stage_y"),
+    );
+    let u2 = us.pop().expect("two drives");
+    let u1 = us.pop().expect("two drives");
+    let data = Dataset::from_columns(
+        "generated",
+        RATE_HZ,
+        0.0,
+        vec![
+            ("u".into(), u1),
+            ("u2".into(), u2),
+            ("y".into(), y1),
+            ("y2".into(), y2),
+        ],
+    )?;
+    Ok(Record {
+        nominal_yaml,
+        data,
+        hidden: if kappa == 0.0 {
+            vec![]
+        } else {
+            vec!["axis_coupling".into()]
+        },
+        truth: format!("y = x1 + {kappa:.4}·x2"),
     })
 }
