@@ -231,10 +231,7 @@ impl ColemanHodgdon {
         if v_max <= v_m {
             return Err(ParamError::new(
                 "v_max",
-                format!(
-                    "input range u_R = u_M − u_m = {} must be > 0",
-                    v_max - v_m
-                ),
+                format!("input range u_R = u_M − u_m = {} must be > 0", v_max - v_m),
                 "give v_max > v_m",
             ));
         }
@@ -307,7 +304,9 @@ mod tests {
 
     #[test]
     fn validation_names_fields() {
-        let e = ChParams::new(-1.0, 1.0, 0.7).validate("retrace.").unwrap_err();
+        let e = ChParams::new(-1.0, 1.0, 0.7)
+            .validate("retrace.")
+            .unwrap_err();
         assert_eq!(e.field, "retrace.alpha");
         let e = ChParams::new(0.1, f64::NAN, 0.7)
             .validate_as("", &["alpha_per_v", "b_um_per_v", "u_um_per_v"])

@@ -124,7 +124,11 @@ impl Tunable for Creep {
         self.terms.iter().flat_map(|t| [t.gain, t.tau_s]).collect()
     }
     fn set_params(&mut self, p: &[f64]) -> Result<(), ParamError> {
-        check_len(p, 2 * self.terms.len(), "[gain_1, tau_1, gain_2, tau_2, ...]")?;
+        check_len(
+            p,
+            2 * self.terms.len(),
+            "[gain_1, tau_1, gain_2, tau_2, ...]",
+        )?;
         let next: Vec<CreepTerm> = p
             .chunks_exact(2)
             .map(|c| CreepTerm {

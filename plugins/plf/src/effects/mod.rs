@@ -137,10 +137,7 @@ impl Effect {
     /// other axes). `repetitive_disturbance` is periodic in time by default (port
     /// `s` only with `variable: signal`).
     pub fn needs_signal(self) -> bool {
-        matches!(
-            self,
-            Effect::PositionDependentGain | Effect::AxisCoupling
-        )
+        matches!(self, Effect::PositionDependentGain | Effect::AxisCoupling)
     }
 }
 

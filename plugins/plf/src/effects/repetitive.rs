@@ -94,7 +94,11 @@ impl RepetitiveDisturbance {
         if self.sin.len() != self.cos.len() {
             return Err(ParamError::new(
                 "sin",
-                format!("has {} entries but cos has {}", self.sin.len(), self.cos.len()),
+                format!(
+                    "has {} entries but cos has {}",
+                    self.sin.len(),
+                    self.cos.len()
+                ),
                 "give as many sine as cosine amplitudes",
             ));
         }

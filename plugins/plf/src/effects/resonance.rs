@@ -129,7 +129,13 @@ impl UnmodeledResonance {
         }
         let a = &ss.a;
         let (a11, a12, a21, a22) = (a[(0, 0)], a[(0, 1)], a[(1, 0)], a[(1, 1)]);
-        let (b1, b2, c1, c2, d) = (ss.b[(0, 0)], ss.b[(1, 0)], ss.c[(0, 0)], ss.c[(0, 1)], ss.d[(0, 0)]);
+        let (b1, b2, c1, c2, d) = (
+            ss.b[(0, 0)],
+            ss.b[(1, 0)],
+            ss.c[(0, 0)],
+            ss.c[(0, 1)],
+            ss.d[(0, 0)],
+        );
         let tr = a11 + a22;
         let det = a11 * a22 - a12 * a21;
         let cb = c1 * b1 + c2 * b2;
@@ -154,7 +160,12 @@ impl Block for UnmodeledResonance {
     fn build(&mut self, ctx: &BuildContext) -> Result<(), ParamError> {
         check::positive("dt", ctx.dt)?;
         Self::check(
-            [self.f_pole_hz, self.zeta_pole, self.f_zero_hz, self.zeta_zero],
+            [
+                self.f_pole_hz,
+                self.zeta_pole,
+                self.f_zero_hz,
+                self.zeta_zero,
+            ],
             Some(ctx.dt),
         )?;
         let (ss, coef) = self.discretise(ctx.dt)?;
@@ -202,7 +213,12 @@ impl Tunable for UnmodeledResonance {
             .to_vec()
     }
     fn params(&self) -> Vec<f64> {
-        vec![self.f_pole_hz, self.zeta_pole, self.f_zero_hz, self.zeta_zero]
+        vec![
+            self.f_pole_hz,
+            self.zeta_pole,
+            self.f_zero_hz,
+            self.zeta_zero,
+        ]
     }
     fn set_params(&mut self, p: &[f64]) -> Result<(), ParamError> {
         check_len(p, 4, "[f_pole_hz, zeta_pole, f_zero_hz, zeta_zero]")?;
