@@ -25,7 +25,7 @@
 //! ([`ch_closed_loop`]); [`ColemanHodgdon::steady_loop`] gives the periodic orbit of
 //! the asymmetric model in closed form.
 //!
-//! Units: α in 1/[u], b and c in [y]/[u]. The AFM-stage plugin uses V and µm
+//! Units: α in 1/\[u\], b and c in \[y\]/\[u\]. The AFM-stage plugin uses V and µm
 //! (Table 6.2); its YAML names `alpha_per_v`, `b_um_per_v`, `u_um_per_v` are
 //! accepted as aliases of `alpha`, `b`, `c`.
 
@@ -57,14 +57,14 @@ impl Direction {
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ChParams {
-    /// α (1/[u]) > 0: rate at which y approaches the anhysteretic line after a
+    /// α (1/\[u\]) > 0: rate at which y approaches the anhysteretic line after a
     /// reversal (YAML alias `alpha_per_v`).
     #[serde(alias = "alpha_per_v")]
     pub alpha: f64,
-    /// b ([y]/[u]): slope of the anhysteretic curve f(u) = b·u (alias `b_um_per_v`).
+    /// b (\[y\]/\[u\]): slope of the anhysteretic curve f(u) = b·u (alias `b_um_per_v`).
     #[serde(alias = "b_um_per_v")]
     pub b: f64,
-    /// c ([y]/[u]): slope g(u) = c right after a reversal (the thesis's u; alias
+    /// c (\[y\]/\[u\]): slope g(u) = c right after a reversal (the thesis's u; alias
     /// `u_um_per_v`).
     #[serde(alias = "u_um_per_v")]
     pub c: f64,
@@ -74,7 +74,7 @@ impl ChParams {
     /// The field names used by [`ChParams::validate`].
     pub const NAMES: [&'static str; 3] = ["alpha", "b", "c"];
 
-    /// A parameter set (α in 1/[u], b and c in [y]/[u]).
+    /// A parameter set (α in 1/\[u\], b and c in \[y\]/\[u\]).
     pub fn new(alpha: f64, b: f64, c: f64) -> Self {
         Self { alpha, b, c }
     }
@@ -103,7 +103,7 @@ impl ChParams {
         Ok(())
     }
 
-    /// k = (b − c)/α ([y]): distance of the asymptotes from the anhysteretic line.
+    /// k = (b − c)/α (\[y\]): distance of the asymptotes from the anhysteretic line.
     pub fn k(&self) -> f64 {
         (self.b - self.c) / self.alpha
     }

@@ -2,6 +2,9 @@
 //! `Tunable` and YAML round trips, graphs, allocation-free ticks, and random
 //! parameters (never a panic).
 
+// Tests compare several parallel sequences index by index.
+#![allow(clippy::needless_range_loop)]
+
 use nanomotion_core::blocks::math::Saturation;
 use nanomotion_core::blocks::sensors::{Quantizer, Rounding};
 use nanomotion_core::blocks::sources::{Constant, Sinusoid};
@@ -772,7 +775,7 @@ mod random_parameters {
             2 => Box::new(TimeDelay::new(v[0], v[1])),
             3 => {
                 let mut r = RepetitiveDisturbance::in_time(v[0], list(1), list(2));
-                if n % 2 == 0 {
+                if n.is_multiple_of(2) {
                     r.variable = PhaseVariable::Signal;
                     r.origin = v[3];
                 }

@@ -20,7 +20,7 @@ pub const MAX_COUPLED: usize = 8;
 #[derive(Debug, Clone, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct AxisCoupling {
-    /// c_1..c_n ([u]/[s]).
+    /// c_1..c_n (\[u\]/\[s\]).
     pub coupling: Vec<f64>,
     #[serde(skip)]
     dt: Option<f64>,

@@ -14,7 +14,7 @@ pub const MAX_TERMS: usize = 4;
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct CreepTerm {
-    /// Gain k_i ([y]/[u]).
+    /// Gain k_i (\[y\]/\[u\]).
     pub gain: f64,
     /// Time constant τ_i (s) > 0.
     pub tau_s: f64,

@@ -82,7 +82,7 @@ impl Block for TimeDelay {
         Self::check_delay(self.delay_s, self.max_delay_s)?;
         check::positive("dt", ctx.dt)?;
         let samples = (self.max_delay_s / ctx.dt).ceil();
-        if !(samples <= MAX_DELAY_SAMPLES) {
+        if samples.is_nan() || samples > MAX_DELAY_SAMPLES {
             return Err(ParamError::new(
                 "max_delay_s",
                 format!(

@@ -13,13 +13,13 @@ use serde::{Deserialize, Serialize};
 #[derive(Debug, Clone, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Drift {
-    /// Offset ([u]), default 0.
+    /// Offset (\[u\]), default 0.
     #[serde(default)]
     pub offset: f64,
-    /// Rate ([u]/s), default 0.
+    /// Rate (\[u\]/s), default 0.
     #[serde(default)]
     pub rate: f64,
-    /// Curvature ([u]/s²), default 0.
+    /// Curvature (\[u\]/s²), default 0.
     #[serde(default)]
     pub curvature: f64,
 }

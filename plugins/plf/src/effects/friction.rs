@@ -30,12 +30,12 @@ pub struct Friction {
     /// Stribeck excess F_S ≥ 0 (force unit): static minus Coulomb friction.
     #[serde(default)]
     pub stribeck: f64,
-    /// Stribeck velocity v_S > 0 ([u]/s).
+    /// Stribeck velocity v_S > 0 (\[u\]/s).
     pub v_stribeck: f64,
-    /// Viscous coefficient F_v (force per [u]/s).
+    /// Viscous coefficient F_v (force per \[u\]/s).
     #[serde(default)]
     pub viscous: f64,
-    /// Smoothing velocity v_ε > 0 ([u]/s) of the sign function.
+    /// Smoothing velocity v_ε > 0 (\[u\]/s) of the sign function.
     pub v_eps: f64,
     #[serde(skip)]
     prev: Option<f64>,
@@ -54,7 +54,7 @@ impl Friction {
         }
     }
 
-    /// The force at velocity `v` ([u]/s).
+    /// The force at velocity `v` (\[u\]/s).
     pub fn force(&self, v: f64) -> f64 {
         let r = v / self.v_stribeck;
         -(v / self.v_eps).tanh() * (self.coulomb + self.stribeck * (-r * r).exp())

@@ -19,11 +19,11 @@ use serde::{Deserialize, Serialize};
 #[derive(Debug, Clone, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Hysteresis {
-    /// α (1/[u]) > 0: how fast y returns to the anhysteretic line after a reversal.
+    /// α (1/\[u\]) > 0: how fast y returns to the anhysteretic line after a reversal.
     pub alpha: f64,
-    /// b ([y]/[u]): slope of the anhysteretic line y = b·u.
+    /// b (\[y\]/\[u\]): slope of the anhysteretic line y = b·u.
     pub b: f64,
-    /// c ([y]/[u]): slope right after a reversal (the thesis's u in (6.3)).
+    /// c (\[y\]/\[u\]): slope right after a reversal (the thesis's u in (6.3)).
     pub c: f64,
     /// Parameters for decreasing u (default: the same as for increasing u).
     #[serde(default, skip_serializing_if = "Option::is_none")]

@@ -47,9 +47,9 @@ pub struct RepetitiveDisturbance {
     /// Origin of the phase for `signal` (unit of s), default 0.
     #[serde(default)]
     pub origin: f64,
-    /// Cosine amplitudes of harmonics 1..H ([u]).
+    /// Cosine amplitudes of harmonics 1..H (\[u\]).
     pub cos: Vec<f64>,
-    /// Sine amplitudes of harmonics 1..H ([u]), as many as `cos`.
+    /// Sine amplitudes of harmonics 1..H (\[u\]), as many as `cos`.
     pub sin: Vec<f64>,
 }
 

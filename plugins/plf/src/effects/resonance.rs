@@ -95,7 +95,7 @@ impl UnmodeledResonance {
         if let Some(dt) = dt {
             let nyq = 0.5 / dt;
             for i in [0, 2] {
-                if !(p[i] < nyq) {
+                if p[i] >= nyq {
                     return Err(ParamError::new(
                         names[i],
                         format!(
