@@ -17,6 +17,8 @@
 //!   delays, frequency response, H∞ norm, FIR design, ZPETC);
 //! - [`analysis`]: Welch PSD/CPSD, cumulative PSD, FRF identification (open and
 //!   closed loop), zero-phase filtering, metrics;
+//! - [`models`]: physical models several plugins share (Coleman–Hodgdon
+//!   hysteresis);
 //! - [`blocks`]: the standard block library (gains, sums, filters, PID, noise,
 //!   references, ...);
 //! - [`rng`]: the seeded, version-stable random number generator behind all noise.
@@ -30,6 +32,7 @@ pub mod data;
 pub mod error;
 pub mod graph;
 pub mod lti;
+pub mod models;
 pub mod rng;
 pub mod roles;
 pub mod scheduler;

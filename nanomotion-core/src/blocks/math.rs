@@ -317,6 +317,8 @@ crate::submit_block_doc! {
 
 /// `saturation`: y = min(max(u, lower), upper), element-wise. A NaN input passes as
 /// NaN (it is never hidden by the clamp).
+///
+/// [`Tunable`](crate::Tunable) parameter vector: `[lower, upper]`.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Saturation {
@@ -370,6 +372,34 @@ impl Block for Saturation {
     }
     fn output(&mut self, _tick: Tick, u: &[f64], y: &mut [f64]) {
         self.apply(u, y);
+    }
+    fn tunable(&self) -> Option<&dyn crate::Tunable> {
+        Some(self)
+    }
+    fn tunable_mut(&mut self) -> Option<&mut dyn crate::Tunable> {
+        Some(self)
+    }
+}
+
+impl crate::Tunable for Saturation {
+    fn param_names(&self) -> Vec<String> {
+        vec!["lower".into(), "upper".into()]
+    }
+    fn params(&self) -> Vec<f64> {
+        vec![self.lower, self.upper]
+    }
+    fn set_params(&mut self, p: &[f64]) -> Result<(), ParamError> {
+        if p.len() != 2 {
+            return Err(ParamError::new(
+                "params",
+                format!("{} values given", p.len()),
+                "give [lower, upper]",
+            ));
+        }
+        check::ordered("lower", p[0], "upper", p[1])?;
+        self.lower = p[0];
+        self.upper = p[1];
+        Ok(())
     }
 }
 

@@ -17,7 +17,9 @@
 
 use crate::block::check;
 use crate::rng::Rng;
-use crate::{Block, BlockDoc, BuildContext, ParamDoc, ParamError, Port, Role, Sensor, Tick};
+use crate::{
+    Block, BlockDoc, BuildContext, ParamDoc, ParamError, Port, Role, Sensor, Tick, Tunable,
+};
 use serde::{Deserialize, Serialize};
 
 /// Resolution of the metrological AFM's laser interferometers (m), Ch. 6.
@@ -43,7 +45,10 @@ fn round() -> Rounding {
     Rounding::Round
 }
 
-/// `quantizer`: y = lsb·round(u/lsb) or lsb·⌊u/lsb⌋, element-wise.
+/// `quantizer`: y = lsb·round(u/lsb) or lsb·⌊u/lsb⌋, element-wise; with an
+/// `offset` o the grid is shifted: y = o + lsb·round((u − o)/lsb).
+///
+/// [`Tunable`] parameter vector: `[lsb, offset]`.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Quantizer {
@@ -55,6 +60,13 @@ pub struct Quantizer {
     /// Signal width n (default 1).
     #[serde(default = "one")]
     pub width: usize,
+    /// Offset o of the grid (unit of u, default 0): the levels are o + k·lsb.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub offset: f64,
+}
+
+fn is_zero(x: &f64) -> bool {
+    *x == 0.0
 }
 
 impl Quantizer {
@@ -64,16 +76,52 @@ impl Quantizer {
             lsb,
             rounding,
             width: 1,
+            offset: 0.0,
         }
+    }
+    /// The same quantiser with its grid shifted by `offset` (unit of u).
+    pub fn with_offset(mut self, offset: f64) -> Self {
+        self.offset = offset;
+        self
     }
     /// One value quantised.
     pub fn quantize(&self, x: f64) -> f64 {
-        let q = x / self.lsb;
-        let q = match self.rounding {
+        if self.offset == 0.0 {
+            return self.grid(x / self.lsb) * self.lsb;
+        }
+        self.offset + self.grid((x - self.offset) / self.lsb) * self.lsb
+    }
+    fn grid(&self, q: f64) -> f64 {
+        match self.rounding {
             Rounding::Round => q.round(),
             Rounding::Floor => q.floor(),
-        };
-        q * self.lsb
+        }
+    }
+    fn check_params(lsb: f64, offset: f64) -> Result<(), ParamError> {
+        check::positive("lsb", lsb)?;
+        check::finite("offset", offset)
+    }
+}
+
+impl Tunable for Quantizer {
+    fn param_names(&self) -> Vec<String> {
+        vec!["lsb".into(), "offset".into()]
+    }
+    fn params(&self) -> Vec<f64> {
+        vec![self.lsb, self.offset]
+    }
+    fn set_params(&mut self, p: &[f64]) -> Result<(), ParamError> {
+        if p.len() != 2 {
+            return Err(ParamError::new(
+                "params",
+                format!("{} values given", p.len()),
+                "give [lsb, offset]",
+            ));
+        }
+        Self::check_params(p[0], p[1])?;
+        self.lsb = p[0];
+        self.offset = p[1];
+        Ok(())
     }
 }
 
@@ -94,7 +142,7 @@ impl Block for Quantizer {
         vec![Port::new("y", self.width)]
     }
     fn build(&mut self, _ctx: &BuildContext) -> Result<(), ParamError> {
-        check::positive("lsb", self.lsb)?;
+        Self::check_params(self.lsb, self.offset)?;
         check::at_least_one("width", self.width)
     }
     fn output(&mut self, tick: Tick, u: &[f64], y: &mut [f64]) {
@@ -102,6 +150,12 @@ impl Block for Quantizer {
     }
     fn role(&self) -> Role {
         Role::Sensor
+    }
+    fn tunable(&self) -> Option<&dyn Tunable> {
+        Some(self)
+    }
+    fn tunable_mut(&mut self) -> Option<&mut dyn Tunable> {
+        Some(self)
     }
 }
 
@@ -114,6 +168,7 @@ crate::submit_block_doc! {
             ParamDoc { name: "lsb", doc: "resolution, one step (unit of u; interferometer 0.15e-9 m)", default: None },
             ParamDoc { name: "rounding", doc: "round (nearest) | floor (encoder count)", default: Some("round") },
             ParamDoc { name: "width", doc: "signal width", default: Some("1") },
+            ParamDoc { name: "offset", doc: "grid offset o (unit of u): levels o + k·lsb; tunable [lsb, offset]", default: Some("0") },
         ],
         ports: "u[n] -> y[n]",
     }

@@ -34,9 +34,7 @@ fn main() {
         "# loop centre (µm): {}",
         0.5 * (lp.eval(30.0, Direction::Trace) + lp.eval(70.0, Direction::Trace))
     );
-    let g = [0, 1, 2].map(|i| {
-        0.5 * (stage.hysteresis[i].trace.b_um_per_v + stage.hysteresis[i].trace.u_um_per_v)
-    });
+    let g = [0, 1, 2].map(|i| 0.5 * (stage.hysteresis[i].trace.b + stage.hysteresis[i].trace.c));
     let p = stage.small_signal_model(g).unwrap();
     let f = log_grid(0.1, 2000.0, 1500);
     for i in 0..3 {

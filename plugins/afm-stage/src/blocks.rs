@@ -3,7 +3,7 @@
 //! fixed voltage range. (The plant is `afm_stage`, the feed-forwards are
 //! `hysteresis_feedforward` and `position_feedforward`.)
 
-use crate::hysteresis::{ChParams, ColemanHodgdon, Direction, ExtendedCh};
+use crate::hysteresis::{CH_NAMES_UM_V, ChParams, ColemanHodgdon, Direction, ExtendedCh};
 use nanomotion_core::block::check;
 use nanomotion_core::{
     Actuator, Block, BlockDoc, BuildContext, ParamDoc, ParamError, Port, Role, Tick,
@@ -60,8 +60,10 @@ impl Block for ColemanHodgdonBlock {
     }
     fn build(&mut self, _ctx: &BuildContext) -> Result<(), ParamError> {
         check::finite("initial_v", self.initial_v)?;
-        let mut h = ColemanHodgdon::new(self.trace, self.retrace.unwrap_or(self.trace))
-            .map_err(ParamError::from)?;
+        let retrace = self.retrace.unwrap_or(self.trace);
+        self.trace.validate_as("trace.", &CH_NAMES_UM_V)?;
+        retrace.validate_as("retrace.", &CH_NAMES_UM_V)?;
+        let mut h = ColemanHodgdon::new(self.trace, retrace)?;
         h.step(self.initial_v);
         self.h = Some(h);
         Ok(())
@@ -80,7 +82,7 @@ nanomotion_core::submit_block_doc! {
         role: Role::Actuator,
         summary: "Coleman–Hodgdon piezo hysteresis dx/dt = α|V̇|(bV − x) + uV̇ (6.3), exact per sample, optional asymmetric retrace set",
         params: &[
-            ParamDoc { name: "trace", doc: "{alpha_per_v (1/V), b_um_per_v, u_um_per_v (µm/V)}", default: None },
+            ParamDoc { name: "trace", doc: "{alpha_per_v (1/V), b_um_per_v, u_um_per_v (µm/V)} (also spelled {alpha, b, c}, the core model's names)", default: None },
             ParamDoc { name: "retrace", doc: "parameters for decreasing voltage", default: Some("= trace") },
             ParamDoc { name: "initial_v", doc: "initial voltage (V)", default: Some("0") },
         ],

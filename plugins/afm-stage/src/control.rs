@@ -315,7 +315,7 @@ pub fn scan_experiment(
     let v0_x = match &mut ff {
         FeedForward::Hysteresis(h, _) => h.step(setup.x_lo_um),
         FeedForward::Position(p) => p.voltage(setup.x_lo_um),
-        FeedForward::None => setup.x_lo_um / st.hysteresis[0].trace.b_um_per_v,
+        FeedForward::None => setup.x_lo_um / st.hysteresis[0].trace.b,
     }
     .clamp(st.v_min_v, st.v_max_v);
     st.initial_v = [v0_x, setup.v_yz, setup.v_yz];
@@ -382,7 +382,7 @@ mod tests {
         // Small-signal plant with the mean hysteresis slope of a 36 V loop.
         let g = [0, 1, 2].map(|i| {
             let h = &stage.hysteresis[i].trace;
-            0.5 * (h.b_um_per_v + h.u_um_per_v)
+            0.5 * (h.b + h.c)
         });
         let p = stage.small_signal_model(g).unwrap();
         let f = log_grid(0.1, 2000.0, 1500);

@@ -119,3 +119,14 @@ impl From<AfmError> for nanomotion_core::ParamError {
         }
     }
 }
+
+/// The core's validation errors (e.g. of the shared Coleman–Hodgdon model) as
+/// [`AfmError::Parameter`].
+impl From<nanomotion_core::ParamError> for AfmError {
+    fn from(e: nanomotion_core::ParamError) -> Self {
+        AfmError::Parameter {
+            name: e.field,
+            problem: format!("{} (fix: {})", e.problem, e.fix),
+        }
+    }
+}

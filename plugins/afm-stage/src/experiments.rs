@@ -36,7 +36,7 @@ use std::f64::consts::TAU;
 pub fn linearised(stage: &AfmStage, gains: [f64; 3]) -> AfmStage {
     let mut s = stage.clone();
     for (h, g) in s.hysteresis.iter_mut().zip(gains) {
-        let p = ChParams::new(h.trace.alpha_per_v, g, g);
+        let p = ChParams::new(h.trace.alpha, g, g);
         h.trace = p;
         h.retrace = p;
     }
@@ -48,7 +48,7 @@ pub fn linearised(stage: &AfmStage, gains: [f64; 3]) -> AfmStage {
 pub fn design_gains(stage: &AfmStage) -> [f64; 3] {
     [0, 1, 2].map(|i| {
         let h = &stage.hysteresis[i].trace;
-        0.5 * (h.b_um_per_v + h.u_um_per_v)
+        0.5 * (h.b + h.c)
     })
 }
 

@@ -6,6 +6,9 @@
 //!
 //! # Coleman–Hodgdon
 //!
+//! (The model and its exact integrator live in the core,
+//! [`nanomotion_core::models::hysteresis`], unit-agnostic; they are re-exported here.)
+//!
 //! The rate-independent differential model
 //!
 //! ```text
@@ -46,230 +49,18 @@
 use crate::error::{AfmError, finite, positive};
 use serde::{Deserialize, Serialize};
 
-/// Direction of the voltage: trace (increasing, dV/dt ≥ 0) or retrace (decreasing).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum Direction {
-    /// Increasing voltage (dV/dt ≥ 0).
-    Trace,
-    /// Decreasing voltage (dV/dt < 0).
-    Retrace,
-}
-
-impl Direction {
-    /// `"trace"` or `"retrace"`.
-    pub fn as_str(self) -> &'static str {
-        match self {
-            Direction::Trace => "trace",
-            Direction::Retrace => "retrace",
-        }
-    }
-}
-
 // ---------------------------------------------------------------------------------
-// Coleman–Hodgdon
+// Coleman–Hodgdon: one copy, in the core (unit-agnostic), re-exported here
 // ---------------------------------------------------------------------------------
 
-/// One parameter set of the Coleman–Hodgdon model (6.3).
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct ChParams {
-    /// α (1/V) > 0: rate at which x approaches the anhysteretic line after a reversal.
-    pub alpha_per_v: f64,
-    /// b (µm/V): slope of the anhysteretic curve f(V) = bV.
-    pub b_um_per_v: f64,
-    /// u (µm/V): slope g(V) = u right after a reversal.
-    pub u_um_per_v: f64,
-}
+pub use nanomotion_core::models::hysteresis::{
+    ChParams, ColemanHodgdon, Direction, SteadyLoop, ch_closed_loop, ch_ode_rhs,
+};
 
-impl ChParams {
-    /// A parameter set (α in 1/V, b and u in µm/V).
-    pub fn new(alpha_per_v: f64, b_um_per_v: f64, u_um_per_v: f64) -> Self {
-        Self {
-            alpha_per_v,
-            b_um_per_v,
-            u_um_per_v,
-        }
-    }
-
-    /// Check α > 0 and b, u finite; `prefix` names the set in errors.
-    pub fn validate(&self, prefix: &str) -> Result<(), AfmError> {
-        positive(&format!("{prefix}alpha_per_v"), self.alpha_per_v)?;
-        finite(&format!("{prefix}b_um_per_v"), self.b_um_per_v)?;
-        finite(&format!("{prefix}u_um_per_v"), self.u_um_per_v)
-    }
-
-    /// k = (b − u)/α (µm): distance of the asymptotes from the anhysteretic line.
-    pub fn k(&self) -> f64 {
-        (self.b_um_per_v - self.u_um_per_v) / self.alpha_per_v
-    }
-}
-
-/// Right-hand side of the Coleman–Hodgdon ODE dx/dt = α|V̇|(bV − x) + uV̇.
-pub fn ch_ode_rhs(p: &ChParams, x: f64, v: f64, v_dot: f64) -> f64 {
-    p.alpha_per_v * v_dot.abs() * (p.b_um_per_v * v - x) + p.u_um_per_v * v_dot
-}
-
-/// The closed-loop branches (6.3) of the symmetric Coleman–Hodgdon model on
-/// [V_m, V_M]: the periodic orbit of the ODE under a voltage oscillating between
-/// V_m and V_M. Written in the overflow-free form e^{−α(V−V_m)}/(1 + e^{−αV_R}).
-pub fn ch_closed_loop(p: &ChParams, v: f64, v_m: f64, v_max: f64, dir: Direction) -> f64 {
-    let (a, b, k) = (p.alpha_per_v, p.b_um_per_v, p.k());
-    let er = (-a * (v_max - v_m)).exp();
-    match dir {
-        Direction::Trace => b * v - k * (1.0 - 2.0 * (-a * (v - v_m)).exp() / (1.0 + er)),
-        Direction::Retrace => b * v + k * (1.0 - 2.0 * (a * (v - v_max)).exp() / (1.0 + er)),
-    }
-}
-
-/// Coleman–Hodgdon hysteresis operator with separate trace/retrace parameter sets,
-/// integrated exactly sample by sample (input held piecewise monotone between
-/// samples).
-///
-/// ```
-/// use afm_stage::hysteresis::{ChParams, ColemanHodgdon, Direction, ch_closed_loop};
-/// let p = ChParams::new(0.03, 1.0, 0.7);
-/// let mut h = ColemanHodgdon::symmetric(p).unwrap();
-/// // Cycle between 0 and 100 V until the loop is periodic, then compare with (6.3).
-/// for _ in 0..5 {
-///     for k in 0..=100 { h.step(k as f64); }
-///     for k in (0..=100).rev() { h.step(k as f64); }
-/// }
-/// for k in 0..=50 { h.step(k as f64); }
-/// let want = ch_closed_loop(&p, 50.0, 0.0, 100.0, Direction::Trace);
-/// assert!((h.position() - want).abs() < 1e-9);
-/// ```
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct ColemanHodgdon {
-    trace: ChParams,
-    retrace: ChParams,
-    x: f64,
-    v: f64,
-}
-
-impl ColemanHodgdon {
-    /// Asymmetric model: `trace` for increasing, `retrace` for decreasing voltage.
-    /// Starts at x = 0, V = 0.
-    pub fn new(trace: ChParams, retrace: ChParams) -> Result<Self, AfmError> {
-        trace.validate("trace.")?;
-        retrace.validate("retrace.")?;
-        Ok(Self {
-            trace,
-            retrace,
-            x: 0.0,
-            v: 0.0,
-        })
-    }
-
-    /// Symmetric model (the classical Coleman–Hodgdon model).
-    pub fn symmetric(p: ChParams) -> Result<Self, AfmError> {
-        Self::new(p, p)
-    }
-
-    /// Trace parameters.
-    pub fn trace(&self) -> &ChParams {
-        &self.trace
-    }
-    /// Retrace parameters.
-    pub fn retrace(&self) -> &ChParams {
-        &self.retrace
-    }
-
-    /// Set the state: position `x` at voltage `v`.
-    pub fn reset(&mut self, x: f64, v: f64) {
-        self.x = x;
-        self.v = v;
-    }
-
-    /// Current position.
-    pub fn position(&self) -> f64 {
-        self.x
-    }
-    /// Current voltage.
-    pub fn voltage(&self) -> f64 {
-        self.v
-    }
-
-    /// Move the voltage monotonically from its present value to `v` and return the
-    /// new position (exact solution of the ODE; no allocation).
-    pub fn step(&mut self, v: f64) -> f64 {
-        let dv = v - self.v;
-        if dv > 0.0 {
-            let p = &self.trace;
-            let (b, k) = (p.b_um_per_v, p.k());
-            self.x = b * v - k + (self.x - b * self.v + k) * (-p.alpha_per_v * dv).exp();
-        } else if dv < 0.0 {
-            let p = &self.retrace;
-            let (b, k) = (p.b_um_per_v, p.k());
-            self.x = b * v + k + (self.x - b * self.v - k) * (p.alpha_per_v * dv).exp();
-        }
-        self.v = v;
-        self.x
-    }
-
-    /// The periodic orbit under a voltage oscillating between `v_m` and `v_max`, in
-    /// closed form: trace x = b_t V − k_t + C e^{−α_t(V−V_m)}, retrace
-    /// x = b_r V + k_r + D e^{α_r(V−V_M)}, with C, D from continuity at both turning
-    /// points. For a symmetric model this is (6.3).
-    pub fn steady_loop(&self, v_m: f64, v_max: f64) -> Result<SteadyLoop, AfmError> {
-        finite("v_m", v_m)?;
-        finite("v_max", v_max)?;
-        if v_max <= v_m {
-            return Err(AfmError::ZeroRange { v_r: v_max - v_m });
-        }
-        let (t, r) = (&self.trace, &self.retrace);
-        let vr = v_max - v_m;
-        let et = (-t.alpha_per_v * vr).exp(); // e^{−α_t V_R}
-        let er = (-r.alpha_per_v * vr).exp(); // e^{−α_r V_R}
-        // Trace at V: b_t V − k_t + C e^{−α_t(V−V_m)}; retrace: b_r V + k_r + D e^{α_r(V−V_M)}.
-        // At V_M: b_t V_M − k_t + C et = b_r V_M + k_r + D
-        // At V_m: b_t V_m − k_t + C    = b_r V_m + k_r + D er
-        let r1 = (r.b_um_per_v - t.b_um_per_v) * v_max + r.k() + t.k();
-        let r0 = (r.b_um_per_v - t.b_um_per_v) * v_m + r.k() + t.k();
-        // [et, −1; 1, −er] [C; D] = [r1; r0]
-        let det = -et * er + 1.0;
-        let c = (-er * r1 + r0) / det;
-        let d = (et * r0 - r1) / det;
-        Ok(SteadyLoop {
-            trace: *t,
-            retrace: *r,
-            v_m,
-            v_max,
-            c,
-            d,
-        })
-    }
-}
-
-/// Periodic orbit of a [`ColemanHodgdon`] model on [V_m, V_M]
-/// (see [`ColemanHodgdon::steady_loop`]).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct SteadyLoop {
-    trace: ChParams,
-    retrace: ChParams,
-    /// Lower turning voltage V_m.
-    pub v_m: f64,
-    /// Upper turning voltage V_M.
-    pub v_max: f64,
-    c: f64,
-    d: f64,
-}
-
-impl SteadyLoop {
-    /// Position on the loop at voltage `v` in direction `dir`.
-    pub fn eval(&self, v: f64, dir: Direction) -> f64 {
-        match dir {
-            Direction::Trace => {
-                let p = &self.trace;
-                p.b_um_per_v * v - p.k() + self.c * (-p.alpha_per_v * (v - self.v_m)).exp()
-            }
-            Direction::Retrace => {
-                let p = &self.retrace;
-                p.b_um_per_v * v + p.k() + self.d * (p.alpha_per_v * (v - self.v_max)).exp()
-            }
-        }
-    }
-}
+/// The YAML/error names of a [`ChParams`] set in this crate's units (V, µm):
+/// α `alpha_per_v`, b `b_um_per_v`, u `u_um_per_v` (accepted by the core's
+/// [`ChParams`] as aliases of `alpha`, `b`, `c`).
+pub const CH_NAMES_UM_V: [&str; 3] = ["alpha_per_v", "b_um_per_v", "u_um_per_v"];
 
 // ---------------------------------------------------------------------------------
 // Extended model (6.4)
@@ -362,10 +153,10 @@ impl ExtendedBranch {
     pub fn from_ch(p: &ChParams) -> Self {
         Self {
             a_um_per_v: 0.0,
-            b_um_per_v: p.b_um_per_v,
+            b_um_per_v: p.b,
             c_per_v: 0.0,
-            u_um_per_v: p.u_um_per_v,
-            alpha_per_v: p.alpha_per_v,
+            u_um_per_v: p.c,
+            alpha_per_v: p.alpha,
             d_um_per_v2: 0.0,
             e_um_per_v: 0.0,
             f_um: 0.0,

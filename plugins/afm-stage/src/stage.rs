@@ -22,7 +22,7 @@
 //! 0.15 nm; head resolution 0.05 nm with noise bound ±0.15 nm.
 
 use crate::error::AfmError;
-use crate::hysteresis::{ChParams, ColemanHodgdon};
+use crate::hysteresis::{CH_NAMES_UM_V, ChParams, ColemanHodgdon};
 use nalgebra::DMatrix;
 use nanomotion_core::block::check;
 use nanomotion_core::lti::{C2dMethod, SsStepper, StateSpace};
@@ -380,10 +380,10 @@ impl AfmStage {
         for i in 0..3 {
             self.hysteresis[i]
                 .trace
-                .validate(&format!("hysteresis[{i}].trace."))?;
+                .validate_as(&format!("hysteresis[{i}].trace."), &CH_NAMES_UM_V)?;
             self.hysteresis[i]
                 .retrace
-                .validate(&format!("hysteresis[{i}].retrace."))?;
+                .validate_as(&format!("hysteresis[{i}].retrace."), &CH_NAMES_UM_V)?;
             check::positive(
                 &format!("resonance_hz[{i}] ({})", AX[i]),
                 self.resonance_hz[i],
@@ -584,7 +584,7 @@ mod tests {
             .map(|i| {
                 let p = s.hysteresis[i].trace;
                 let v = [40.0, 20.0, 10.0][i];
-                p.b_um_per_v * v - p.k() * (1.0 - (-p.alpha_per_v * v).exp())
+                p.b * v - p.k() * (1.0 - (-p.alpha * v).exp())
             })
             .collect();
         for j in 0..3 {
@@ -744,7 +744,7 @@ mod tests {
             "resonance_hz[2]"
         );
         let mut h = default_hysteresis();
-        h[1].retrace.alpha_per_v = -1.0;
+        h[1].retrace.alpha = -1.0;
         assert_eq!(
             err(AfmStage {
                 hysteresis: h,

@@ -1,1 +1,192 @@
 //! Effect blocks of the PLF vocabulary.
+//!
+//! One registered block type per [`Effect`]: the signal being modified enters on
+//! input port `u` (width 1) and leaves on output port `y` (width 1); blocks that need
+//! a second signal (a scheduling variable, usually the plant's position) read it on
+//! input port `s`. All blocks are unit-agnostic (u may be V, N, m, ...), validate
+//! every parameter in [`build`](nanomotion_core::Block::build) with a
+//! [`ParamError`] naming the field and the fix, never allocate in `output`/`update`,
+//! reset all state in `build`, and are [`Tunable`](nanomotion_core::Tunable) so the
+//! workflow can fit them (`set_params`, then the scheduler's `reset`).
+//!
+//! | effect | block type | module |
+//! |---|---|---|
+//! | `hysteresis` | `hysteresis` | [`hysteresis`] |
+//! | `friction` | `friction` | [`friction`] |
+//! | `time_delay` | `time_delay` | [`delay`] |
+//! | `repetitive_disturbance` | `repetitive_disturbance` | [`repetitive`] |
+//! | `position_dependent_gain` | `position_dependent_gain` | [`gain`] |
+//! | `quantization` | `quantizer` (core) | [`nanomotion_core::blocks::sensors::Quantizer`] |
+//! | `unmodeled_resonance` | `unmodeled_resonance` | [`resonance`] |
+//! | `drift` | `drift` | [`drift`] |
+//! | `creep` | `creep` | [`creep`] |
+//! | `axis_coupling` | `axis_coupling` | [`coupling`] |
+//! | `encoder_slit_error` | `encoder_slit_error` | [`slit`] |
+//! | `saturation` | `saturation` (core) | [`nanomotion_core::blocks::math::Saturation`] |
+//! | `backlash` | `backlash` | [`backlash`] |
+
+use nanomotion_core::ParamError;
+
+pub mod backlash;
+pub mod coupling;
+pub mod creep;
+pub mod delay;
+pub mod drift;
+pub mod friction;
+pub mod gain;
+pub mod hysteresis;
+pub mod repetitive;
+pub mod resonance;
+pub mod slit;
+
+pub use backlash::Backlash;
+pub use coupling::AxisCoupling;
+pub use creep::{Creep, CreepTerm};
+pub use delay::TimeDelay;
+pub use drift::Drift;
+pub use friction::Friction;
+pub use gain::{GainVariable, PositionDependentGain};
+pub use hysteresis::Hysteresis;
+pub use repetitive::{PhaseVariable, RepetitiveDisturbance};
+pub use resonance::UnmodeledResonance;
+pub use slit::EncoderSlitError;
+
+/// The vocabulary of performance-limiting effects the workflow can name.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum Effect {
+    /// Rate-independent input–output loop (Coleman–Hodgdon, Sec. 6.3).
+    Hysteresis,
+    /// Coulomb + Stribeck + viscous friction force from a position signal.
+    Friction,
+    /// A pure (fractional) time delay.
+    TimeDelay,
+    /// A disturbance periodic in time or in a signal (position).
+    RepetitiveDisturbance,
+    /// A gain that depends on a scheduling signal (position).
+    PositionDependentGain,
+    /// Finite resolution (the core's `quantizer`).
+    Quantization,
+    /// An unmodelled pole–zero pair (resonance / anti-resonance).
+    UnmodeledResonance,
+    /// Offset + linear (+ quadratic) drift in time.
+    Drift,
+    /// Piezo creep (sum of first-order lags).
+    Creep,
+    /// Cross-axis coupling.
+    AxisCoupling,
+    /// Per-slit line-position errors of an optical encoder (Ch. 8–9).
+    EncoderSlitError,
+    /// Hard limits (the core's `saturation`).
+    Saturation,
+    /// Play / backlash operator.
+    Backlash,
+}
+
+impl Effect {
+    /// Every effect, in vocabulary order.
+    pub const ALL: [Effect; 13] = [
+        Effect::Hysteresis,
+        Effect::Friction,
+        Effect::TimeDelay,
+        Effect::RepetitiveDisturbance,
+        Effect::PositionDependentGain,
+        Effect::Quantization,
+        Effect::UnmodeledResonance,
+        Effect::Drift,
+        Effect::Creep,
+        Effect::AxisCoupling,
+        Effect::EncoderSlitError,
+        Effect::Saturation,
+        Effect::Backlash,
+    ];
+
+    /// The vocabulary name (as reported by `nanomotion diagnose`).
+    pub fn name(self) -> &'static str {
+        match self {
+            Effect::Hysteresis => "hysteresis",
+            Effect::Friction => "friction",
+            Effect::TimeDelay => "time_delay",
+            Effect::RepetitiveDisturbance => "repetitive_disturbance",
+            Effect::PositionDependentGain => "position_dependent_gain",
+            Effect::Quantization => "quantization",
+            Effect::UnmodeledResonance => "unmodeled_resonance",
+            Effect::Drift => "drift",
+            Effect::Creep => "creep",
+            Effect::AxisCoupling => "axis_coupling",
+            Effect::EncoderSlitError => "encoder_slit_error",
+            Effect::Saturation => "saturation",
+            Effect::Backlash => "backlash",
+        }
+    }
+
+    /// The effect called `name` (exactly as [`Effect::name`] spells it).
+    pub fn from_name(name: &str) -> Option<Effect> {
+        Self::ALL.into_iter().find(|e| e.name() == name)
+    }
+
+    /// The registered block type (`type:` in YAML) that models the effect.
+    pub fn block_type(self) -> &'static str {
+        match self {
+            Effect::Quantization => "quantizer",
+            other => other.name(),
+        }
+    }
+
+    /// Whether the block needs input port `s` (a second signal) in its default
+    /// form: `position_dependent_gain` (scheduling signal), `axis_coupling` (the
+    /// other axes). `repetitive_disturbance` is periodic in time by default (port
+    /// `s` only with `variable: signal`).
+    pub fn needs_signal(self) -> bool {
+        matches!(self, Effect::PositionDependentGain | Effect::AxisCoupling)
+    }
+}
+
+impl std::fmt::Display for Effect {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// `p` must have `n` values; `order` names them for the error.
+pub(crate) fn check_len(p: &[f64], n: usize, order: &str) -> Result<(), ParamError> {
+    if p.len() == n {
+        Ok(())
+    } else {
+        Err(ParamError::new(
+            "params",
+            format!("{} values given, {n} expected", p.len()),
+            format!("give {order}"),
+        ))
+    }
+}
+
+/// A list length `n` of field `field` must lie in `[lo, hi]`.
+pub(crate) fn check_count(field: &str, n: usize, lo: usize, hi: usize) -> Result<(), ParamError> {
+    if (lo..=hi).contains(&n) {
+        Ok(())
+    } else {
+        Err(ParamError::new(
+            field,
+            format!("has {n} entries, must have {lo} to {hi}"),
+            format!("give between {lo} and {hi} values"),
+        ))
+    }
+}
+
+/// `value` finite with |value| ≤ `limit` (keeps products and powers finite).
+pub(crate) fn check_bounded(field: &str, value: f64, limit: f64) -> Result<(), ParamError> {
+    nanomotion_core::block::check::finite(field, value)?;
+    if value.abs() <= limit {
+        Ok(())
+    } else {
+        Err(ParamError::new(
+            field,
+            format!("is {value}, beyond ±{limit:e}"),
+            format!("give a value of magnitude ≤ {limit:e}"),
+        ))
+    }
+}
+
+/// The magnitude bound of every gain/coefficient parameter: generous for any unit,
+/// small enough that sums and products of a few of them stay finite.
+pub(crate) const MAX_MAGNITUDE: f64 = 1e100;

@@ -1,0 +1,109 @@
+//! `backlash`: the play operator.
+
+use super::{MAX_MAGNITUDE, check_bounded, check_len};
+use nanomotion_core::block::check;
+use nanomotion_core::{
+    Block, BlockDoc, BuildContext, ParamDoc, ParamError, Port, Role, Tick, Tunable,
+};
+use serde::{Deserialize, Serialize};
+
+/// `backlash`: play operator of width w ≥ 0. The output follows the input only
+/// after the input has moved w/2 past it:
+///
+/// ```text
+/// u − y > w/2  ⇒  y = u − w/2
+/// y − u > w/2  ⇒  y = u + w/2
+/// otherwise y unchanged
+/// ```
+///
+/// starting at y = u₀ (the first input). A non-finite input passes through without
+/// changing the state.
+///
+/// [`Tunable`] vector: `[width]`.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Backlash {
+    /// Total play w (unit of u), ≥ 0.
+    pub width: f64,
+    #[serde(skip)]
+    y: Option<f64>,
+}
+
+impl Backlash {
+    /// Play of total width `width`.
+    pub fn new(width: f64) -> Self {
+        Self { width, y: None }
+    }
+
+    fn check(w: f64) -> Result<(), ParamError> {
+        check::non_negative("width", w)?;
+        check_bounded("width", w, MAX_MAGNITUDE)
+    }
+}
+
+#[typetag::serde(name = "backlash")]
+impl Block for Backlash {
+    fn inputs(&self) -> Vec<Port> {
+        vec![Port::new("u", 1)]
+    }
+    fn outputs(&self) -> Vec<Port> {
+        vec![Port::new("y", 1)]
+    }
+    fn build(&mut self, _ctx: &BuildContext) -> Result<(), ParamError> {
+        Self::check(self.width)?;
+        self.y = None;
+        Ok(())
+    }
+    fn output(&mut self, _tick: Tick, u: &[f64], y: &mut [f64]) {
+        let u = u[0];
+        if !u.is_finite() {
+            y[0] = u;
+            return;
+        }
+        let h = 0.5 * self.width;
+        let mut out = self.y.unwrap_or(u);
+        if u - out > h {
+            out = u - h;
+        } else if out - u > h {
+            out = u + h;
+        }
+        self.y = Some(out);
+        y[0] = out;
+    }
+    fn role(&self) -> Role {
+        Role::Plant
+    }
+    fn tunable(&self) -> Option<&dyn Tunable> {
+        Some(self)
+    }
+    fn tunable_mut(&mut self) -> Option<&mut dyn Tunable> {
+        Some(self)
+    }
+}
+
+impl Tunable for Backlash {
+    fn param_names(&self) -> Vec<String> {
+        vec!["width".into()]
+    }
+    fn params(&self) -> Vec<f64> {
+        vec![self.width]
+    }
+    fn set_params(&mut self, p: &[f64]) -> Result<(), ParamError> {
+        check_len(p, 1, "[width]")?;
+        Self::check(p[0])?;
+        self.width = p[0];
+        Ok(())
+    }
+}
+
+nanomotion_core::submit_block_doc! {
+    BlockDoc {
+        type_name: "backlash",
+        role: Role::Plant,
+        summary: "PLF effect: play operator of width w: y moves only once u is w/2 past it, y₀ = u₀; tunable [width]",
+        params: &[
+            ParamDoc { name: "width", doc: "total play w ≥ 0 (unit of u)", default: None },
+        ],
+        ports: "u -> y",
+    }
+}

@@ -1,0 +1,155 @@
+//! `creep`: piezo creep as a sum of first-order lags.
+
+use super::{MAX_MAGNITUDE, check_bounded, check_count, check_len};
+use nanomotion_core::block::check;
+use nanomotion_core::{
+    Block, BlockDoc, BuildContext, ParamDoc, ParamError, Port, Role, Tick, Tunable,
+};
+use serde::{Deserialize, Serialize};
+
+/// Most terms a `creep` block may have.
+pub const MAX_TERMS: usize = 4;
+
+/// One first-order term of [`Creep`].
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CreepTerm {
+    /// Gain k_i (\[y\]/\[u\]).
+    pub gain: f64,
+    /// Time constant τ_i (s) > 0.
+    pub tau_s: f64,
+}
+
+/// `creep`:
+///
+/// ```text
+/// y = u + Σ_i k_i·L_i(u),    L_i(s) = 1/(τ_i s + 1)
+/// ```
+///
+/// with each L_i discretised exactly for a held input (ZOH):
+/// x_{k+1} = e^{−dt/τ}x_k + (1 − e^{−dt/τ})u_k, L_i = x. The response to a step
+/// of height A is A·(1 + Σ k_i(1 − e^{−t/τ_i})): a linear, sum-of-exponentials
+/// approximation of piezo creep, whose measured step response grows with the
+/// logarithm of time (time constants spread over decades approximate a log).
+/// 1 to [`MAX_TERMS`] terms. The lags start at rest at the first input.
+///
+/// [`Tunable`] vector: `[gain_1, tau_1, gain_2, tau_2, ...]` (YAML
+/// `terms[i].gain`, `terms[i].tau_s`).
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Creep {
+    /// The terms {gain, tau_s}.
+    pub terms: Vec<CreepTerm>,
+    #[serde(skip)]
+    a: [f64; MAX_TERMS],
+    #[serde(skip)]
+    x: [f64; MAX_TERMS],
+    #[serde(skip)]
+    started: bool,
+}
+
+impl Creep {
+    /// Creep with the given terms.
+    pub fn new(terms: Vec<CreepTerm>) -> Self {
+        Self {
+            terms,
+            a: [0.0; MAX_TERMS],
+            x: [0.0; MAX_TERMS],
+            started: false,
+        }
+    }
+
+    fn check_terms(terms: &[CreepTerm]) -> Result<(), ParamError> {
+        check_count("terms", terms.len(), 1, MAX_TERMS)?;
+        for (i, t) in terms.iter().enumerate() {
+            check_bounded(&format!("terms[{i}].gain"), t.gain, MAX_MAGNITUDE)?;
+            check::positive(&format!("terms[{i}].tau_s"), t.tau_s)?;
+        }
+        Ok(())
+    }
+}
+
+#[typetag::serde(name = "creep")]
+impl Block for Creep {
+    fn inputs(&self) -> Vec<Port> {
+        vec![Port::new("u", 1)]
+    }
+    fn outputs(&self) -> Vec<Port> {
+        vec![Port::new("y", 1)]
+    }
+    fn build(&mut self, ctx: &BuildContext) -> Result<(), ParamError> {
+        Self::check_terms(&self.terms)?;
+        check::positive("dt", ctx.dt)?;
+        self.a = [0.0; MAX_TERMS];
+        for (a, t) in self.a.iter_mut().zip(&self.terms) {
+            *a = (-ctx.dt / t.tau_s).exp();
+        }
+        self.x = [0.0; MAX_TERMS];
+        self.started = false;
+        Ok(())
+    }
+    fn output(&mut self, _tick: Tick, u: &[f64], y: &mut [f64]) {
+        let x = u[0];
+        let n = self.terms.len().min(MAX_TERMS);
+        if !self.started {
+            self.x[..n].iter_mut().for_each(|s| *s = x);
+            self.started = true;
+        }
+        let mut out = x;
+        for i in 0..n {
+            out += self.terms[i].gain * self.x[i];
+            let a = self.a[i];
+            self.x[i] = a * self.x[i] + (1.0 - a) * x;
+        }
+        y[0] = out;
+    }
+    fn role(&self) -> Role {
+        Role::Actuator
+    }
+    fn tunable(&self) -> Option<&dyn Tunable> {
+        Some(self)
+    }
+    fn tunable_mut(&mut self) -> Option<&mut dyn Tunable> {
+        Some(self)
+    }
+}
+
+impl Tunable for Creep {
+    fn param_names(&self) -> Vec<String> {
+        (0..self.terms.len())
+            .flat_map(|i| [format!("terms[{i}].gain"), format!("terms[{i}].tau_s")])
+            .collect()
+    }
+    fn params(&self) -> Vec<f64> {
+        self.terms.iter().flat_map(|t| [t.gain, t.tau_s]).collect()
+    }
+    fn set_params(&mut self, p: &[f64]) -> Result<(), ParamError> {
+        check_len(
+            p,
+            2 * self.terms.len(),
+            "[gain_1, tau_1, gain_2, tau_2, ...]",
+        )?;
+        let next: Vec<CreepTerm> = p
+            .chunks_exact(2)
+            .map(|c| CreepTerm {
+                gain: c[0],
+                tau_s: c[1],
+            })
+            .collect();
+        Self::check_terms(&next)?;
+        self.terms = next;
+        Ok(())
+    }
+}
+
+nanomotion_core::submit_block_doc! {
+    BlockDoc {
+        type_name: "creep",
+        role: Role::Actuator,
+        summary: "PLF effect: piezo creep y = u + Σ k_i/(τ_i s + 1)·u (ZOH-exact, 1–4 terms; a sum-of-exponentials approximation of the logarithmic creep); tunable [gain_1, tau_1, ...]",
+        params: &[
+            ParamDoc { name: "terms", doc: "[{gain: k_i ([y]/[u]), tau_s: τ_i (s) > 0}], 1 to 4 terms", default: None },
+        ],
+        ports: "u -> y",
+    }
+}

@@ -1,0 +1,170 @@
+//! `time_delay`: y(t) = u(t − τ) with fractional delays.
+
+use super::check_len;
+use nanomotion_core::block::check;
+use nanomotion_core::{
+    Block, BlockDoc, BuildContext, ParamDoc, ParamError, Port, Role, Tick, Tunable,
+};
+use serde::{Deserialize, Serialize};
+
+/// Largest delay buffer (samples) a `time_delay` may allocate.
+pub const MAX_DELAY_SAMPLES: f64 = 1e6;
+
+/// `time_delay`: y(t) = u(t − τ), τ = `delay_s`. With τ/dt = n + f (n integer,
+/// 0 ≤ f < 1) the output is the linear interpolation (1 − f)·u_{k−n} + f·u_{k−n−1}
+/// (exact for integer delays and for ramps). The samples before the start are the
+/// first input. The buffer holds `max_delay_s` (fixed when built, at most
+/// [`MAX_DELAY_SAMPLES`] samples), so τ can be refitted in [0, max_delay_s] without
+/// reallocating. Direct feed-through (τ may be below one sample).
+///
+/// [`Tunable`] vector: `[delay_s]`.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TimeDelay {
+    /// Delay τ (s), 0 ≤ τ ≤ `max_delay_s`.
+    pub delay_s: f64,
+    /// Longest delay the buffer holds (s), ≥ 0.
+    pub max_delay_s: f64,
+    #[serde(skip)]
+    buf: Vec<f64>,
+    #[serde(skip)]
+    pos: usize,
+    #[serde(skip)]
+    n: usize,
+    #[serde(skip)]
+    frac: f64,
+    #[serde(skip)]
+    started: bool,
+}
+
+impl TimeDelay {
+    /// A delay of `delay_s` with room for `max_delay_s`.
+    pub fn new(delay_s: f64, max_delay_s: f64) -> Self {
+        Self {
+            delay_s,
+            max_delay_s,
+            buf: Vec::new(),
+            pos: 0,
+            n: 0,
+            frac: 0.0,
+            started: false,
+        }
+    }
+
+    fn check_delay(delay_s: f64, max_delay_s: f64) -> Result<(), ParamError> {
+        check::non_negative("max_delay_s", max_delay_s)?;
+        check::in_range("delay_s", delay_s, 0.0, max_delay_s)
+    }
+
+    /// τ/dt split into whole samples and a fraction; values within 1e-9 of an
+    /// integer count as that integer (so 3·dt is exactly 3 samples).
+    fn split(delay_s: f64, dt: f64) -> (usize, f64) {
+        let x = delay_s / dt;
+        let r = x.round();
+        if (x - r).abs() <= 1e-9 * r.max(1.0) {
+            (r as usize, 0.0)
+        } else {
+            let n = x.floor();
+            (n as usize, x - n)
+        }
+    }
+}
+
+#[typetag::serde(name = "time_delay")]
+impl Block for TimeDelay {
+    fn inputs(&self) -> Vec<Port> {
+        vec![Port::new("u", 1)]
+    }
+    fn outputs(&self) -> Vec<Port> {
+        vec![Port::new("y", 1)]
+    }
+    fn build(&mut self, ctx: &BuildContext) -> Result<(), ParamError> {
+        Self::check_delay(self.delay_s, self.max_delay_s)?;
+        check::positive("dt", ctx.dt)?;
+        let samples = (self.max_delay_s / ctx.dt).ceil();
+        if samples.is_nan() || samples > MAX_DELAY_SAMPLES {
+            return Err(ParamError::new(
+                "max_delay_s",
+                format!(
+                    "{} s is {samples:e} samples at dt = {} s, more than the {MAX_DELAY_SAMPLES:e} allowed",
+                    self.max_delay_s, ctx.dt
+                ),
+                "give a shorter max_delay_s or run the block at a lower rate",
+            ));
+        }
+        let (n, frac) = Self::split(self.delay_s, ctx.dt);
+        let len = samples as usize + 2;
+        if n + 1 >= len {
+            return Err(ParamError::new(
+                "delay_s",
+                "does not fit the buffer of max_delay_s",
+                "give delay_s ≤ max_delay_s",
+            ));
+        }
+        self.buf.clear();
+        self.buf.resize(len, 0.0);
+        self.pos = 0;
+        self.n = n;
+        self.frac = frac;
+        self.started = false;
+        Ok(())
+    }
+    fn output(&mut self, _tick: Tick, u: &[f64], y: &mut [f64]) {
+        let len = self.buf.len();
+        if len == 0 {
+            y[0] = 0.0;
+            return;
+        }
+        if !self.started {
+            self.buf.iter_mut().for_each(|b| *b = u[0]);
+            self.started = true;
+        }
+        self.pos = (self.pos + 1) % len;
+        self.buf[self.pos] = u[0];
+        let i0 = (self.pos + len - self.n) % len;
+        let a = self.buf[i0];
+        y[0] = if self.frac == 0.0 {
+            a
+        } else {
+            let b = self.buf[(i0 + len - 1) % len];
+            a + self.frac * (b - a)
+        };
+    }
+    fn role(&self) -> Role {
+        Role::Math
+    }
+    fn tunable(&self) -> Option<&dyn Tunable> {
+        Some(self)
+    }
+    fn tunable_mut(&mut self) -> Option<&mut dyn Tunable> {
+        Some(self)
+    }
+}
+
+impl Tunable for TimeDelay {
+    fn param_names(&self) -> Vec<String> {
+        vec!["delay_s".into()]
+    }
+    fn params(&self) -> Vec<f64> {
+        vec![self.delay_s]
+    }
+    fn set_params(&mut self, p: &[f64]) -> Result<(), ParamError> {
+        check_len(p, 1, "[delay_s]")?;
+        Self::check_delay(p[0], self.max_delay_s)?;
+        self.delay_s = p[0];
+        Ok(())
+    }
+}
+
+nanomotion_core::submit_block_doc! {
+    BlockDoc {
+        type_name: "time_delay",
+        role: Role::Math,
+        summary: "PLF effect: y(t) = u(t − delay_s), fractional delays by linear interpolation, samples before the start = first input; tunable [delay_s]",
+        params: &[
+            ParamDoc { name: "delay_s", doc: "delay τ (s), in [0, max_delay_s]", default: None },
+            ParamDoc { name: "max_delay_s", doc: "buffer length (s), fixed when built, ≤ 1e6 samples", default: None },
+        ],
+        ports: "u -> y",
+    }
+}

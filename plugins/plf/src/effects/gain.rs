@@ -1,0 +1,149 @@
+//! `position_dependent_gain`: a gain that varies polynomially with a scheduling
+//! signal.
+
+use super::{MAX_MAGNITUDE, check_bounded, check_count, check_len};
+use nanomotion_core::block::check;
+use nanomotion_core::{
+    Block, BlockDoc, BuildContext, ParamDoc, ParamError, Port, Role, Tick, Tunable,
+};
+use serde::{Deserialize, Serialize};
+
+/// Highest polynomial order of a `position_dependent_gain`.
+pub const MAX_ORDER: usize = 8;
+
+/// Where the scheduling variable comes from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum GainVariable {
+    /// The signal on port `s` (usually the plant's position).
+    #[default]
+    Signal,
+    /// The input itself (s = u; no port `s`): an amplitude-dependent gain.
+    Input,
+}
+
+fn one() -> f64 {
+    1.0
+}
+
+/// `position_dependent_gain`:
+///
+/// ```text
+/// y = u·(1 + Σ_{i=1..n} g_i·((s − center)/scale)^i)
+/// ```
+///
+/// with s from port `s` (`variable: signal`, default) or s = u (`variable: input`).
+/// 1 ≤ n ≤ [`MAX_ORDER`]. Evaluated by Horner's rule.
+///
+/// [`Tunable`] vector: `[coeffs[0..n]]` (g_1..g_n).
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PositionDependentGain {
+    /// `signal` (default, port `s`) or `input`.
+    #[serde(default)]
+    pub variable: GainVariable,
+    /// Centre of the polynomial (unit of s), default 0.
+    #[serde(default)]
+    pub center: f64,
+    /// Scale > 0 (unit of s), default 1: the polynomial is in (s − center)/scale.
+    #[serde(default = "one")]
+    pub scale: f64,
+    /// g_1..g_n (dimensionless).
+    pub coeffs: Vec<f64>,
+}
+
+impl PositionDependentGain {
+    /// A gain scheduled on port `s`.
+    pub fn new(center: f64, scale: f64, coeffs: Vec<f64>) -> Self {
+        Self {
+            variable: GainVariable::Signal,
+            center,
+            scale,
+            coeffs,
+        }
+    }
+
+    /// The relative gain 1 + Σ g_i x^i at scheduling value `s`.
+    pub fn gain(&self, s: f64) -> f64 {
+        let x = (s - self.center) / self.scale;
+        let mut acc = 0.0;
+        for g in self.coeffs.iter().rev() {
+            acc = (acc + g) * x;
+        }
+        1.0 + acc
+    }
+
+    fn check_coeffs(c: &[f64]) -> Result<(), ParamError> {
+        check_count("coeffs", c.len(), 1, MAX_ORDER)?;
+        for (i, g) in c.iter().enumerate() {
+            check_bounded(&format!("coeffs[{i}]"), *g, MAX_MAGNITUDE)?;
+        }
+        Ok(())
+    }
+}
+
+#[typetag::serde(name = "position_dependent_gain")]
+impl Block for PositionDependentGain {
+    fn inputs(&self) -> Vec<Port> {
+        match self.variable {
+            GainVariable::Signal => vec![Port::new("u", 1), Port::new("s", 1)],
+            GainVariable::Input => vec![Port::new("u", 1)],
+        }
+    }
+    fn outputs(&self) -> Vec<Port> {
+        vec![Port::new("y", 1)]
+    }
+    fn build(&mut self, _ctx: &BuildContext) -> Result<(), ParamError> {
+        check_bounded("center", self.center, MAX_MAGNITUDE)?;
+        check::positive("scale", self.scale)?;
+        Self::check_coeffs(&self.coeffs)
+    }
+    fn output(&mut self, _tick: Tick, u: &[f64], y: &mut [f64]) {
+        let s = match self.variable {
+            GainVariable::Signal => u[1],
+            GainVariable::Input => u[0],
+        };
+        y[0] = u[0] * self.gain(s);
+    }
+    fn role(&self) -> Role {
+        Role::Plant
+    }
+    fn tunable(&self) -> Option<&dyn Tunable> {
+        Some(self)
+    }
+    fn tunable_mut(&mut self) -> Option<&mut dyn Tunable> {
+        Some(self)
+    }
+}
+
+impl Tunable for PositionDependentGain {
+    fn param_names(&self) -> Vec<String> {
+        (0..self.coeffs.len())
+            .map(|i| format!("coeffs[{i}]"))
+            .collect()
+    }
+    fn params(&self) -> Vec<f64> {
+        self.coeffs.clone()
+    }
+    fn set_params(&mut self, p: &[f64]) -> Result<(), ParamError> {
+        check_len(p, self.coeffs.len(), "[coeffs[0..n]]")?;
+        Self::check_coeffs(p)?;
+        self.coeffs.copy_from_slice(p);
+        Ok(())
+    }
+}
+
+nanomotion_core::submit_block_doc! {
+    BlockDoc {
+        type_name: "position_dependent_gain",
+        role: Role::Plant,
+        summary: "PLF effect: y = u·(1 + Σ g_i ((s − center)/scale)^i), s from port s or s = u; tunable [coeffs..]",
+        params: &[
+            ParamDoc { name: "variable", doc: "signal (port s) | input (s = u)", default: Some("signal") },
+            ParamDoc { name: "center", doc: "polynomial centre (unit of s)", default: Some("0") },
+            ParamDoc { name: "scale", doc: "polynomial scale > 0 (unit of s)", default: Some("1") },
+            ParamDoc { name: "coeffs", doc: "g_1..g_n (-), 1 ≤ n ≤ 8", default: None },
+        ],
+        ports: "u (, s) -> y",
+    }
+}

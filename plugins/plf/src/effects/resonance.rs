@@ -1,0 +1,247 @@
+//! `unmodeled_resonance`: a series pole–zero pair with unity DC gain.
+
+use super::check_len;
+use nanomotion_core::block::check;
+use nanomotion_core::lti::{C2dMethod, StateSpace, TransferFunction};
+use nanomotion_core::{
+    Block, BlockDoc, BuildContext, ParamDoc, ParamError, Port, Role, Tick, Tunable,
+};
+use serde::{Deserialize, Serialize};
+use std::f64::consts::TAU;
+
+/// Largest damping ratio accepted (beyond this the pair is two real, far-apart
+/// roots and no longer a resonance).
+pub const MAX_DAMPING: f64 = 100.0;
+
+/// `unmodeled_resonance`:
+///
+/// ```text
+/// R(s) = (ω_p²/ω_z²) · (s² + 2ζ_z ω_z s + ω_z²) / (s² + 2ζ_p ω_p s + ω_p²)
+/// ```
+///
+/// (unity DC gain; ω = 2πf) discretised at the block's rate with Tustin pre-warped
+/// at ω_p (the core's [`c2d`](nanomotion_core::lti::c2d)), so the discrete response
+/// equals R(jω_p) exactly at the resonance, and run as one biquad (direct form II
+/// transposed). The state starts at the steady state of the first input (no start-up
+/// transient). [`Block::lti`] returns the discrete model.
+///
+/// [`Tunable`] vector: `[f_pole_hz, zeta_pole, f_zero_hz, zeta_zero]`.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct UnmodeledResonance {
+    /// Pole (resonance) frequency f_p (Hz), 0 < f_p < Nyquist.
+    pub f_pole_hz: f64,
+    /// Pole damping ratio ζ_p, 0 < ζ_p ≤ [`MAX_DAMPING`].
+    pub zeta_pole: f64,
+    /// Zero (anti-resonance) frequency f_z (Hz), 0 < f_z < Nyquist.
+    pub f_zero_hz: f64,
+    /// Zero damping ratio ζ_z, 0 < ζ_z ≤ [`MAX_DAMPING`].
+    pub zeta_zero: f64,
+    /// Normalised biquad [b0, b1, b2, a1, a2] (a0 = 1).
+    #[serde(skip)]
+    coef: [f64; 5],
+    #[serde(skip)]
+    z: [f64; 2],
+    #[serde(skip)]
+    started: bool,
+    #[serde(skip)]
+    dt: Option<f64>,
+    #[serde(skip)]
+    model: Option<StateSpace>,
+}
+
+impl UnmodeledResonance {
+    /// A pole pair at `f_pole_hz` with damping `zeta_pole` and a zero pair at
+    /// `f_zero_hz` with damping `zeta_zero`.
+    pub fn new(f_pole_hz: f64, zeta_pole: f64, f_zero_hz: f64, zeta_zero: f64) -> Self {
+        Self {
+            f_pole_hz,
+            zeta_pole,
+            f_zero_hz,
+            zeta_zero,
+            coef: [0.0; 5],
+            z: [0.0; 2],
+            started: false,
+            dt: None,
+            model: None,
+        }
+    }
+
+    /// The continuous transfer function R(s).
+    pub fn continuous(&self) -> Result<TransferFunction, ParamError> {
+        let (wp, wz) = (TAU * self.f_pole_hz, TAU * self.f_zero_hz);
+        let g = (wp / wz) * (wp / wz);
+        TransferFunction::new(
+            vec![g, g * 2.0 * self.zeta_zero * wz, g * wz * wz],
+            vec![1.0, 2.0 * self.zeta_pole * wp, wp * wp],
+            None,
+        )
+        .map_err(|e| ParamError::new("f_pole_hz", e.to_string(), "check the frequencies"))
+    }
+
+    /// The normalised biquad coefficients [b0, b1, b2, a1, a2] (a0 = 1) in z⁻¹
+    /// (valid after `build`).
+    pub fn biquad(&self) -> [f64; 5] {
+        self.coef
+    }
+
+    fn check(p: [f64; 4], dt: Option<f64>) -> Result<(), ParamError> {
+        let names = ["f_pole_hz", "zeta_pole", "f_zero_hz", "zeta_zero"];
+        for (i, v) in p.iter().enumerate() {
+            check::positive(names[i], *v)?;
+        }
+        check::in_range("zeta_pole", p[1], 0.0, MAX_DAMPING)?;
+        check::in_range("zeta_zero", p[3], 0.0, MAX_DAMPING)?;
+        if let Some(dt) = dt {
+            let nyq = 0.5 / dt;
+            for i in [0, 2] {
+                if p[i] >= nyq {
+                    return Err(ParamError::new(
+                        names[i],
+                        format!(
+                            "{} Hz is not below the Nyquist frequency {nyq} Hz of the block's rate",
+                            p[i]
+                        ),
+                        "give a lower frequency or run the block at a higher rate",
+                    ));
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Discretise: Tustin pre-warped at f_p, then the 2-state model's transfer
+    /// function num/den in closed form (den = z² − tr(A)z + det A,
+    /// num = D·den + (CB)z + C·adj(−A)·B).
+    fn discretise(&self, dt: f64) -> Result<(StateSpace, [f64; 5]), ParamError> {
+        let bad = |e: String| ParamError::new("f_pole_hz", e, "check the frequencies and damping");
+        let ss = self
+            .continuous()?
+            .c2d(
+                dt,
+                C2dMethod::Tustin {
+                    prewarp_hz: Some(self.f_pole_hz),
+                },
+            )
+            .map_err(|e| bad(e.to_string()))?;
+        if ss.nstates() != 2 {
+            return Err(bad(format!("{} states, 2 expected", ss.nstates())));
+        }
+        let a = &ss.a;
+        let (a11, a12, a21, a22) = (a[(0, 0)], a[(0, 1)], a[(1, 0)], a[(1, 1)]);
+        let (b1, b2, c1, c2, d) = (
+            ss.b[(0, 0)],
+            ss.b[(1, 0)],
+            ss.c[(0, 0)],
+            ss.c[(0, 1)],
+            ss.d[(0, 0)],
+        );
+        let tr = a11 + a22;
+        let det = a11 * a22 - a12 * a21;
+        let cb = c1 * b1 + c2 * b2;
+        // adj(−A) = [[−a22, a12], [a21, −a11]]
+        let cmb = c1 * (-a22 * b1 + a12 * b2) + c2 * (a21 * b1 - a11 * b2);
+        let coef = [d, cb - d * tr, d * det + cmb, -tr, det];
+        if coef.iter().any(|v| !v.is_finite()) {
+            return Err(bad("the discrete coefficients are not finite".into()));
+        }
+        Ok((ss, coef))
+    }
+}
+
+#[typetag::serde(name = "unmodeled_resonance")]
+impl Block for UnmodeledResonance {
+    fn inputs(&self) -> Vec<Port> {
+        vec![Port::new("u", 1)]
+    }
+    fn outputs(&self) -> Vec<Port> {
+        vec![Port::new("y", 1)]
+    }
+    fn build(&mut self, ctx: &BuildContext) -> Result<(), ParamError> {
+        check::positive("dt", ctx.dt)?;
+        Self::check(
+            [
+                self.f_pole_hz,
+                self.zeta_pole,
+                self.f_zero_hz,
+                self.zeta_zero,
+            ],
+            Some(ctx.dt),
+        )?;
+        let (ss, coef) = self.discretise(ctx.dt)?;
+        self.coef = coef;
+        self.model = Some(ss);
+        self.dt = Some(ctx.dt);
+        self.z = [0.0; 2];
+        self.started = false;
+        Ok(())
+    }
+    fn output(&mut self, _tick: Tick, u: &[f64], y: &mut [f64]) {
+        let [b0, b1, b2, a1, a2] = self.coef;
+        let x = u[0];
+        if !self.started {
+            // Steady state for a constant input x: y = G·x, G = Σb/(1 + a1 + a2).
+            let g = (b0 + b1 + b2) / (1.0 + a1 + a2);
+            let ys = g * x;
+            self.z[1] = b2 * x - a2 * ys;
+            self.z[0] = b1 * x - a1 * ys + self.z[1];
+            self.started = true;
+        }
+        let out = b0 * x + self.z[0];
+        self.z[0] = b1 * x - a1 * out + self.z[1];
+        self.z[1] = b2 * x - a2 * out;
+        y[0] = out;
+    }
+    fn lti(&self) -> Option<StateSpace> {
+        self.model.clone()
+    }
+    fn role(&self) -> Role {
+        Role::Plant
+    }
+    fn tunable(&self) -> Option<&dyn Tunable> {
+        Some(self)
+    }
+    fn tunable_mut(&mut self) -> Option<&mut dyn Tunable> {
+        Some(self)
+    }
+}
+
+impl Tunable for UnmodeledResonance {
+    fn param_names(&self) -> Vec<String> {
+        ["f_pole_hz", "zeta_pole", "f_zero_hz", "zeta_zero"]
+            .map(String::from)
+            .to_vec()
+    }
+    fn params(&self) -> Vec<f64> {
+        vec![
+            self.f_pole_hz,
+            self.zeta_pole,
+            self.f_zero_hz,
+            self.zeta_zero,
+        ]
+    }
+    fn set_params(&mut self, p: &[f64]) -> Result<(), ParamError> {
+        check_len(p, 4, "[f_pole_hz, zeta_pole, f_zero_hz, zeta_zero]")?;
+        Self::check([p[0], p[1], p[2], p[3]], self.dt)?;
+        self.f_pole_hz = p[0];
+        self.zeta_pole = p[1];
+        self.f_zero_hz = p[2];
+        self.zeta_zero = p[3];
+        Ok(())
+    }
+}
+
+nanomotion_core::submit_block_doc! {
+    BlockDoc {
+        type_name: "unmodeled_resonance",
+        role: Role::Plant,
+        summary: "PLF effect: pole–zero pair R(s) = (ω_p²/ω_z²)(s² + 2ζ_zω_z s + ω_z²)/(s² + 2ζ_pω_p s + ω_p²), unity DC gain, Tustin pre-warped at ω_p, one biquad; tunable all four",
+        params: &[
+            ParamDoc { name: "f_pole_hz", doc: "resonance f_p (Hz), below Nyquist", default: None },
+            ParamDoc { name: "zeta_pole", doc: "pole damping ζ_p in (0, 100]", default: None },
+            ParamDoc { name: "f_zero_hz", doc: "anti-resonance f_z (Hz), below Nyquist", default: None },
+            ParamDoc { name: "zeta_zero", doc: "zero damping ζ_z in (0, 100]", default: None },
+        ],
+        ports: "u -> y",
+    }
+}
