@@ -339,6 +339,24 @@ fn compile(
             "shorten the run or lower the base rate",
         ));
     }
+    if let Some(d) = &data {
+        let run_s = n_ticks_f / base_rate_hz;
+        let data_s = d.duration_s();
+        if run_s > data_s * (1.0 + 1e-9) {
+            return Err(setting(
+                "duration_s",
+                format!(
+                    "the run lasts {run_s} s but the data {} lasts only {data_s} s ({} samples at {} Hz)",
+                    d.origin(),
+                    d.len(),
+                    d.rate_hz()
+                ),
+                format!(
+                    "run at most {data_s} s (`--duration {data_s}`, or leave it out to use the data's length)"
+                ),
+            ));
+        }
+    }
     if blocks.is_empty() {
         return Err(setting("blocks", "is empty", "add at least one block"));
     }

@@ -3,6 +3,7 @@
 //! registered with `typetag` under the `type:` name given in its docs.
 
 pub mod control;
+pub mod data_column;
 pub mod linear;
 pub mod math;
 pub mod sensors;
