@@ -321,7 +321,7 @@ pub fn diagnose_with_progress(
     if let Some(s) = opts.seed {
         nominal.seed = s;
     }
-    let channels = surgery::channels(&nominal)?;
+    let channels = surgery::channels(&nominal, &data)?;
     let ctx = Ctx {
         data: &data,
         channels,
@@ -426,7 +426,7 @@ pub fn diagnose_with_progress(
         }
         let after_ms = weighted_holdout_ms(&ctx, &win.residual);
         let (worse, better) = holdout_weighted_vectors(&ctx, &cur.residual, &win.residual);
-        let (test, _rel) = stats::improvement_test(&worse, &better, 10);
+        let (test, _rel) = stats::improvement_test(&worse, &better, 20);
         let level = opts.alpha / total.max(1) as f64;
         let floor_ms: f64 = excess
             .iter()
@@ -980,9 +980,14 @@ fn enumerate(ctx: &Ctx<'_>, cur: &Current, opts: &Options) -> Result<Vec<Cand>, 
                     output: None,
                     starts: [0.01, 0.1]
                         .iter()
-                        .map(|f| json!({"type": "friction", "coulomb": f * su, "stribeck": 0.0, "v_stribeck": sv, "viscous": 0.0, "v_eps": 0.01 * sv}))
+                        .map(|f| json!({"type": "friction", "coulomb": f * su, "stribeck": 0.0, "v_stribeck": 0.3 * sv, "viscous": 0.0, "v_eps": 0.003 * sv}))
                         .collect(),
-                    free: vec![(0, Scale::Log), (3, Scale::Linear(0.1 * su / sv))],
+                    free: vec![
+                        (0, Scale::Log),
+                        (1, Scale::Linear(0.1 * su)),
+                        (2, Scale::Log),
+                        (3, Scale::Linear(0.1 * su / sv)),
+                    ],
                     s: vec![],
                     rate_hz: None,
                 });

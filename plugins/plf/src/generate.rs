@@ -214,7 +214,7 @@ pub fn second_order(
                 q: rng.uniform_in(0.15, 0.3) * x_amp,
             },
             "unmodeled_resonance" => {
-                let fp = rng.uniform_in(150.0, 350.0);
+                let fp = rng.uniform_in(70.0, 150.0);
                 Truth::Resonance {
                     fp,
                     zp: rng.uniform_in(0.01, 0.04),
@@ -238,11 +238,11 @@ pub fn second_order(
                 taus: [0.05, 0.5, 5.0],
             },
             "encoder_slit_error" => {
-                let q = 0.02 * x_amp;
+                let q = 0.05 * x_amp;
                 let nn = [8usize, 12, 16, 20][(rng.uniform() * 4.0) as usize % 4];
                 Truth::SlitError {
                     q,
-                    errors: (0..nn).map(|_| rng.normal() * 0.4 * q).collect(),
+                    errors: (0..nn).map(|_| rng.normal() * 0.5 * q).collect(),
                 }
             }
             "saturation" => {
@@ -455,8 +455,8 @@ pub fn second_order(
         }
         Truth::Drift { b, .. } => format!("output drift {b:.3e} m/s (+ offset, curvature)"),
         Truth::Creep { gains, .. } => format!("input creep, gains {gains:.3?} at 0.05/0.5/5 s"),
-        Truth::SlitError { errors, q } => {
-            format!("{} slit errors of σ {:.2} lsb", errors.len(), 0.4 * q / q)
+        Truth::SlitError { errors, .. } => {
+            format!("{} slit errors of σ {:.2} lsb", errors.len(), 0.5)
         }
         Truth::Saturation { lo, hi } => format!("drive saturation [{lo:.3e}, {hi:.3e}] N"),
         Truth::Backlash { w } => format!("drive backlash width {w:.3e} N"),

@@ -109,7 +109,10 @@ fn split(reference: &str) -> (&str, &str) {
 
 /// The compared channels of `spec`, with their plants (the spec is built once, a
 /// copy, to learn port widths and roles).
-pub fn channels(spec: &GraphSpec) -> Result<Vec<Channel>, PlfError> {
+pub fn channels(
+    spec: &GraphSpec,
+    data: &std::sync::Arc<nanomotion_core::data::Dataset>,
+) -> Result<Vec<Channel>, PlfError> {
     let probe = clone_spec(spec)?;
     let roles: Vec<(String, Role)> = probe
         .blocks
@@ -121,7 +124,9 @@ pub fn channels(spec: &GraphSpec) -> Result<Vec<Channel>, PlfError> {
         .iter()
         .map(|b| (b.name.clone(), b.rate_hz))
         .collect();
-    let (sched, _) = probe.build().map_err(|e| PlfError::Model(e.to_string()))?;
+    let (sched, _) = probe
+        .build_with_data(data.clone())
+        .map_err(|e| PlfError::Model(e.to_string()))?;
     let width_in = |reference: &str| -> usize {
         let (b, p) = split(reference);
         sched

@@ -36,6 +36,14 @@ fn check_named(effect: &str, seed: u64) {
         100.0 * cut,
         r.stopped_because
     );
+    for s in &r.steps {
+        for c in s.candidates.iter().take(5) {
+            eprintln!(
+                "    {} {} ({} params): held-out {:.3e}",
+                c.effect, c.site, c.n_params, c.holdout_rms
+            );
+        }
+    }
     assert_eq!(
         r.found.first().map(String::as_str),
         Some(effect),
