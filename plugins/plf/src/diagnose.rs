@@ -978,16 +978,11 @@ fn enumerate(ctx: &Ctx<'_>, cur: &Current, opts: &Options) -> Result<Vec<Cand>, 
                     effect: "friction",
                     site: fb.clone(),
                     output: None,
-                    starts: [0.01, 0.1]
+                    starts: [(0.1, 0.001), (0.1, 0.01), (0.3, 0.05)]
                         .iter()
-                        .map(|f| json!({"type": "friction", "coulomb": f * su, "stribeck": 0.0, "v_stribeck": 0.3 * sv, "viscous": 0.0, "v_eps": 0.003 * sv}))
+                        .map(|(f, e)| json!({"type": "friction", "coulomb": f * su, "stribeck": 0.0, "v_stribeck": sv, "viscous": 0.0, "v_eps": e * sv}))
                         .collect(),
-                    free: vec![
-                        (0, Scale::Log),
-                        (1, Scale::Linear(0.1 * su)),
-                        (2, Scale::Log),
-                        (3, Scale::Linear(0.1 * su / sv)),
-                    ],
+                    free: vec![(0, Scale::Log), (3, Scale::Linear(0.1 * su / sv))],
                     s: vec![],
                     rate_hz: None,
                 });

@@ -231,9 +231,9 @@ pub fn second_order(
             },
             "creep" => Truth::Creep {
                 gains: [
-                    rng.uniform_in(0.03, 0.06),
-                    rng.uniform_in(0.03, 0.06),
-                    rng.uniform_in(0.02, 0.05),
+                    rng.uniform_in(0.06, 0.12),
+                    rng.uniform_in(0.06, 0.12),
+                    rng.uniform_in(0.05, 0.1),
                 ],
                 taus: [0.05, 0.5, 5.0],
             },
