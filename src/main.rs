@@ -1,5 +1,6 @@
 //! The `nanomotion` command: run, check and inspect YAML controller graphs.
 
+mod diagnose_cmd;
 mod optimize_cmd;
 
 use clap::{Parser, Subcommand};
@@ -25,7 +26,7 @@ use std::time::{Duration, Instant};
     arg_required_else_help = true
 )]
 #[command(
-    after_help = "Examples:\n  nanomotion run examples/quickstart.yaml --out out/quickstart\n  nanomotion check examples/quickstart.yaml\n  nanomotion rc-check examples/rc_dvrc.yaml\n  nanomotion optimize-waveform examples/optimize_waveform/model.yaml --budget 0.1\n  nanomotion blocks"
+    after_help = "Examples:\n  nanomotion run examples/quickstart.yaml --out out/quickstart\n  nanomotion check examples/quickstart.yaml\n  nanomotion rc-check examples/rc_dvrc.yaml\n  nanomotion optimize-waveform examples/optimize_waveform/model.yaml --budget 0.1\n  nanomotion diagnose examples/diagnose/model.yaml examples/diagnose/record.csv\n  nanomotion blocks"
 )]
 struct Cli {
     #[command(subcommand)]
@@ -82,6 +83,37 @@ enum Command {
         #[arg(long)]
         budget: Option<f64>,
     },
+    /// Find where a model and a measured record disagree, name the missing effect
+    /// (hysteresis, friction, time_delay, repetitive_disturbance,
+    /// position_dependent_gain, quantization, unmodeled_resonance, drift, creep,
+    /// axis_coupling, encoder_slit_error, saturation, backlash), fit it, insert it
+    /// into the graph and show the held-out residual shrink; repeat until nothing
+    /// significant is left. Writes `model_augmented.yaml`, `report.json`, evidence
+    /// plots and residual PSDs into the output folder.
+    Diagnose {
+        /// The nominal model graph (YAML) with `data_column` inputs and `compare:` entries.
+        model: PathBuf,
+        /// The measured record (CSV with a `t` or `t_s` column, or MATLAB v5 `.mat`).
+        data: PathBuf,
+        /// Output folder (default out/diagnose_<model stem>).
+        #[arg(long, short)]
+        out: Option<PathBuf>,
+        /// Write the JSON report here too (default: <out>/report.json).
+        #[arg(long)]
+        json: Option<PathBuf>,
+        /// Name at most this many effects.
+        #[arg(long, default_value_t = 3)]
+        max_effects: usize,
+        /// Fraction of the record, at its end, held out for scoring.
+        #[arg(long, default_value_t = 0.3)]
+        holdout: f64,
+        /// Override the graph's seed.
+        #[arg(long)]
+        seed: Option<u64>,
+        /// Only try these effects (comma separated vocabulary names).
+        #[arg(long, value_delimiter = ',')]
+        effects: Vec<String>,
+    },
     /// List the registered block types, with their ports and parameters.
     Blocks {
         /// Show only types whose name contains this text.
@@ -116,6 +148,25 @@ fn main() -> ExitCode {
             out,
             budget,
         } => optimize_cmd::optimize_waveform(&config, &out, budget),
+        Command::Diagnose {
+            model,
+            data,
+            out,
+            json,
+            max_effects,
+            holdout,
+            seed,
+            effects,
+        } => diagnose_cmd::run(diagnose_cmd::Args {
+            model,
+            data,
+            out,
+            json,
+            max_effects,
+            holdout,
+            seed,
+            effects,
+        }),
         Command::Blocks { filter } => {
             blocks(filter.as_deref());
             Ok(())
