@@ -384,7 +384,7 @@ fn rate_from_times(
             Ok(fit) => return Ok(fit),
             Err(f) => f,
         },
-        Some(q) if q > 0.0 => {
+        Some(q) if q > 0.0 && uniform_fit(t, q).is_ok() => {
             note = format!(
                 "; the timestamps are printed with too few digits to be read as rounded (±{q:e} s is more than {MAX_TIME_RESOLUTION_REL:e} of the period)"
             );
