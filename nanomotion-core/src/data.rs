@@ -886,7 +886,7 @@ impl Dataset {
     }
 
     /// The dataset as CSV text in the format [`Dataset::from_csv_str`] reads: a
-    /// header `t_s,<names>` and every value in Rust's shortest round-trip form, so
+    /// header `t_s,<names>` and every value in Rust's shortest round-trip form (times plain, values in exponent form), so
     /// that reading it back gives the same numbers.
     pub fn to_csv_string(&self) -> String {
         use std::fmt::Write as _;
@@ -899,7 +899,7 @@ impl Dataset {
         for k in 0..self.len() {
             let _ = write!(s, "{}", self.t0_s + k as f64 / self.rate_hz);
             for c in &self.columns {
-                let _ = write!(s, ",{}", c[k]);
+                let _ = write!(s, ",{:e}", c[k]);
             }
             s.push('\n');
         }
