@@ -336,7 +336,7 @@ fn uniform_fit(t: &[f64], q: f64) -> Result<(f64, f64), StepFailure> {
         .unwrap_or(estimate);
     let dt = 1.0 / rate;
     let tol = |k: usize| qk(k) + qk(k - 1) + UNIFORM_REL_TOL * dt + UNIFORM_ABS_TOL_S;
-    let Some(first) = (1..n).find(|&k| !((t[k] - t[k - 1] - dt).abs() <= tol(k))) else {
+    let Some(first) = (1..n).find(|&k| (t[k] - t[k - 1] - dt).abs() > tol(k)) else {
         return Ok((rate, t0));
     };
     // A gap skews the mean step so that every step fails: point at the first step
@@ -345,7 +345,7 @@ fn uniform_fit(t: &[f64], q: f64) -> Result<(f64, f64), StepFailure> {
     steps.sort_by(f64::total_cmp);
     let median = steps[steps.len() / 2];
     let k = (1..n)
-        .find(|&k| !((t[k] - t[k - 1] - median).abs() <= tol(k)))
+        .find(|&k| (t[k] - t[k - 1] - median).abs() > tol(k))
         .unwrap_or(first);
     Err(StepFailure {
         k,
@@ -835,7 +835,7 @@ impl Dataset {
             ));
         };
         for (what, r) in &sources {
-            if !((r - rate).abs() <= 1e-9 * rate.abs()) {
+            if !r.is_finite() || (r - rate).abs() > 1e-9 * rate.abs() {
                 return Err(DataError::new(
                     origin,
                     format!(
@@ -941,7 +941,7 @@ impl Dataset {
 
 /// A rate given for a CSV file must agree with the file's times.
 fn check_given_rate(d: &Dataset, rate_hz: f64) -> Result<(), DataError> {
-    if (d.rate_hz - rate_hz).abs() > 1e-9 * d.rate_hz {
+    if !rate_hz.is_finite() || (d.rate_hz - rate_hz).abs() > 1e-9 * d.rate_hz {
         return Err(DataError::new(
             &d.origin,
             format!("its times give {} Hz but {rate_hz} Hz was given", d.rate_hz),
