@@ -54,9 +54,11 @@ enum Command {
         /// Measured data (CSV with a `t_s` column, or MATLAB v5 `.mat`): played by
         /// `data_column` blocks and compared with the graph's `compare:` signals
         /// (rms, max, fit %, `comparison.json`, `compare_*.svg`). The duration
-        /// becomes the data's length unless --duration is given.
+        /// becomes the data's length unless --duration is given. Give it twice to
+        /// merge two files of the same rate and length (e.g. input and output
+        /// saved as separate `.mat` files).
         #[arg(long, value_name = "FILE")]
-        data: Option<PathBuf>,
+        data: Vec<PathBuf>,
         /// Sample rate (Hz) of a `.mat` data file that has no time vector `t`.
         #[arg(long, value_name = "HZ", requires = "data")]
         data_rate: Option<f64>,
@@ -184,7 +186,7 @@ struct RunArgs {
     seed: Option<u64>,
     duration: Option<f64>,
     no_files: bool,
-    data: Option<PathBuf>,
+    data: Vec<PathBuf>,
     data_rate: Option<f64>,
 }
 
@@ -202,13 +204,16 @@ fn run(args: RunArgs) -> Result<(), String> {
     if let Some(s) = seed {
         spec.seed = s;
     }
-    let data = match &data {
-        Some(path) => Some(std::sync::Arc::new(
-            nanomotion::core::data::Dataset::from_file_with_rate(path, data_rate)
-                .map_err(|e| e.to_string())?,
-        )),
-        None => None,
-    };
+    let mut merged: Option<nanomotion::core::data::Dataset> = None;
+    for path in &data {
+        let d = nanomotion::core::data::Dataset::from_file_with_rate(path, data_rate)
+            .map_err(|e| e.to_string())?;
+        merged = Some(match merged {
+            None => d,
+            Some(m) => m.merge(d).map_err(|e| e.to_string())?,
+        });
+    }
+    let data = merged.map(std::sync::Arc::new);
     if data.is_none() && !spec.compare.is_empty() {
         return Err(format!(
             "{}: the graph compares {} signal(s) with measured data (`compare:`), but no data was given (fix: run with --data FILE)",

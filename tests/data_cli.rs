@@ -274,3 +274,63 @@ fn compare_without_data_and_runs_longer_than_the_data() {
     );
     std::fs::remove_dir_all(dir).ok();
 }
+
+/// `../shared/data/boucwen_benchmark`, or `None` after a loud skip; with `CI` set a
+/// missing folder fails the test.
+fn boucwen() -> Option<PathBuf> {
+    let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data/boucwen_benchmark");
+    if p.is_dir() {
+        return Some(p);
+    }
+    assert!(
+        std::env::var_os("CI").is_none(),
+        "{} not found, and CI is set: the shared data must be beside the checkout",
+        p.display()
+    );
+    eprintln!("SKIPPED: {} not found", p.display());
+    None
+}
+
+#[test]
+fn boucwen_mat_pair_and_csv_give_the_same_comparison() {
+    let Some(bw) = boucwen() else { return };
+    let dir = tmp("boucwen");
+    let model = |u: &str, y: &str| {
+        format!(
+            "base_rate_hz: 750\nduration_s: 1\nblocks:\n  - {{ name: u, type: data_column, column: {u} }}\n  - {{ name: g, type: gain, k: 1.0e-6 }}\nconnections:\n  - {{ from: u.y, to: g.u }}\ncompare:\n  - {{ signal: g.y, column: {y} }}\n"
+        )
+    };
+    let m = write(&dir, "mat.yaml", &model("uval_multisine", "yval_multisine"));
+    let o = nm()
+        .arg("run")
+        .arg(&m)
+        .arg("--data")
+        .arg(bw.join("uval_multisine.mat"))
+        .arg("--data")
+        .arg(bw.join("yval_multisine.mat"))
+        .args(["--data-rate", "750", "--no-files"])
+        .output()
+        .unwrap();
+    let mat_out = String::from_utf8_lossy(&o.stdout).into_owned();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let (code, csv_out, stderr) = run(
+        &dir,
+        &model("u_force_N", "y_disp_m"),
+        &bw.join("bw_val_multisine.csv"),
+    );
+    assert_eq!(code, Some(0), "{stderr}");
+    let row = |out: &str| -> Vec<String> {
+        let line = out
+            .lines()
+            .find(|l| l.starts_with("g.y "))
+            .unwrap()
+            .to_string();
+        line.split_whitespace()
+            .skip(2)
+            .map(str::to_string)
+            .collect()
+    };
+    assert_eq!(row(&mat_out), row(&csv_out), "{mat_out}\n{csv_out}");
+    assert!(mat_out.contains("8192 samples at 750 Hz"), "{mat_out}");
+    std::fs::remove_dir_all(dir).ok();
+}
