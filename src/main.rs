@@ -52,6 +52,17 @@ enum Command {
         /// Write no files, print the metrics only.
         #[arg(long)]
         no_files: bool,
+        /// Measured data (CSV with a `t_s` column, or MATLAB v5 `.mat`): played by
+        /// `data_column` blocks and compared with the graph's `compare:` signals
+        /// (rms, max, fit %, `comparison.json`, `compare_*.svg`). The duration
+        /// becomes the data's length unless --duration is given. Give it twice to
+        /// merge two files of the same rate and length (e.g. input and output
+        /// saved as separate `.mat` files).
+        #[arg(long, value_name = "FILE")]
+        data: Vec<PathBuf>,
+        /// Sample rate (Hz) of a `.mat` data file that has no time vector `t`.
+        #[arg(long, value_name = "HZ", requires = "data")]
+        data_rate: Option<f64>,
     },
     /// Validate a graph without running it: parse, build every block, resolve ports,
     /// rates and execution order, and report inserted rate transitions.
@@ -131,7 +142,17 @@ fn main() -> ExitCode {
             seed,
             duration,
             no_files,
-        } => run(graph, out, seed, duration, no_files),
+            data,
+            data_rate,
+        } => run(RunArgs {
+            graph,
+            out,
+            seed,
+            duration,
+            no_files,
+            data,
+            data_rate,
+        }),
         Command::Check { graph } => check(graph),
         Command::RcCheck { graph } => match nanomotion::dvrc::check::rc_check_file(&graph) {
             Ok(report) => {
@@ -209,21 +230,58 @@ fn check(graph: PathBuf) -> Result<(), String> {
     Ok(())
 }
 
-fn run(
+/// The arguments of `nanomotion run`.
+struct RunArgs {
     graph: PathBuf,
     out: PathBuf,
     seed: Option<u64>,
     duration: Option<f64>,
     no_files: bool,
-) -> Result<(), String> {
+    data: Vec<PathBuf>,
+    data_rate: Option<f64>,
+}
+
+fn run(args: RunArgs) -> Result<(), String> {
+    let RunArgs {
+        graph,
+        out,
+        seed,
+        duration,
+        no_files,
+        data,
+        data_rate,
+    } = args;
     let mut spec = load(&graph)?;
     if let Some(s) = seed {
         spec.seed = s;
     }
-    if let Some(d) = duration {
-        spec.duration_s = d;
+    let mut merged: Option<nanomotion::core::data::Dataset> = None;
+    for path in &data {
+        let d = nanomotion::core::data::Dataset::from_file_with_rate(path, data_rate)
+            .map_err(|e| e.to_string())?;
+        merged = Some(match merged {
+            None => d,
+            Some(m) => m.merge(d).map_err(|e| e.to_string())?,
+        });
     }
-    let (mut sched, report) = spec.build().map_err(|e| e.to_string())?;
+    let data = merged.map(std::sync::Arc::new);
+    if data.is_none() && !spec.compare.is_empty() {
+        return Err(format!(
+            "{}: the graph compares {} signal(s) with measured data (`compare:`), but no data was given (fix: run with --data FILE)",
+            graph.display(),
+            spec.compare.len()
+        ));
+    }
+    match (duration, &data) {
+        (Some(d), _) => spec.duration_s = d,
+        (None, Some(d)) => spec.duration_s = d.duration_s(),
+        (None, None) => {}
+    }
+    let (mut sched, report) = match &data {
+        Some(d) => spec.build_with_data(d.clone()),
+        None => spec.build(),
+    }
+    .map_err(|e| e.to_string())?;
     for r in &report.rate_transitions {
         eprintln!("note: rate transition {r}");
     }
@@ -273,9 +331,46 @@ fn run(
             );
         }
     }
+    let comparisons = match &data {
+        Some(d) => nanomotion::core::data::compare(&sched, d).map_err(|e| e.to_string())?,
+        None => Vec::new(),
+    };
+    if let Some(d) = &data {
+        println!(
+            "data {}: {} samples at {} Hz ({} s)",
+            d.origin(),
+            d.len(),
+            d.rate_hz(),
+            d.duration_s()
+        );
+    }
+    if !comparisons.is_empty() {
+        println!(
+            "{:<24} {:<16} {:>12} {:>12} {:>9}",
+            "signal", "column", "rms", "max |.|", "fit %"
+        );
+        for c in &comparisons {
+            println!(
+                "{:<24} {:<16} {:>12.4e} {:>12.4e} {:>9.3}",
+                c.signal, c.column, c.rms, c.max_abs, c.fit_percent
+            );
+        }
+    }
     if !no_files {
-        let files = nanomotion::output::write_all(&out, &result, &report.rate_transitions)
+        let mut files = nanomotion::output::write_all(&out, &result, &report.rate_transitions)
             .map_err(|e| e.to_string())?;
+        if let Some(d) = &data
+            && !comparisons.is_empty()
+        {
+            let title = result
+                .title
+                .clone()
+                .unwrap_or_else(|| graph.display().to_string());
+            files.extend(
+                nanomotion::output::write_comparisons(&out, &title, d, &comparisons)
+                    .map_err(|e| e.to_string())?,
+            );
+        }
         println!("wrote {} files to {}", files.len(), out.display());
     }
     Ok(())

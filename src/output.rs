@@ -239,3 +239,81 @@ pub fn write_all(
     written.push(path);
     Ok(written)
 }
+
+/// The comparison file (`comparison.json`) of `nanomotion run --data`.
+#[derive(Debug, Serialize)]
+pub struct ComparisonFile<'a> {
+    /// The data file.
+    pub data: &'a str,
+    /// The data's sample rate (Hz).
+    pub data_rate_hz: f64,
+    /// Samples in the data.
+    pub data_samples: usize,
+    /// One entry per `compare:` pair; the residual is `measured − model`.
+    pub comparisons: &'a [nanomotion_core::data::Comparison],
+}
+
+/// Write `comparison.json` and one SVG per compared signal
+/// (`compare_<signal>.svg`: measured and model against time on top, the residual
+/// below). Returns the files written.
+pub fn write_comparisons(
+    dir: &Path,
+    title: &str,
+    data: &nanomotion_core::data::Dataset,
+    comparisons: &[nanomotion_core::data::Comparison],
+) -> Result<Vec<PathBuf>, OutputError> {
+    std::fs::create_dir_all(dir).map_err(io(dir))?;
+    let mut written = Vec::new();
+    for c in comparisons {
+        let t = c.times();
+        let top = Figure {
+            title: format!("{title}: {} against measured `{}`", c.signal, c.column),
+            x_label: "time (s)".into(),
+            y_label: c.column.clone(),
+            x_scale: Scale::Linear,
+            series: vec![
+                Series {
+                    label: format!("measured {}", c.column),
+                    x: t.clone(),
+                    y: c.measured.clone(),
+                },
+                Series {
+                    label: format!("model {}", c.signal),
+                    x: t.clone(),
+                    y: c.model.clone(),
+                },
+            ],
+        };
+        let bottom = Figure {
+            title: format!(
+                "residual (measured − model): rms {:.3e}, max {:.3e}, fit {:.2} %",
+                c.rms, c.max_abs, c.fit_percent
+            ),
+            x_label: "time (s)".into(),
+            y_label: "residual".into(),
+            x_scale: Scale::Linear,
+            series: vec![Series {
+                label: "measured − model".into(),
+                x: t,
+                y: c.residual.clone(),
+            }],
+        };
+        let path = dir.join(format!("compare_{}.svg", file_stem(&c.signal)));
+        crate::plot::draw_svg_panels(&[top, bottom], &path)?;
+        written.push(path);
+    }
+    let file = ComparisonFile {
+        data: data.origin(),
+        data_rate_hz: data.rate_hz(),
+        data_samples: data.len(),
+        comparisons,
+    };
+    let path = dir.join("comparison.json");
+    let text = serde_json::to_string_pretty(&file).map_err(|e| OutputError::Csv {
+        path: path.display().to_string(),
+        message: e.to_string(),
+    })?;
+    std::fs::write(&path, text).map_err(io(&path))?;
+    written.push(path);
+    Ok(written)
+}

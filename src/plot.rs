@@ -95,6 +95,37 @@ const COLORS: [RGBColor; 6] = [
 
 /// Draw `fig` into an SVG file at `path` (800 × 450 px).
 pub fn draw_svg(fig: &Figure, path: &Path) -> Result<(), PlotError> {
+    draw_svg_panels(std::slice::from_ref(fig), path)
+}
+
+/// Draw `figs` stacked top to bottom into one SVG file at `path` (800 px wide,
+/// 450 px for one panel, 320 px per panel for several).
+pub fn draw_svg_panels(figs: &[Figure], path: &Path) -> Result<(), PlotError> {
+    let err = |m: String| PlotError {
+        path: path.display().to_string(),
+        message: m,
+    };
+    let height = if figs.len() <= 1 {
+        450
+    } else {
+        320 * figs.len() as u32
+    };
+    let root = SVGBackend::new(path, (800, height)).into_drawing_area();
+    root.fill(&WHITE).map_err(|e| err(e.to_string()))?;
+    let areas = root.split_evenly((figs.len().max(1), 1));
+    for (fig, area) in figs.iter().zip(&areas) {
+        draw_on(fig, area, path)?;
+    }
+    root.present().map_err(|e| err(e.to_string()))?;
+    Ok(())
+}
+
+/// Draw `fig` on one drawing area of an SVG being written to `path`.
+fn draw_on(
+    fig: &Figure,
+    root: &DrawingArea<SVGBackend<'_>, plotters::coord::Shift>,
+    path: &Path,
+) -> Result<(), PlotError> {
     let err = |m: String| PlotError {
         path: path.display().to_string(),
         message: m,
@@ -160,8 +191,6 @@ pub fn draw_svg(fig: &Figure, path: &Path) -> Result<(), PlotError> {
     };
     let (y0, y1) = (y0 - pad, y1 + pad);
 
-    let root = SVGBackend::new(path, (800, 450)).into_drawing_area();
-    root.fill(&WHITE).map_err(|e| err(e.to_string()))?;
     macro_rules! body {
         ($chart:expr) => {{
             let mut chart = $chart;
@@ -197,7 +226,7 @@ pub fn draw_svg(fig: &Figure, path: &Path) -> Result<(), PlotError> {
             }
         }};
     }
-    let mut builder = ChartBuilder::on(&root);
+    let mut builder = ChartBuilder::on(root);
     builder
         .caption(fig.title.as_str(), ("sans-serif", 18))
         .margin(12)
@@ -215,7 +244,6 @@ pub fn draw_svg(fig: &Figure, path: &Path) -> Result<(), PlotError> {
                 .map_err(|e| err(e.to_string()))?
         ),
     }
-    root.present().map_err(|e| err(e.to_string()))?;
     Ok(())
 }
 

@@ -336,7 +336,7 @@ fn uniform_fit(t: &[f64], q: f64) -> Result<(f64, f64), StepFailure> {
         .unwrap_or(estimate);
     let dt = 1.0 / rate;
     let tol = |k: usize| qk(k) + qk(k - 1) + UNIFORM_REL_TOL * dt + UNIFORM_ABS_TOL_S;
-    let Some(first) = (1..n).find(|&k| !((t[k] - t[k - 1] - dt).abs() <= tol(k))) else {
+    let Some(first) = (1..n).find(|&k| (t[k] - t[k - 1] - dt).abs() > tol(k)) else {
         return Ok((rate, t0));
     };
     // A gap skews the mean step so that every step fails: point at the first step
@@ -345,7 +345,7 @@ fn uniform_fit(t: &[f64], q: f64) -> Result<(f64, f64), StepFailure> {
     steps.sort_by(f64::total_cmp);
     let median = steps[steps.len() / 2];
     let k = (1..n)
-        .find(|&k| !((t[k] - t[k - 1] - median).abs() <= tol(k)))
+        .find(|&k| (t[k] - t[k - 1] - median).abs() > tol(k))
         .unwrap_or(first);
     Err(StepFailure {
         k,
@@ -384,7 +384,7 @@ fn rate_from_times(
             Ok(fit) => return Ok(fit),
             Err(f) => f,
         },
-        Some(q) if q > 0.0 => {
+        Some(q) if q > 0.0 && uniform_fit(t, q).is_ok() => {
             note = format!(
                 "; the timestamps are printed with too few digits to be read as rounded (±{q:e} s is more than {MAX_TIME_RESOLUTION_REL:e} of the period)"
             );
@@ -835,7 +835,7 @@ impl Dataset {
             ));
         };
         for (what, r) in &sources {
-            if !((r - rate).abs() <= 1e-9 * rate.abs()) {
+            if !r.is_finite() || (r - rate).abs() > 1e-9 * rate.abs() {
                 return Err(DataError::new(
                     origin,
                     format!(
@@ -886,7 +886,7 @@ impl Dataset {
     }
 
     /// The dataset as CSV text in the format [`Dataset::from_csv_str`] reads: a
-    /// header `t_s,<names>` and every value in Rust's shortest round-trip form, so
+    /// header `t_s,<names>` and every value in Rust's shortest round-trip form (times plain, values in exponent form), so
     /// that reading it back gives the same numbers.
     pub fn to_csv_string(&self) -> String {
         use std::fmt::Write as _;
@@ -899,7 +899,7 @@ impl Dataset {
         for k in 0..self.len() {
             let _ = write!(s, "{}", self.t0_s + k as f64 / self.rate_hz);
             for c in &self.columns {
-                let _ = write!(s, ",{}", c[k]);
+                let _ = write!(s, ",{:e}", c[k]);
             }
             s.push('\n');
         }
@@ -941,7 +941,7 @@ impl Dataset {
 
 /// A rate given for a CSV file must agree with the file's times.
 fn check_given_rate(d: &Dataset, rate_hz: f64) -> Result<(), DataError> {
-    if (d.rate_hz - rate_hz).abs() > 1e-9 * d.rate_hz {
+    if !rate_hz.is_finite() || (d.rate_hz - rate_hz).abs() > 1e-9 * d.rate_hz {
         return Err(DataError::new(
             &d.origin,
             format!("its times give {} Hz but {rate_hz} Hz was given", d.rate_hz),

@@ -557,3 +557,30 @@ mod mutated_graphs {
         }
     }
 }
+
+#[test]
+fn data_column_ticks_do_not_allocate_and_hold_the_last_sample() {
+    use nanomotion_core::data::Dataset;
+    let values: Vec<f64> = (0..1000).map(|k| k as f64 * 0.5).collect();
+    let data = std::sync::Arc::new(
+        Dataset::from_columns("rec.csv", 1000.0, 0.0, vec![("u".into(), values)]).unwrap(),
+    );
+    let yaml = "base_rate_hz: 2000\nduration_s: 1.0\nblocks:\n  - { name: d, type: data_column, column: u, rate_hz: 1000 }\nlog: [d.y]\n";
+    let (mut s, _) = GraphSpec::from_yaml(yaml, "d.yaml")
+        .unwrap()
+        .build_with_data(data)
+        .unwrap();
+    s.tick();
+    let info = allocation_counter::measure(|| {
+        s.step_n(1999);
+    });
+    assert_eq!(info.count_total, 0, "a tick allocated: {info:?}");
+    let res = s.result();
+    let y = &res.logs[0].data;
+    assert_eq!(y.len(), 1000);
+    assert_eq!((y[0], y[1], y[999]), (0.0, 0.5, 499.5));
+    // Stepping past the end (the scheduler lets a caller tick on) holds the last sample.
+    s.step_n(10);
+    let id = s.signal_id("d.y").unwrap();
+    assert_eq!(s.read(id), &[499.5]);
+}
