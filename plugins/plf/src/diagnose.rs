@@ -416,13 +416,11 @@ pub fn diagnose_with_progress(
         let mut win = results[bi].take().expect("best exists");
         let cand = &cands[bi];
         // Joint refit with the effects named before.
-        if !cur.free.is_empty() {
-            if let Ok(j) = joint_refit(&ctx, &win, &mut runs) {
-                if weighted_holdout_ms(&ctx, &j.residual) < weighted_holdout_ms(&ctx, &win.residual)
-                {
-                    win = j;
-                }
-            }
+        if !cur.free.is_empty()
+            && let Ok(j) = joint_refit(&ctx, &win, &mut runs)
+            && weighted_holdout_ms(&ctx, &j.residual) < weighted_holdout_ms(&ctx, &win.residual)
+        {
+            win = j;
         }
         let after_ms = weighted_holdout_ms(&ctx, &win.residual);
         let (worse, better) = holdout_weighted_vectors(&ctx, &cur.residual, &win.residual);
@@ -481,12 +479,11 @@ pub fn diagnose_with_progress(
         let mut unc = BTreeMap::new();
         for (k, (nm, v)) in names.iter().zip(&values).enumerate() {
             params.insert(nm.clone(), *v);
-            if let Some(pos) = win.free_indices.iter().position(|&i| i == k) {
-                if let Some(s) = win.std.get(pos) {
-                    if s.is_finite() {
-                        unc.insert(nm.clone(), *s);
-                    }
-                }
+            if let Some(pos) = win.free_indices.iter().position(|&i| i == k)
+                && let Some(s) = win.std.get(pos)
+                && s.is_finite()
+            {
+                unc.insert(nm.clone(), *s);
             }
         }
         let sc = scores(&ctx, &new);
@@ -891,9 +888,11 @@ fn enumerate(ctx: &Ctx<'_>, cur: &Current, opts: &Options) -> Result<Vec<Cand>, 
         if want("unmodeled_resonance") {
             out.push(resonance(r, fs, out_site.clone(), Some(i), out_rate));
         }
-        if want("encoder_slit_error") {
-            if let Some(lsb) = quantizer_lsb(&cur.spec()?, &ch.signal) {
-                let slits = (range(yhat) / lsb).round() as usize;
+        if want("encoder_slit_error")
+            && let Some(lsb) = quantizer_lsb(&cur.spec()?, &ch.signal)
+        {
+            let slits = (range(yhat) / lsb).round() as usize;
+            {
                 if let Some(nn) = slit_count(r, &yhat[..ctx.n_est], lsb, slits) {
                     out.push(Cand {
                         effect: "encoder_slit_error",
@@ -1063,8 +1062,10 @@ fn enumerate(ctx: &Ctx<'_>, cur: &Current, opts: &Options) -> Result<Vec<Cand>, 
             if want("unmodeled_resonance") {
                 out.push(resonance(r, fs, inp.clone(), None, None));
             }
-            if want("repetitive_disturbance") {
-                if let Some(p) = line_period(r) {
+            if want("repetitive_disturbance")
+                && let Some(p) = line_period(r)
+            {
+                {
                     let h = 3;
                     out.push(Cand {
                         effect: "repetitive_disturbance",
@@ -1145,15 +1146,16 @@ fn slit_count(r: &[f64], y: &[f64], pitch: f64, slits: usize) -> Option<usize> {
 }
 
 fn fit_candidate(ctx: &Ctx<'_>, cur: &Current, c: &Cand) -> Result<Fitted, String> {
-    let mut best: Option<(
+    // (cost, spec, block name, free parameters, their σ, residuals)
+    type Best = (
         f64,
         GraphSpec,
         String,
         Vec<FreeParam>,
         Vec<f64>,
         Vec<Vec<f64>>,
-        usize,
-    )> = None;
+    );
+    let mut best: Option<Best> = None;
     let mut runs = 0;
     for start in &c.starts {
         let block = surgery::block_from_json(start.clone()).map_err(|e| e.to_string())?;
@@ -1243,10 +1245,10 @@ fn fit_candidate(ctx: &Ctx<'_>, cur: &Current, c: &Cand) -> Result<Fitted, Strin
             (fit.cost, fit.std, residual)
         };
         if best.as_ref().is_none_or(|b| cost < b.0) {
-            best = Some((cost, spec, name, new_free, std, residual, 0));
+            best = Some((cost, spec, name, new_free, std, residual));
         }
     }
-    let (_, spec, name, new_free, std, residual, _) = best.ok_or("no start could be fitted")?;
+    let (_, spec, name, new_free, std, residual) = best.ok_or("no start could be fitted")?;
     let k = c.free.len() as f64;
     let ne = ctx.n_est as f64;
     let nh = (ctx.n - ctx.n_est) as f64;
@@ -1365,8 +1367,12 @@ fn evidence(ctx: &Ctx<'_>, cur: &Current, c: &Cand) -> String {
                 .collect();
             let mut mask = vec![false; x.len()];
             for &k in &near {
-                for m in k.saturating_sub(5)..(k + 5).min(x.len()) {
-                    mask[m] = true;
+                for m in mask
+                    .iter_mut()
+                    .take((k + 5).min(x.len()))
+                    .skip(k.saturating_sub(5))
+                {
+                    *m = true;
                 }
             }
             let (a, b): (Vec<f64>, Vec<f64>) = (0..r.len().min(x.len()))

@@ -157,7 +157,7 @@ pub fn second_order(
     n: usize,
     coloured_noise: bool,
 ) -> Result<Record, DataError> {
-    let mut rng = Rng::new(seed ^ 0x5eed_0f_91a7);
+    let mut rng = Rng::new(seed ^ 0x005e_ed0f_91a7);
     let stage = Stage {
         f0: rng.uniform_in(20.0, 60.0),
         zeta: rng.uniform_in(0.03, 0.15),
@@ -200,9 +200,9 @@ pub fn second_order(
                     rng.uniform_in(0.0, 0.05) * x_amp,
                 ],
                 phases: [
-                    rng.uniform_in(0.0, 6.28),
-                    rng.uniform_in(0.0, 6.28),
-                    rng.uniform_in(0.0, 6.28),
+                    rng.uniform_in(0.0, 2.0 * PI),
+                    rng.uniform_in(0.0, 2.0 * PI),
+                    rng.uniform_in(0.0, 2.0 * PI),
                 ],
             },
             "position_dependent_gain" => Truth::PositionGain {
