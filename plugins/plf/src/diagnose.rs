@@ -761,10 +761,11 @@ fn std_of(x: &[f64]) -> f64 {
     stats::mean_square(&x.iter().map(|v| v - m).collect::<Vec<_>>()).sqrt()
 }
 
-/// The period (in samples) of the strongest line of `r`, if any.
+/// The period (in samples) of the strongest line of `r`, if at least three periods
+/// fit in `r` (a slower "period" is a trend, not a repetition).
 fn line_period(r: &[f64]) -> Option<f64> {
     let (_, f) = stats::fisher_g(r);
-    (f > 0.0).then(|| 1.0 / f)
+    (f > 0.0 && 1.0 / f <= r.len() as f64 / 3.0).then(|| 1.0 / f)
 }
 
 /// The spatial period of `r` as a function of `pos` (binned on a uniform grid).
@@ -787,7 +788,9 @@ fn position_period(r: &[f64], pos: &[f64]) -> Option<f64> {
         .map(|(s, &c)| if c > 0 { s / c as f64 } else { 0.0 })
         .collect();
     let (t, f) = stats::fisher_g(&filled);
-    (t.p_value < 0.01 && f > 0.0).then(|| span / (bins - 1) as f64 / f)
+    // At least three spatial periods over the range travelled.
+    (t.p_value < 0.01 && f > 0.0 && 1.0 / f <= bins as f64 / 3.0)
+        .then(|| span / (bins - 1) as f64 / f)
 }
 
 fn enumerate(ctx: &Ctx<'_>, cur: &Current, opts: &Options) -> Result<Vec<Cand>, PlfError> {
@@ -814,7 +817,11 @@ fn enumerate(ctx: &Ctx<'_>, cur: &Current, opts: &Options) -> Result<Vec<Cand>, 
                 starts: vec![
                     json!({"type": "drift", "offset": 0.0, "rate": 0.0, "curvature": 0.0}),
                 ],
-                free: vec![(0, Scale::Linear(sr)), (1, Scale::Linear(sr / t_len))],
+                free: vec![
+                    (0, Scale::Linear(sr)),
+                    (1, Scale::Linear(sr / t_len)),
+                    (2, Scale::Linear(sr / (t_len * t_len))),
+                ],
                 s: vec![],
                 rate_hz: out_rate,
             });

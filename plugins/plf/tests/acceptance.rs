@@ -81,3 +81,67 @@ named! {
     saturation_is_named: "saturation",
     backlash_is_named: "backlash",
 }
+
+#[test]
+fn axis_coupling_is_named_on_two_axes() {
+    link();
+    let rec = generate::two_axis("axis_coupling", 1, 8000).unwrap();
+    let spec = GraphSpec::from_yaml(&rec.nominal_yaml, "two_axis.yaml").unwrap();
+    let r = diagnose(&spec, &rec.data, &Options::default()).unwrap();
+    eprintln!("{}: found {:?}; {}", rec.truth, r.found, r.stopped_because);
+    assert_eq!(r.found, vec!["axis_coupling".to_string()]);
+    // The coupled axis's own rms is cut by more than half; the clean axis is untouched.
+    let s = &r.steps[0];
+    assert!(s.per_output[0].holdout_rms < 0.5 * r.nominal.per_output[0].holdout_rms);
+    assert_eq!(
+        s.per_output[1].holdout_rms,
+        r.nominal.per_output[1].holdout_rms
+    );
+}
+
+#[test]
+fn two_hidden_effects_are_both_named_each_cutting_the_gap() {
+    for (pair, seed) in [
+        ("backlash+drift", 3),
+        ("hysteresis+repetitive_disturbance", 4),
+    ] {
+        let r = run(pair, seed, 12_000, 3);
+        eprintln!("{pair}: found {:?}; {}", r.found, r.stopped_because);
+        let mut want: Vec<&str> = pair.split('+').collect();
+        let mut got: Vec<&str> = r.found.iter().map(String::as_str).collect();
+        want.sort_unstable();
+        got.sort_unstable();
+        assert_eq!(got, want, "{pair}");
+        for s in &r.steps {
+            assert!(
+                s.holdout_rms_after < s.holdout_rms_before,
+                "{pair}: step {} did not cut",
+                s.effect
+            );
+        }
+    }
+}
+
+/// Noise alone — white, and white plus a strongly coloured (AR(1), a = 0.98)
+/// component — must name nothing: the measured false-alarm rate over 50 seeds
+/// is asserted at ≤ 5 % (issue 12 asks for ≥ 95 % `found: []`).
+#[test]
+fn noise_alone_names_nothing() {
+    link();
+    let mut alarms = Vec::new();
+    for seed in 0..50u64 {
+        let coloured = seed % 2 == 1;
+        let rec = generate::second_order("none", 100 + seed, 4000, coloured).unwrap();
+        let spec = GraphSpec::from_yaml(&rec.nominal_yaml, "generated.yaml").unwrap();
+        let r = diagnose(&spec, &rec.data, &Options::default()).unwrap();
+        if !r.found.is_empty() {
+            alarms.push((seed, coloured, r.found.clone()));
+        }
+    }
+    eprintln!("false alarms: {} of 50: {alarms:?}", alarms.len());
+    assert!(
+        alarms.len() <= 2,
+        "{} false alarms of 50: {alarms:?}",
+        alarms.len()
+    );
+}
