@@ -977,6 +977,44 @@ fn enumerate(ctx: &Ctx<'_>, cur: &Current, opts: &Options) -> Result<Vec<Cand>, 
                     rate_hz: None,
                 });
             }
+            if want("hysteresis") {
+                // Bouc–Wen: saturating loops (restoring forces, mounts).
+                let ry = range(&pos);
+                out.push(Cand {
+                    effect: "hysteresis",
+                    site: fb.clone(),
+                    output: None,
+                    starts: [(0.3, 1.0), (1.0, 4.0), (1.0, 15.0)]
+                        .iter()
+                        .map(|(a, b)| json!({"type": "bouc_wen", "a": -a * g, "beta": b / ry, "gamma": 0.0, "linear": 0.0}))
+                        .collect(),
+                    free: vec![
+                        (0, Scale::Linear(0.1 * g)),
+                        (1, Scale::Log),
+                        (2, Scale::Linear(1.0 / ry)),
+                        (3, Scale::Linear(0.1 * g)),
+                    ],
+                    s: vec![],
+                    rate_hz: None,
+                });
+                out.push(Cand {
+                    effect: "hysteresis",
+                    site: inp.clone(),
+                    output: None,
+                    starts: [1.0, 4.0, 15.0]
+                        .iter()
+                        .map(|b| json!({"type": "bouc_wen", "a": 0.5, "beta": b / ru, "gamma": 0.0, "linear": 0.5}))
+                        .collect(),
+                    free: vec![
+                        (0, Scale::Linear(0.1)),
+                        (1, Scale::Log),
+                        (2, Scale::Linear(1.0 / ru)),
+                        (3, Scale::Linear(0.1)),
+                    ],
+                    s: vec![],
+                    rate_hz: None,
+                });
+            }
             if want("friction") {
                 let v: Vec<f64> = pos.windows(2).map(|w| (w[1] - w[0]) * fs).collect();
                 let sv = std_of(&v).max(1e-300);

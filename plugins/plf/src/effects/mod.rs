@@ -28,6 +28,7 @@
 use nanomotion_core::ParamError;
 
 pub mod backlash;
+pub mod bouc_wen;
 pub mod coupling;
 pub mod creep;
 pub mod delay;
@@ -40,6 +41,7 @@ pub mod resonance;
 pub mod slit;
 
 pub use backlash::Backlash;
+pub use bouc_wen::BoucWen;
 pub use coupling::AxisCoupling;
 pub use creep::{Creep, CreepTerm};
 pub use delay::TimeDelay;
