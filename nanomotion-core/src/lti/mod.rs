@@ -37,6 +37,7 @@ pub mod linalg;
 pub mod lmi;
 pub mod margins;
 pub mod riccati;
+mod schur;
 pub mod sim;
 pub mod ss;
 pub mod tf;

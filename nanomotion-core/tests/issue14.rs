@@ -1,0 +1,184 @@
+//! Issue 14: reproducers of the defects found by the independent cross-check of
+//! `nanomotion_core::lti` (badly scaled Riccati problems, O(n³) Lyapunov,
+//! H∞ synthesis limits, validation, delay-chain poles). Each test failed on the
+//! code before the fix.
+
+use nalgebra::DMatrix;
+use nanomotion_core::lti::{C2dMethod, LtiError, StateSpace, c2d, care, dare};
+use nanomotion_core::rng::Rng;
+use std::f64::consts::PI;
+
+/// ‖AᵀX + XA − (XB)R⁻¹(BᵀX) + Q‖_F relative to the sum of the terms' norms,
+/// computed here from the data.
+fn care_residual(
+    a: &DMatrix<f64>,
+    b: &DMatrix<f64>,
+    q: &DMatrix<f64>,
+    r: &DMatrix<f64>,
+    x: &DMatrix<f64>,
+) -> f64 {
+    let xb = x * b;
+    let quad = &xb * r.clone().try_inverse().unwrap() * xb.transpose();
+    let res = a.transpose() * x + x * a - &quad + q;
+    res.norm() / (2.0 * (a.transpose() * x).norm() + quad.norm() + q.norm())
+}
+
+fn dare_residual(
+    a: &DMatrix<f64>,
+    b: &DMatrix<f64>,
+    q: &DMatrix<f64>,
+    r: &DMatrix<f64>,
+    x: &DMatrix<f64>,
+) -> f64 {
+    let axa = a.transpose() * x * a;
+    let bxa = b.transpose() * x * a;
+    let quad = bxa.transpose() * (r + b.transpose() * x * b).try_inverse().unwrap() * &bxa;
+    let res = &axa - x - &quad + q;
+    res.norm() / (axa.norm() + x.norm() + quad.norm() + q.norm())
+}
+
+/// Componentwise backward error of the CARE, computed here: maxᵢⱼ |Res|ᵢⱼ over
+/// (|Aᵀ||X| + |X||A| + |X||B||R⁻¹||Bᵀ||X| + |Q|)ᵢⱼ.
+fn care_backward(
+    a: &DMatrix<f64>,
+    b: &DMatrix<f64>,
+    q: &DMatrix<f64>,
+    r: &DMatrix<f64>,
+    x: &DMatrix<f64>,
+) -> f64 {
+    let ri = r.clone().try_inverse().unwrap();
+    let res = a.transpose() * x + x * a - x * b * &ri * b.transpose() * x + q;
+    let (aa, xa, ba) = (a.abs(), x.abs(), b.abs());
+    let floor =
+        aa.transpose() * &xa + &xa * &aa + &xa * &ba * ri.abs() * ba.transpose() * &xa + q.abs();
+    let fmax = floor.amax();
+    res.iter()
+        .zip(floor.iter())
+        .map(|(r, f)| r.abs() / f.max(f64::EPSILON * fmax))
+        .fold(0.0, f64::max)
+}
+
+/// The issue's stage model: an integrator plus a 500 Hz mode with ζ = 0.01.
+fn stage() -> (DMatrix<f64>, DMatrix<f64>) {
+    let w = 2.0 * PI * 500.0;
+    let z = 0.01;
+    let a = DMatrix::from_row_slice(
+        3,
+        3,
+        &[0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, -w * w, -2.0 * z * w],
+    );
+    let b = DMatrix::from_row_slice(3, 1, &[1.0, 0.0, w * w]);
+    (a, b)
+}
+
+#[test]
+fn care_on_the_stage_model_with_cheap_control() {
+    let (a, b) = stage();
+    let q = DMatrix::identity(3, 3);
+    let r = DMatrix::from_element(1, 1, 1e-6);
+    let s = care(&a, &b, &q, &r, None).unwrap();
+    // The terms of the equation cancel (B = [1, 0, ω²]ᵀ, R = 1e-6): the
+    // normwise residual of even the exact X is ~1e-11; against the round-off
+    // floor of evaluating the equation the residual is at machine precision.
+    let res = care_residual(&a, &b, &q, &r, &s.x);
+    assert!(res < 1e-10, "residual {res:e}");
+    assert!(s.backward_error < 1e-15, "{:e}", s.backward_error);
+    assert!(s.closed_loop_poles.iter().all(|p| p.re < 0.0));
+    assert!(s.x.clone().cholesky().is_some(), "X ≻ 0");
+}
+
+#[test]
+fn dare_on_the_zoh_stage_model_at_20_khz() {
+    let (a, b) = stage();
+    let sys = StateSpace::new(a, b, DMatrix::zeros(1, 3), DMatrix::zeros(1, 1), None).unwrap();
+    let d = c2d(&sys, 1.0 / 20e3, C2dMethod::Zoh).unwrap();
+    let q = DMatrix::identity(3, 3);
+    let r = DMatrix::from_element(1, 1, 1e-6);
+    let s = dare(&d.a, &d.b, &q, &r, None).unwrap();
+    let res = dare_residual(&d.a, &d.b, &q, &r, &s.x);
+    assert!(res < 1e-13, "residual {res:e}");
+    assert!(s.closed_loop_poles.iter().all(|p| p.norm() < 1.0));
+}
+
+fn random_problem(rng: &mut Rng, n: usize, m: usize) -> [DMatrix<f64>; 3] {
+    let a = DMatrix::from_fn(n, n, |_, _| rng.normal());
+    let b = DMatrix::from_fn(n, m, |_, _| rng.normal());
+    let c = DMatrix::from_fn(n, n, |_, _| rng.normal());
+    let q = &c * c.transpose() / n as f64 + DMatrix::identity(n, n) * 1e-3;
+    [a, b, q]
+}
+
+#[test]
+fn random_n20_problems_with_r_1e_minus_8() {
+    let mut rng = Rng::new(14);
+    for case in 0..6 {
+        let [a, b, q] = random_problem(&mut rng, 20, [2, 4, 20][case % 3]);
+        let m = b.ncols();
+        let r = DMatrix::identity(m, m) * 1e-8;
+        let s = care(&a, &b, &q, &r, None).unwrap_or_else(|e| panic!("case {case}: care {e}"));
+        assert!(
+            s.backward_error < 1e-14,
+            "case {case}: care backward error {:e}",
+            s.backward_error
+        );
+        // Normwise the terms cancel to ~1e-6 (the equation's own round-off);
+        // componentwise the residual is at machine precision.
+        let be = care_backward(&a, &b, &q, &r, &s.x);
+        assert!(be < 1e-13, "case {case}: care backward error {be:e}");
+        assert!(s.closed_loop_poles.iter().all(|p| p.re < 0.0));
+        // Discrete: the same data scaled to spectral radius 1.2.
+        let rho = nanomotion_core::lti::linalg::eigvals(&a)
+            .iter()
+            .map(|p| p.norm())
+            .fold(0.0, f64::max);
+        let ad = &a * (1.2 / rho);
+        let s = dare(&ad, &b, &q, &r, None).unwrap_or_else(|e| panic!("case {case}: dare {e}"));
+        assert!(
+            s.backward_error < 1e-14,
+            "case {case}: dare backward error {:e}",
+            s.backward_error
+        );
+        let res = dare_residual(&ad, &b, &q, &r, &s.x);
+        assert!(res < 1e-8, "case {case}: dare residual {res:e}");
+        assert!(s.closed_loop_poles.iter().all(|p| p.norm() < 1.0));
+    }
+}
+
+#[test]
+fn dare_n5_with_r_1e_minus_8_to_round_off() {
+    let mut rng = Rng::new(5);
+    for case in 0..10 {
+        let [a, b, q] = random_problem(&mut rng, 5, 1 + case % 2);
+        let m = b.ncols();
+        let r = DMatrix::identity(m, m) * 1e-8;
+        let s = dare(&a, &b, &q, &r, None).unwrap_or_else(|e| panic!("case {case}: {e}"));
+        let res = dare_residual(&a, &b, &q, &r, &s.x);
+        assert!(res < 1e-14, "case {case}: residual {res:e}");
+    }
+}
+
+#[test]
+fn riccati_errors_name_the_cause() {
+    // Unstable mode that B cannot reach: not stabilisable.
+    let a = DMatrix::from_row_slice(2, 2, &[1.0, 0.0, 0.0, -1.0]);
+    let b = DMatrix::from_row_slice(2, 1, &[0.0, 1.0]);
+    let q = DMatrix::identity(2, 2);
+    let r = DMatrix::identity(1, 1);
+    let e = care(&a, &b, &q, &r, None).unwrap_err();
+    assert!(e.to_string().contains("not stabilisable"), "{e}");
+    let ad = DMatrix::from_row_slice(2, 2, &[1.5, 0.0, 0.0, 0.5]);
+    let e = dare(&ad, &b, &q, &r, None).unwrap_err();
+    assert!(e.to_string().contains("not stabilisable"), "{e}");
+    // A mode on the imaginary axis that Q does not see: not detectable, and the
+    // Hamiltonian eigenvalue on the axis is reported with its distance.
+    let a = DMatrix::from_row_slice(2, 2, &[0.0, 1.0, -1.0, 0.0]);
+    let b = DMatrix::from_row_slice(2, 1, &[0.0, 1.0]);
+    let e = care(&a, &b, &DMatrix::zeros(2, 2), &r, None).unwrap_err();
+    let msg = e.to_string();
+    assert!(msg.contains("not detectable"), "{msg}");
+    assert!(
+        msg.contains("imaginary axis") && msg.contains("distance"),
+        "{msg}"
+    );
+    assert!(matches!(e, LtiError::Singular(_)));
+}
