@@ -182,3 +182,56 @@ fn riccati_errors_name_the_cause() {
     );
     assert!(matches!(e, LtiError::Singular(_)));
 }
+
+/// A random Hurwitz matrix: shifted so that its rightmost eigenvalue is at −0.1.
+fn hurwitz(rng: &mut Rng, n: usize) -> DMatrix<f64> {
+    let a = DMatrix::from_fn(n, n, |_, _| rng.normal());
+    let worst = nanomotion_core::lti::linalg::eigvals(&a)
+        .iter()
+        .map(|p| p.re)
+        .fold(f64::NEG_INFINITY, f64::max);
+    a - DMatrix::identity(n, n) * (worst + 0.1)
+}
+
+#[test]
+fn lyapunov_is_cubic_and_care_is_refined_at_n40() {
+    use nanomotion_core::lti::{dlyap, lyap};
+    let mut rng = Rng::new(40);
+    // n = 60 by the Kronecker form was a 3600 × 3600 LU (minutes, 100 MB).
+    let n = 60;
+    let a = hurwitz(&mut rng, n);
+    let c = DMatrix::from_fn(n, n, |_, _| rng.normal());
+    let q = &c * c.transpose();
+    let t0 = std::time::Instant::now();
+    let x = lyap(&a, &q).unwrap();
+    let ad = &a
+        * (0.9
+            / nanomotion_core::lti::linalg::eigvals(&a)
+                .iter()
+                .map(|p| p.norm())
+                .fold(0.0, f64::max));
+    let xd = dlyap(&ad, &q).unwrap();
+    let elapsed = t0.elapsed().as_secs_f64();
+    assert!(elapsed < 2.0, "lyap + dlyap at n = 60 took {elapsed} s");
+    let r = a.transpose() * &x + &x * &a + &q;
+    assert!(
+        r.norm() < 1e-11 * (2.0 * (&a * &x).norm() + q.norm()),
+        "{:e}",
+        r.norm()
+    );
+    let r = ad.transpose() * &xd * &ad - &xd + &q;
+    assert!(
+        r.norm() < 1e-11 * (2.0 * xd.norm() + q.norm()),
+        "{:e}",
+        r.norm()
+    );
+    // CARE at n = 40 is refined by Newton (it was not above n = 24).
+    let b = DMatrix::from_fn(40, 3, |_, _| rng.normal());
+    let a40 = DMatrix::from_fn(40, 40, |_, _| rng.normal());
+    let q40 = DMatrix::identity(40, 40);
+    let r3 = DMatrix::identity(3, 3);
+    let s = care(&a40, &b, &q40, &r3, None).unwrap();
+    assert!(s.relative_residual < 1e-9, "{:e}", s.relative_residual);
+    assert!(s.backward_error < 1e-15, "{:e}", s.backward_error);
+    assert!(care_backward(&a40, &b, &q40, &r3, &s.x) < 1e-13);
+}
