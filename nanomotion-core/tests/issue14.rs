@@ -235,3 +235,140 @@ fn lyapunov_is_cubic_and_care_is_refined_at_n40() {
     assert!(s.backward_error < 1e-15, "{:e}", s.backward_error);
     assert!(care_backward(&a40, &b, &q40, &r3, &s.x) < 1e-13);
 }
+
+mod hinf_synthesis {
+    use nalgebra::DMatrix;
+    use nanomotion_core::lti::hinfsyn::{HinfSynOptions, augw, hinfsyn, lft};
+    use nanomotion_core::lti::{C2dMethod, StateSpace, TransferFunction, c2d, hinfnorm};
+
+    fn tf(num: &[f64], den: &[f64]) -> StateSpace {
+        TransferFunction::new(num.to_vec(), den.to_vec(), None)
+            .unwrap()
+            .to_ss()
+            .unwrap()
+    }
+
+    fn gain(k: f64) -> StateSpace {
+        StateSpace::gain(DMatrix::from_element(1, 1, k), None)
+    }
+
+    /// The standard biproper sensitivity weight W_S = (s/M + ω)/(s + ωA):
+    /// D₁₁ = 1/M ≠ 0.
+    #[test]
+    fn biproper_sensitivity_weight_d11_nonzero() {
+        let g = tf(&[1.0], &[1.0, 0.4, 1.0]);
+        let (m, w, aa) = (2.0, 0.5, 1e-3);
+        let ws = tf(&[1.0 / m, w], &[1.0, w * aa]);
+        let p = augw(&g, Some(&ws), Some(&gain(0.1)), None).unwrap();
+        assert!(p.d[(0, 0)] != 0.0);
+        let syn = hinfsyn(&p, 1, 1, &HinfSynOptions::default()).unwrap();
+        // Independent check of the returned closed loop.
+        let cl = lft(&p, &syn.controller, 1, 1).unwrap();
+        assert!(cl.is_stable());
+        let norm = hinfnorm(&cl).unwrap().norm;
+        assert!(
+            norm <= syn.gamma * (1.0 + 1e-6),
+            "{norm} vs γ {}",
+            syn.gamma
+        );
+        // ‖W_S S‖∞ ≥ |W_S(∞)| = 1/M since S(∞) = 1 (strictly proper G).
+        assert!(syn.gamma >= 1.0 / m);
+        // Better than a PI on the same weights, and the bracket is tight.
+        let pi = lft(&p, &tf(&[0.3, 0.1], &[1.0, 0.0]), 1, 1).unwrap();
+        assert!(norm < hinfnorm(&pi).unwrap().norm);
+        assert!(syn.gamma - syn.gamma_infeasible <= 1e-4 * syn.gamma);
+        // D₁₁ with γ below ‖D₁₁‖ is infeasible: the lower end never passes 1/M.
+        assert!(syn.gamma_infeasible >= 1.0 / m * (1.0 - 1e-12));
+    }
+
+    fn coupled_plant() -> StateSpace {
+        let a = DMatrix::from_row_slice(
+            4,
+            4,
+            &[
+                0.0, 1.0, 0.0, 0.0, -1.0, -0.1, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, -1.2, -0.1,
+            ],
+        );
+        let b = DMatrix::from_row_slice(4, 2, &[0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0]);
+        let c = DMatrix::from_row_slice(2, 4, &[1.0, 0.0, 0.05, 0.0, -0.03, 0.0, 1.0, 0.0]);
+        let g = StateSpace::new(a, b, c, DMatrix::zeros(2, 2), None).unwrap();
+        let w1 = StateSpace::new(
+            DMatrix::identity(2, 2) * -0.001,
+            DMatrix::identity(2, 2),
+            DMatrix::identity(2, 2) * 0.5,
+            DMatrix::zeros(2, 2),
+            None,
+        )
+        .unwrap();
+        let w2 = StateSpace::gain(DMatrix::identity(2, 2) * 0.3, None);
+        augw(&g, Some(&w1), Some(&w2), None).unwrap()
+    }
+
+    #[test]
+    fn tight_tolerance_returns_the_best_verified_controller() {
+        let p = coupled_plant();
+        let opts = HinfSynOptions {
+            gamma_rel_tol: 1e-8,
+            ..Default::default()
+        };
+        let syn = hinfsyn(&p, 2, 2, &opts).unwrap();
+        let norm = hinfnorm(&lft(&p, &syn.controller, 2, 2).unwrap())
+            .unwrap()
+            .norm;
+        assert!(norm <= syn.gamma * (1.0 + 1e-6));
+        let loose = hinfsyn(&p, 2, 2, &HinfSynOptions::default()).unwrap();
+        assert!(syn.gamma <= loose.gamma * (1.0 + 1e-9));
+    }
+
+    #[test]
+    fn discrete_plants_by_the_exact_bilinear_map() {
+        let g = tf(&[1.0], &[1.0, 0.4, 1.0]);
+        let w1 = tf(&[1.0], &[1.0, 0.001]);
+        let pc = augw(&g, Some(&w1), Some(&gain(0.5)), None).unwrap();
+        let dt = 0.05;
+        let pd = c2d(&pc, dt, C2dMethod::TUSTIN).unwrap();
+        let opts = HinfSynOptions {
+            gamma_rel_tol: 1e-6,
+            ..Default::default()
+        };
+        let sc = hinfsyn(&pc, 1, 1, &opts).unwrap();
+        let sd = hinfsyn(&pd, 1, 1, &opts).unwrap();
+        assert_eq!(sd.controller.dt, Some(dt));
+        let cl = lft(&pd, &sd.controller, 1, 1).unwrap();
+        assert!(cl.is_stable());
+        let norm = hinfnorm(&cl).unwrap().norm;
+        assert!(norm <= sd.gamma * (1.0 + 1e-6), "{norm} vs {}", sd.gamma);
+        // Tustin is the bilinear map (with a frequency scaling), which
+        // preserves the H∞ norm exactly: the same optimal γ.
+        assert!(
+            (sd.gamma - sc.gamma).abs() <= 2e-6 * sc.gamma,
+            "{} vs {}",
+            sd.gamma,
+            sc.gamma
+        );
+    }
+
+    #[test]
+    fn gamma_bracket_does_not_depend_on_gamma_one() {
+        let g = tf(&[1.0], &[1.0, 0.4, 1.0]);
+        let w1 = tf(&[1.0], &[1.0, 0.001]);
+        let base = hinfsyn(
+            &augw(&g, Some(&w1), Some(&gain(0.5)), None).unwrap(),
+            1,
+            1,
+            &HinfSynOptions::default(),
+        )
+        .unwrap();
+        for k in [1e-10, 1e10] {
+            // z scaled by k: γ scales by k.
+            let p = augw(&g, Some(&w1.scaled(k)), Some(&gain(0.5 * k)), None).unwrap();
+            let syn = hinfsyn(&p, 1, 1, &HinfSynOptions::default()).unwrap();
+            assert!(
+                (syn.gamma / k - base.gamma).abs() <= 2e-4 * base.gamma,
+                "k = {k}: {} vs {}",
+                syn.gamma / k,
+                base.gamma
+            );
+        }
+    }
+}

@@ -138,6 +138,25 @@ pub(crate) fn bilinear_d2c_unit(sys: &StateSpace) -> Result<StateSpace, LtiError
     })
 }
 
+/// The inverse of [`bilinear_d2c_unit`]: z = (1 + s)/(1 − s), a discrete model
+/// with period `dt` and the same frequency response along the map. Requires
+/// I − A invertible (no pole at s = 1).
+pub(crate) fn bilinear_c2d_unit(sys: &StateSpace, dt: f64) -> Result<StateSpace, LtiError> {
+    let n = sys.nstates();
+    let ident = DMatrix::<f64>::identity(n, n);
+    let m = (&ident - &sys.a)
+        .try_inverse()
+        .ok_or_else(|| LtiError::Singular("pole at s = 1: bilinear map undefined".into()))?;
+    let s2 = std::f64::consts::SQRT_2;
+    Ok(StateSpace {
+        a: &m * (&ident + &sys.a),
+        b: &m * &sys.b * s2,
+        c: &sys.c * &m * s2,
+        d: &sys.d + &sys.c * &m * &sys.b,
+        dt: Some(dt),
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

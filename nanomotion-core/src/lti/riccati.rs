@@ -252,8 +252,9 @@ pub fn care_general(
     // A). The sign iteration would return round-off instead, which no relative
     // residual can judge (every term of the equation is then round-off too).
     // This is the Y equation of every mixed-sensitivity H∞ problem with y = e.
-    let data = a.norm() + g.norm();
-    if q.iter().all(|v| v.abs() <= f64::EPSILON * data) && eigvals(a).iter().all(|l| l.re < 0.0) {
+    // (Q must be exactly zero: any threshold relative to A or G would depend on
+    // the problem's scaling, X ↦ tX, G ↦ G/t, Q ↦ tQ.)
+    if q.iter().all(|v| *v == 0.0) && eigvals(a).iter().all(|l| l.re < 0.0) {
         return Ok((DMatrix::zeros(n, n), 0));
     }
     let g = symmetrise(g);
