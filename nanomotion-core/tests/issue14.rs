@@ -372,3 +372,111 @@ mod hinf_synthesis {
         }
     }
 }
+
+#[test]
+fn delay_chain_poles_are_exactly_zero() {
+    use nanomotion_core::lti::{delay, series};
+    for d in [1usize, 3, 8, 20] {
+        let z = delay(d, 1e-3);
+        let p = z.poles();
+        assert_eq!(p.len(), d);
+        assert!(p.iter().all(|l| l.norm() == 0.0), "d = {d}: {p:?}");
+        // A plant behind the delay keeps its own poles; the delay's are exact.
+        let g = StateSpace::new(
+            DMatrix::from_row_slice(2, 2, &[0.5, 0.2, -0.3, 0.7]),
+            DMatrix::from_row_slice(2, 1, &[1.0, 0.0]),
+            DMatrix::from_row_slice(1, 2, &[1.0, 1.0]),
+            DMatrix::zeros(1, 1),
+            Some(1e-3),
+        )
+        .unwrap();
+        let s = series(&z, &g).unwrap();
+        let zeros = s.poles().iter().filter(|l| l.norm() == 0.0).count();
+        assert_eq!(zeros, d, "d = {d}: {:?}", s.poles());
+    }
+}
+
+mod validation {
+    use nalgebra::DMatrix;
+    use nanomotion_core::lti::{
+        C2dMethod, Complex, LtiError, StateSpace, TransferFunction, c2d, zpk_checked,
+    };
+
+    #[test]
+    fn state_space_rejects_non_finite_entries() {
+        let ok = |v: f64| {
+            StateSpace::new(
+                DMatrix::from_element(1, 1, v),
+                DMatrix::from_element(1, 1, 1.0),
+                DMatrix::from_element(1, 1, 1.0),
+                DMatrix::zeros(1, 1),
+                None,
+            )
+        };
+        assert!(ok(-1.0).is_ok());
+        for bad in [f64::NAN, f64::INFINITY, f64::NEG_INFINITY] {
+            let e = ok(bad).unwrap_err();
+            assert!(matches!(e, LtiError::Parameter { name: "a", .. }), "{e}");
+        }
+        let e = StateSpace::new(
+            DMatrix::zeros(2, 2),
+            DMatrix::zeros(3, 1),
+            DMatrix::zeros(1, 2),
+            DMatrix::zeros(1, 1),
+            None,
+        )
+        .unwrap_err();
+        assert!(matches!(e, LtiError::Dimension(_)));
+    }
+
+    #[test]
+    fn zpk_checked_refuses_an_unpaired_complex_root() {
+        let z = [Complex::new(-1.0, 2.0)];
+        let e = zpk_checked(&[], &z, 1.0, None).unwrap_err();
+        assert!(e.to_string().contains("conjugate"), "{e}");
+        let pair = [Complex::new(-1.0, 2.0), Complex::new(-1.0, -2.0)];
+        let tf = zpk_checked(&[Complex::new(-3.0, 0.0)], &pair, 2.0, None).unwrap();
+        assert_eq!(tf.num, vec![2.0, 6.0]);
+        assert!((tf.den[1] - 2.0).abs() < 1e-15 && (tf.den[2] - 5.0).abs() < 1e-15);
+    }
+
+    #[test]
+    fn zoh_overflow_is_an_error_not_inf() {
+        let sys = StateSpace::new(
+            DMatrix::from_element(1, 1, 1e4),
+            DMatrix::from_element(1, 1, 1.0),
+            DMatrix::from_element(1, 1, 1.0),
+            DMatrix::zeros(1, 1),
+            None,
+        )
+        .unwrap();
+        let e = c2d(&sys, 1.0, C2dMethod::Zoh).unwrap_err();
+        assert!(e.to_string().contains("overflows"), "{e}");
+        assert!(c2d(&sys, 1e-5, C2dMethod::Zoh).is_ok());
+    }
+
+    #[test]
+    fn poles_with_a_tiny_leading_coefficient_are_not_nan() {
+        // ε s² + 3 s + 2: roots ≈ −2/3 and −3/ε.
+        let eps = 1e-300;
+        let tf = TransferFunction::new(vec![1.0], vec![eps, 3.0, 2.0], None).unwrap();
+        let p = tf.poles();
+        assert!(p.iter().all(|z| !z.re.is_nan() && !z.im.is_nan()), "{p:?}");
+        assert!(p.iter().any(|z| (z.re + 2.0 / 3.0).abs() < 1e-12), "{p:?}");
+    }
+
+    #[test]
+    fn siso_helpers_on_mimo_are_errors() {
+        let sys = StateSpace::gain(DMatrix::identity(2, 2), None);
+        assert!(matches!(
+            sys.try_freqresp_siso(&[1.0]),
+            Err(LtiError::Dimension(_))
+        ));
+        assert!(sys.try_bode(&[1.0]).is_err());
+        let siso = StateSpace::gain(DMatrix::from_element(1, 1, 2.0), None);
+        assert_eq!(
+            siso.try_freqresp_siso(&[1.0]).unwrap()[0],
+            Complex::new(2.0, 0.0)
+        );
+    }
+}

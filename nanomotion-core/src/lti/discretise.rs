@@ -52,6 +52,15 @@ pub fn c2d(sys: &StateSpace, dt: f64, method: C2dMethod) -> Result<StateSpace, L
             aug.view_mut((0, 0), (n, n)).copy_from(&(&sys.a * dt));
             aug.view_mut((0, n), (n, m)).copy_from(&(&sys.b * dt));
             let e = expm(&aug);
+            if e.iter().any(|v| !v.is_finite()) {
+                return Err(LtiError::param(
+                    "dt",
+                    format!(
+                        "ZOH: e^(AT) overflows at T = {dt} s (‖A‖₁·T = {:.3e}): the model's fastest unstable mode grows beyond f64 in one sample",
+                        super::linalg::norm_1(&sys.a) * dt
+                    ),
+                ));
+            }
             Ok(StateSpace {
                 a: e.view((0, 0), (n, n)).into_owned(),
                 b: e.view((0, n), (n, m)).into_owned(),

@@ -279,7 +279,10 @@ pub fn care_general(
         }
         Err(why) => reasons.push(why),
     }
-    if best.as_ref().is_none_or(|b| b.1 > 1e-13) {
+    if best
+        .as_ref()
+        .is_none_or(|b| b.1 > 1e-13 && care_backward(&a_s, &g_s, &q_s, &b.0) > 1e-14)
+    {
         match care_schur(&a_s, &g_s, &q_s) {
             Ok(x) => {
                 let (x, rel, steps) = care_newton(&a_s, &g_s, &q_s, x, 6);

@@ -79,6 +79,19 @@ impl StateSpace {
                 format!("sample period {t} s must be finite and > 0"),
             ));
         }
+        for (name, m) in [("a", &a), ("b", &b), ("c", &c), ("d", &d)] {
+            if let Some(k) = m.iter().position(|v| !v.is_finite()) {
+                return Err(LtiError::param(
+                    name,
+                    format!(
+                        "entry ({}, {}) is {} (entries must be finite)",
+                        k % m.nrows().max(1),
+                        k / m.nrows().max(1),
+                        m.as_slice()[k]
+                    ),
+                ));
+            }
+        }
         Ok(Self { a, b, c, d, dt })
     }
 
@@ -180,7 +193,8 @@ impl StateSpace {
     }
 
     /// SISO frequency response at one angular frequency `w_rad_s` (rad/s); for a
-    /// MIMO model, the (0, 0) entry.
+    /// MIMO model, the (0, 0) entry (use [`StateSpace::try_freqresp_siso`] for
+    /// an error instead).
     pub fn freqresp_siso_at(&self, w_rad_s: f64) -> Complex<f64> {
         self.evalfr(self.frequency_point(w_rad_s))[(0, 0)]
     }
@@ -189,6 +203,32 @@ impl StateSpace {
     /// MIMO model, the (0, 0) entry.
     pub fn freqresp_siso(&self, w_rad_s: &[f64]) -> Vec<Complex<f64>> {
         w_rad_s.iter().map(|&w| self.freqresp_siso_at(w)).collect()
+    }
+
+    /// Checked SISO frequency response at `w_rad_s` (rad/s): a
+    /// [`LtiError::Dimension`] for a MIMO model instead of its (0, 0) entry.
+    pub fn try_freqresp_siso(&self, w_rad_s: &[f64]) -> Result<Vec<Complex<f64>>, LtiError> {
+        self.require_siso("try_freqresp_siso")?;
+        Ok(self.freqresp_siso(w_rad_s))
+    }
+
+    /// Checked SISO Bode data (see [`StateSpace::bode`]): a
+    /// [`LtiError::Dimension`] for a MIMO model.
+    pub fn try_bode(&self, w_rad_s: &[f64]) -> Result<(Vec<f64>, Vec<f64>), LtiError> {
+        self.require_siso("try_bode")?;
+        Ok(self.bode(w_rad_s))
+    }
+
+    fn require_siso(&self, what: &str) -> Result<(), LtiError> {
+        if self.is_siso() {
+            Ok(())
+        } else {
+            Err(LtiError::Dimension(format!(
+                "{what} needs a SISO model, this one is {}×{} (use freqresp for the matrix response)",
+                self.noutputs(),
+                self.ninputs()
+            )))
+        }
     }
 
     /// SISO Bode data at `w_rad_s` (rad/s): magnitudes (absolute, not dB) and
