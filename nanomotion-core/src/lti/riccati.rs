@@ -294,7 +294,7 @@ pub fn care_general(
         }
     }
     let fail = |reasons: &[String]| {
-        let mut causes = diagnose(a, &g, &q, false);
+        let mut causes = diagnose(&a_s, &g_s, &q_s, false);
         let h = hamiltonian(&a_s, &g_s, &q_s);
         let hn = h.norm();
         let dist = eigvals(&h)
@@ -795,8 +795,12 @@ pub fn dare(
     let m = b.ncols();
     let mut reasons: Vec<String> = Vec::new();
     let fail = |reasons: &[String]| {
-        let g = b * inverse_pd("r", r).unwrap_or_else(|_| DMatrix::zeros(m, m)) * b.transpose();
-        let mut causes = diagnose(&a0, &symmetrise(&g), &q0, true);
+        let g = symmetrise(
+            &(b * inverse_pd("r", r).unwrap_or_else(|_| DMatrix::zeros(m, m)) * b.transpose()),
+        );
+        let sc = Scaling::new(&a0, &g, &q0);
+        let (a_s, g_s, q_s) = sc.apply(&a0, &g, &q0);
+        let mut causes = diagnose(&a_s, &g_s, &q_s, true);
         causes.extend(reasons.iter().cloned());
         LtiError::Singular(format!(
             "DARE has no stabilising solution: {} (an unstable mode that B cannot reach or Q does not see, or a closed-loop pole on the unit circle)",
@@ -924,12 +928,18 @@ fn lyap_unchecked(a: &DMatrix<f64>, q: &DMatrix<f64>) -> Result<DMatrix<f64>, Lt
             "lyap: the Lyapunov operator is singular (eigenvalues of A with λ_i + λ_j = 0)".into(),
         )
     };
-    let rs = real_schur(a).ok_or_else(|| {
+    // Balanced: A = D Ab D⁻¹ (powers of two), Y = DXD solves the equation with
+    // (Ab, DQD); X = D⁻¹YD⁻¹.
+    let (ab, d) = balance(a);
+    let qb = DMatrix::from_fn(q.nrows(), q.ncols(), |i, j| q[(i, j)] * d[i] * d[j]);
+    let rs = real_schur(&ab).ok_or_else(|| {
         LtiError::Singular("lyap: the Schur decomposition of A did not converge".into())
     })?;
-    let c = -(rs.u.transpose() * q * &rs.u);
+    let c = -(rs.u.transpose() * &qb * &rs.u);
     let y = lyap_quasi_triangular(&rs, &c).ok_or_else(singular)?;
-    let x = symmetrise(&(&rs.u * y * rs.u.transpose()));
+    let n = a.nrows();
+    let yb = &rs.u * y * rs.u.transpose();
+    let x = symmetrise(&DMatrix::from_fn(n, n, |i, j| yb[(i, j)] / (d[i] * d[j])));
     if x.iter().any(|v| !v.is_finite()) {
         return Err(singular());
     }
@@ -953,12 +963,16 @@ fn dlyap_unchecked(a: &DMatrix<f64>, q: &DMatrix<f64>) -> Result<DMatrix<f64>, L
             "dlyap: the Stein operator is singular (eigenvalues of A with λ_i λ_j = 1)".into(),
         )
     };
-    let rs = real_schur(a).ok_or_else(|| {
+    let (ab, d) = balance(a);
+    let qb = DMatrix::from_fn(q.nrows(), q.ncols(), |i, j| q[(i, j)] * d[i] * d[j]);
+    let rs = real_schur(&ab).ok_or_else(|| {
         LtiError::Singular("dlyap: the Schur decomposition of A did not converge".into())
     })?;
-    let c = -(rs.u.transpose() * q * &rs.u);
+    let c = -(rs.u.transpose() * &qb * &rs.u);
     let y = stein_quasi_triangular(&rs, &c).ok_or_else(singular)?;
-    let x = symmetrise(&(&rs.u * y * rs.u.transpose()));
+    let n = a.nrows();
+    let yb = &rs.u * y * rs.u.transpose();
+    let x = symmetrise(&DMatrix::from_fn(n, n, |i, j| yb[(i, j)] / (d[i] * d[j])));
     if x.iter().any(|v| !v.is_finite()) {
         return Err(singular());
     }
