@@ -684,7 +684,7 @@ fn dare_newton(
             break;
         }
         let acl = a - b * &k;
-        let Ok(delta) = dlyap_unchecked(&acl, &res) else {
+        let Ok(delta) = dlyap_core(&acl, &res, false) else {
             break;
         };
         let candidate = symmetrise(&(&x + delta));
@@ -853,7 +853,7 @@ pub fn dare(
             return Err(fail(&reasons));
         };
         // A last Newton step on the unscaled data.
-        let (x, _, _) = dare_newton(&a0, b, &q0, r, sc.unscale(&xs), 2);
+        let (x, _, _) = dare_newton(&a0, b, &q0, r, sc.unscale(&xs), 4);
         (x, it)
     };
     // K = (R + BᵀXB)⁻¹(BᵀXA + Sᵀ), on the original (A, B, Q, R, S).
@@ -958,12 +958,26 @@ pub fn dlyap(a: &DMatrix<f64>, q: &DMatrix<f64>) -> Result<DMatrix<f64>, LtiErro
 }
 
 fn dlyap_unchecked(a: &DMatrix<f64>, q: &DMatrix<f64>) -> Result<DMatrix<f64>, LtiError> {
+    dlyap_core(a, q, true)
+}
+
+/// dlyap with or without the balancing of A (the DARE's Newton steps run on
+/// data the Riccati scaling has already balanced).
+fn dlyap_core(
+    a: &DMatrix<f64>,
+    q: &DMatrix<f64>,
+    balanced: bool,
+) -> Result<DMatrix<f64>, LtiError> {
     let singular = || {
         LtiError::Singular(
             "dlyap: the Stein operator is singular (eigenvalues of A with λ_i λ_j = 1)".into(),
         )
     };
-    let (ab, d) = balance(a);
+    let (ab, d) = if balanced {
+        balance(a)
+    } else {
+        (a.clone(), nalgebra::DVector::from_element(a.nrows(), 1.0))
+    };
     let qb = DMatrix::from_fn(q.nrows(), q.ncols(), |i, j| q[(i, j)] * d[i] * d[j]);
     let rs = real_schur(&ab).ok_or_else(|| {
         LtiError::Singular("dlyap: the Schur decomposition of A did not converge".into())
