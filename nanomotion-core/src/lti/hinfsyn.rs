@@ -261,9 +261,12 @@ fn undo_d22(k0: &StateSpace, d22: &DMatrix<f64>) -> Option<StateSpace> {
     })
 }
 
+/// A controller with the X∞ and Y∞ it was built from.
+type Design = (StateSpace, DMatrix<f64>, DMatrix<f64>);
+
 /// A controller for the original plant at γ (all shifts undone), with the X∞
 /// and Y∞ of the (shifted) problem, or None when γ is infeasible.
-fn controller_at(s: &Shifted, gamma: f64) -> Option<(StateSpace, DMatrix<f64>, DMatrix<f64>)> {
+fn controller_at(s: &Shifted, gamma: f64) -> Option<Design> {
     let (k_bar, x, y) = if s.d11.iter().all(|v| *v == 0.0) {
         try_gamma(&s.parts, gamma)?
     } else {
@@ -361,7 +364,7 @@ pub fn hinfsyn(
             "must be in (0, 1), e.g. 1e-4",
         ));
     }
-    if !(opts.gamma_max > 0.0) {
+    if opts.gamma_max.is_nan() || opts.gamma_max <= 0.0 {
         return Err(LtiError::param(
             "gamma_max",
             "must be positive (f64::INFINITY for no bound)",
@@ -444,7 +447,7 @@ fn hinfsyn_continuous(
     let range = 1e12;
     let top = opts.gamma_max.min(g0 * range);
     let floor = (g0 / range).max(lb);
-    let mut feasible: Vec<(f64, (StateSpace, DMatrix<f64>, DMatrix<f64>))> = Vec::new();
+    let mut feasible: Vec<(f64, Design)> = Vec::new();
     let mut lo;
     let mut hi;
     match controller_at(&s, g0) {
