@@ -430,6 +430,40 @@ mod validation {
     }
 
     #[test]
+    fn hand_built_inconsistent_models_are_typed_errors_not_panics() {
+        use nanomotion_core::lti::{feedback, hinfnorm, series, ss2tf};
+        let good = StateSpace::new(
+            DMatrix::from_element(1, 1, -1.0),
+            DMatrix::from_element(1, 1, 1.0),
+            DMatrix::from_element(1, 1, 1.0),
+            DMatrix::zeros(1, 1),
+            None,
+        )
+        .unwrap();
+        let mut bad = good.clone();
+        bad.b = DMatrix::zeros(3, 1); // 3 rows for 1 state
+        assert!(matches!(bad.validate(), Err(LtiError::Dimension(_))));
+        assert!(matches!(hinfnorm(&bad), Err(LtiError::Dimension(_))));
+        assert!(matches!(
+            c2d(&bad, 0.1, C2dMethod::Zoh),
+            Err(LtiError::Dimension(_))
+        ));
+        assert!(matches!(series(&good, &bad), Err(LtiError::Dimension(_))));
+        assert!(matches!(
+            feedback(&bad, &good, -1.0),
+            Err(LtiError::Dimension(_))
+        ));
+        assert!(matches!(ss2tf(&bad), Err(LtiError::Dimension(_))));
+        let mut nan = good.clone();
+        nan.a[(0, 0)] = f64::NAN;
+        assert!(matches!(
+            hinfnorm(&nan),
+            Err(LtiError::Parameter { name: "a", .. })
+        ));
+        assert!(c2d(&nan, 0.1, C2dMethod::Zoh).is_err());
+    }
+
+    #[test]
     fn zpk_checked_refuses_an_unpaired_complex_root() {
         let z = [Complex::new(-1.0, 2.0)];
         let e = zpk_checked(&[], &z, 1.0, None).unwrap_err();

@@ -33,6 +33,7 @@ impl C2dMethod {
 /// Discretise a continuous state-space model at sample period `dt` (s)
 /// (python-control `c2d(sys, Ts, method)`).
 pub fn c2d(sys: &StateSpace, dt: f64, method: C2dMethod) -> Result<StateSpace, LtiError> {
+    sys.validate()?;
     if sys.dt.is_some() {
         return Err(LtiError::Domain(
             "c2d needs a continuous model (dt = None)".into(),

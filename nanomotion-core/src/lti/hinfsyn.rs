@@ -370,15 +370,7 @@ pub fn hinfsyn(
             "must be positive (f64::INFINITY for no bound)",
         ));
     }
-    if p.a
-        .iter()
-        .chain(p.b.iter())
-        .chain(p.c.iter())
-        .chain(p.d.iter())
-        .any(|v| !v.is_finite())
-    {
-        return Err(LtiError::param("p", "has a non-finite entry"));
-    }
+    p.validate()?;
     match p.dt {
         None => hinfsyn_continuous(p, ny, nu, opts),
         Some(dt) => {
@@ -530,6 +522,8 @@ fn hinfsyn_continuous(
 /// [z; y] (the last `ny` are y). P may have a feed-through D₂₂ (then
 /// I − D_K D₂₂ must be invertible: a well-posed loop).
 pub fn lft(p: &StateSpace, k: &StateSpace, ny: usize, nu: usize) -> Result<StateSpace, LtiError> {
+    p.validate()?;
+    k.validate()?;
     if p.dt != k.dt {
         return Err(LtiError::SampleTime(p.dt, k.dt));
     }
