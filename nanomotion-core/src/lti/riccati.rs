@@ -8,29 +8,54 @@
 //!   **indefinite** (the H∞ form G = B₂B₂ᵀ − γ⁻²B₁B₁ᵀ), A − GX Hurwitz;
 //! - [`dare`]: AᵀXA − X − (AᵀXB + S)(R + BᵀXB)⁻¹(BᵀXA + Sᵀ) + Q = 0 with A − BK
 //!   Schur, K = (R + BᵀXB)⁻¹(BᵀXA + Sᵀ);
-//! - [`lyap`] (AᵀX + XA + Q = 0) and [`dlyap`] (AᵀXA − X + Q = 0), by the
-//!   Kronecker form, for small n.
+//! - [`lyap`] (AᵀX + XA + Q = 0) and [`dlyap`] (AᵀXA − X + Q = 0) by
+//!   Bartels–Stewart: balance A, real Schur form A = UTUᵀ, then the
+//!   quasi-triangular solve with 1×1/2×2 blocks; O(n³) time, O(n²) memory.
 //!
 //! # Methods
+//!
+//! **Scaling.** Every Riccati problem is first scaled by powers of two: x = Dx̃
+//! with D from a symplectic balancing of the Hamiltonian [A, G; Q, Aᵀ]
+//! (Parlett–Reinsch balancing of the 2n × 2n matrix, D = √(t₁/t₂) so that the
+//! similarity diag(D, D⁻¹) keeps the structure), X̃ = σX̂ with σ equilibrating
+//! ‖G‖ and ‖Q‖, and for the DARE the inputs scaled to a unit-diagonal R. A
+//! stage model with B = [1, 0, ω²]ᵀ and R = 1e-6 then becomes an ordinary
+//! problem.
 //!
 //! **CARE: matrix sign function** (Roberts 1971; determinant scaling, Byers 1987).
 //! The Hamiltonian H = [A, −G; −Q, −Aᵀ] has no eigenvalue on the imaginary axis
 //! exactly when a stabilising solution can exist; Z ← (cZ + (cZ)⁻¹)/2 with
 //! c = |det Z|^(−1/2n) converges quadratically to W = sign(H), and the stable
 //! invariant subspace [I; X] satisfies (W + I)[I; X] = 0, i.e.
-//! [W₁₂; W₂₂ + I] X = −[W₁₁ + I; W₂₁], solved by least squares. Only LU and QR
-//! are needed (nalgebra has no ordered Schur form).
+//! [W₁₂; W₂₂ + I] X = −[W₁₁ + I; W₂₁], solved by least squares.
 //!
 //! **DARE: structure-preserving doubling** (SDA; Chu, Fan, Lin & Wang 2004) on
 //! X = AᵀX(I + GX)⁻¹A + H, G = BR⁻¹Bᵀ, H = Q (after removing S):
 //! A ← A(I + GH)⁻¹A, G ← G + A(I + GH)⁻¹GAᵀ, H ← H + AᵀH(I + GH)⁻¹A; H → X
 //! quadratically.
 //!
+//! **Refinement, at every size.** Newton's method (Kleinman for the CARE:
+//! (A − GX)ᵀΔ + Δ(A − GX) = −Res(X); Hewer for the DARE: A_cℓᵀΔA_cℓ − Δ +
+//! Res(X) = 0), one Bartels–Stewart solve per step, while the residual falls;
+//! the DARE's residual is evaluated in the R-form (no R⁻¹).
+//!
+//! **Fallback: ordered Schur** (Laub 1979). When the sign function or the
+//! doubling fails or leaves a residual above round-off, the stable invariant
+//! subspace is taken from an ordered Schur form of the Hamiltonian (CARE) or
+//! of the symplectic matrix [A + GA⁻ᵀQ, −GA⁻ᵀ; −A⁻ᵀQ, A⁻ᵀ] (DARE, A
+//! invertible): nalgebra's real Schur form, made triangular by one unitary
+//! rotation per 2×2 block, then reordered by unitary swaps of adjacent
+//! diagonal entries. The better of the two answers is kept.
+//!
 //! Every answer is **checked independently of the method** before it is returned:
-//! the residual of the equation itself (relative to the size of its terms) and
-//! the eigenvalues of the closed loop. An equation without a stabilising
-//! solution (an uncontrollable unstable mode, a Hamiltonian eigenvalue on the
-//! axis) is a [`LtiError::Singular`] naming what failed, never a wrong X.
+//! the residual of the equation itself (relative to the size of its terms, or —
+//! for badly scaled data whose terms cancel — against the round-off floor of
+//! evaluating the equation, [`RiccatiSolution::backward_error`]) and the
+//! eigenvalues of the closed loop. An equation without a stabilising solution
+//! is a [`LtiError::Singular`] naming the cause — "(A, B) is not stabilisable"
+//! with the unreachable mode, "(Q, A) is not detectable" with the unobservable
+//! mode on the axis/circle, and the distance of the Hamiltonian's nearest
+//! eigenvalue to the imaginary axis — never a wrong X.
 //!
 //! ```
 //! use nalgebra::DMatrix;
