@@ -305,6 +305,36 @@ mod hinf_synthesis {
     }
 
     #[test]
+    fn mimo_biproper_weight_with_d11_nonzero() {
+        // The coupled 2×2 plant with W1 = (s/2 + 0.5)/(s + 0.0005)·I.
+        let p0 = coupled_plant();
+        let g = StateSpace::new(
+            p0.a.view((0, 0), (4, 4)).clone_owned(),
+            p0.b.view((0, 2), (4, 2)).clone_owned(),
+            -p0.c.view((4, 0), (2, 4)).clone_owned(),
+            DMatrix::zeros(2, 2),
+            None,
+        )
+        .unwrap();
+        let w1 = StateSpace::new(
+            DMatrix::identity(2, 2) * -0.0005,
+            DMatrix::identity(2, 2),
+            DMatrix::identity(2, 2) * (0.5 - 0.0005 * 0.5),
+            DMatrix::identity(2, 2) * 0.5,
+            None,
+        )
+        .unwrap();
+        let w2 = StateSpace::gain(DMatrix::identity(2, 2) * 0.3, None);
+        let p = augw(&g, Some(&w1), Some(&w2), None).unwrap();
+        assert!(p.d[(0, 0)] == 0.5 && p.d[(1, 1)] == 0.5);
+        let syn = hinfsyn(&p, 2, 2, &HinfSynOptions::default()).unwrap();
+        let cl = lft(&p, &syn.controller, 2, 2).unwrap();
+        let norm = hinfnorm(&cl).unwrap().norm;
+        assert!(norm <= syn.gamma * (1.0 + 1e-6), "{norm} vs {}", syn.gamma);
+        assert!(syn.gamma >= 0.5, "‖W1(∞)S(∞)‖ = 0.5 is a lower bound");
+    }
+
+    #[test]
     fn tight_tolerance_returns_the_best_verified_controller() {
         let p = coupled_plant();
         let opts = HinfSynOptions {

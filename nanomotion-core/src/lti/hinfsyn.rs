@@ -32,7 +32,7 @@
 //! ```
 //!
 //! **General D.** D₂₂ ≠ 0 is removed by ȳ = y − D₂₂u (K = K₀(I + D₂₂K₀)⁻¹);
-//! D₁₁ ≠ 0 (a biproper sensitivity weight, the thesis's (7.10)) by loop
+//! D₁₁ ≠ 0 (a biproper sensitivity weight; also needed by the thesis's (7.10)) by loop
 //! shifting: a constant feed-through D_K = −D₁₂⁺D₁₁D₂₁⁺, then for each γ the
 //! orthogonal Möbius map of Safonov, Limebeer & Chiang (1989) that sends
 //! D̄₁₁/γ to 0 while preserving ‖·‖∞ < γ (γ > ‖D̄₁₁‖ is required; when
