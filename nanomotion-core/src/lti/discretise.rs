@@ -33,6 +33,7 @@ impl C2dMethod {
 /// Discretise a continuous state-space model at sample period `dt` (s)
 /// (python-control `c2d(sys, Ts, method)`).
 pub fn c2d(sys: &StateSpace, dt: f64, method: C2dMethod) -> Result<StateSpace, LtiError> {
+    sys.validate()?;
     if sys.dt.is_some() {
         return Err(LtiError::Domain(
             "c2d needs a continuous model (dt = None)".into(),
@@ -52,6 +53,15 @@ pub fn c2d(sys: &StateSpace, dt: f64, method: C2dMethod) -> Result<StateSpace, L
             aug.view_mut((0, 0), (n, n)).copy_from(&(&sys.a * dt));
             aug.view_mut((0, n), (n, m)).copy_from(&(&sys.b * dt));
             let e = expm(&aug);
+            if e.iter().any(|v| !v.is_finite()) {
+                return Err(LtiError::param(
+                    "dt",
+                    format!(
+                        "ZOH: e^(AT) overflows at T = {dt} s (‖A‖₁·T = {:.3e}): the model's fastest unstable mode grows beyond f64 in one sample",
+                        super::linalg::norm_1(&sys.a) * dt
+                    ),
+                ));
+            }
             Ok(StateSpace {
                 a: e.view((0, 0), (n, n)).into_owned(),
                 b: e.view((0, n), (n, m)).into_owned(),
@@ -135,6 +145,25 @@ pub(crate) fn bilinear_d2c_unit(sys: &StateSpace) -> Result<StateSpace, LtiError
         c,
         d,
         dt: None,
+    })
+}
+
+/// The inverse of [`bilinear_d2c_unit`]: z = (1 + s)/(1 − s), a discrete model
+/// with period `dt` and the same frequency response along the map. Requires
+/// I − A invertible (no pole at s = 1).
+pub(crate) fn bilinear_c2d_unit(sys: &StateSpace, dt: f64) -> Result<StateSpace, LtiError> {
+    let n = sys.nstates();
+    let ident = DMatrix::<f64>::identity(n, n);
+    let m = (&ident - &sys.a)
+        .try_inverse()
+        .ok_or_else(|| LtiError::Singular("pole at s = 1: bilinear map undefined".into()))?;
+    let s2 = std::f64::consts::SQRT_2;
+    Ok(StateSpace {
+        a: &m * (&ident + &sys.a),
+        b: &m * &sys.b * s2,
+        c: &sys.c * &m * s2,
+        d: &sys.d + &sys.c * &m * &sys.b,
+        dt: Some(dt),
     })
 }
 

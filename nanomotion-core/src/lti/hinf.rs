@@ -44,6 +44,7 @@ fn sigma_max(sys: &StateSpace, nu: f64) -> f64 {
 /// [0, π/T]. Fails with [`LtiError::Unstable`] for an unstable model (whose norm is
 /// infinite).
 pub fn hinfnorm(sys: &StateSpace) -> Result<HinfNorm, LtiError> {
+    sys.validate()?;
     if !sys.is_stable() {
         return Err(LtiError::Unstable(
             "the H∞ norm of an unstable system is infinite".into(),

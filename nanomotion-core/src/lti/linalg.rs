@@ -200,6 +200,35 @@ pub fn eigvals(a: &DMatrix<f64>) -> Vec<Complex<f64>> {
     if a.iter().any(|v| !v.is_finite()) {
         return vec![Complex::new(f64::NAN, f64::NAN); n];
     }
+    // Isolate eigenvalues first (LAPACK gebal's permutation step): a row or
+    // column whose off-diagonal entries in the active part are exactly zero
+    // gives its diagonal entry as an eigenvalue, exactly. A delay chain z⁻ᵈ is
+    // nilpotent and deflates completely to d exact zeros, instead of a circle
+    // of radius ε^(1/d) from the QR iteration.
+    let mut active: Vec<usize> = (0..n).collect();
+    let mut isolated = Vec::new();
+    loop {
+        let found = active.iter().position(|&i| {
+            active.iter().all(|&j| j == i || a[(i, j)] == 0.0)
+                || active.iter().all(|&j| j == i || a[(j, i)] == 0.0)
+        });
+        match found {
+            Some(k) => {
+                let i = active.remove(k);
+                isolated.push(Complex::new(a[(i, i)], 0.0));
+            }
+            None => break,
+        }
+    }
+    if active.is_empty() {
+        return isolated;
+    }
+    if !isolated.is_empty() {
+        let sub = DMatrix::from_fn(active.len(), active.len(), |r, c| a[(active[r], active[c])]);
+        let mut rest = eigvals(&sub);
+        isolated.append(&mut rest);
+        return isolated;
+    }
     let (b, _) = balance(a);
     match nalgebra::linalg::Schur::try_new(b.clone(), f64::EPSILON, 10_000 * n.max(1)) {
         Some(s) => s.complex_eigenvalues().iter().copied().collect(),
@@ -281,6 +310,36 @@ pub fn roots(p: &[f64]) -> Vec<Complex<f64>> {
     let n = p.len() - 1;
     if n == 0 {
         return Vec::new();
+    }
+    // Trailing zeros are exact roots at 0.
+    let nz = p.iter().rev().take_while(|c| **c == 0.0).count();
+    if nz > 0 {
+        let mut r = roots(&p[..p.len() - nz]);
+        r.extend(std::iter::repeat_n(Complex::new(0.0, 0.0), nz));
+        return r;
+    }
+    // A leading coefficient much smaller than the constant term would put
+    // overflowing ratios in the companion matrix (NaN eigenvalues): take the
+    // roots y of the reversed polynomial instead, x = 1/y (large but finite).
+    if p[0].abs() < p[n].abs() {
+        let rev: Vec<f64> = p.iter().rev().copied().collect();
+        return roots(&rev)
+            .into_iter()
+            .map(|y| {
+                if y.norm() == 0.0 {
+                    Complex::new(f64::INFINITY, 0.0)
+                } else if y.re.abs() >= y.im.abs() {
+                    // Smith's division: no underflow of |y|² for tiny y.
+                    let r = y.im / y.re;
+                    let d = y.re + y.im * r;
+                    Complex::new(1.0 / d, -r / d)
+                } else {
+                    let r = y.re / y.im;
+                    let d = y.re * r + y.im;
+                    Complex::new(r / d, -1.0 / d)
+                }
+            })
+            .collect();
     }
     let mut comp = DMatrix::<f64>::zeros(n, n);
     for j in 0..n {

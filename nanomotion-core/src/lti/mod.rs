@@ -37,6 +37,7 @@ pub mod linalg;
 pub mod lmi;
 pub mod margins;
 pub mod riccati;
+mod schur;
 pub mod sim;
 pub mod ss;
 pub mod tf;
@@ -51,7 +52,7 @@ pub use margins::{Margins, stability_margins};
 pub use riccati::{RiccatiSolution, care, care_general, dare, dlyap, lyap};
 pub use sim::{SsStepper, impulse, lsim, lsim_siso, step_response};
 pub use ss::{append, delay, feedback, parallel, series, ss2tf, unwrap_phase};
-pub use tf::{tf2sos, tf2ss, zpk, zpk2sos, zpk2ss};
+pub use tf::{tf2sos, tf2ss, zpk, zpk_checked, zpk2sos, zpk2ss};
 pub use zpetc::{Zpetc, ZpetcFilter, zpetc, zpetc_ss};
 
 /// Complex numbers (nalgebra's re-export of `num_complex::Complex`).

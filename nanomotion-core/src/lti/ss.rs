@@ -32,6 +32,66 @@ fn to_complex(m: &DMatrix<f64>) -> DMatrix<Complex<f64>> {
     m.map(|v| Complex::new(v, 0.0))
 }
 
+fn check_parts(
+    a: &DMatrix<f64>,
+    b: &DMatrix<f64>,
+    c: &DMatrix<f64>,
+    d: &DMatrix<f64>,
+    dt: Option<f64>,
+) -> Result<(), LtiError> {
+    let n = a.nrows();
+    if a.ncols() != n {
+        return Err(LtiError::Dimension(format!(
+            "A is {}×{}, must be square",
+            a.nrows(),
+            a.ncols()
+        )));
+    }
+    if b.nrows() != n {
+        return Err(LtiError::Dimension(format!(
+            "B has {} rows, A has {n}",
+            b.nrows()
+        )));
+    }
+    if c.ncols() != n {
+        return Err(LtiError::Dimension(format!(
+            "C has {} columns, A has {n} rows",
+            c.ncols()
+        )));
+    }
+    if d.nrows() != c.nrows() || d.ncols() != b.ncols() {
+        return Err(LtiError::Dimension(format!(
+            "D is {}×{}, must be {}×{} (outputs × inputs)",
+            d.nrows(),
+            d.ncols(),
+            c.nrows(),
+            b.ncols()
+        )));
+    }
+    if let Some(t) = dt
+        && !(t.is_finite() && t > 0.0)
+    {
+        return Err(LtiError::param(
+            "dt",
+            format!("sample period {t} s must be finite and > 0"),
+        ));
+    }
+    for (name, m) in [("a", a), ("b", b), ("c", c), ("d", d)] {
+        if let Some(k) = m.iter().position(|v| !v.is_finite()) {
+            return Err(LtiError::param(
+                name,
+                format!(
+                    "entry ({}, {}) is {} (entries must be finite)",
+                    k % m.nrows().max(1),
+                    k / m.nrows().max(1),
+                    m.as_slice()[k]
+                ),
+            ));
+        }
+    }
+    Ok(())
+}
+
 impl StateSpace {
     /// A state-space model, checking that the dimensions of A (n×n), B (n×m),
     /// C (p×n) and D (p×m) fit and that `dt` (s), if given, is positive.
@@ -42,44 +102,17 @@ impl StateSpace {
         d: DMatrix<f64>,
         dt: Option<f64>,
     ) -> Result<Self, LtiError> {
-        let n = a.nrows();
-        if a.ncols() != n {
-            return Err(LtiError::Dimension(format!(
-                "A is {}×{}, must be square",
-                a.nrows(),
-                a.ncols()
-            )));
-        }
-        if b.nrows() != n {
-            return Err(LtiError::Dimension(format!(
-                "B has {} rows, A has {n}",
-                b.nrows()
-            )));
-        }
-        if c.ncols() != n {
-            return Err(LtiError::Dimension(format!(
-                "C has {} columns, A has {n} rows",
-                c.ncols()
-            )));
-        }
-        if d.nrows() != c.nrows() || d.ncols() != b.ncols() {
-            return Err(LtiError::Dimension(format!(
-                "D is {}×{}, must be {}×{} (outputs × inputs)",
-                d.nrows(),
-                d.ncols(),
-                c.nrows(),
-                b.ncols()
-            )));
-        }
-        if let Some(t) = dt
-            && !(t.is_finite() && t > 0.0)
-        {
-            return Err(LtiError::param(
-                "dt",
-                format!("sample period {t} s must be finite and > 0"),
-            ));
-        }
+        check_parts(&a, &b, &c, &d, dt)?;
         Ok(Self { a, b, c, d, dt })
+    }
+
+    /// Re-checks the invariants of [`StateSpace::new`] (fitting dimensions,
+    /// finite entries, positive finite `dt`) on a model whose public fields may
+    /// have been set directly. The toolkit's fallible operations call it, so a
+    /// hand-built inconsistent model gives a typed error instead of a panic
+    /// inside nalgebra.
+    pub fn validate(&self) -> Result<(), LtiError> {
+        check_parts(&self.a, &self.b, &self.c, &self.d, self.dt)
     }
 
     /// A static gain y = D u (no states).
@@ -180,7 +213,8 @@ impl StateSpace {
     }
 
     /// SISO frequency response at one angular frequency `w_rad_s` (rad/s); for a
-    /// MIMO model, the (0, 0) entry.
+    /// MIMO model, the (0, 0) entry (use [`StateSpace::try_freqresp_siso`] for
+    /// an error instead).
     pub fn freqresp_siso_at(&self, w_rad_s: f64) -> Complex<f64> {
         self.evalfr(self.frequency_point(w_rad_s))[(0, 0)]
     }
@@ -189,6 +223,32 @@ impl StateSpace {
     /// MIMO model, the (0, 0) entry.
     pub fn freqresp_siso(&self, w_rad_s: &[f64]) -> Vec<Complex<f64>> {
         w_rad_s.iter().map(|&w| self.freqresp_siso_at(w)).collect()
+    }
+
+    /// Checked SISO frequency response at `w_rad_s` (rad/s): a
+    /// [`LtiError::Dimension`] for a MIMO model instead of its (0, 0) entry.
+    pub fn try_freqresp_siso(&self, w_rad_s: &[f64]) -> Result<Vec<Complex<f64>>, LtiError> {
+        self.require_siso("try_freqresp_siso")?;
+        Ok(self.freqresp_siso(w_rad_s))
+    }
+
+    /// Checked SISO Bode data (see [`StateSpace::bode`]): a
+    /// [`LtiError::Dimension`] for a MIMO model.
+    pub fn try_bode(&self, w_rad_s: &[f64]) -> Result<(Vec<f64>, Vec<f64>), LtiError> {
+        self.require_siso("try_bode")?;
+        Ok(self.bode(w_rad_s))
+    }
+
+    fn require_siso(&self, what: &str) -> Result<(), LtiError> {
+        if self.is_siso() {
+            Ok(())
+        } else {
+            Err(LtiError::Dimension(format!(
+                "{what} needs a SISO model, this one is {}×{} (use freqresp for the matrix response)",
+                self.noutputs(),
+                self.ninputs()
+            )))
+        }
     }
 
     /// SISO Bode data at `w_rad_s` (rad/s): magnitudes (absolute, not dB) and
@@ -310,6 +370,7 @@ pub fn unwrap_phase(phase: &[f64]) -> Vec<f64> {
 /// at 4 kHz lost its whole numerator that way; test
 /// `ss2tf_survives_bad_state_scaling`).
 pub fn ss2tf(sys: &StateSpace) -> Result<TransferFunction, LtiError> {
+    sys.validate()?;
     if !sys.is_siso() {
         return Err(LtiError::Dimension("ss2tf needs a SISO system".into()));
     }
@@ -431,6 +492,8 @@ fn numerator_by_determinants(sys: &StateSpace, den: &[f64]) -> Vec<f64> {
 /// Series connection: `sys1` followed by `sys2`, i.e. G = G₂·G₁ (python-control
 /// `series(sys1, sys2)`). Outputs of `sys1` feed the inputs of `sys2`.
 pub fn series(sys1: &StateSpace, sys2: &StateSpace) -> Result<StateSpace, LtiError> {
+    sys1.validate()?;
+    sys2.validate()?;
     let dt = common_dt(sys1, sys2)?;
     if sys1.noutputs() != sys2.ninputs() {
         return Err(LtiError::Dimension(format!(
@@ -461,6 +524,8 @@ pub fn series(sys1: &StateSpace, sys2: &StateSpace) -> Result<StateSpace, LtiErr
 
 /// Parallel connection G = G₁ + G₂ (same inputs, outputs added).
 pub fn parallel(sys1: &StateSpace, sys2: &StateSpace) -> Result<StateSpace, LtiError> {
+    sys1.validate()?;
+    sys2.validate()?;
     let dt = common_dt(sys1, sys2)?;
     if sys1.ninputs() != sys2.ninputs() || sys1.noutputs() != sys2.noutputs() {
         return Err(LtiError::Dimension(
@@ -536,6 +601,8 @@ pub fn append(systems: &[StateSpace]) -> Result<StateSpace, LtiError> {
 /// -1.0` is negative feedback, (I + G₁G₂)⁻¹G₁. Fails if I − sign·D₁D₂ is singular
 /// (an algebraic loop).
 pub fn feedback(sys1: &StateSpace, sys2: &StateSpace, sign: f64) -> Result<StateSpace, LtiError> {
+    sys1.validate()?;
+    sys2.validate()?;
     let dt = common_dt(sys1, sys2)?;
     let (p1, m1) = (sys1.noutputs(), sys1.ninputs());
     if sys2.ninputs() != p1 || sys2.noutputs() != m1 {

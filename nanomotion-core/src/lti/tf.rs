@@ -144,7 +144,9 @@ pub fn tf2ss(tf: &TransferFunction) -> Result<StateSpace, LtiError> {
 }
 
 /// Transfer function from zeros, poles and gain k: k·∏(x − zᵢ)/∏(x − pᵢ)
-/// (python-control `zpk`). Complex zeros and poles must come in conjugate pairs.
+/// (python-control `zpk`). Complex zeros and poles must come in conjugate pairs;
+/// this is not checked (an unpaired root loses its imaginary part): use
+/// [`zpk_checked`] for user data.
 pub fn zpk(
     zeros: &[Complex<f64>],
     poles: &[Complex<f64>],
@@ -157,6 +159,58 @@ pub fn zpk(
         den: poly_from_roots(poles),
         dt,
     }
+}
+
+/// Checked [`zpk`]: finite roots and gain, and every complex zero and pole
+/// paired with its conjugate (to 1e-9 relative); an unpaired complex root is a
+/// [`LtiError::Parameter`] instead of a silently dropped imaginary part.
+pub fn zpk_checked(
+    zeros: &[Complex<f64>],
+    poles: &[Complex<f64>],
+    gain: f64,
+    dt: Option<f64>,
+) -> Result<TransferFunction, LtiError> {
+    if !gain.is_finite() {
+        return Err(LtiError::param("gain", "must be finite"));
+    }
+    for (name, roots) in [("zeros", zeros), ("poles", poles)] {
+        if roots
+            .iter()
+            .any(|z| !(z.re.is_finite() && z.im.is_finite()))
+        {
+            return Err(LtiError::param(name, "must be finite"));
+        }
+        let tol = |z: Complex<f64>| 1e-9 * (1.0 + z.norm());
+        let mut used = vec![false; roots.len()];
+        for i in 0..roots.len() {
+            let z = roots[i];
+            if used[i] || z.im.abs() <= tol(z) {
+                continue;
+            }
+            let partner = (0..roots.len())
+                .find(|&j| j != i && !used[j] && (roots[j] - z.conj()).norm() <= tol(z));
+            match partner {
+                Some(j) => {
+                    used[i] = true;
+                    used[j] = true;
+                }
+                None => {
+                    return Err(LtiError::param(
+                        name,
+                        format!(
+                            "the complex root {} {:+}i has no conjugate partner: a real transfer function needs conjugate pairs",
+                            z.re, z.im
+                        ),
+                    ));
+                }
+            }
+        }
+    }
+    TransferFunction::new(
+        poly_from_roots(zeros).iter().map(|c| c * gain).collect(),
+        poly_from_roots(poles),
+        dt,
+    )
 }
 
 /// One real section num(x)/den(x) of degree ≤ 2 (descending powers, den monic).

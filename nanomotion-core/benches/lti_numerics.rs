@@ -1,0 +1,98 @@
+//! Time per call of the dense LTI numerics at n = 10, 20, 40 (issue 14):
+//! `cargo bench -p nanomotion-core --bench lti_numerics`.
+
+use criterion::{Criterion, criterion_group, criterion_main};
+use nalgebra::DMatrix;
+use nanomotion_core::lti::hinfsyn::{HinfSynOptions, augw, hinfsyn};
+use nanomotion_core::lti::linalg::eigvals;
+use nanomotion_core::lti::{StateSpace, care, dare, hinfnorm, lyap};
+use nanomotion_core::rng::Rng;
+use std::hint::black_box;
+use std::time::Duration;
+
+fn random(rng: &mut Rng, r: usize, c: usize) -> DMatrix<f64> {
+    DMatrix::from_fn(r, c, |_, _| rng.normal())
+}
+
+fn hurwitz(rng: &mut Rng, n: usize) -> DMatrix<f64> {
+    let a = random(rng, n, n);
+    let worst = eigvals(&a)
+        .iter()
+        .map(|p| p.re)
+        .fold(f64::NEG_INFINITY, f64::max);
+    a - DMatrix::identity(n, n) * (worst + 0.5)
+}
+
+fn bench(c: &mut Criterion) {
+    let mut group = c.benchmark_group("lti");
+    group
+        .sample_size(10)
+        .warm_up_time(Duration::from_millis(300))
+        .measurement_time(Duration::from_secs(1));
+    for n in [10usize, 20, 40] {
+        let mut rng = Rng::new(n as u64);
+        let a = random(&mut rng, n, n);
+        let b = random(&mut rng, n, 2);
+        let q = DMatrix::identity(n, n);
+        let r = DMatrix::identity(2, 2);
+        group.bench_function(format!("care/{n}"), |bch| {
+            bch.iter(|| care(black_box(&a), &b, &q, &r, None).unwrap())
+        });
+        let rho = eigvals(&a).iter().map(|p| p.norm()).fold(0.0, f64::max);
+        let ad = &a * (1.1 / rho);
+        group.bench_function(format!("dare/{n}"), |bch| {
+            bch.iter(|| dare(black_box(&ad), &b, &q, &r, None).unwrap())
+        });
+        let ah = hurwitz(&mut rng, n);
+        group.bench_function(format!("lyap/{n}"), |bch| {
+            bch.iter(|| lyap(black_box(&ah), &q).unwrap())
+        });
+        let sys = StateSpace::new(
+            ah.clone(),
+            random(&mut rng, n, 2),
+            random(&mut rng, 2, n),
+            DMatrix::zeros(2, 2),
+            None,
+        )
+        .unwrap();
+        group.bench_function(format!("hinfnorm/{n}"), |bch| {
+            bch.iter(|| hinfnorm(black_box(&sys)).unwrap())
+        });
+        // Mixed sensitivity on a stable plant of n − 2 states (P has n states:
+        // plant, W1 of order 1, W2 static... plus one more weight state).
+        let ng = n - 2;
+        let g = StateSpace::new(
+            hurwitz(&mut rng, ng),
+            random(&mut rng, ng, 1),
+            random(&mut rng, 1, ng),
+            DMatrix::zeros(1, 1),
+            None,
+        )
+        .unwrap();
+        let w1 = StateSpace::new(
+            DMatrix::from_element(1, 1, -0.01),
+            DMatrix::from_element(1, 1, 1.0),
+            DMatrix::from_element(1, 1, 1.0),
+            DMatrix::zeros(1, 1),
+            None,
+        )
+        .unwrap();
+        let w2 = StateSpace::new(
+            DMatrix::from_element(1, 1, -100.0),
+            DMatrix::from_element(1, 1, 100.0),
+            DMatrix::from_element(1, 1, 1.0),
+            DMatrix::from_element(1, 1, 0.1),
+            None,
+        )
+        .unwrap();
+        let p = augw(&g, Some(&w1), Some(&w2), None).unwrap();
+        assert_eq!(p.nstates(), n);
+        group.bench_function(format!("hinfsyn/{n}"), |bch| {
+            bch.iter(|| hinfsyn(black_box(&p), 1, 1, &HinfSynOptions::default()).unwrap())
+        });
+    }
+    group.finish();
+}
+
+criterion_group!(benches, bench);
+criterion_main!(benches);
