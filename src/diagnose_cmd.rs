@@ -171,6 +171,16 @@ fn print_report(r: &Report) {
         100.0 * (1.0 - r.final_scores.holdout_rms / r.nominal.holdout_rms)
     );
     println!("stopped because {}", r.stopped_because);
+    if !r.rejected_candidates.is_empty() {
+        println!("  (the last step's best candidates:");
+        for c in r.rejected_candidates.iter().take(4) {
+            println!(
+                "     {:<24} {:<52} {:>2} params  held-out rms {:.4e}",
+                c.effect, c.site, c.n_params, c.holdout_rms
+            );
+        }
+        println!("  )");
+    }
 }
 
 fn plot(p: &PlotData, path: &Path) -> Result<(), String> {

@@ -225,6 +225,8 @@ pub struct Report {
     pub final_tests: Vec<ResidualTests>,
     /// Why the workflow stopped.
     pub stopped_because: String,
+    /// The candidates of the step that named nothing (best first), if it came to one.
+    pub rejected_candidates: Vec<Candidate>,
     /// Samples used for estimation and held out.
     pub estimation_samples: usize,
     /// Held-out samples.
@@ -337,6 +339,7 @@ pub fn diagnose_with_progress(
     let mut steps: Vec<Step> = Vec::new();
     let mut plots = Vec::new();
     let mut stopped = format!("reached --max-effects {}", opts.max_effects);
+    let mut rejected_candidates = Vec::new();
     for step_no in 0..opts.max_effects {
         // At the noise floor already?
         let excess = excess_ms(&ctx, &cur);
@@ -348,33 +351,54 @@ pub fn diagnose_with_progress(
         let total = cands.len();
         let mut results: Vec<Option<Fitted>> = Vec::with_capacity(total);
         let threads = opts.threads.max(1);
-        for (chunk_no, chunk) in cands.chunks(threads).enumerate() {
-            progress(
-                &format!("step {}: fitting candidates", step_no + 1),
-                (chunk_no * threads) as f64 / total as f64,
-            );
-            let out: Vec<Result<Fitted, String>> = std::thread::scope(|sc| {
-                let handles: Vec<_> = chunk
-                    .iter()
-                    .map(|c| sc.spawn(|| fit_candidate(&ctx, &cur, c)))
-                    .collect();
-                handles
-                    .into_iter()
-                    .map(|h| h.join().unwrap_or_else(|_| Err("the fit panicked".into())))
-                    .collect()
-            });
-            for (c, r) in chunk.iter().zip(out) {
-                match r {
-                    Ok(f) => {
-                        runs += f.runs;
-                        results.push(Some(f));
+        // A work queue: each worker takes the next candidate; results land in
+        // their candidate's slot, so the outcome does not depend on timing.
+        let next = std::sync::atomic::AtomicUsize::new(0);
+        let slots: Vec<std::sync::Mutex<Option<Result<Fitted, String>>>> =
+            (0..total).map(|_| std::sync::Mutex::new(None)).collect();
+        let (tx, rx) = std::sync::mpsc::channel::<()>();
+        std::thread::scope(|sc| {
+            for _ in 0..threads.min(total.max(1)) {
+                let tx = tx.clone();
+                let (next, slots, cands, ctx, cur) = (&next, &slots, &cands, &ctx, &cur);
+                sc.spawn(move || {
+                    loop {
+                        let i = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                        if i >= cands.len() {
+                            break;
+                        }
+                        let r = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+                            fit_candidate(ctx, cur, &cands[i])
+                        }))
+                        .unwrap_or_else(|_| Err("the fit panicked".into()));
+                        if let Ok(mut slot) = slots[i].lock() {
+                            *slot = Some(r);
+                        }
+                        let _ = tx.send(());
                     }
-                    Err(e) => {
-                        tracing::debug!(effect = c.effect, site = %c.site.describe(), "candidate failed: {e}");
-                        results.push(None);
-                        let _ = c;
-                    }
+                });
+            }
+            drop(tx);
+            let mut done = 0;
+            while rx.recv().is_ok() {
+                done += 1;
+                progress(
+                    &format!("step {}: fitting candidates", step_no + 1),
+                    done as f64 / total as f64,
+                );
+            }
+        });
+        for (c, slot) in cands.iter().zip(slots) {
+            match slot.into_inner().ok().flatten() {
+                Some(Ok(f)) => {
+                    runs += f.runs;
+                    results.push(Some(f));
                 }
+                Some(Err(e)) => {
+                    tracing::debug!(effect = c.effect, site = %c.site.describe(), "candidate failed: {e}");
+                    results.push(None);
+                }
+                None => results.push(None),
             }
         }
         progress(&format!("step {}: deciding", step_no + 1), 1.0);
@@ -403,25 +427,44 @@ pub fn diagnose_with_progress(
                 },
             })
             .collect();
-        let best = results
-            .iter()
-            .enumerate()
-            .filter_map(|(i, r)| r.as_ref().map(|f| (i, f.score)))
-            .min_by(|a, b| a.1.total_cmp(&b.1));
         table.sort_by(|a, b| a.score.total_cmp(&b.score));
-        let Some((bi, _)) = best else {
+        // The best three by score; with effects named before, each is refitted
+        // jointly with them (an effect fitted first must not keep what belongs to
+        // the new one) and the best after the joint refit wins.
+        let mut order: Vec<usize> = (0..results.len())
+            .filter(|&i| results[i].is_some())
+            .collect();
+        order.sort_by(|&a, &b| {
+            let sa = results[a].as_ref().map_or(f64::INFINITY, |f| f.score);
+            let sb = results[b].as_ref().map_or(f64::INFINITY, |f| f.score);
+            sa.total_cmp(&sb)
+        });
+        if order.is_empty() {
             stopped = "no candidate could be fitted".into();
             break;
-        };
-        let mut win = results[bi].take().expect("best exists");
-        let cand = &cands[bi];
-        // Joint refit with the effects named before.
-        if !cur.free.is_empty()
-            && let Ok(j) = joint_refit(&ctx, &win, &mut runs)
-            && weighted_holdout_ms(&ctx, &j.residual) < weighted_holdout_ms(&ctx, &win.residual)
-        {
-            win = j;
         }
+        let k_of = |f: &Fitted| f.free_indices.len() as f64;
+        let penalised = |f: &Fitted, ms: f64| {
+            let ne = ctx.n_est as f64;
+            let nh = (ctx.n - ctx.n_est) as f64;
+            ms * (1.0 + k_of(f) * ne.ln() / ne) * (1.0 + k_of(f) / nh.sqrt())
+        };
+        let mut best: Option<(usize, Fitted, f64)> = None;
+        for &i in order.iter().take(if cur.free.is_empty() { 1 } else { 3 }) {
+            let mut f = results[i].take().expect("fitted");
+            if !cur.free.is_empty()
+                && let Ok(j) = joint_refit(&ctx, &f, &mut runs)
+                && weighted_holdout_ms(&ctx, &j.residual) < weighted_holdout_ms(&ctx, &f.residual)
+            {
+                f = j;
+            }
+            let sc = penalised(&f, weighted_holdout_ms(&ctx, &f.residual));
+            if best.as_ref().is_none_or(|b| sc < b.2) {
+                best = Some((i, f, sc));
+            }
+        }
+        let (bi, win, _) = best.expect("at least one candidate");
+        let cand = &cands[bi];
         let after_ms = weighted_holdout_ms(&ctx, &win.residual);
         let (worse, better) = holdout_weighted_vectors(&ctx, &cur.residual, &win.residual);
         let (test, _rel) = stats::improvement_test(&worse, &better, 20);
@@ -441,6 +484,7 @@ pub fn diagnose_with_progress(
         let hb = holdout_rms(&ctx, &cur.residual);
         let ha = holdout_rms(&ctx, &win.residual);
         if test.p_value >= level || excess_cut < opts.min_excess_cut {
+            rejected_candidates = table.clone();
             stopped = format!(
                 "no candidate cut the held-out residual significantly: best was {} ({}), held-out rms {:.4e} -> {:.4e}, p = {:.2e} (needed < {:.1e}), {:.0} % of the excess over the noise floor (needed {:.0} %)",
                 cand.effect,
@@ -528,6 +572,7 @@ pub fn diagnose_with_progress(
         final_scores,
         final_tests,
         stopped_because: stopped,
+        rejected_candidates,
         estimation_samples: n_est,
         holdout_samples: n - n_est,
         runs,

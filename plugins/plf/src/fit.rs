@@ -252,12 +252,9 @@ impl Evaluator {
                     data.rate_hz()
                 )));
             }
-            let sd = crate::stats::mean_square(
-                &col.iter()
-                    .map(|v| v - crate::stats::mean(col))
-                    .collect::<Vec<_>>(),
-            )
-            .sqrt();
+            let m = crate::stats::mean(col);
+            let sd =
+                crate::stats::mean_square(&col.iter().map(|v| v - m).collect::<Vec<_>>()).sqrt();
             weight.push(if sd > 0.0 { 1.0 / sd } else { 1.0 });
             measured.push(col.to_vec());
             decim.push(mr as usize);

@@ -1,0 +1,77 @@
+//! The confusion table of the discrepancy workflow over generated records: every
+//! vocabulary effect hidden on the second-order stage (and the two-axis stage for
+//! `axis_coupling`), several seeds each, plus noise-only records. Prints a
+//! Markdown table (docs/plf.md quotes it):
+//!
+//! ```text
+//! cargo run --release -p nanomotion-plf --example confusion [SEEDS]
+//! ```
+
+use nanomotion_core::graph::GraphSpec;
+use nanomotion_plf::diagnose::{Options, VOCABULARY, diagnose};
+use nanomotion_plf::generate;
+use std::collections::BTreeMap;
+use std::time::Instant;
+
+fn main() {
+    let _ = std::any::type_name::<nanomotion_plf::effects::Effect>();
+    let seeds: u64 = std::env::args()
+        .nth(1)
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(5);
+    let n = 12_000;
+    let mut rows: Vec<(String, BTreeMap<String, usize>, Vec<f64>, f64)> = Vec::new();
+    let start = Instant::now();
+    for &effect in VOCABULARY.iter().chain(["none"].iter()) {
+        let mut named: BTreeMap<String, usize> = BTreeMap::new();
+        let mut cuts = Vec::new();
+        let t0 = Instant::now();
+        for seed in 1..=seeds {
+            let rec = if effect == "axis_coupling" {
+                generate::two_axis(effect, seed, n)
+            } else {
+                generate::second_order(effect, seed, n, false)
+            }
+            .expect("generator");
+            let spec =
+                GraphSpec::from_yaml(&rec.nominal_yaml, "generated.yaml").expect("nominal graph");
+            let r = diagnose(&spec, &rec.data, &Options::default()).expect("diagnose");
+            let first = r.found.first().cloned().unwrap_or_else(|| "[]".into());
+            *named.entry(first).or_default() += 1;
+            if let Some(s) = r.steps.first() {
+                cuts.push(100.0 * (1.0 - s.holdout_rms_after / s.holdout_rms_before));
+            }
+            if r.found.len() > 1 {
+                *named
+                    .entry(format!("(+{} more)", r.found.len() - 1))
+                    .or_default() += 1;
+            }
+        }
+        eprintln!("{effect}: {named:?} in {:.1} s", t0.elapsed().as_secs_f64());
+        rows.push((
+            effect.to_string(),
+            named,
+            cuts,
+            t0.elapsed().as_secs_f64() / seeds as f64,
+        ));
+    }
+    println!(
+        "| hidden | named first (count of {seeds} seeds) | first step's held-out cut (min / median) | s per record |"
+    );
+    println!("|---|---|---|---|");
+    for (effect, named, mut cuts, secs) in rows {
+        cuts.sort_by(f64::total_cmp);
+        let cut = if cuts.is_empty() {
+            "—".to_string()
+        } else {
+            format!("{:.0} % / {:.0} %", cuts[0], cuts[cuts.len() / 2])
+        };
+        let names: Vec<String> = named.iter().map(|(k, v)| format!("{k} {v}")).collect();
+        println!("| {effect} | {} | {cut} | {secs:.1} |", names.join(", "));
+    }
+    println!(
+        "\n{} records of {n} samples at 2 kHz in {:.0} s",
+        14 * seeds,
+        start.elapsed().as_secs_f64()
+    );
+}
