@@ -38,6 +38,12 @@ pub mod roles;
 pub mod scheduler;
 pub mod yaml;
 
+/// The linear-algebra crate the toolkit's matrices come from ([`lti`] models are
+/// `nalgebra::DMatrix<f64>`), re-exported so that callers build and read
+/// models with exactly the version the core is compiled against, without a
+/// nalgebra dependency of their own: `use nanomotion_core::nalgebra::DMatrix;`.
+pub use nalgebra;
+
 pub use block::{Block, BlockDoc, BuildContext, ParamDoc, Port, Role, Tick, Tunable};
 pub use error::{GraphError, ParamError};
 pub use graph::{Graph, GraphSpec};

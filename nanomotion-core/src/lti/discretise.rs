@@ -18,9 +18,13 @@ pub enum C2dMethod {
     /// Tustin (bilinear) s = k(z − 1)/(z + 1) with k = 2/T, or with pre-warping
     /// at `prewarp_hz` f₀: k = ω₀/tan(ω₀T/2), ω₀ = 2πf₀, so that the discrete
     /// response equals the continuous one exactly at f₀.
+    ///
+    /// The pre-warp frequency is in **Hz** (as the name says), unlike the
+    /// toolkit's frequency grids in rad/s; [`C2dMethod::tustin_prewarp_rad_s`]
+    /// builds this variant from a frequency in rad/s.
     Tustin {
-        /// Pre-warp frequency f₀ in Hz (must be below Nyquist), `None` for plain
-        /// Tustin.
+        /// Pre-warp frequency f₀ in Hz (must be below Nyquist, 1/(2T) Hz),
+        /// `None` for plain Tustin.
         prewarp_hz: Option<f64>,
     },
 }
@@ -28,6 +32,44 @@ pub enum C2dMethod {
 impl C2dMethod {
     /// Plain Tustin without pre-warping.
     pub const TUSTIN: C2dMethod = C2dMethod::Tustin { prewarp_hz: None };
+
+    /// Tustin pre-warped at the angular frequency `w0_rad_s` (rad/s, the unit
+    /// of every frequency grid of the toolkit): the same method as
+    /// `Tustin { prewarp_hz: Some(w0_rad_s / 2π) }`. The range is checked by
+    /// [`c2d`] (> 0 and below the Nyquist frequency π/T rad/s).
+    ///
+    /// ```
+    /// use nanomotion_core::lti::{C2dMethod, TransferFunction};
+    /// let w0 = 2.0 * std::f64::consts::PI * 300.0; // rad/s
+    /// let g = TransferFunction::new(vec![1.0], vec![1e-3, 1.0], None).unwrap();
+    /// let gd = g.c2d(1e-3, C2dMethod::tustin_prewarp_rad_s(w0)).unwrap();
+    /// let (c, d) = (g.freqresp(&[w0])[0], gd.freqresp_siso(&[w0])[0]);
+    /// assert!((c - d).norm() < 1e-12);
+    /// let back = C2dMethod::tustin_prewarp_rad_s(w0).prewarp_rad_s().unwrap();
+    /// assert!((back - w0).abs() < 1e-12 * w0);
+    /// ```
+    pub fn tustin_prewarp_rad_s(w0_rad_s: f64) -> C2dMethod {
+        C2dMethod::Tustin {
+            prewarp_hz: Some(w0_rad_s / (2.0 * PI)),
+        }
+    }
+
+    /// Tustin pre-warped at `f0_hz` (Hz): `Tustin { prewarp_hz: Some(f0_hz) }`.
+    pub fn tustin_prewarp_hz(f0_hz: f64) -> C2dMethod {
+        C2dMethod::Tustin {
+            prewarp_hz: Some(f0_hz),
+        }
+    }
+
+    /// The pre-warp frequency in rad/s (`None` for ZOH and plain Tustin).
+    pub fn prewarp_rad_s(&self) -> Option<f64> {
+        match self {
+            C2dMethod::Tustin {
+                prewarp_hz: Some(f0),
+            } => Some(2.0 * PI * f0),
+            _ => None,
+        }
+    }
 }
 
 /// Discretise a continuous state-space model at sample period `dt` (s)
@@ -78,8 +120,10 @@ pub fn c2d(sys: &StateSpace, dt: f64, method: C2dMethod) -> Result<StateSpace, L
                         return Err(LtiError::param(
                             "prewarp_hz",
                             format!(
-                                "{f0} Hz must be > 0 and below the Nyquist frequency {} Hz",
-                                0.5 / dt
+                                "{f0} Hz ({} rad/s) must be > 0 and below the Nyquist frequency {} Hz ({} rad/s)",
+                                2.0 * PI * f0,
+                                0.5 / dt,
+                                PI / dt
                             ),
                         ));
                     }

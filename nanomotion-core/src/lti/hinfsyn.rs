@@ -591,6 +591,10 @@ pub fn augw(
     w2: Option<&StateSpace>,
     w3: Option<&StateSpace>,
 ) -> Result<StateSpace, LtiError> {
+    g.validate()?;
+    for w in [w1, w2, w3].into_iter().flatten() {
+        w.validate()?;
+    }
     let (p, m) = (g.noutputs(), g.ninputs());
     if w1.is_none() && w2.is_none() && w3.is_none() {
         return Err(LtiError::param("w1", "give at least one weight"));

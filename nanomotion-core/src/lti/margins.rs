@@ -78,6 +78,7 @@ fn grid_range(l: &StateSpace) -> (f64, f64) {
 /// assert!((m.phase_crossover_rad_s - 3f64.sqrt()).abs() < 1e-8);
 /// ```
 pub fn stability_margins(l: &StateSpace) -> Result<Margins, LtiError> {
+    l.validate()?;
     if !l.is_siso() {
         return Err(LtiError::Dimension(format!(
             "stability margins need a SISO loop gain, got {} outputs × {} inputs",

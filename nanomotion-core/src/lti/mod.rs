@@ -17,6 +17,9 @@
 //! - [`stability_margins`]: gain, phase and modulus margins of a loop gain;
 //! - [`care`], [`care_general`], [`dare`], [`lyap`], [`dlyap`]: stabilising
 //!   Riccati solutions (sign function, doubling) and Lyapunov equations;
+//!   [`care_general_solution`], [`lyap_solution`] and [`dlyap_solution`]
+//!   return a solution struct with the residual, backward error and
+//!   iterations, as [`care`] and [`dare`] do ([`RiccatiSolution`]);
 //! - [`hinfsyn()`], [`augw`], [`lft`]: H∞ output-feedback synthesis by
 //!   γ-iteration on the two DGKF Riccati equations, mixed-sensitivity plants;
 //! - [`LmiProblem`]: a small dense LMI feasibility solver (Lyapunov and
@@ -24,6 +27,46 @@
 //! - [`zpetc()`]: Tomizuka's zero-phase-error tracking controller;
 //! - [`SsStepper`], [`lsim`], [`step_response`], [`impulse`]: allocation-free
 //!   simulation.
+//!
+//! # Units
+//!
+//! Time is in seconds (`dt`, sample periods). **Frequency is angular, in rad/s**,
+//! wherever the toolkit evaluates or reports a frequency response: every
+//! frequency grid (`w_rad_s` of [`StateSpace::freqresp`], [`StateSpace::bode`],
+//! [`TransferFunction::freqresp`], [`sos_freqresp`], [`Zpetc::freqresp`]) and
+//! every returned frequency ([`HinfNorm::peak_rad_s`], the `*_rad_s` fields of
+//! [`Margins`]); poles are in rad/s (s-plane) or on the z-plane. Design
+//! frequencies that engineers specify in hertz are in **Hz** and say so in
+//! their names: the cut-offs `cutoff_hz` of [`fir_lowpass`] and
+//! [`butter_lowpass`], and the Tustin pre-warp frequency `prewarp_hz` of
+//! [`C2dMethod::Tustin`] — for which [`C2dMethod::tustin_prewarp_rad_s`] takes
+//! the same frequency in rad/s. Every frequency argument or field carries its
+//! unit as a `_rad_s` or `_hz` suffix.
+//!
+//! # Building models without nalgebra
+//!
+//! The matrices are nalgebra's [`DMatrix`]; `nanomotion_core` re-exports the
+//! nalgebra it is built with ([`crate::nalgebra`]), so a caller needs no
+//! nalgebra dependency of a matching version. [`StateSpace::from_rows`] and
+//! [`TransferFunction::from_slices`] build models from plain rows
+//! (`&[Vec<f64>]`, `&[&[f64]]`, `&[[f64; N]]`), with a typed
+//! [`LtiError::RaggedRows`] for rows of unequal length:
+//!
+//! ```
+//! use nanomotion_core::lti::StateSpace;
+//! // Mass-spring-damper, x = (position, velocity).
+//! let sys = StateSpace::from_rows(
+//!     &[[0.0, 1.0], [-4.0, -0.4]],
+//!     &[[0.0], [1.0]],
+//!     &[[1.0, 0.0]],
+//!     &[[0.0]],
+//!     None,
+//! )
+//! .unwrap();
+//! assert_eq!((sys.nstates(), sys.ninputs(), sys.noutputs()), (2, 1, 1));
+//! let a: nanomotion_core::nalgebra::DMatrix<f64> = sys.a.clone();
+//! assert_eq!(a[(1, 0)], -4.0);
+//! ```
 
 use nalgebra::DMatrix;
 use serde::{Deserialize, Serialize};
@@ -49,7 +92,10 @@ pub use hinf::{HinfNorm, hinfnorm};
 pub use hinfsyn::{HinfSyn, HinfSynOptions, augw, hinfsyn, lft};
 pub use lmi::{LmiConstraint, LmiError, LmiOptions, LmiProblem, LmiSolution, LmiStatus, LmiVar};
 pub use margins::{Margins, stability_margins};
-pub use riccati::{RiccatiSolution, care, care_general, dare, dlyap, lyap};
+pub use riccati::{
+    CareGeneralSolution, LyapunovSolution, RiccatiSolution, care, care_general,
+    care_general_solution, dare, dlyap, dlyap_solution, lyap, lyap_solution,
+};
 pub use sim::{SsStepper, impulse, lsim, lsim_siso, step_response};
 pub use ss::{append, delay, feedback, parallel, series, ss2tf, unwrap_phase};
 pub use tf::{tf2sos, tf2ss, zpk, zpk_checked, zpk2sos, zpk2ss};
@@ -93,6 +139,19 @@ pub enum LtiError {
     /// The system is unstable where a stable one is required (H∞ norm).
     #[error("system is not stable: {0}")]
     Unstable(String),
+    /// Rows of unequal length where a matrix is built from rows
+    /// ([`StateSpace::from_rows`]).
+    #[error("matrix `{matrix}`: row {row} has {len} entries, expected {expected} (ragged rows)")]
+    RaggedRows {
+        /// Which matrix ("a", "b", "c" or "d").
+        matrix: &'static str,
+        /// Index of the first offending row.
+        row: usize,
+        /// Its length.
+        len: usize,
+        /// The length the matrix's shape requires.
+        expected: usize,
+    },
 }
 
 impl LtiError {
@@ -107,7 +166,14 @@ impl LtiError {
 /// State-space model x' = A x + B u, y = C x + D u; `dt = None` for continuous
 /// time (x' = dx/dt), `Some(T)` for discrete time with period T seconds
 /// (x' = x[k+1]).
+///
+/// The fields are public; [`StateSpace::new`] and [`StateSpace::from_rows`]
+/// check that the sizes fit and the entries are finite, deserialisation runs
+/// the same checks, and every fallible toolkit function re-checks a model
+/// whose fields were set directly ([`StateSpace::validate`]), so an
+/// inconsistent model is a typed [`LtiError`], never a panic.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(try_from = "StateSpaceParts")]
 pub struct StateSpace {
     /// State matrix A (n × n).
     pub a: DMatrix<f64>,
@@ -119,6 +185,24 @@ pub struct StateSpace {
     pub d: DMatrix<f64>,
     /// Sample period in seconds, `None` for continuous time.
     pub dt: Option<f64>,
+}
+
+/// The serialised form of [`StateSpace`], checked by [`StateSpace::new`] on
+/// the way in.
+#[derive(Deserialize)]
+struct StateSpaceParts {
+    a: DMatrix<f64>,
+    b: DMatrix<f64>,
+    c: DMatrix<f64>,
+    d: DMatrix<f64>,
+    dt: Option<f64>,
+}
+
+impl TryFrom<StateSpaceParts> for StateSpace {
+    type Error = LtiError;
+    fn try_from(p: StateSpaceParts) -> Result<Self, LtiError> {
+        StateSpace::new(p.a, p.b, p.c, p.d, p.dt)
+    }
 }
 
 /// SISO transfer function num(s)/den(s) or num(z)/den(z), coefficients in

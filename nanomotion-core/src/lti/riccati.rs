@@ -94,6 +94,47 @@ pub struct RiccatiSolution {
     pub backward_error: f64,
 }
 
+/// The stabilising solution of the general CARE AᵀX + XA − XGX + Q = 0
+/// ([`care_general_solution`]) with the checks it passed: the same fields as
+/// [`RiccatiSolution`] except the gain (there is no B and R here; the
+/// closed loop is A − GX).
+#[derive(Debug, Clone, PartialEq)]
+pub struct CareGeneralSolution {
+    /// The symmetric stabilising solution X.
+    pub x: DMatrix<f64>,
+    /// Eigenvalues of the closed loop A − GX (all in the open left half plane).
+    pub closed_loop_poles: Vec<Complex<f64>>,
+    /// ‖AᵀX + XA − XGX + Q‖_F / (2‖AᵀX‖_F + ‖XGX‖_F + ‖Q‖_F).
+    pub relative_residual: f64,
+    /// Sign-function iterations plus Newton steps used (0 when X = 0 is exact,
+    /// Q = 0 with A Hurwitz).
+    pub iterations: usize,
+    /// maxᵢⱼ |residualᵢⱼ| / (|Aᵀ||X| + |X||A| + |X||G||X| + |Q|)ᵢⱼ: the residual
+    /// against the round-off floor of evaluating the equation (see
+    /// [`RiccatiSolution::backward_error`]).
+    pub backward_error: f64,
+}
+
+/// The solution of a Lyapunov equation ([`lyap_solution`]: AᵀX + XA + Q = 0;
+/// [`dlyap_solution`]: AᵀXA − X + Q = 0) with its residual, in the layout of
+/// [`RiccatiSolution`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct LyapunovSolution {
+    /// The symmetric solution X.
+    pub x: DMatrix<f64>,
+    /// ‖residual‖_F / (sum of the Frobenius norms of the equation's terms):
+    /// 2‖AᵀX‖ + ‖Q‖ (continuous), ‖AᵀXA‖ + ‖X‖ + ‖Q‖ (discrete).
+    pub relative_residual: f64,
+    /// Steps of iterative refinement taken after the Bartels–Stewart solve
+    /// (X ← X + Δ with Δ solving the same equation for the residual; at most
+    /// two, only while the backward error is above round-off and falls).
+    pub iterations: usize,
+    /// maxᵢⱼ |residualᵢⱼ| / (Σ |term|)ᵢⱼ with entrywise absolute values
+    /// (|Aᵀ||X| + |X||A| + |Q|, or |Aᵀ||X||A| + |X| + |Q|): the residual
+    /// against the round-off floor of evaluating the equation.
+    pub backward_error: f64,
+}
+
 /// Largest accepted relative residual before a solution is refused.
 const RESIDUAL_TOL: f64 = 1e-8;
 const MAX_ITERATIONS: usize = 100;
@@ -259,11 +300,35 @@ pub fn care(
 /// solved by the matrix sign function, refined by Newton's method (one
 /// Lyapunov equation per step), and solved again by the ordered Schur method
 /// when the sign function fails or leaves a residual above 1e-13.
+///
+/// Kept for its callers; [`care_general_solution`] returns the same X with its
+/// residual, backward error and closed-loop poles.
 pub fn care_general(
     a: &DMatrix<f64>,
     g: &DMatrix<f64>,
     q: &DMatrix<f64>,
 ) -> Result<(DMatrix<f64>, usize), LtiError> {
+    care_general_solution(a, g, q).map(|s| (s.x, s.iterations))
+}
+
+/// [`care_general`] returning a [`CareGeneralSolution`]: X with its relative
+/// residual, backward error, iterations and the poles of A − GX, as [`care`]
+/// and [`dare`] return a [`RiccatiSolution`].
+///
+/// ```
+/// use nanomotion_core::nalgebra::DMatrix;
+/// use nanomotion_core::lti::care_general_solution;
+/// // 2ax − gx² + q = 0 with a = 1, g = 1, q = 0: the stabilising root x = 2.
+/// let one = DMatrix::from_element(1, 1, 1.0);
+/// let sol = care_general_solution(&one, &one, &DMatrix::zeros(1, 1)).unwrap();
+/// assert!((sol.x[(0, 0)] - 2.0).abs() < 1e-12);
+/// assert!(sol.backward_error < 1e-14 && sol.closed_loop_poles[0].re < 0.0);
+/// ```
+pub fn care_general_solution(
+    a: &DMatrix<f64>,
+    g: &DMatrix<f64>,
+    q: &DMatrix<f64>,
+) -> Result<CareGeneralSolution, LtiError> {
     let n = a.nrows();
     check_square("a", a, n)?;
     check_square("g", g, n)?;
@@ -271,7 +336,13 @@ pub fn care_general(
     check_symmetric("g", g)?;
     check_symmetric("q", q)?;
     if n == 0 {
-        return Ok((DMatrix::zeros(0, 0), 0));
+        return Ok(CareGeneralSolution {
+            x: DMatrix::zeros(0, 0),
+            closed_loop_poles: Vec::new(),
+            relative_residual: 0.0,
+            iterations: 0,
+            backward_error: 0.0,
+        });
     }
     // Q = 0 with A Hurwitz: X = 0 is the stabilising solution, exactly (A − G·0 =
     // A). The sign iteration would return round-off instead, which no relative
@@ -279,8 +350,17 @@ pub fn care_general(
     // This is the Y equation of every mixed-sensitivity H∞ problem with y = e.
     // (Q must be exactly zero: any threshold relative to A or G would depend on
     // the problem's scaling, X ↦ tX, G ↦ G/t, Q ↦ tQ.)
-    if q.iter().all(|v| *v == 0.0) && eigvals(a).iter().all(|l| l.re < 0.0) {
-        return Ok((DMatrix::zeros(n, n), 0));
+    if q.iter().all(|v| *v == 0.0) {
+        let poles = eigvals(a);
+        if poles.iter().all(|l| l.re < 0.0) {
+            return Ok(CareGeneralSolution {
+                x: DMatrix::zeros(n, n),
+                closed_loop_poles: poles,
+                relative_residual: 0.0,
+                iterations: 0,
+                backward_error: 0.0,
+            });
+        }
     }
     let g = symmetrise(g);
     let q = symmetrise(q);
@@ -349,17 +429,21 @@ pub fn care_general(
         ));
         return Err(fail(&reasons));
     }
-    let worst = eigvals(&(a - &g * &x))
-        .iter()
-        .map(|p| p.re)
-        .fold(f64::NEG_INFINITY, f64::max);
+    let poles = eigvals(&(a - &g * &x));
+    let worst = poles.iter().map(|p| p.re).fold(f64::NEG_INFINITY, f64::max);
     if worst.is_nan() || worst >= 0.0 {
         reasons.push(format!(
             "the closed loop A − GX has an eigenvalue with real part {worst:.3e}"
         ));
         return Err(fail(&reasons));
     }
-    Ok((x, iterations))
+    Ok(CareGeneralSolution {
+        x,
+        closed_loop_poles: poles,
+        relative_residual: rel,
+        iterations,
+        backward_error: backward,
+    })
 }
 
 /// Powers of two (exact scalings) nearest to `v`.
@@ -938,13 +1022,98 @@ pub fn dare(
 /// AᵀX + XA + Q = 0 (unique when no two eigenvalues of A sum to 0) by
 /// Bartels–Stewart: the real Schur form A = UTUᵀ, then the quasi-triangular
 /// solve of TᵀY + YT = −UᵀQU block by block, X = UYUᵀ. O(n³) time, O(n²)
-/// memory.
+/// memory. [`lyap_solution`] returns X with its residual and backward error.
 pub fn lyap(a: &DMatrix<f64>, q: &DMatrix<f64>) -> Result<DMatrix<f64>, LtiError> {
     let n = a.nrows();
     check_square("a", a, n)?;
     check_square("q", q, n)?;
     check_symmetric("q", q)?;
     lyap_unchecked(a, q)
+}
+
+/// [`lyap`] returning a [`LyapunovSolution`]: X with its relative residual,
+/// backward error and the refinement steps taken, in the layout of the
+/// Riccati solvers' [`RiccatiSolution`].
+///
+/// ```
+/// use nanomotion_core::nalgebra::DMatrix;
+/// use nanomotion_core::lti::lyap_solution;
+/// let a = DMatrix::from_row_slice(2, 2, &[-1.0, 2.0, 0.0, -3.0]);
+/// let sol = lyap_solution(&a, &DMatrix::identity(2, 2)).unwrap();
+/// assert!(sol.relative_residual < 1e-14 && sol.backward_error < 1e-14);
+/// ```
+pub fn lyap_solution(a: &DMatrix<f64>, q: &DMatrix<f64>) -> Result<LyapunovSolution, LtiError> {
+    let x = lyap(a, q)?;
+    Ok(refine_lyapunov(a, q, x, false))
+}
+
+/// [`dlyap`] returning a [`LyapunovSolution`] (see [`lyap_solution`]).
+pub fn dlyap_solution(a: &DMatrix<f64>, q: &DMatrix<f64>) -> Result<LyapunovSolution, LtiError> {
+    let x = dlyap(a, q)?;
+    Ok(refine_lyapunov(a, q, x, true))
+}
+
+/// Residual of AᵀX + XA + Q (or AᵀXA − X + Q): (relative residual, backward
+/// error, residual).
+fn lyapunov_residual(
+    a: &DMatrix<f64>,
+    q: &DMatrix<f64>,
+    x: &DMatrix<f64>,
+    discrete: bool,
+) -> (f64, f64, DMatrix<f64>) {
+    let (res, scale, floor) = if discrete {
+        let axa = a.transpose() * x * a;
+        let res = &axa - x + q;
+        let scale = axa.norm() + x.norm() + q.norm();
+        let floor = a.transpose().abs() * x.abs() * a.abs() + x.abs() + q.abs();
+        (res, scale, floor)
+    } else {
+        let ax = a.transpose() * x;
+        let res = &ax + ax.transpose() + q;
+        let scale = 2.0 * ax.norm() + q.norm();
+        let axa = a.transpose().abs() * x.abs();
+        let floor = &axa + axa.transpose() + q.abs();
+        (res, scale, floor)
+    };
+    (
+        res.norm() / scale.max(f64::MIN_POSITIVE),
+        componentwise(&res, &floor),
+        symmetrise(&res),
+    )
+}
+
+/// Iterative refinement of a Lyapunov solution: X ← X + Δ with Δ solving the
+/// equation for the residual, at most twice, while the backward error is above
+/// round-off and falls.
+fn refine_lyapunov(
+    a: &DMatrix<f64>,
+    q: &DMatrix<f64>,
+    mut x: DMatrix<f64>,
+    discrete: bool,
+) -> LyapunovSolution {
+    let (mut rel, mut backward, mut res) = lyapunov_residual(a, q, &x, discrete);
+    let mut iterations = 0;
+    while iterations < 2 && backward > 4.0 * f64::EPSILON && backward.is_finite() {
+        let delta = if discrete {
+            dlyap_unchecked(a, &res)
+        } else {
+            lyap_unchecked(a, &res)
+        };
+        let Ok(delta) = delta else { break };
+        let candidate = symmetrise(&(&x + delta));
+        let (rel_c, backward_c, res_c) = lyapunov_residual(a, q, &candidate, discrete);
+        if backward_c.is_nan() || backward_c >= backward {
+            break;
+        }
+        (x, rel, backward, res) = (candidate, rel_c, backward_c, res_c);
+        iterations += 1;
+    }
+    LyapunovSolution {
+        x,
+        relative_residual: rel,
+        iterations,
+        backward_error: backward,
+    }
 }
 
 fn lyap_unchecked(a: &DMatrix<f64>, q: &DMatrix<f64>) -> Result<DMatrix<f64>, LtiError> {
@@ -973,7 +1142,8 @@ fn lyap_unchecked(a: &DMatrix<f64>, q: &DMatrix<f64>) -> Result<DMatrix<f64>, Lt
 
 /// AᵀXA − X + Q = 0 (unique when no two eigenvalues of A multiply to 1) by
 /// the Bartels–Stewart method for the Stein equation: real Schur form, then
-/// the quasi-triangular solve of TᵀYT − Y = −UᵀQU, O(n³).
+/// the quasi-triangular solve of TᵀYT − Y = −UᵀQU, O(n³). [`dlyap_solution`]
+/// returns X with its residual and backward error.
 pub fn dlyap(a: &DMatrix<f64>, q: &DMatrix<f64>) -> Result<DMatrix<f64>, LtiError> {
     let n = a.nrows();
     check_square("a", a, n)?;

@@ -34,6 +34,7 @@ pub struct SsStepper {
 impl SsStepper {
     /// A stepper for the discrete model `sys`, starting from x = 0.
     pub fn new(sys: &StateSpace) -> Result<Self, LtiError> {
+        sys.validate()?;
         if sys.dt.is_none() {
             return Err(LtiError::Domain(
                 "SsStepper needs a discrete model: discretise it with c2d first".into(),
@@ -187,14 +188,24 @@ pub fn lsim(
 }
 
 /// Simulate the (0, 0) channel of a discrete model for a scalar input sequence.
+///
+/// A model without outputs has no (0, 0) channel: a [`LtiError::Dimension`]
+/// (one without inputs gives its zero-state output, zeros).
 pub fn lsim_siso(sys: &StateSpace, u: &[f64]) -> Result<Vec<f64>, LtiError> {
     let mut s = SsStepper::new(sys)?;
+    if sys.noutputs() == 0 {
+        return Err(LtiError::Dimension(format!(
+            "lsim_siso needs at least one output, the model is {}×{}",
+            sys.noutputs(),
+            sys.ninputs()
+        )));
+    }
     let mut uu = vec![0.0; sys.ninputs()];
     let mut y = vec![0.0; sys.noutputs()];
     Ok(u.iter()
         .map(|&v| {
-            if !uu.is_empty() {
-                uu[0] = v;
+            if let Some(u0) = uu.first_mut() {
+                *u0 = v;
             }
             s.step(&uu, &mut y);
             y[0]

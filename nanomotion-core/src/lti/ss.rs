@@ -92,6 +92,29 @@ fn check_parts(
     Ok(())
 }
 
+/// The common length of `rows` (`None` for no rows), or the first row whose
+/// length differs from the first row's.
+fn row_width<R: AsRef<[f64]>>(matrix: &'static str, rows: &[R]) -> Result<Option<usize>, LtiError> {
+    let Some(first) = rows.first() else {
+        return Ok(None);
+    };
+    let expected = first.as_ref().len();
+    match rows.iter().position(|r| r.as_ref().len() != expected) {
+        Some(row) => Err(LtiError::RaggedRows {
+            matrix,
+            row,
+            len: rows[row].as_ref().len(),
+            expected,
+        }),
+        None => Ok(Some(expected)),
+    }
+}
+
+/// A matrix from rows of equal length `width`.
+fn rows_to_matrix<R: AsRef<[f64]>>(rows: &[R], width: usize) -> DMatrix<f64> {
+    DMatrix::from_fn(rows.len(), width, |i, j| rows[i].as_ref()[j])
+}
+
 impl StateSpace {
     /// A state-space model, checking that the dimensions of A (n×n), B (n×m),
     /// C (p×n) and D (p×m) fit and that `dt` (s), if given, is positive.
@@ -104,6 +127,74 @@ impl StateSpace {
     ) -> Result<Self, LtiError> {
         check_parts(&a, &b, &c, &d, dt)?;
         Ok(Self { a, b, c, d, dt })
+    }
+
+    /// A model from plain rows, without building nalgebra matrices: A (n×n),
+    /// B (n×m), C (p×n), D (p×m) as slices of rows (`&[Vec<f64>]`,
+    /// `&[&[f64]]`, `&[[f64; N]]`, ...), `dt` in seconds or `None` for
+    /// continuous time.
+    ///
+    /// Rows of unequal length within one matrix are a
+    /// [`LtiError::RaggedRows`] naming the matrix and the row; shapes that do
+    /// not fit together are a [`LtiError::Dimension`], non-finite entries a
+    /// [`LtiError::Parameter`] (the checks of [`StateSpace::new`]). An empty
+    /// `d` is the p×m zero matrix (python-control's `D = 0`). Without states
+    /// (`a` empty) the number of inputs is taken from the rows of `d` and the
+    /// number of outputs from `d` when `c` is empty; [`StateSpace::gain`] is
+    /// the plainer way to build a static gain.
+    ///
+    /// ```
+    /// use nanomotion_core::lti::{LtiError, StateSpace};
+    /// let a = vec![vec![0.0, 1.0], vec![-2.0, -3.0]];
+    /// let sys = StateSpace::from_rows(&a, &[[0.0], [1.0]], &[[1.0, 0.0]], &[] as &[[f64; 1]], None)
+    ///     .unwrap();
+    /// assert_eq!(sys.d.shape(), (1, 1));
+    /// let ragged = vec![vec![0.0, 1.0], vec![-2.0]];
+    /// let e = StateSpace::from_rows(&ragged, &[[0.0], [1.0]], &[[1.0, 0.0]], &[[0.0]], None)
+    ///     .unwrap_err();
+    /// assert!(matches!(e, LtiError::RaggedRows { matrix: "a", row: 1, len: 1, expected: 2 }));
+    /// ```
+    pub fn from_rows<RA, RB, RC, RD>(
+        a: &[RA],
+        b: &[RB],
+        c: &[RC],
+        d: &[RD],
+        dt: Option<f64>,
+    ) -> Result<Self, LtiError>
+    where
+        RA: AsRef<[f64]>,
+        RB: AsRef<[f64]>,
+        RC: AsRef<[f64]>,
+        RD: AsRef<[f64]>,
+    {
+        let wa = row_width("a", a)?;
+        let wb = row_width("b", b)?;
+        let wc = row_width("c", c)?;
+        let wd = row_width("d", d)?;
+        let n = a.len();
+        let m = match (wb, wd) {
+            (Some(m), _) => m,
+            (None, Some(m)) if n == 0 => m,
+            _ => 0,
+        };
+        let p = if c.is_empty() && n == 0 {
+            d.len()
+        } else {
+            c.len()
+        };
+        let am = rows_to_matrix(a, wa.unwrap_or(0));
+        let bm = rows_to_matrix(b, wb.unwrap_or(m));
+        let cm = if c.is_empty() {
+            DMatrix::zeros(p, n)
+        } else {
+            rows_to_matrix(c, wc.unwrap_or(n))
+        };
+        let dm = if d.is_empty() {
+            DMatrix::zeros(p, m)
+        } else {
+            rows_to_matrix(d, wd.unwrap_or(m))
+        };
+        Self::new(am, bm, cm, dm, dt)
     }
 
     /// Re-checks the invariants of [`StateSpace::new`] (fitting dimensions,
@@ -153,15 +244,28 @@ impl StateSpace {
     }
 
     /// Poles: the eigenvalues of A (rad/s for continuous, z-plane for discrete).
+    /// A hand-built model whose A is not square or has a non-finite entry gives
+    /// NaN poles (one per row of A; [`StateSpace::try_poles`] gives an error).
     pub fn poles(&self) -> Vec<Complex<f64>> {
-        eigvals(&self.a)
+        self.try_poles()
+            .unwrap_or_else(|_| vec![Complex::new(f64::NAN, f64::NAN); self.a.nrows()])
+    }
+
+    /// Poles (see [`StateSpace::poles`]), or the error of
+    /// [`StateSpace::validate`] for an inconsistent model.
+    pub fn try_poles(&self) -> Result<Vec<Complex<f64>>, LtiError> {
+        self.validate()?;
+        Ok(eigvals(&self.a))
     }
 
     /// Asymptotic stability: all poles strictly inside the unit circle (discrete)
     /// or strictly in the left half plane (continuous). A model without states is
-    /// stable.
+    /// stable; an inconsistent hand-built model (see [`StateSpace::validate`])
+    /// is not.
     pub fn is_stable(&self) -> bool {
-        let p = self.poles();
+        let Ok(p) = self.try_poles() else {
+            return false;
+        };
         match self.dt {
             Some(_) => p.iter().all(|z| z.norm() < 1.0),
             None => p.iter().all(|s| s.re < 0.0),
@@ -170,8 +274,28 @@ impl StateSpace {
 
     /// The transfer matrix G(x) = C (xI − A)⁻¹ B + D at a complex point `x`
     /// (x = s for continuous, x = z for discrete models). Entries are infinite
-    /// (NaN) at a pole.
+    /// (NaN) at a pole. An inconsistent hand-built model (see
+    /// [`StateSpace::validate`]) gives a NaN matrix of C's rows × B's columns
+    /// ([`StateSpace::try_evalfr`] gives the error).
     pub fn evalfr(&self, x: Complex<f64>) -> DMatrix<Complex<f64>> {
+        if self.validate().is_err() {
+            return DMatrix::from_element(
+                self.noutputs(),
+                self.ninputs(),
+                Complex::new(f64::NAN, f64::NAN),
+            );
+        }
+        self.evalfr_valid(x)
+    }
+
+    /// The transfer matrix at `x` (see [`StateSpace::evalfr`]), or the error of
+    /// [`StateSpace::validate`] for an inconsistent model.
+    pub fn try_evalfr(&self, x: Complex<f64>) -> Result<DMatrix<Complex<f64>>, LtiError> {
+        self.validate()?;
+        Ok(self.evalfr_valid(x))
+    }
+
+    fn evalfr_valid(&self, x: Complex<f64>) -> DMatrix<Complex<f64>> {
         let n = self.nstates();
         let mut g = to_complex(&self.d);
         if n == 0 {
@@ -205,6 +329,8 @@ impl StateSpace {
 
     /// Frequency response G(jω) (continuous) or G(e^{jωT}) (discrete) at the
     /// angular frequencies `w_rad_s` (rad/s): one p×m complex matrix per frequency.
+    /// NaN matrices for an inconsistent hand-built model (see
+    /// [`StateSpace::evalfr`]; [`StateSpace::try_freqresp`] gives the error).
     pub fn freqresp(&self, w_rad_s: &[f64]) -> Vec<DMatrix<Complex<f64>>> {
         w_rad_s
             .iter()
@@ -212,21 +338,34 @@ impl StateSpace {
             .collect()
     }
 
+    /// Frequency response at `w_rad_s` (rad/s) (see [`StateSpace::freqresp`]),
+    /// or the error of [`StateSpace::validate`] for an inconsistent model.
+    pub fn try_freqresp(&self, w_rad_s: &[f64]) -> Result<Vec<DMatrix<Complex<f64>>>, LtiError> {
+        self.validate()?;
+        Ok(self.freqresp(w_rad_s))
+    }
+
     /// SISO frequency response at one angular frequency `w_rad_s` (rad/s); for a
     /// MIMO model, the (0, 0) entry (use [`StateSpace::try_freqresp_siso`] for
-    /// an error instead).
+    /// an error instead); NaN for a model without inputs or outputs and for an
+    /// inconsistent hand-built model.
     pub fn freqresp_siso_at(&self, w_rad_s: f64) -> Complex<f64> {
-        self.evalfr(self.frequency_point(w_rad_s))[(0, 0)]
+        self.evalfr(self.frequency_point(w_rad_s))
+            .get((0, 0))
+            .copied()
+            .unwrap_or(Complex::new(f64::NAN, f64::NAN))
     }
 
     /// SISO frequency response at the angular frequencies `w_rad_s` (rad/s); for a
-    /// MIMO model, the (0, 0) entry.
+    /// MIMO model, the (0, 0) entry (NaN as for
+    /// [`StateSpace::freqresp_siso_at`]).
     pub fn freqresp_siso(&self, w_rad_s: &[f64]) -> Vec<Complex<f64>> {
         w_rad_s.iter().map(|&w| self.freqresp_siso_at(w)).collect()
     }
 
     /// Checked SISO frequency response at `w_rad_s` (rad/s): a
-    /// [`LtiError::Dimension`] for a MIMO model instead of its (0, 0) entry.
+    /// [`LtiError::Dimension`] for a MIMO model instead of its (0, 0) entry,
+    /// the error of [`StateSpace::validate`] for an inconsistent one.
     pub fn try_freqresp_siso(&self, w_rad_s: &[f64]) -> Result<Vec<Complex<f64>>, LtiError> {
         self.require_siso("try_freqresp_siso")?;
         Ok(self.freqresp_siso(w_rad_s))
@@ -240,6 +379,7 @@ impl StateSpace {
     }
 
     fn require_siso(&self, what: &str) -> Result<(), LtiError> {
+        self.validate()?;
         if self.is_siso() {
             Ok(())
         } else {
@@ -263,20 +403,34 @@ impl StateSpace {
         )
     }
 
-    /// Steady-state (DC) gain: G(0) continuous, G(1) discrete.
+    /// Steady-state (DC) gain: G(0) continuous, G(1) discrete (NaN for an
+    /// inconsistent hand-built model, as [`StateSpace::evalfr`]).
     pub fn dcgain(&self) -> DMatrix<Complex<f64>> {
-        let x = if self.dt.is_some() {
+        self.evalfr(self.dc_point())
+    }
+
+    /// Steady-state gain (see [`StateSpace::dcgain`]), or the error of
+    /// [`StateSpace::validate`] for an inconsistent model.
+    pub fn try_dcgain(&self) -> Result<DMatrix<Complex<f64>>, LtiError> {
+        self.try_evalfr(self.dc_point())
+    }
+
+    fn dc_point(&self) -> Complex<f64> {
+        if self.dt.is_some() {
             Complex::new(1.0, 0.0)
         } else {
             Complex::new(0.0, 0.0)
-        };
-        self.evalfr(x)
+        }
     }
 
     /// The same system with A balanced by a diagonal similarity transform
     /// (see [`balance`]): same transfer function, better
-    /// conditioned matrices.
+    /// conditioned matrices. An inconsistent hand-built model (see
+    /// [`StateSpace::validate`]) is returned unchanged.
     pub fn balanced(&self) -> StateSpace {
+        if self.validate().is_err() {
+            return self.clone();
+        }
         let (a, d) = balance(&self.a);
         let mut b = self.b.clone();
         let mut c = self.c.clone();
@@ -555,6 +709,9 @@ pub fn parallel(sys1: &StateSpace, sys2: &StateSpace) -> Result<StateSpace, LtiE
 /// Block-diagonal stacking of systems (python-control `append`): inputs and
 /// outputs are concatenated, no interconnection.
 pub fn append(systems: &[StateSpace]) -> Result<StateSpace, LtiError> {
+    for s in systems {
+        s.validate()?;
+    }
     let Some(first) = systems.first() else {
         return Ok(StateSpace::gain(DMatrix::zeros(0, 0), None));
     };

@@ -40,6 +40,19 @@ impl TransferFunction {
         Ok(Self { num, den, dt })
     }
 
+    /// [`TransferFunction::new`] from borrowed coefficient slices (descending
+    /// powers), so that arrays and slices need no `vec!`.
+    ///
+    /// ```
+    /// use nanomotion_core::lti::TransferFunction;
+    /// let g = TransferFunction::from_slices(&[1.0], &[1.0, 2.0, 1.0], None).unwrap();
+    /// assert_eq!(g.dcgain(), 1.0);
+    /// assert!(TransferFunction::from_slices(&[1.0, 0.0, 0.0], &[1.0, 1.0], None).is_err());
+    /// ```
+    pub fn from_slices(num: &[f64], den: &[f64], dt: Option<f64>) -> Result<Self, LtiError> {
+        Self::new(num.to_vec(), den.to_vec(), dt)
+    }
+
     /// The transfer function at a complex point `x` (s or z).
     pub fn eval(&self, x: Complex<f64>) -> Complex<f64> {
         polyval(&self.num, x) / polyval(&self.den, x)
