@@ -20,7 +20,9 @@ fn main() {
         .and_then(|s| s.parse().ok())
         .unwrap_or(5);
     let n = 12_000;
-    let mut rows: Vec<(String, BTreeMap<String, usize>, Vec<f64>, f64)> = Vec::new();
+    // (hidden effect, what was named first with counts, first-step cuts, s per record)
+    type Row = (String, BTreeMap<String, usize>, Vec<f64>, f64);
+    let mut rows: Vec<Row> = Vec::new();
     let start = Instant::now();
     for &effect in VOCABULARY.iter().chain(["none"].iter()) {
         let mut named: BTreeMap<String, usize> = BTreeMap::new();
