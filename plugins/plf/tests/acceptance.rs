@@ -44,9 +44,10 @@ fn check_named(effect: &str, seed: u64) {
             );
         }
     }
+    // Named, and nothing padded after it.
     assert_eq!(
-        r.found.first().map(String::as_str),
-        Some(effect),
+        r.found,
+        vec![effect.to_string()],
         "{effect} seed {seed}: found {:?}",
         r.found
     );
