@@ -119,6 +119,11 @@ pub fn channels(
         .iter()
         .map(|b| (b.name.clone(), b.block.role()))
         .collect();
+    let probe_types: Vec<(String, String)> = probe
+        .blocks
+        .iter()
+        .map(|b| (b.name.clone(), b.block.typetag_name().to_string()))
+        .collect();
     let rates: Vec<(String, Option<f64>)> = probe
         .blocks
         .iter()
@@ -139,10 +144,19 @@ pub fn channels(
     for c in &spec.compare {
         let (mut block, _) = split(&c.signal);
         let mut position = c.signal.clone();
-        // Walk up through sensor blocks (quantisers, measurement noise) with a
-        // single input to the plant.
+        // Walk up through sensor blocks (quantisers, measurement noise) and
+        // `demux` splitters with a single input to the plant. Through a demux the
+        // position stays the compared (scalar) signal.
+        let type_of = |name: &str| {
+            probe_types
+                .iter()
+                .find(|(n, _)| n == name)
+                .map(|(_, t)| t.as_str())
+                .unwrap_or("")
+        };
         for _ in 0..8 {
-            if role_of(block) != Some(Role::Sensor) {
+            let is_demux = type_of(block) == "demux";
+            if role_of(block) != Some(Role::Sensor) && !is_demux {
                 break;
             }
             let feeding: Vec<&Connection> = spec
@@ -153,15 +167,26 @@ pub fn channels(
             if feeding.len() != 1 {
                 break;
             }
-            position = feeding[0].from.clone();
+            if !is_demux {
+                position = feeding[0].from.clone();
+            }
             block = split(&feeding[0].from).0;
         }
-        let plant_inputs = spec
-            .connections
-            .iter()
-            .filter(|k| split(&k.to).0 == block && width_in(&k.to) == 1)
-            .map(|k| (k.from.clone(), k.to.clone()))
-            .collect();
+        // Scalar drives of the plant: width-1 connections into it, and the
+        // width-1 inputs of a `mux` that assembles a vector drive.
+        let mut plant_inputs: Vec<(String, String)> = Vec::new();
+        for k in spec.connections.iter().filter(|k| split(&k.to).0 == block) {
+            if width_in(&k.to) == 1 {
+                plant_inputs.push((k.from.clone(), k.to.clone()));
+            } else if type_of(split(&k.from).0) == "mux" {
+                let mux = split(&k.from).0;
+                for m in spec.connections.iter().filter(|m| split(&m.to).0 == mux) {
+                    if width_in(&m.to) == 1 {
+                        plant_inputs.push((m.from.clone(), m.to.clone()));
+                    }
+                }
+            }
+        }
         let rate_hz = rates
             .iter()
             .find(|(n, _)| n == split(&c.signal).0)
