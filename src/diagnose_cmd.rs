@@ -26,7 +26,10 @@ pub fn run(a: Args) -> Result<(), String> {
     let out = a.out.clone().unwrap_or_else(|| {
         PathBuf::from("out").join(format!(
             "diagnose_{}",
-            a.model.file_stem().map(|s| s.to_string_lossy().to_string()).unwrap_or_default()
+            a.model
+                .file_stem()
+                .map(|s| s.to_string_lossy().to_string())
+                .unwrap_or_default()
         ))
     });
     std::fs::create_dir_all(&out).map_err(|e| format!("cannot create {}: {e}", out.display()))?;
@@ -51,9 +54,11 @@ pub fn run(a: Args) -> Result<(), String> {
         if bar.is_none() && start.elapsed() > Duration::from_millis(500) {
             let b = ProgressBar::new(1000);
             b.set_style(
-                ProgressStyle::with_template("{spinner} {msg} [{bar:30}] {percent:>3}% ({elapsed})")
-                    .expect("static template")
-                    .progress_chars("=> "),
+                ProgressStyle::with_template(
+                    "{spinner} {msg} [{bar:30}] {percent:>3}% ({elapsed})",
+                )
+                .expect("static template")
+                .progress_chars("=> "),
             );
             bar = Some(b);
         }
@@ -67,7 +72,11 @@ pub fn run(a: Args) -> Result<(), String> {
         b.finish_and_clear();
     }
     print_report(&report);
-    println!("({} graph runs in {:.1} s)", report.runs, start.elapsed().as_secs_f64());
+    println!(
+        "({} graph runs in {:.1} s)",
+        report.runs,
+        start.elapsed().as_secs_f64()
+    );
     let files = write(&out, &report, &a)?;
     println!("wrote {} files to {}", files.len(), out.display());
     println!(
@@ -90,12 +99,20 @@ fn print_report(r: &Report) {
             t.signal,
             t.whiteness.statistic,
             t.whiteness.p_value,
-            if t.whiteness.p_value < 0.01 { ": not white" } else { ": white at 1 %" },
+            if t.whiteness.p_value < 0.01 {
+                ": not white"
+            } else {
+                ": white at 1 %"
+            },
             t.input,
             t.input_correlation.statistic,
             t.input_lag,
             t.input_correlation.p_value,
-            if t.input_correlation.p_value < 0.01 { ": the model misses an input-driven effect" } else { "" },
+            if t.input_correlation.p_value < 0.01 {
+                ": the model misses an input-driven effect"
+            } else {
+                ""
+            },
             t.line_hz,
             t.periodic_line.p_value,
             t.noise_floor
@@ -113,9 +130,15 @@ fn print_report(r: &Report) {
             }
         }
         if s.candidates.len() > 8 {
-            println!("  ... and {} more (see the JSON report)", s.candidates.len() - 8);
+            println!(
+                "  ... and {} more (see the JSON report)",
+                s.candidates.len() - 8
+            );
         }
-        println!("  => named: {} (block `{}`, type `{}`), {}", s.effect, s.block.name, s.block.type_name, s.site);
+        println!(
+            "  => named: {} (block `{}`, type `{}`), {}",
+            s.effect, s.block.name, s.block.type_name, s.site
+        );
         println!("     evidence: {}", s.evidence);
         let params: Vec<String> = s
             .params
@@ -133,7 +156,11 @@ fn print_report(r: &Report) {
     }
     println!(
         "\nfound: [{}]",
-        r.found.iter().map(|f| format!("\"{f}\"")).collect::<Vec<_>>().join(", ")
+        r.found
+            .iter()
+            .map(|f| format!("\"{f}\""))
+            .collect::<Vec<_>>()
+            .join(", ")
     );
     println!(
         "final: rms {:.4e}, held-out rms {:.4e}, fit {:.1} % (nominal held-out {:.4e}: {:.1} % cut)",
@@ -195,7 +222,11 @@ fn write(out: &Path, r: &Report, a: &Args) -> Result<Vec<PathBuf>, String> {
             "# Written by `nanomotion diagnose {} {}`: the nominal graph plus the effects found ({}).\n",
             a.model.display(),
             a.data.display(),
-            if r.found.is_empty() { "none".to_string() } else { r.found.join(", ") }
+            if r.found.is_empty() {
+                "none".to_string()
+            } else {
+                r.found.join(", ")
+            }
         );
         std::fs::write(&path, header + &yaml).map_err(io(&path))?;
         files.push(path);

@@ -133,6 +133,25 @@ pub enum GraphError {
         reference: String,
         problem: String,
     },
+    /// A block produced a non-finite output (found by
+    /// [`Scheduler::check_finite`](crate::scheduler::Scheduler::check_finite)).
+    #[error(
+        "block `{block}` (type `{type_name}`) produced a non-finite output ({value} in `{block}.{port}`) at base tick {tick} (t = {t_s} s), the first in the run (fix: check its parameters and inputs; an unstable loop diverges, see its gains and sample rate)"
+    )]
+    NonFinite {
+        block: String,
+        type_name: String,
+        port: String,
+        value: f64,
+        tick: u64,
+        t_s: f64,
+    },
+    /// A non-finite value was seen but replaying the run from the start did not
+    /// produce it again.
+    #[error(
+        "a non-finite value appeared by base tick {tick} ({place}), but replaying the run from its initial state did not reproduce it (fix: reset the scheduler before running, and do not change blocks during a run)"
+    )]
+    NonFiniteNotReproduced { tick: u64, place: String },
     /// The file could not be read.
     #[error("cannot read `{path}`: {source}")]
     Io {

@@ -130,6 +130,24 @@ pub type Graph = Scheduler;
 /// Maximum number of base ticks a graph may ask for (keeps memory and time sane).
 pub const MAX_TICKS: f64 = 2.0e9;
 
+/// Lowest base rate and block rate (Hz): 1 mHz.
+pub const MIN_RATE_HZ: f64 = 1e-3;
+/// Highest base rate (Hz): 1 GHz.
+pub const MAX_RATE_HZ: f64 = 1e9;
+
+/// Most memory a built graph may hold, estimated at build (bytes): 4 GiB. The
+/// estimate adds the signal and input buffers, every log (samples × width × 8
+/// bytes, reserved for the whole run) and each block's
+/// [`Block::memory_bytes`]; a graph above it is refused with the breakdown.
+pub const MAX_GRAPH_BYTES: usize = 4 << 30;
+
+/// Longest `title`, in characters.
+pub const MAX_TITLE_CHARS: usize = 200;
+
+/// Prefix of the names of inserted rate transitions. It contains `:`, which user
+/// block names may not contain, so an inserted name can never be a user's name.
+pub const RATE_TRANSITION_PREFIX: &str = "rt:";
+
 impl GraphSpec {
     /// An empty graph at `base_rate_hz` running for `duration_s`, for building graphs
     /// from Rust.
@@ -292,11 +310,22 @@ fn setting(field: &str, problem: impl Into<String>, fix: impl Into<String>) -> G
     }
 }
 
-fn valid_name(name: &str) -> bool {
+/// The documented block-name rule: non-empty, ASCII letters, digits, `_` and `-`
+/// only (`.` separates block and port; `:` is reserved for inserted blocks such as
+/// rate transitions, so they can never collide with a user's block).
+pub fn valid_block_name(name: &str) -> bool {
     !name.is_empty()
         && name
             .chars()
-            .all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-' || c == ':')
+            .all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-')
+}
+
+fn bytes_text(b: f64) -> String {
+    if b >= (1u64 << 30) as f64 {
+        format!("{:.1} GiB", b / (1u64 << 30) as f64)
+    } else {
+        format!("{:.1} MiB", b / (1u64 << 20) as f64)
+    }
 }
 
 fn compile(
@@ -315,12 +344,28 @@ fn compile(
         score,
         compare,
     } = spec;
-    if !(base_rate_hz.is_finite() && base_rate_hz > 0.0) {
+    if !(MIN_RATE_HZ..=MAX_RATE_HZ).contains(&base_rate_hz) {
         return Err(setting(
             "base_rate_hz",
-            format!("is {base_rate_hz}"),
+            format!("is {base_rate_hz}, outside [{MIN_RATE_HZ}, {MAX_RATE_HZ:e}] Hz"),
             "give a positive rate in Hz, e.g. 4000",
         ));
+    }
+    if let Some(t) = &title {
+        if let Some(c) = t.chars().find(|c| c.is_control()) {
+            return Err(setting(
+                "title",
+                format!("contains the control character U+{:04X}", c as u32),
+                "remove it (titles go into SVG and JSON files; write plain text on one line)",
+            ));
+        }
+        if t.chars().count() > MAX_TITLE_CHARS {
+            return Err(setting(
+                "title",
+                format!("has {} characters", t.chars().count()),
+                format!("shorten it to at most {MAX_TITLE_CHARS} characters"),
+            ));
+        }
     }
     if !(duration_s.is_finite() && duration_s >= 0.0) {
         return Err(setting(
@@ -364,12 +409,13 @@ fn compile(
 
     // 1. Names, rates, build.
     let mut pending: Vec<Pending> = Vec::with_capacity(blocks.len());
+    let mut block_bytes = 0usize;
     for b in blocks {
-        if !valid_name(&b.name) {
+        if !valid_block_name(&b.name) {
             return Err(setting(
                 "blocks.name",
-                format!("`{}` is not a valid block name", b.name),
-                "use letters, digits, `_` and `-` only (no `.`, which separates block and port)",
+                format!("`{}` is not a valid block name", b.name.escape_debug()),
+                "use ASCII letters, digits, `_` and `-` only (`.` separates block and port; `:` is reserved for blocks the loader inserts, such as rate transitions)",
             ));
         }
         if pending.iter().any(|p| p.name == b.name) {
@@ -378,8 +424,8 @@ fn compile(
         let rate_hz = b.rate_hz.unwrap_or(base_rate_hz);
         let ratio = base_rate_hz / rate_hz;
         let period = ratio.round();
-        if !(rate_hz.is_finite() && rate_hz > 0.0)
-            || period < 1.0
+        if !(rate_hz.is_finite() && rate_hz >= MIN_RATE_HZ)
+            || !(1.0..=MAX_TICKS).contains(&period)
             || (ratio - period).abs() > 1e-9 * ratio
         {
             return Err(GraphError::BadRate {
@@ -401,6 +447,39 @@ fn compile(
         })?;
         let inputs = block.inputs();
         let outputs = block.outputs();
+        // Every port of every block (plugins too) within the width bound.
+        for (dir, ports) in [("input", &inputs), ("output", &outputs)] {
+            for port in ports.iter() {
+                if port.width > crate::block::MAX_WIDTH {
+                    return Err(GraphError::Param {
+                        block: b.name.clone(),
+                        type_name: type_name.clone(),
+                        source: crate::ParamError::new(
+                            format!("{dir} port `{}`", port.name),
+                            format!(
+                                "is {} values wide, more than {}",
+                                port.width,
+                                crate::block::MAX_WIDTH
+                            ),
+                            "give the block fewer channels",
+                        ),
+                    });
+                }
+            }
+        }
+        block_bytes = block_bytes.saturating_add(block.memory_bytes());
+        if block_bytes > MAX_GRAPH_BYTES {
+            return Err(setting(
+                "blocks",
+                format!(
+                    "the blocks up to `{}` hold {} of buffers, more than the {} a graph may use",
+                    b.name,
+                    bytes_text(block_bytes as f64),
+                    bytes_text(MAX_GRAPH_BYTES as f64)
+                ),
+                "shorten delays and repetitive memories, or use fewer channels",
+            ));
+        }
         let feedthrough = block.direct_feedthrough();
         pending.push(Pending {
             sources: vec![None; inputs.len()],
@@ -456,7 +535,12 @@ fn compile(
             } else {
                 "decimation (sampling, no anti-alias filter)"
             };
-            let name = format!("rt:{}:{}", c.from.replace('.', ":"), pending[db].name);
+            // `:` cannot appear in a user's name, so this cannot collide with one.
+            let name = format!(
+                "{RATE_TRANSITION_PREFIX}{}:{}",
+                c.from.replace('.', ":"),
+                pending[db].name
+            );
             report.rate_transitions.push(format!(
                 "`{}` -> `{}`: {kind} {from_hz} Hz -> {to_hz} Hz, inserted as block `{name}`",
                 c.from, c.to
@@ -627,9 +711,16 @@ fn compile(
             Ok((bi, offs[pi], outs[pi].width))
         };
     let mut logs: Vec<LogChannel> = Vec::new();
+    // Memory estimate, checked before each log buffer is reserved.
+    let mut graph_bytes = (signal_len + input_len)
+        .saturating_mul(8)
+        .saturating_add(block_bytes);
+    let mut log_bytes = 0usize;
     let add_log = |reference: &str,
                    section: &'static str,
-                   logs: &mut Vec<LogChannel>|
+                   logs: &mut Vec<LogChannel>,
+                   graph_bytes: &mut usize,
+                   log_bytes: &mut usize|
      -> Result<usize, GraphError> {
         if let Some(i) = logs.iter().position(|l| l.name == reference) {
             return Ok(i);
@@ -637,6 +728,21 @@ fn compile(
         let (bi, offset, width) = lookup(reference, section)?;
         let period = nodes[bi].period;
         let samples = n_ticks.div_ceil(period) as usize;
+        let bytes = samples.saturating_mul(width).saturating_mul(8);
+        *graph_bytes = graph_bytes.saturating_add(bytes);
+        *log_bytes = log_bytes.saturating_add(bytes);
+        if *graph_bytes > MAX_GRAPH_BYTES {
+            return Err(setting(
+                "log",
+                format!(
+                    "recording `{reference}` ({samples} samples × {width} values) brings the graph to about {} ({} of it logs, which are kept in memory for the whole run), more than the {} limit",
+                    bytes_text(*graph_bytes as f64),
+                    bytes_text(*log_bytes as f64),
+                    bytes_text(MAX_GRAPH_BYTES as f64)
+                ),
+                "log and score fewer signals, shorten duration_s, or give the logged blocks a lower rate_hz",
+            ));
+        }
         logs.push(LogChannel {
             name: reference.to_string(),
             countdown: 0,
@@ -649,7 +755,7 @@ fn compile(
         Ok(logs.len() - 1)
     };
     for l in &log {
-        add_log(l, "log", &mut logs)?;
+        add_log(l, "log", &mut logs, &mut graph_bytes, &mut log_bytes)?;
     }
     let mut scores = Vec::new();
     for s in &score {
@@ -663,7 +769,29 @@ fn compile(
                 ),
             });
         }
-        let channel = add_log(&s.signal, "score", &mut logs)?;
+        let channel = add_log(
+            &s.signal,
+            "score",
+            &mut logs,
+            &mut graph_bytes,
+            &mut log_bytes,
+        )?;
+        let l = &logs[channel];
+        let samples = n_ticks.div_ceil(l.period);
+        let first = (s.from_s * l.rate_hz - 1e-9).ceil().max(0.0);
+        if n_ticks > 0 && first >= samples as f64 {
+            return Err(GraphError::BadSignal {
+                section: "score",
+                reference: s.signal.clone(),
+                problem: format!(
+                    "from_s is {} s but the run records only {} s of it ({samples} samples at {} Hz), so nothing would be scored; give from_s below {} s or run longer",
+                    s.from_s,
+                    n_ticks as f64 / base_rate_hz,
+                    l.rate_hz,
+                    (samples as f64 - 1.0).max(0.0) / l.rate_hz
+                ),
+            });
+        }
         scores.push(ScoreChannel {
             channel,
             from_s: s.from_s,
@@ -672,7 +800,13 @@ fn compile(
 
     let mut compares = Vec::new();
     for c in &compare {
-        let channel = add_log(&c.signal, "compare", &mut logs)?;
+        let channel = add_log(
+            &c.signal,
+            "compare",
+            &mut logs,
+            &mut graph_bytes,
+            &mut log_bytes,
+        )?;
         compares.push((c.signal.clone(), c.column.clone(), channel));
     }
 
