@@ -103,6 +103,9 @@ pub struct BuildContext {
     /// [`GraphSpec::build_with_data`](crate::graph::GraphSpec::build_with_data)),
     /// for blocks that play recorded signals.
     pub data: Option<std::sync::Arc<crate::data::Dataset>>,
+    /// The folder relative file names in parameters resolve against (the graph
+    /// file's folder); `None`: the working directory.
+    pub base_dir: Option<std::path::PathBuf>,
 }
 
 impl BuildContext {
@@ -113,6 +116,22 @@ impl BuildContext {
             dt,
             seed,
             data: None,
+            base_dir: None,
+        }
+    }
+
+    /// The same context with a folder for relative file names.
+    pub fn with_base_dir(mut self, dir: Option<std::path::PathBuf>) -> Self {
+        self.base_dir = dir;
+        self
+    }
+
+    /// `path` as given if absolute, else relative to [`BuildContext::base_dir`].
+    pub fn resolve(&self, path: &str) -> std::path::PathBuf {
+        let p = std::path::Path::new(path);
+        match &self.base_dir {
+            Some(dir) if p.is_relative() => dir.join(p),
+            _ => p.to_path_buf(),
         }
     }
 

@@ -113,6 +113,11 @@ pub struct GraphSpec {
     /// Model outputs to compare with measured columns (needs data: `--data`).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub compare: Vec<CompareSpec>,
+    /// The folder relative file names in block parameters (`calibration_file`)
+    /// are resolved against: the graph file's folder when read with
+    /// [`GraphSpec::from_file`], else the working directory. Not part of the YAML.
+    #[serde(skip)]
+    pub base_dir: Option<std::path::PathBuf>,
 }
 
 /// What the loader did on its own initiative, for the user to see.
@@ -163,7 +168,18 @@ impl GraphSpec {
             log: Vec::new(),
             score: Vec::new(),
             compare: Vec::new(),
+            base_dir: None,
         }
+    }
+
+    /// Score error signal `signal` (`block.port`), ignoring samples before
+    /// `from_s` seconds.
+    pub fn score(&mut self, signal: &str, from_s: f64) -> &mut Self {
+        self.score.push(ScoreSpec {
+            signal: signal.to_string(),
+            from_s,
+        });
+        self
     }
 
     /// Add a block running at the base rate.
@@ -206,14 +222,25 @@ impl GraphSpec {
         crate::yaml::from_str::<GraphSpec>(text, origin).map_err(add_type_suggestion)
     }
 
-    /// Read and parse a graph file.
+    /// Read and parse a graph file (at most [`MAX_GRAPH_FILE_BYTES`]). Relative
+    /// file names in block parameters will resolve against its folder.
     pub fn from_file(path: impl AsRef<std::path::Path>) -> Result<Self, GraphError> {
         let path = path.as_ref();
-        let text = std::fs::read_to_string(path).map_err(|source| GraphError::Io {
-            path: path.display().to_string(),
-            source,
-        })?;
-        Self::from_yaml(&text, &path.display().to_string())
+        let text =
+            read_text_capped(path, MAX_GRAPH_FILE_BYTES).map_err(|source| GraphError::Io {
+                path: path.display().to_string(),
+                source,
+            })?;
+        let mut spec = Self::from_yaml(&text, &path.display().to_string())?;
+        spec.base_dir = Some(
+            path.parent()
+                .filter(|p| !p.as_os_str().is_empty())
+                .map_or_else(
+                    || std::path::PathBuf::from("."),
+                    std::path::Path::to_path_buf,
+                ),
+        );
+        Ok(spec)
     }
 
     /// Validate the graph, build every block, resolve ports, rates and order, and
@@ -230,6 +257,30 @@ impl GraphSpec {
     ) -> Result<(Scheduler, BuildReport), GraphError> {
         compile(self, Some(data))
     }
+}
+
+/// Largest graph file [`GraphSpec::from_file`] reads: 64 MiB.
+pub const MAX_GRAPH_FILE_BYTES: u64 = 64 << 20;
+
+/// Read a UTF-8 text file of at most `max_bytes` bytes through a bounded reader
+/// (so `/dev/zero` or a huge file is an error, not an endless read).
+pub fn read_text_capped(path: &std::path::Path, max_bytes: u64) -> std::io::Result<String> {
+    use std::io::Read as _;
+    let file = std::fs::File::open(path)?;
+    let mut bytes = Vec::new();
+    file.take(max_bytes + 1).read_to_end(&mut bytes)?;
+    if bytes.len() as u64 > max_bytes {
+        return Err(std::io::Error::new(
+            std::io::ErrorKind::InvalidData,
+            format!("larger than {} MiB; is it the right file?", max_bytes >> 20),
+        ));
+    }
+    String::from_utf8(bytes).map_err(|e| {
+        std::io::Error::new(
+            std::io::ErrorKind::InvalidData,
+            format!("not UTF-8 text ({e})"),
+        )
+    })
 }
 
 /// Add "did you mean" to unknown-type errors.
@@ -273,6 +324,11 @@ fn edit_distance(a: &str, b: &str) -> usize {
         prev = cur;
     }
     prev[b.len()]
+}
+
+/// Whether `candidate` is near enough to `word` to suggest it ("did you mean").
+pub fn is_near(word: &str, candidate: &str) -> bool {
+    edit_distance(word, candidate) <= (candidate.len().max(word.len()) / 2).max(2)
 }
 
 /// The candidate nearest to `word`, if it is reasonably near.
@@ -343,6 +399,7 @@ fn compile(
         log,
         score,
         compare,
+        base_dir,
     } = spec;
     if !(MIN_RATE_HZ..=MAX_RATE_HZ).contains(&base_rate_hz) {
         return Err(setting(
@@ -439,7 +496,8 @@ fn compile(
         let type_name = b.block.typetag_name().to_string();
         let mut block = b.block;
         let ctx = BuildContext::new(b.name.clone(), dt, derive_seed(seed, &b.name))
-            .with_data(data.clone());
+            .with_data(data.clone())
+            .with_base_dir(base_dir.clone());
         block.build(&ctx).map_err(|source| GraphError::Param {
             block: b.name.clone(),
             type_name: type_name.clone(),
