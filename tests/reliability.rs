@@ -285,3 +285,38 @@ fn relative_calibration_file_resolves_against_the_graph_folder() {
     assert!(so.contains("ok"), "{so}");
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// Run by `missing_shared_data_fails_under_ci_and_skips_visibly_otherwise` in a
+/// child process; does nothing in a normal run.
+#[test]
+fn shared_data_child() {
+    if std::env::var_os("NM_SHARED_DATA_CHILD").is_none() {
+        return;
+    }
+    let got = nanomotion::core::data::shared_data_or_skip(
+        Path::new("/nonexistent/shared/data/xyz"),
+        "shared_data_child",
+    );
+    assert!(got.is_none());
+}
+
+#[test]
+fn missing_shared_data_fails_under_ci_and_skips_visibly_otherwise() {
+    let child = |ci: bool| {
+        let mut c = Command::new(std::env::current_exe().unwrap());
+        c.args(["--exact", "shared_data_child", "--test-threads=1"])
+            .env("NM_SHARED_DATA_CHILD", "1")
+            .env_remove("CI");
+        if ci {
+            c.env("CI", "true");
+        }
+        c.output().unwrap()
+    };
+    let o = child(false);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    // Visible without --nocapture.
+    assert!(err.contains("SKIPPED: shared_data_child"), "{err}");
+    let o = child(true);
+    assert!(!o.status.success(), "a missing data set passed under CI");
+}

@@ -38,7 +38,8 @@ use std::fmt::Write as _;
 /// (its `type:` and parameters, flattened into the same YAML map).
 #[derive(Debug, Serialize, Deserialize)]
 pub struct BlockSpec {
-    /// Unique instance name (letters, digits, `_`, `-`; no `.`).
+    /// Unique instance name: ASCII letters, digits, `_`, `-` (no `.`, which separates
+    /// block and port, and no `:`, reserved for inserted blocks).
     pub name: String,
     /// Rate in Hz; must divide the base rate. Default: the base rate.
     #[serde(default, skip_serializing_if = "Option::is_none")]

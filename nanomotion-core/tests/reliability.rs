@@ -306,3 +306,39 @@ log: [zero.y]
     s.step_n(100);
     s.check_finite().unwrap();
 }
+
+// ---- item 12: library ------------------------------------------------------------
+
+#[test]
+fn pi_limits_take_effect() {
+    use nanomotion_core::Controller;
+    use nanomotion_core::blocks::control::{AntiWindup, Pi};
+    let mut pi = Pi::new(100.0, 5.0, 1e-3)
+        .unwrap()
+        .with_limits(-1.0, 1.0, AntiWindup::Clamping)
+        .unwrap();
+    assert_eq!(pi.output_limits(), (Some(-1.0), Some(1.0)));
+    let mut u = [0.0];
+    for _ in 0..10 {
+        pi.control(&[1.0], &mut u);
+        assert!(u[0] <= 1.0, "output {} above the limit", u[0]);
+    }
+    assert!(
+        Pi::new(1.0, 5.0, 1e-3)
+            .unwrap()
+            .with_limits(1.0, -1.0, AntiWindup::Clamping)
+            .is_err()
+    );
+}
+
+#[test]
+fn graph_spec_score_from_rust() {
+    let mut g = GraphSpec::new(1000.0, 0.01);
+    g.add("c", nanomotion_core::blocks::math::Gain::with_width(1.0, 1));
+    g.add("k", nanomotion_core::blocks::sources::Constant::new(2.0));
+    g.connect("k.y", "c.u").score("c.y", 0.002);
+    let (mut s, _) = g.build().unwrap();
+    let r = s.run(|_| {});
+    assert_eq!(r.scores[0].rms, 2.0);
+    assert_eq!(r.scores[0].samples, 8);
+}

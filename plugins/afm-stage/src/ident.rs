@@ -679,13 +679,12 @@ mod tests {
     fn fit_to_measured_sma_reversal_curves() {
         let root =
             Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data/sma_hysteresis");
-        if !root.is_dir() {
-            eprintln!(
-                "SKIPPED: fit_to_measured_sma_reversal_curves: {} not found",
-                root.display()
-            );
+        let Some(root) = nanomotion_core::data::shared_data_or_skip(
+            &root,
+            "fit_to_measured_sma_reversal_curves",
+        ) else {
             return;
-        }
+        };
         for file in ["DataE_raw.csv", "DataT_raw.csv"] {
             let data = read_forc_csv(&root.join(file)).unwrap();
             let (tr, re) = split_forc(&data).unwrap();
