@@ -54,8 +54,34 @@ fn emit(args: std::fmt::Arguments<'_>) {
     after_help = "Examples:\n  nanomotion run examples/quickstart.yaml --out out/quickstart\n  nanomotion check examples/quickstart.yaml\n  nanomotion rc-check examples/rc_dvrc.yaml\n  nanomotion optimize-waveform examples/optimize_waveform/model.yaml --budget 0.1\n  nanomotion diagnose examples/diagnose/model.yaml examples/diagnose/record.csv\n  nanomotion blocks"
 )]
 struct Cli {
+    /// Show the library's diagnostics on stderr: -v build notes and progress
+    /// (info), -vv details (debug), -vvv everything (trace). `RUST_LOG` (e.g.
+    /// `RUST_LOG=nanomotion_core=debug`) overrides it.
+    #[arg(short, long, action = clap::ArgAction::Count, global = true)]
+    verbose: u8,
     #[command(subcommand)]
     command: Command,
+}
+
+/// Send `tracing` events to stderr: `RUST_LOG` if set, else by `-v` count
+/// (default: warnings only).
+fn init_tracing(verbose: u8) {
+    use tracing_subscriber::EnvFilter;
+    let filter = EnvFilter::try_from_default_env().unwrap_or_else(|_| {
+        EnvFilter::new(match verbose {
+            0 => "warn",
+            1 => "info",
+            2 => "debug",
+            _ => "trace",
+        })
+    });
+    let _ = tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr)
+        .with_target(true)
+        .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
+        .without_time()
+        .try_init();
 }
 
 #[derive(Subcommand, Debug)]
@@ -166,6 +192,7 @@ enum Command {
 fn main() -> ExitCode {
     nanomotion::link_plugins();
     let cli = Cli::parse();
+    init_tracing(cli.verbose);
     let result = match cli.command {
         Command::Run {
             graph,

@@ -320,3 +320,28 @@ fn missing_shared_data_fails_under_ci_and_skips_visibly_otherwise() {
     let o = child(true);
     assert!(!o.status.success(), "a missing data set passed under CI");
 }
+
+#[test]
+fn verbose_and_rust_log_show_the_library_diagnostics() {
+    let dir = scratch("trace");
+    let g = SMALL.replace(
+        "{ name: k, type: gain, k: 2.0 }",
+        "{ name: k, type: gain, k: 2.0, rate_hz: 500 }",
+    );
+    std::fs::write(dir.join("g.yaml"), g).unwrap();
+    let (rc, _, quiet) = out(nm(&dir).args(["check", "g.yaml"]).env_remove("RUST_LOG"));
+    assert_eq!(rc, 0, "{quiet}");
+    assert!(!quiet.contains("INFO"), "{quiet}");
+    let (rc, _, e) = out(nm(&dir)
+        .args(["-v", "check", "g.yaml"])
+        .env_remove("RUST_LOG"));
+    assert_eq!(rc, 0, "{e}");
+    assert!(e.contains("INFO") && e.contains("rate transition"), "{e}");
+    assert!(!e.contains('\u{1b}'), "colour codes in a pipe: {e}");
+    let (rc, _, e) = out(nm(&dir)
+        .args(["check", "g.yaml"])
+        .env("RUST_LOG", "nanomotion_core=debug"));
+    assert_eq!(rc, 0, "{e}");
+    assert!(e.contains("DEBUG") && e.contains("execution order"), "{e}");
+    std::fs::remove_dir_all(&dir).ok();
+}

@@ -600,10 +600,12 @@ fn compile(
                 c.from.replace('.', ":"),
                 pending[db].name
             );
-            report.rate_transitions.push(format!(
+            let note = format!(
                 "`{}` -> `{}`: {kind} {from_hz} Hz -> {to_hz} Hz, inserted as block `{name}`",
                 c.from, c.to
-            ));
+            );
+            tracing::info!(target: "nanomotion_core::graph", "rate transition {note}");
+            report.rate_transitions.push(note);
             let idx = match pending.iter().position(|p| p.name == name) {
                 Some(i) => i,
                 None => {
@@ -869,6 +871,15 @@ fn compile(
         compares.push((c.signal.clone(), c.column.clone(), channel));
     }
 
+    tracing::debug!(
+        target: "nanomotion_core::graph",
+        blocks = block_list.len(),
+        ticks = n_ticks,
+        memory_bytes = graph_bytes,
+        log_bytes,
+        "graph built; execution order: {}",
+        report.order.join(", ")
+    );
     let sched = Scheduler::new_internal(crate::scheduler::Parts {
         title,
         base_rate_hz,

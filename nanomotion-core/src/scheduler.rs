@@ -421,6 +421,11 @@ impl Scheduler {
                 .or_else(|| self.first_non_finite_output().map(|_| self.k))
                 .or_else(|| self.first_non_finite_log_tick());
             if let Some(seen) = seen {
+                tracing::debug!(
+                    target: "nanomotion_core::scheduler",
+                    seen,
+                    "non-finite value detected; replaying to locate it"
+                );
                 self.locate_non_finite(seen)?;
             }
         }
@@ -484,6 +489,12 @@ impl Scheduler {
             self.tick();
             if let Some((i, offset)) = self.first_non_finite_output() {
                 self.non_finite = Some((i, offset, self.k - 1, self.signals[offset]));
+                tracing::warn!(
+                    target: "nanomotion_core::scheduler",
+                    block = %self.names[i],
+                    tick = self.k - 1,
+                    "first non-finite output located by replay"
+                );
                 return Ok(());
             }
         }
