@@ -463,7 +463,7 @@ pub mod check {
                 format!(
                     "{samples} samples × width {width} is more than {} buffered values ({} MiB)",
                     super::MAX_BUFFER_VALUES,
-                    super::MAX_BUFFER_VALUES * 8 >> 20
+                    (super::MAX_BUFFER_VALUES * 8) >> 20
                 ),
                 "give a shorter buffer or fewer channels",
             )),

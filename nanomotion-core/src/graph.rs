@@ -482,8 +482,7 @@ fn compile(
         let rate_hz = b.rate_hz.unwrap_or(base_rate_hz);
         let ratio = base_rate_hz / rate_hz;
         let period = ratio.round();
-        if !(rate_hz.is_finite() && rate_hz >= MIN_RATE_HZ)
-            || !(1.0..=MAX_TICKS).contains(&period)
+        if !(rate_hz.is_finite() && rate_hz >= MIN_RATE_HZ && (1.0..=MAX_TICKS).contains(&period))
             || (ratio - period).abs() > 1e-9 * ratio
         {
             return Err(GraphError::BadRate {

@@ -667,7 +667,7 @@ impl FittedStageParams {
         check::non_negative("delay_s", self.delay_s)?;
         let n = self.delay_s / dt;
         let rounded = n.round();
-        if !(rounded <= MAX_FITTED_DELAY_SAMPLES as f64) {
+        if rounded.is_nan() || rounded > MAX_FITTED_DELAY_SAMPLES as f64 {
             return Err(ParamError::new(
                 "delay_s",
                 format!(
