@@ -919,9 +919,26 @@ fn resolve(
             reference: reference.to_string(),
         })?;
     let Some(bi) = pending.iter().position(|p| p.name == b) else {
-        let hint = nearest(b, pending.iter().map(|p| p.name.as_str()))
+        let mut hint = nearest(b, pending.iter().map(|p| p.name.as_str()))
             .map(|s| format!("; did you mean `{s}`?"))
             .unwrap_or_default();
+        let names: Vec<&str> = pending
+            .iter()
+            .map(|p| p.name.as_str())
+            .filter(|n| !n.contains(':'))
+            .collect();
+        let shown = names
+            .iter()
+            .take(20)
+            .copied()
+            .collect::<Vec<_>>()
+            .join(", ");
+        let more = if names.len() > 20 {
+            format!(", ... ({} in all)", names.len())
+        } else {
+            String::new()
+        };
+        let _ = write!(hint, "; known blocks: {shown}{more}");
         return Err(GraphError::UnknownBlock {
             index,
             reference: reference.to_string(),

@@ -345,3 +345,55 @@ fn graph_spec_score_from_rust() {
     assert_eq!(r.scores[0].rms, 2.0);
     assert_eq!(r.scores[0].samples, 8);
 }
+
+// ---- item 10: messages -----------------------------------------------------------
+
+#[test]
+fn parse_errors_name_the_file_and_hide_the_parser_internals() {
+    let dup = "base_rate_hz: 1000\nduration_s: 1\nduration_s: 2\nblocks:\n  - { name: a, type: gain, k: 1 }\n";
+    let e = GraphSpec::from_yaml(dup, "f.yaml").unwrap_err().to_string();
+    assert!(e.starts_with("f.yaml: line 3"), "{e}");
+    assert!(
+        e.contains("--> f.yaml:3:1") && !e.contains("<input>"),
+        "{e}"
+    );
+    assert!(
+        !e.contains("DuplicateKeyPolicy") && e.contains("appear once"),
+        "{e}"
+    );
+    let two = "base_rate_hz: 1000\nduration_s: 1\nblocks:\n  - { name: a, type: gain, k: 1 }\n---\nx: 1\n";
+    let e = GraphSpec::from_yaml(two, "f.yaml").unwrap_err().to_string();
+    assert!(
+        !e.contains("from_str_multiple") && e.contains("one YAML document"),
+        "{e}"
+    );
+    let mut many = String::from("base_rate_hz: 1000\nduration_s: 1\nblocks: []\nlog: [");
+    for _ in 0..300_000 {
+        many.push_str("a,");
+    }
+    many.push_str("a]\n");
+    let e = GraphSpec::from_yaml(&many, "f.yaml")
+        .unwrap_err()
+        .to_string();
+    assert!(
+        !e.contains("Nodes {") && !e.contains("budget breached"),
+        "{e}"
+    );
+}
+
+#[test]
+fn overflowing_pi_gain_names_kp() {
+    let yaml = "base_rate_hz: 1000\nduration_s: 1\nblocks:\n  - { name: a, type: pi, kp: 1e308, zero_hz: 5 }\n  - { name: c, type: constant, value: 1 }\nconnections:\n  - { from: c.y, to: a.e }\n";
+    let e = build_err(yaml);
+    assert!(e.contains("`kp`") && !e.contains("`ki`"), "{e}");
+}
+
+#[test]
+fn connection_errors_count_from_one_and_list_the_blocks() {
+    let yaml = "base_rate_hz: 1000\nduration_s: 1\nblocks:\n  - { name: amp, type: gain, k: 1 }\n  - { name: c, type: constant, value: 1 }\nconnections:\n  - { from: c.y, to: amp.u }\n  - { from: c.y, to: zzz.u }\n";
+    let e = build_err(yaml);
+    assert!(
+        e.contains("connection 2 ") && e.contains("known blocks: amp, c"),
+        "{e}"
+    );
+}

@@ -486,6 +486,17 @@ impl Pi {
         self.dt = dt;
         check::finite("kp", self.kp)?;
         check::non_negative("zero_hz", self.zero_hz)?;
+        let ki = self.kp * TAU * self.zero_hz;
+        if !ki.is_finite() {
+            return Err(ParamError::new(
+                "kp",
+                format!(
+                    "kp = {} with zero_hz = {} gives an integral gain kp·2π·zero_hz = {ki}, not a finite number",
+                    self.kp, self.zero_hz
+                ),
+                "give a smaller kp or zero_hz",
+            ));
+        }
         self.pid = Pid {
             kp: self.kp,
             ki: self.kp * TAU * self.zero_hz,
