@@ -213,9 +213,20 @@ pub struct MetricsFile<'a> {
     pub scores: &'a [nanomotion_core::scheduler::Score],
     /// Rate transitions the loader inserted.
     pub rate_transitions: &'a [String],
-    /// Cumulative-PSD end values (the squared rms seen through the spectrum) per
-    /// scored signal, for cross-checking the rms.
-    pub cumulative_psd_end: Vec<(String, f64)>,
+    /// Cumulative-PSD end values per score (the variance seen through the
+    /// spectrum: rms² − mean²), for cross-checking the scores.
+    pub cumulative_psd_end: Vec<CumulativePsdEnd>,
+}
+
+/// The end value of one score's cumulative PSD.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct CumulativePsdEnd {
+    /// `block.port` (with `[j]` for an element of a vector signal).
+    pub signal: String,
+    /// Samples before this time (s) were left out, as for the score.
+    pub from_s: f64,
+    /// The end value (unit²): the variance of the scored samples.
+    pub end: f64,
 }
 
 /// File-name-safe form of a signal name.
@@ -365,9 +376,13 @@ pub fn write_all(
         }
         let (f, c) = cumulative_psd(&x, log.rate_hz);
         if let Some(&end) = c.last() {
-            cps.push((s.signal.clone(), end));
+            cps.push(CumulativePsdEnd {
+                signal: s.signal.clone(),
+                from_s: s.from_s,
+                end,
+            });
             cp_series.push(Series {
-                label: format!("{} (end {:.3e})", s.signal, end),
+                label: format!("{} from {} s (end {:.3e})", s.signal, s.from_s, end),
                 x: f,
                 y: c,
             });

@@ -346,3 +346,24 @@ fn verbose_and_rust_log_show_the_library_diagnostics() {
     assert!(e.contains("DEBUG") && e.contains("execution order"), "{e}");
     std::fs::remove_dir_all(&dir).ok();
 }
+
+#[test]
+fn two_scores_of_one_signal_stay_apart_in_metrics() {
+    let dir = scratch("scores");
+    let g = SMALL.replace(
+        "  - { signal: k.y, from_s: 0.01 }\n",
+        "  - { signal: k.y, from_s: 0.01 }\n  - { signal: k.y, from_s: 0.05 }\n",
+    );
+    std::fs::write(dir.join("g.yaml"), g).unwrap();
+    let (rc, _, e) = out(nm(&dir).args(["run", "g.yaml"]));
+    assert_eq!(rc, 0, "{e}");
+    let m: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("out/g/metrics.json")).unwrap())
+            .unwrap();
+    let ends = m["cumulative_psd_end"].as_array().unwrap();
+    let froms: Vec<f64> = ends.iter().map(|e| e["from_s"].as_f64().unwrap()).collect();
+    assert_eq!(froms, vec![0.01, 0.05]);
+    let svg = std::fs::read_to_string(dir.join("out/g/cumulative_psd.svg")).unwrap();
+    assert!(svg.contains("k.y from 0.01 s") && svg.contains("k.y from 0.05 s"));
+    std::fs::remove_dir_all(&dir).ok();
+}
