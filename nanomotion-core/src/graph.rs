@@ -220,7 +220,9 @@ impl GraphSpec {
 
     /// Parse a graph from YAML text; `origin` (file name) prefixes errors.
     pub fn from_yaml(text: &str, origin: &str) -> Result<Self, GraphError> {
-        crate::yaml::from_str::<GraphSpec>(text, origin).map_err(add_type_suggestion)
+        crate::yaml::from_str::<GraphSpec>(text, origin)
+            .map_err(add_type_suggestion)
+            .map_err(|e| locate_unknown_field(e, text))
     }
 
     /// Read and parse a graph file (at most [`MAX_GRAPH_FILE_BYTES`]). Relative
@@ -307,6 +309,57 @@ fn add_type_suggestion(e: GraphError) -> GraphError {
                     "{message}\nhint: unknown block type `{bad}` (`nanomotion blocks` lists all types)"
                 );
             }
+        }
+    }
+    GraphError::Parse { origin, message }
+}
+
+/// Inside a block, the parser (typetag buffers the block's map) reports an
+/// unknown field at the block's first line and "at line" of its last field. Find
+/// the line that really holds the key and say so, with the text of that line.
+fn locate_unknown_field(e: GraphError, text: &str) -> GraphError {
+    let GraphError::Parse {
+        origin,
+        mut message,
+    } = e
+    else {
+        return e;
+    };
+    let Some(pos) = message.find("unknown field `") else {
+        return GraphError::Parse { origin, message };
+    };
+    let rest = &message[pos + "unknown field `".len()..];
+    let Some(end) = rest.find('`') else {
+        return GraphError::Parse { origin, message };
+    };
+    let field = rest[..end].to_string();
+    // The reported line: "line N column M" at the start of the message.
+    let first_line = message
+        .strip_prefix("line ")
+        .and_then(|r| r.split_whitespace().next())
+        .and_then(|n| n.parse::<usize>().ok())
+        .unwrap_or(1);
+    let is_key_on = |line: &str| {
+        line.match_indices(&format!("{field}:")).any(|(i, _)| {
+            i == 0
+                || line[..i]
+                    .chars()
+                    .next_back()
+                    .is_some_and(|c| c == ' ' || c == '{' || c == ',' || c == '-' || c == '\t')
+        })
+    };
+    if let Some((n, line)) = text
+        .lines()
+        .enumerate()
+        .skip(first_line.saturating_sub(1))
+        .find(|(_, l)| is_key_on(l))
+    {
+        if n + 1 != first_line || !message.contains(&format!("line {} column", n + 1)) {
+            message = format!(
+                "{message}\nnote: the unknown field `{field}` is on line {}: `{}`",
+                n + 1,
+                line.trim()
+            );
         }
     }
     GraphError::Parse { origin, message }

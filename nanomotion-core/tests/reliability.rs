@@ -397,3 +397,12 @@ fn connection_errors_count_from_one_and_list_the_blocks() {
         "{e}"
     );
 }
+
+#[test]
+fn an_unknown_field_inside_a_block_is_located_on_its_own_line() {
+    let yaml = "base_rate_hz: 1000\nduration_s: 1\nblocks:\n  - name: a\n    type: gain\n    k: 1\n    kk: 2\n    width: 1\n";
+    let e = GraphSpec::from_yaml(yaml, "f.yaml")
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("`kk` is on line 7: `kk: 2`"), "{e}");
+}
