@@ -406,3 +406,14 @@ fn an_unknown_field_inside_a_block_is_located_on_its_own_line() {
         .to_string();
     assert!(e.contains("`kk` is on line 7: `kk: 2`"), "{e}");
 }
+
+#[test]
+fn model_orders_are_bounded() {
+    let den: Vec<String> = (0..2001).map(|_| "1".to_string()).collect();
+    let yaml = one_block(&format!(
+        "type: transfer_function, num: [1], den: [{}], discrete: true",
+        den.join(",")
+    ));
+    let e = build(&yaml).unwrap_err().to_string();
+    assert!(e.contains("den (coefficients)") && e.contains("65"), "{e}");
+}

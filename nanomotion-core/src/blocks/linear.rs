@@ -315,6 +315,16 @@ impl TransferFunctionBlock {
     }
 }
 
+/// Highest order of a `transfer_function` (coefficients per polynomial: 65). Its
+/// roots are found by a dense eigenvalue problem at build; higher orders are
+/// numerically meaningless as polynomials (write them as `state_space` or
+/// cascades).
+pub const MAX_TF_ORDER: usize = 64;
+
+/// Most states of a `state_space` block: 256 (its stepper is a dense
+/// matrix–vector product per tick, and discretisation a dense exponential).
+pub const MAX_SS_STATES: usize = 256;
+
 #[typetag::serde(name = "transfer_function")]
 impl Block for TransferFunctionBlock {
     siso_ports!();
@@ -334,6 +344,8 @@ impl Block for TransferFunctionBlock {
 
     fn build(&mut self, ctx: &BuildContext) -> Result<(), ParamError> {
         check::width("width", self.width)?;
+        check::size("num (coefficients)", self.num.len(), 0, MAX_TF_ORDER + 1)?;
+        check::size("den (coefficients)", self.den.len(), 0, MAX_TF_ORDER + 1)?;
         check::all_finite("num", &self.num)?;
         check::all_finite("den", &self.den)?;
         if self.den.iter().all(|&v| v == 0.0) {
@@ -478,6 +490,9 @@ impl Block for StateSpaceBlock {
 
     fn build(&mut self, ctx: &BuildContext) -> Result<(), ParamError> {
         let (n, m, p) = self.dims();
+        check::size("a (states)", n, 0, MAX_SS_STATES)?;
+        check::width("b (inputs)", m.max(1))?;
+        check::width("c (outputs)", p.max(1))?;
         if m == 0 || p == 0 {
             return Err(ParamError::new(
                 if n > 0 { "b" } else { "d" },
