@@ -224,6 +224,12 @@ impl Dataset {
 // Loading files
 // ---------------------------------------------------------------------------------
 
+/// Read a text data file through a reader bounded by [`MAX_FILE_BYTES`] (a
+/// device such as `/dev/zero`, or a huge file, is an error, not an endless read).
+pub fn read_text_capped_data(path: &std::path::Path) -> std::io::Result<String> {
+    crate::graph::read_text_capped(path, MAX_FILE_BYTES)
+}
+
 /// A measured data set of the shared folder (`shared/data/…` beside the
 /// workspace) that a test or example needs: `Some(path)` if it exists. If it does
 /// not, with the environment variable `CI` set this panics (a CI run must not pass

@@ -430,7 +430,7 @@ pub fn fit_extended(
 /// `shared/data/sma_hysteresis/`). Errors name the file and line.
 pub fn read_forc_csv(path: &Path) -> Result<Vec<(f64, f64)>, AfmError> {
     let file = path.display().to_string();
-    let text = std::fs::read_to_string(path).map_err(|e| AfmError::File {
+    let text = nanomotion_core::data::read_text_capped_data(path).map_err(|e| AfmError::File {
         file: file.clone(),
         line: 0,
         problem: e.to_string(),
