@@ -353,14 +353,13 @@ fn locate_unknown_field(e: GraphError, text: &str) -> GraphError {
         .enumerate()
         .skip(first_line.saturating_sub(1))
         .find(|(_, l)| is_key_on(l))
+        && (n + 1 != first_line || !message.contains(&format!("line {} column", n + 1)))
     {
-        if n + 1 != first_line || !message.contains(&format!("line {} column", n + 1)) {
-            message = format!(
-                "{message}\nnote: the unknown field `{field}` is on line {}: `{}`",
-                n + 1,
-                line.trim()
-            );
-        }
+        message = format!(
+            "{message}\nnote: the unknown field `{field}` is on line {}: `{}`",
+            n + 1,
+            line.trim()
+        );
     }
     GraphError::Parse { origin, message }
 }
