@@ -456,8 +456,33 @@ fn run(args: RunArgs) -> Result<(), String> {
     if let Some(folder) = folder {
         eprintln!("writing files to {} ...", out.display());
         let dir = folder.dir().to_path_buf();
-        let mut files = nanomotion::output::write_all(&dir, &result, &report.rate_transitions)
-            .map_err(|e| e.to_string())?;
+        let started = Instant::now();
+        let mut wbar: Option<ProgressBar> = None;
+        let mut files = nanomotion::output::write_all_with_progress(
+            &dir,
+            &result,
+            &report.rate_transitions,
+            |what, fraction| {
+                // A bar once writing takes noticeable time.
+                if wbar.is_none() && started.elapsed() > Duration::from_millis(300) {
+                    let b = ProgressBar::new(1000);
+                    b.set_style(
+                        ProgressStyle::with_template("{spinner} writing [{bar:30}] {msg}")
+                            .expect("static template")
+                            .progress_chars("=> "),
+                    );
+                    wbar = Some(b);
+                }
+                if let Some(b) = &wbar {
+                    b.set_position((fraction * 1000.0) as u64);
+                    b.set_message(what.to_string());
+                }
+            },
+        )
+        .map_err(|e| e.to_string())?;
+        if let Some(b) = wbar {
+            b.finish_and_clear();
+        }
         if let Some(d) = &data
             && !comparisons.is_empty()
         {

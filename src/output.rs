@@ -324,7 +324,27 @@ pub fn write_all(
     result: &RunResult,
     rate_transitions: &[String],
 ) -> Result<Vec<PathBuf>, OutputError> {
+    write_all_with_progress(dir, result, rate_transitions, |_, _| {})
+}
+
+/// [`write_all`], calling `progress(file, fraction)` before each file is written
+/// (`fraction` of the files done, 0..1), so a caller can show what is being
+/// written (a long run's CSV and plots take seconds).
+pub fn write_all_with_progress(
+    dir: &Path,
+    result: &RunResult,
+    rate_transitions: &[String],
+    mut progress: impl FnMut(&str, f64),
+) -> Result<Vec<PathBuf>, OutputError> {
     std::fs::create_dir_all(dir).map_err(io(dir))?;
+    let traces = result.logs.iter().filter(|l| !l.is_empty()).count();
+    let total = (traces + 3) as f64; // CSV, traces, cumulative PSD, metrics
+    let mut step = 0.0;
+    let mut tell = |what: &str| {
+        progress(what, step / total);
+        step += 1.0;
+    };
+    tell("signals CSV");
     let mut written = write_csv(dir, &result.logs)?;
     let title = result
         .title
@@ -349,11 +369,13 @@ pub fn write_all(
             series,
         };
         let path = dir.join(format!("trace_{}.svg", file_stem(&log.name)));
+        tell(&format!("trace of {}", log.name));
         draw_svg(&fig, &path)?;
         written.push(path);
     }
 
     // Cumulative PSD of the scored signals (the thesis's way to judge a result).
+    tell("cumulative PSD");
     let mut cps = Vec::new();
     let mut cp_series = Vec::new();
     for s in &result.scores {
@@ -408,6 +430,7 @@ pub fn write_all(
         rate_transitions,
         cumulative_psd_end: cps,
     };
+    tell("metrics.json");
     let path = dir.join("metrics.json");
     let text = serde_json::to_string_pretty(&metrics).map_err(|e| OutputError::Csv {
         path: path.display().to_string(),

@@ -367,3 +367,31 @@ fn two_scores_of_one_signal_stay_apart_in_metrics() {
     assert!(svg.contains("k.y from 0.01 s") && svg.contains("k.y from 0.05 s"));
     std::fs::remove_dir_all(&dir).ok();
 }
+
+#[test]
+fn writing_reports_progress_file_by_file() {
+    nanomotion::link_plugins();
+    let (mut s, report) = GraphSpec::from_yaml(SMALL, "g.yaml")
+        .unwrap()
+        .build()
+        .unwrap();
+    let result = s.run(|_| {});
+    let dir = scratch("progress").join("o");
+    let mut seen: Vec<(String, f64)> = Vec::new();
+    nanomotion::output::write_all_with_progress(&dir, &result, &report.rate_transitions, |w, f| {
+        seen.push((w.to_string(), f));
+    })
+    .unwrap();
+    let names: Vec<&str> = seen.iter().map(|(w, _)| w.as_str()).collect();
+    assert_eq!(
+        names,
+        [
+            "signals CSV",
+            "trace of k.y",
+            "cumulative PSD",
+            "metrics.json"
+        ]
+    );
+    assert!(seen.windows(2).all(|w| w[0].1 < w[1].1 && w[1].1 < 1.0));
+    std::fs::remove_dir_all(dir.parent().unwrap()).ok();
+}
