@@ -30,6 +30,36 @@ pub use nanomotion_plf as plf;
 pub use timestamp_encoder;
 pub use walking_piezo;
 
+/// `serde`, re-exported so that a crate defining blocks needs only `nanomotion`:
+/// derive with `#[serde(crate = "nanomotion::serde")]`.
+pub use serde;
+/// `typetag`, re-exported so that a crate defining blocks needs only `nanomotion`:
+/// bring it into scope with `use nanomotion::typetag;` (its expansion names
+/// `typetag::`) and register with `#[typetag::serde(name = "...")]`.
+///
+/// ```
+/// use nanomotion::typetag;
+/// use nanomotion::serde::{Deserialize, Serialize};
+/// use nanomotion::core::{Block, GraphSpec, Port, Tick};
+///
+/// /// y = 3·u, defined with nothing but `nanomotion`.
+/// #[derive(Debug, Serialize, Deserialize)]
+/// #[serde(crate = "nanomotion::serde", deny_unknown_fields)]
+/// struct Triple {}
+///
+/// #[typetag::serde(name = "doc_facade_triple")]
+/// impl Block for Triple {
+///     fn inputs(&self) -> Vec<Port> { vec![Port::new("u", 1)] }
+///     fn outputs(&self) -> Vec<Port> { vec![Port::new("y", 1)] }
+///     fn output(&mut self, _t: Tick, u: &[f64], y: &mut [f64]) { y[0] = 3.0 * u[0]; }
+/// }
+///
+/// let yaml = "base_rate_hz: 10\nduration_s: 0.1\nblocks:\n  - { name: c, type: constant, value: 2.0 }\n  - { name: t, type: doc_facade_triple }\nconnections:\n  - { from: c.y, to: t.u }\nlog: [t.y]\n";
+/// let (mut s, _) = GraphSpec::from_yaml(yaml, "doc.yaml").unwrap().build().unwrap();
+/// assert_eq!(s.run(|_| {}).logs[0].data, vec![6.0]);
+/// ```
+pub use typetag;
+
 pub mod output;
 pub mod plot;
 

@@ -11,6 +11,31 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::{Duration, Instant};
 
+/// `println!` that survives a closed pipe (`nanomotion run … | head -1`): a
+/// broken pipe ends the printing quietly (files are still written), any other
+/// write error is reported once on stderr.
+macro_rules! say {
+    ($($t:tt)*) => {
+        emit(format_args!($($t)*))
+    };
+}
+
+fn emit(args: std::fmt::Arguments<'_>) {
+    use std::io::Write as _;
+    use std::sync::atomic::{AtomicBool, Ordering};
+    static FAILED: AtomicBool = AtomicBool::new(false);
+    if FAILED.load(Ordering::Relaxed) {
+        return;
+    }
+    let mut out = std::io::stdout().lock();
+    if let Err(e) = out.write_fmt(args).and_then(|()| out.write_all(b"\n")) {
+        FAILED.store(true, Ordering::Relaxed);
+        if e.kind() != std::io::ErrorKind::BrokenPipe {
+            eprintln!("warning: cannot write to standard output: {e}");
+        }
+    }
+}
+
 /// Simulate and control nano-motion systems (piezo stages, encoders) from YAML
 /// controller graphs.
 ///
@@ -29,8 +54,34 @@ use std::time::{Duration, Instant};
     after_help = "Examples:\n  nanomotion run examples/quickstart.yaml --out out/quickstart\n  nanomotion check examples/quickstart.yaml\n  nanomotion rc-check examples/rc_dvrc.yaml\n  nanomotion optimize-waveform examples/optimize_waveform/model.yaml --budget 0.1\n  nanomotion diagnose examples/diagnose/model.yaml examples/diagnose/record.csv\n  nanomotion blocks"
 )]
 struct Cli {
+    /// Show the library's diagnostics on stderr: -v build notes and progress
+    /// (info), -vv details (debug), -vvv everything (trace). `RUST_LOG` (e.g.
+    /// `RUST_LOG=nanomotion_core=debug`) overrides it.
+    #[arg(short, long, action = clap::ArgAction::Count, global = true)]
+    verbose: u8,
     #[command(subcommand)]
     command: Command,
+}
+
+/// Send `tracing` events to stderr: `RUST_LOG` if set, else by `-v` count
+/// (default: warnings only).
+fn init_tracing(verbose: u8) {
+    use tracing_subscriber::EnvFilter;
+    let filter = EnvFilter::try_from_default_env().unwrap_or_else(|_| {
+        EnvFilter::new(match verbose {
+            0 => "warn",
+            1 => "info",
+            2 => "debug",
+            _ => "trace",
+        })
+    });
+    let _ = tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr)
+        .with_target(true)
+        .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
+        .without_time()
+        .try_init();
 }
 
 #[derive(Subcommand, Debug)]
@@ -40,9 +91,15 @@ enum Command {
     Run {
         /// The graph file (YAML).
         graph: PathBuf,
-        /// Output folder (created if missing).
-        #[arg(long, short, default_value = "out")]
-        out: PathBuf,
+        /// Output folder (default out/<graph stem>). Written atomically: files go
+        /// into a temporary folder that replaces this one when complete, with
+        /// `nanomotion-run.json` written last. A folder holding a previous run is
+        /// replaced; any other non-empty folder is refused unless --force.
+        #[arg(long, short)]
+        out: Option<PathBuf>,
+        /// Replace a non-empty output folder that does not hold a previous run.
+        #[arg(long)]
+        force: bool,
         /// Override the graph's seed.
         #[arg(long)]
         seed: Option<u64>,
@@ -135,10 +192,12 @@ enum Command {
 fn main() -> ExitCode {
     nanomotion::link_plugins();
     let cli = Cli::parse();
+    init_tracing(cli.verbose);
     let result = match cli.command {
         Command::Run {
             graph,
             out,
+            force,
             seed,
             duration,
             no_files,
@@ -147,6 +206,7 @@ fn main() -> ExitCode {
         } => run(RunArgs {
             graph,
             out,
+            force,
             seed,
             duration,
             no_files,
@@ -155,8 +215,12 @@ fn main() -> ExitCode {
         }),
         Command::Check { graph } => check(graph),
         Command::RcCheck { graph } => match nanomotion::dvrc::check::rc_check_file(&graph) {
+            Ok(report) if report.blocks.is_empty() => Err(format!(
+                "{}: no repetitive_control, high_order_rc or dvrc block, nothing to check (fix: rc-check a graph with a repetitive controller, e.g. examples/rc_dvrc.yaml; `nanomotion check` validates any graph)",
+                graph.display()
+            )),
             Ok(report) => {
-                print!("{report}");
+                say!("{}", report.to_string().trim_end());
                 if !report.all_hold() {
                     return ExitCode::from(2);
                 }
@@ -188,10 +252,7 @@ fn main() -> ExitCode {
             seed,
             effects,
         }),
-        Command::Blocks { filter } => {
-            blocks(filter.as_deref());
-            Ok(())
-        }
+        Command::Blocks { filter } => blocks(filter.as_deref()),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
@@ -209,22 +270,22 @@ fn load(graph: &PathBuf) -> Result<GraphSpec, String> {
 fn check(graph: PathBuf) -> Result<(), String> {
     let spec = load(&graph)?;
     let (sched, report) = spec.build().map_err(|e| e.to_string())?;
-    println!("{}: ok", graph.display());
-    println!(
+    say!("{}: ok", graph.display());
+    say!(
         "  base rate {} Hz, {} ticks",
         sched.base_rate_hz(),
         sched.ticks_total()
     );
-    println!("  blocks in execution order:");
+    say!("  blocks in execution order:");
     for line in sched.describe() {
-        println!("    {line}");
+        say!("    {line}");
     }
     if report.rate_transitions.is_empty() {
-        println!("  no rate transitions");
+        say!("  no rate transitions");
     } else {
-        println!("  rate transitions inserted:");
+        say!("  rate transitions inserted:");
         for r in &report.rate_transitions {
-            println!("    {r}");
+            say!("    {r}");
         }
     }
     Ok(())
@@ -233,7 +294,8 @@ fn check(graph: PathBuf) -> Result<(), String> {
 /// The arguments of `nanomotion run`.
 struct RunArgs {
     graph: PathBuf,
-    out: PathBuf,
+    out: Option<PathBuf>,
+    force: bool,
     seed: Option<u64>,
     duration: Option<f64>,
     no_files: bool,
@@ -245,6 +307,7 @@ fn run(args: RunArgs) -> Result<(), String> {
     let RunArgs {
         graph,
         out,
+        force,
         seed,
         duration,
         no_files,
@@ -285,6 +348,24 @@ fn run(args: RunArgs) -> Result<(), String> {
     for r in &report.rate_transitions {
         eprintln!("note: rate transition {r}");
     }
+    // The output folder is checked (and its temporary folder made) before the
+    // simulation, so a bad --out costs nothing.
+    let out = out.unwrap_or_else(|| {
+        let stem = graph
+            .file_stem()
+            .map_or_else(|| "run".into(), |s| s.to_string_lossy().into_owned());
+        PathBuf::from("out").join(nanomotion::output::file_stem(&stem))
+    });
+    let folder = if no_files {
+        None
+    } else {
+        Some(nanomotion::output::RunFolder::prepare(&out, force).map_err(|e| e.to_string())?)
+    };
+    if sched.ticks_total() == 0 {
+        eprintln!(
+            "note: duration 0 s: nothing is simulated, logs are empty and no plots are drawn"
+        );
+    }
     let start = Instant::now();
     let mut bar: Option<ProgressBar> = None;
     let result = sched.run(|fraction| {
@@ -309,7 +390,7 @@ fn run(args: RunArgs) -> Result<(), String> {
     }
     let wall = start.elapsed().as_secs_f64();
     sched.check_finite().map_err(|e| e.to_string())?;
-    println!(
+    say!(
         "{}: simulated {:.3} s in {:.3} s ({:.0}x real time)",
         result
             .title
@@ -319,15 +400,23 @@ fn run(args: RunArgs) -> Result<(), String> {
         wall,
         result.duration_s / wall.max(1e-9)
     );
-    if !result.scores.is_empty() {
-        println!(
+    if !result.scores.is_empty() && sched.ticks_total() > 0 {
+        say!(
             "{:<32} {:>12} {:>12} {:>12} {:>8}",
-            "signal", "rms", "max |.|", "mean", "from (s)"
+            "signal",
+            "rms",
+            "max |.|",
+            "mean",
+            "from (s)"
         );
         for s in &result.scores {
-            println!(
+            say!(
                 "{:<32} {:>12.4e} {:>12.4e} {:>12.4e} {:>8}",
-                s.signal, s.rms, s.max_abs, s.mean, s.from_s
+                s.signal,
+                s.rms,
+                s.max_abs,
+                s.mean,
+                s.from_s
             );
         }
     }
@@ -336,7 +425,7 @@ fn run(args: RunArgs) -> Result<(), String> {
         None => Vec::new(),
     };
     if let Some(d) = &data {
-        println!(
+        say!(
             "data {}: {} samples at {} Hz ({} s)",
             d.origin(),
             d.len(),
@@ -345,20 +434,55 @@ fn run(args: RunArgs) -> Result<(), String> {
         );
     }
     if !comparisons.is_empty() {
-        println!(
+        say!(
             "{:<24} {:<16} {:>12} {:>12} {:>9}",
-            "signal", "column", "rms", "max |.|", "fit %"
+            "signal",
+            "column",
+            "rms",
+            "max |.|",
+            "fit %"
         );
         for c in &comparisons {
-            println!(
+            say!(
                 "{:<24} {:<16} {:>12.4e} {:>12.4e} {:>9.3}",
-                c.signal, c.column, c.rms, c.max_abs, c.fit_percent
+                c.signal,
+                c.column,
+                c.rms,
+                c.max_abs,
+                c.fit_percent
             );
         }
     }
-    if !no_files {
-        let mut files = nanomotion::output::write_all(&out, &result, &report.rate_transitions)
-            .map_err(|e| e.to_string())?;
+    if let Some(folder) = folder {
+        eprintln!("writing files to {} ...", out.display());
+        let dir = folder.dir().to_path_buf();
+        let started = Instant::now();
+        let mut wbar: Option<ProgressBar> = None;
+        let mut files = nanomotion::output::write_all_with_progress(
+            &dir,
+            &result,
+            &report.rate_transitions,
+            |what, fraction| {
+                // A bar once writing takes noticeable time.
+                if wbar.is_none() && started.elapsed() > Duration::from_millis(300) {
+                    let b = ProgressBar::new(1000);
+                    b.set_style(
+                        ProgressStyle::with_template("{spinner} writing [{bar:30}] {msg}")
+                            .expect("static template")
+                            .progress_chars("=> "),
+                    );
+                    wbar = Some(b);
+                }
+                if let Some(b) = &wbar {
+                    b.set_position((fraction * 1000.0) as u64);
+                    b.set_message(what.to_string());
+                }
+            },
+        )
+        .map_err(|e| e.to_string())?;
+        if let Some(b) = wbar {
+            b.finish_and_clear();
+        }
         if let Some(d) = &data
             && !comparisons.is_empty()
         {
@@ -367,34 +491,68 @@ fn run(args: RunArgs) -> Result<(), String> {
                 .clone()
                 .unwrap_or_else(|| graph.display().to_string());
             files.extend(
-                nanomotion::output::write_comparisons(&out, &title, d, &comparisons)
+                nanomotion::output::write_comparisons(&dir, &title, d, &comparisons)
                     .map_err(|e| e.to_string())?,
             );
         }
-        println!("wrote {} files to {}", files.len(), out.display());
+        let names: Vec<String> = files
+            .iter()
+            .filter_map(|f| f.file_name())
+            .map(|n| n.to_string_lossy().into_owned())
+            .collect();
+        let graph_name = graph.display().to_string();
+        folder
+            .commit(&nanomotion::output::Manifest {
+                graph: &graph_name,
+                title: &result.title,
+                files: names,
+                complete: true,
+            })
+            .map_err(|e| e.to_string())?;
+        say!("wrote {} files to {}", files.len() + 1, out.display());
     }
     Ok(())
 }
 
-fn blocks(filter: Option<&str>) {
+fn blocks(filter: Option<&str>) -> Result<(), String> {
     let docs = block_docs();
     let types = registered_types();
-    for t in &types {
-        if filter.is_some_and(|f| !t.contains(f)) {
-            continue;
-        }
+    let shown: Vec<&String> = types
+        .iter()
+        .filter(|t| filter.is_none_or(|f| t.contains(f)))
+        .collect();
+    if let Some(f) = filter
+        && shown.is_empty()
+    {
+        let close: Vec<&str> = types
+            .iter()
+            .filter(|t| nanomotion::core::graph::is_near(f, t))
+            .map(String::as_str)
+            .collect();
+        let hint = if close.is_empty() {
+            String::new()
+        } else {
+            format!("; did you mean {}?", close.join(", "))
+        };
+        return Err(format!(
+            "no block type contains `{f}`{hint} (fix: `nanomotion blocks` lists all {} types)",
+            types.len()
+        ));
+    }
+    for t in shown {
         match docs.iter().find(|d| d.type_name == t) {
             Some(d) => {
-                println!("{} ({}): {}", d.type_name, d.role.as_str(), d.summary);
-                println!("    ports: {}", d.ports);
+                say!("{} ({}): {}", d.type_name, d.role.as_str(), d.summary);
+                say!("    ports: {}", d.ports);
                 for p in d.params {
                     match p.default {
-                        Some(def) => println!("    {:<22} {} [default {def}]", p.name, p.doc),
-                        None => println!("    {:<22} {}", p.name, p.doc),
+                        Some(def) => say!("    {:<22} {} [default {def}]", p.name, p.doc),
+                        None => say!("    {:<22} {}", p.name, p.doc),
                     }
                 }
             }
-            None => println!("{t}: (no documentation registered)"),
+            None => say!("{t}: (no documentation registered)"),
         }
     }
+    Ok(())
 }

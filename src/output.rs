@@ -30,6 +30,169 @@ pub enum OutputError {
     /// A plot could not be drawn.
     #[error(transparent)]
     Plot(#[from] PlotError),
+    /// The output folder cannot be used.
+    #[error("output folder `{path}`: {problem} (fix: {fix})")]
+    Folder {
+        /// The folder.
+        path: String,
+        /// What is wrong.
+        problem: String,
+        /// How to fix it.
+        fix: String,
+    },
+}
+
+/// Name of the manifest written last into every run folder: a folder without it
+/// is not a complete run (and a folder with it came from `nanomotion run`).
+pub const MANIFEST: &str = "nanomotion-run.json";
+
+/// The manifest (`nanomotion-run.json`), written last.
+#[derive(Debug, Serialize)]
+pub struct Manifest<'a> {
+    /// The graph file.
+    pub graph: &'a str,
+    /// Graph title.
+    pub title: &'a Option<String>,
+    /// Files of the run (names inside the folder).
+    pub files: Vec<String>,
+    /// Always `true`: the run was written completely.
+    pub complete: bool,
+}
+
+/// An output folder being written: files go into a hidden temporary sibling
+/// folder, which [`RunFolder::commit`] renames to the target in one step, so a
+/// reader sees the previous complete run or the new complete run, never a mix.
+/// Dropped without commit (an error, a panic), the temporary folder is removed.
+#[derive(Debug)]
+pub struct RunFolder {
+    target: PathBuf,
+    tmp: PathBuf,
+    replace: bool,
+    committed: bool,
+}
+
+impl RunFolder {
+    /// Check `target` before a run and create the temporary folder beside it.
+    ///
+    /// - a missing folder is created (with its parents);
+    /// - a folder holding a previous complete run (its [`MANIFEST`]) is replaced;
+    /// - an empty folder is used;
+    /// - any other non-empty folder is refused unless `force`, then replaced
+    ///   whole (stale files of earlier graphs never stay beside new ones);
+    /// - a file, or a folder that cannot be written, is an error now, before
+    ///   the simulation runs.
+    pub fn prepare(target: &Path, force: bool) -> Result<Self, OutputError> {
+        let folder_err = |problem: String, fix: &str| OutputError::Folder {
+            path: target.display().to_string(),
+            problem,
+            fix: fix.into(),
+        };
+        let mut replace = false;
+        match std::fs::metadata(target) {
+            Ok(m) if !m.is_dir() => {
+                return Err(folder_err(
+                    "is a file, not a folder".into(),
+                    "pass another --out, or remove the file",
+                ));
+            }
+            Ok(_) => {
+                let entries: Vec<String> = std::fs::read_dir(target)
+                    .map_err(io(target))?
+                    .filter_map(Result::ok)
+                    .map(|e| e.file_name().to_string_lossy().into_owned())
+                    .collect();
+                if !entries.is_empty() {
+                    let ours = entries.iter().any(|e| e == MANIFEST);
+                    if !ours && !force {
+                        let mut shown: Vec<&str> =
+                            entries.iter().take(3).map(String::as_str).collect();
+                        if entries.len() > 3 {
+                            shown.push("...");
+                        }
+                        return Err(folder_err(
+                            format!(
+                                "is not empty and does not hold a previous nanomotion run ({} entries: {})",
+                                entries.len(),
+                                shown.join(", ")
+                            ),
+                            "pass --force to replace its whole content, or choose another --out",
+                        ));
+                    }
+                    replace = true;
+                }
+            }
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
+            Err(e) => return Err(io(target)(e)),
+        }
+        let parent = match target.parent() {
+            Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+            _ => PathBuf::from("."),
+        };
+        std::fs::create_dir_all(&parent).map_err(io(&parent))?;
+        let name = target
+            .file_name()
+            .map_or_else(|| "out".into(), |n| n.to_string_lossy().into_owned());
+        let tmp = parent.join(format!(".{name}.partial-{}", std::process::id()));
+        if tmp.exists() {
+            std::fs::remove_dir_all(&tmp).map_err(io(&tmp))?;
+        }
+        std::fs::create_dir(&tmp).map_err(io(&tmp))?;
+        Ok(Self {
+            target: target.to_path_buf(),
+            tmp,
+            replace,
+            committed: false,
+        })
+    }
+
+    /// The folder to write the files into (the temporary one).
+    pub fn dir(&self) -> &Path {
+        &self.tmp
+    }
+
+    /// The final folder.
+    pub fn target(&self) -> &Path {
+        &self.target
+    }
+
+    /// Write the manifest last, then put the folder in place of the target.
+    pub fn commit(mut self, manifest: &Manifest<'_>) -> Result<(), OutputError> {
+        let path = self.tmp.join(MANIFEST);
+        let text = serde_json::to_string_pretty(manifest).map_err(|e| OutputError::Csv {
+            path: path.display().to_string(),
+            message: e.to_string(),
+        })?;
+        std::fs::write(&path, text).map_err(io(&path))?;
+        if self.replace {
+            let old = self.tmp.with_file_name(format!(
+                "{}.old",
+                self.tmp.file_name().unwrap_or_default().to_string_lossy()
+            ));
+            std::fs::rename(&self.target, &old).map_err(io(&self.target))?;
+            if let Err(e) = std::fs::rename(&self.tmp, &self.target) {
+                // Put the previous run back.
+                let _ = std::fs::rename(&old, &self.target);
+                return Err(io(&self.target)(e));
+            }
+            std::fs::remove_dir_all(&old).map_err(io(&old))?;
+        } else {
+            if self.target.exists() {
+                // An empty folder made before the run.
+                std::fs::remove_dir(&self.target).map_err(io(&self.target))?;
+            }
+            std::fs::rename(&self.tmp, &self.target).map_err(io(&self.target))?;
+        }
+        self.committed = true;
+        Ok(())
+    }
+}
+
+impl Drop for RunFolder {
+    fn drop(&mut self) {
+        if !self.committed {
+            let _ = std::fs::remove_dir_all(&self.tmp);
+        }
+    }
 }
 
 fn io(path: &Path) -> impl FnOnce(std::io::Error) -> OutputError + '_ {
@@ -50,9 +213,20 @@ pub struct MetricsFile<'a> {
     pub scores: &'a [nanomotion_core::scheduler::Score],
     /// Rate transitions the loader inserted.
     pub rate_transitions: &'a [String],
-    /// Cumulative-PSD end values (the squared rms seen through the spectrum) per
-    /// scored signal, for cross-checking the rms.
-    pub cumulative_psd_end: Vec<(String, f64)>,
+    /// Cumulative-PSD end values per score (the variance seen through the
+    /// spectrum: rms² − mean²), for cross-checking the scores.
+    pub cumulative_psd_end: Vec<CumulativePsdEnd>,
+}
+
+/// The end value of one score's cumulative PSD.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct CumulativePsdEnd {
+    /// `block.port` (with `[j]` for an element of a vector signal).
+    pub signal: String,
+    /// Samples before this time (s) were left out, as for the score.
+    pub from_s: f64,
+    /// The end value (unit²): the variance of the scored samples.
+    pub end: f64,
 }
 
 /// File-name-safe form of a signal name.
@@ -150,15 +324,35 @@ pub fn write_all(
     result: &RunResult,
     rate_transitions: &[String],
 ) -> Result<Vec<PathBuf>, OutputError> {
+    write_all_with_progress(dir, result, rate_transitions, |_, _| {})
+}
+
+/// [`write_all`], calling `progress(file, fraction)` before each file is written
+/// (`fraction` of the files done, 0..1), so a caller can show what is being
+/// written (a long run's CSV and plots take seconds).
+pub fn write_all_with_progress(
+    dir: &Path,
+    result: &RunResult,
+    rate_transitions: &[String],
+    mut progress: impl FnMut(&str, f64),
+) -> Result<Vec<PathBuf>, OutputError> {
     std::fs::create_dir_all(dir).map_err(io(dir))?;
+    let traces = result.logs.iter().filter(|l| !l.is_empty()).count();
+    let total = (traces + 3) as f64; // CSV, traces, cumulative PSD, metrics
+    let mut step = 0.0;
+    let mut tell = |what: &str| {
+        progress(what, step / total);
+        step += 1.0;
+    };
+    tell("signals CSV");
     let mut written = write_csv(dir, &result.logs)?;
     let title = result
         .title
         .clone()
         .unwrap_or_else(|| "nanomotion run".into());
 
-    // One trace plot per logged signal.
-    for log in &result.logs {
+    // One trace plot per logged signal (none for an empty log: `duration_s: 0`).
+    for log in result.logs.iter().filter(|l| !l.is_empty()) {
         let t = log.times();
         let series = (0..log.width)
             .map(|j| Series {
@@ -175,11 +369,13 @@ pub fn write_all(
             series,
         };
         let path = dir.join(format!("trace_{}.svg", file_stem(&log.name)));
+        tell(&format!("trace of {}", log.name));
         draw_svg(&fig, &path)?;
         written.push(path);
     }
 
     // Cumulative PSD of the scored signals (the thesis's way to judge a result).
+    tell("cumulative PSD");
     let mut cps = Vec::new();
     let mut cp_series = Vec::new();
     for s in &result.scores {
@@ -202,9 +398,13 @@ pub fn write_all(
         }
         let (f, c) = cumulative_psd(&x, log.rate_hz);
         if let Some(&end) = c.last() {
-            cps.push((s.signal.clone(), end));
+            cps.push(CumulativePsdEnd {
+                signal: s.signal.clone(),
+                from_s: s.from_s,
+                end,
+            });
             cp_series.push(Series {
-                label: format!("{} (end {:.3e})", s.signal, end),
+                label: format!("{} from {} s (end {:.3e})", s.signal, s.from_s, end),
                 x: f,
                 y: c,
             });
@@ -230,6 +430,7 @@ pub fn write_all(
         rate_transitions,
         cumulative_psd_end: cps,
     };
+    tell("metrics.json");
     let path = dir.join("metrics.json");
     let text = serde_json::to_string_pretty(&metrics).map_err(|e| OutputError::Csv {
         path: path.display().to_string(),

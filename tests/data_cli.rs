@@ -279,16 +279,7 @@ fn compare_without_data_and_runs_longer_than_the_data() {
 /// missing folder fails the test.
 fn boucwen() -> Option<PathBuf> {
     let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data/boucwen_benchmark");
-    if p.is_dir() {
-        return Some(p);
-    }
-    assert!(
-        std::env::var_os("CI").is_none(),
-        "{} not found, and CI is set: the shared data must be beside the checkout",
-        p.display()
-    );
-    eprintln!("SKIPPED: {} not found", p.display());
-    None
+    nanomotion::core::data::shared_data_or_skip(&p, "data_cli (Bou-Wen benchmark)")
 }
 
 #[test]

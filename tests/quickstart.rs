@@ -80,9 +80,14 @@ fn quickstart_tracks_within_one_encoder_count_and_writes_outputs() {
     let m: serde_json::Value = serde_json::from_str(&read(&dir.join("metrics.json"))).unwrap();
     let ends = m["cumulative_psd_end"].as_array().unwrap();
     for e in ends {
-        let sig = e[0].as_str().unwrap();
-        let end = e[1].as_f64().unwrap();
-        let sc = res.scores.iter().find(|s| s.signal == sig).unwrap();
+        let sig = e["signal"].as_str().unwrap();
+        let from_s = e["from_s"].as_f64().unwrap();
+        let end = e["end"].as_f64().unwrap();
+        let sc = res
+            .scores
+            .iter()
+            .find(|s| s.signal == sig && s.from_s == from_s)
+            .unwrap();
         let var = sc.rms * sc.rms - sc.mean * sc.mean;
         assert!(
             (end - var).abs() < 0.25 * var,

@@ -45,4 +45,12 @@ fn third_party_parameters_are_validated() {
         .unwrap_err()
         .to_string();
     assert!(err.contains("block `a`") && err.contains("window"), "{err}");
+    // A huge window is an error naming the field, not an allocation abort.
+    let huge = yaml.replace("window: 0", "window: 18446744073709551615");
+    let err = GraphSpec::from_yaml(&huge, "tp.yaml")
+        .unwrap()
+        .build()
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("`window`"), "{err}");
 }

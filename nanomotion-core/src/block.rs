@@ -103,6 +103,9 @@ pub struct BuildContext {
     /// [`GraphSpec::build_with_data`](crate::graph::GraphSpec::build_with_data)),
     /// for blocks that play recorded signals.
     pub data: Option<std::sync::Arc<crate::data::Dataset>>,
+    /// The folder relative file names in parameters resolve against (the graph
+    /// file's folder); `None`: the working directory.
+    pub base_dir: Option<std::path::PathBuf>,
 }
 
 impl BuildContext {
@@ -113,6 +116,22 @@ impl BuildContext {
             dt,
             seed,
             data: None,
+            base_dir: None,
+        }
+    }
+
+    /// The same context with a folder for relative file names.
+    pub fn with_base_dir(mut self, dir: Option<std::path::PathBuf>) -> Self {
+        self.base_dir = dir;
+        self
+    }
+
+    /// `path` as given if absolute, else relative to [`BuildContext::base_dir`].
+    pub fn resolve(&self, path: &str) -> std::path::PathBuf {
+        let p = std::path::Path::new(path);
+        match &self.base_dir {
+            Some(dir) if p.is_relative() => dir.join(p),
+            _ => p.to_path_buf(),
         }
     }
 
@@ -209,6 +228,14 @@ pub trait Block: Send + Debug {
     /// [`Block::build`]. Lets tools analyse loops before a graph runs.
     fn lti(&self) -> Option<StateSpace> {
         None
+    }
+    /// Heap memory (bytes) the block holds after [`Block::build`] beyond its ports:
+    /// delay lines, memories, tables. The graph compiler adds these up with the
+    /// signal and log buffers and refuses a graph above
+    /// [`MAX_GRAPH_BYTES`](crate::graph::MAX_GRAPH_BYTES). Blocks whose state is a
+    /// few numbers keep the default 0.
+    fn memory_bytes(&self) -> usize {
+        0
     }
     /// The role the block plays.
     fn role(&self) -> Role {
@@ -402,7 +429,81 @@ pub mod check {
             Err(ParamError::new(field, "is 0", "give at least 1"))
         }
     }
+
+    /// A size (count of things a block allocates or loops over) must be in
+    /// `[lo, hi]`. Every size parameter of every block goes through this (or
+    /// [`width`], [`buffer`]) before anything is allocated, so a huge value in a
+    /// graph file is an error naming the field, never an allocation abort.
+    pub fn size(field: &str, value: usize, lo: usize, hi: usize) -> Result<(), ParamError> {
+        if (lo..=hi).contains(&value) {
+            Ok(())
+        } else {
+            Err(ParamError::new(
+                field,
+                format!("is {value}, outside the allowed range [{lo}, {hi}]"),
+                format!("give a whole number in [{lo}, {hi}]"),
+            ))
+        }
+    }
+
+    /// A port or channel width: `1 ..= MAX_WIDTH`.
+    pub fn width(field: &str, value: usize) -> Result<(), ParamError> {
+        size(field, value, 1, super::MAX_WIDTH)
+    }
+
+    /// A buffer of `samples` samples of `width` values each (delay lines,
+    /// repetitive-control memories): `samples` in `[lo, MAX_BUFFER_VALUES]` and
+    /// `samples · width ≤ MAX_BUFFER_VALUES`.
+    pub fn buffer(field: &str, samples: usize, lo: usize, width: usize) -> Result<(), ParamError> {
+        size(field, samples, lo, super::MAX_BUFFER_VALUES)?;
+        match samples.checked_mul(width.max(1)) {
+            Some(v) if v <= super::MAX_BUFFER_VALUES => Ok(()),
+            _ => Err(ParamError::new(
+                field,
+                format!(
+                    "{samples} samples × width {width} is more than {} buffered values ({} MiB)",
+                    super::MAX_BUFFER_VALUES,
+                    (super::MAX_BUFFER_VALUES * 8) >> 20
+                ),
+                "give a shorter buffer or fewer channels",
+            )),
+        }
+    }
+
+    /// A duration in seconds that a block turns into a number of samples at
+    /// period `dt`: finite, ≥ 0, and at most `max_samples` samples. Returns the
+    /// number of samples (rounded to the nearest; exact multiples are the caller's
+    /// business).
+    pub fn samples_of(
+        field: &str,
+        seconds: f64,
+        dt: f64,
+        max_samples: usize,
+    ) -> Result<usize, ParamError> {
+        non_negative(field, seconds)?;
+        let n = (seconds / dt).round();
+        if n.is_finite() && n <= max_samples as f64 {
+            Ok(n as usize)
+        } else {
+            Err(ParamError::new(
+                field,
+                format!(
+                    "{seconds} s is {n:e} samples at the block period {dt} s, more than {max_samples}"
+                ),
+                format!("give at most {} s", max_samples as f64 * dt),
+            ))
+        }
+    }
 }
+
+/// Largest width of a port (values per sample), and of the channel count of any
+/// block (`width`, `widths[i]`): 1024. Checked by every block's `build` and again
+/// by the graph compiler for every port of every block.
+pub const MAX_WIDTH: usize = 1024;
+
+/// Largest number of `f64` values one block may buffer (delay lines, repetitive
+/// memories, FIR taps): 2^24 = 16 777 216 values, 128 MiB.
+pub const MAX_BUFFER_VALUES: usize = 1 << 24;
 
 #[cfg(test)]
 mod tests {

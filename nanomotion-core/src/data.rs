@@ -224,6 +224,37 @@ impl Dataset {
 // Loading files
 // ---------------------------------------------------------------------------------
 
+/// Read a text data file through a reader bounded by [`MAX_FILE_BYTES`] (a
+/// device such as `/dev/zero`, or a huge file, is an error, not an endless read).
+pub fn read_text_capped_data(path: &std::path::Path) -> std::io::Result<String> {
+    crate::graph::read_text_capped(path, MAX_FILE_BYTES)
+}
+
+/// A measured data set of the shared folder (`shared/data/…` beside the
+/// workspace) that a test or example needs: `Some(path)` if it exists. If it does
+/// not, with the environment variable `CI` set this panics (a CI run must not pass
+/// a test that checked nothing); otherwise it prints `SKIPPED: <test>: <path> not
+/// found` straight to the terminal's stderr — not through the test harness's
+/// capture, so the skip is visible in a plain `cargo test` — and returns `None`.
+pub fn shared_data_or_skip(path: &std::path::Path, test: &str) -> Option<std::path::PathBuf> {
+    use std::io::Write as _;
+    if path.exists() {
+        return Some(path.to_path_buf());
+    }
+    assert!(
+        std::env::var_os("CI").is_none(),
+        "{test}: {} not found, and CI is set: the shared data must be beside the checkout",
+        path.display()
+    );
+    // `std::io::stderr()` directly: the harness captures `eprintln!`, not this.
+    let _ = writeln!(
+        std::io::stderr(),
+        "SKIPPED: {test}: {} not found (set up shared/data beside the workspace to run it)",
+        path.display()
+    );
+    None
+}
+
 /// Largest data file read (bytes): 512 MiB. Files are read through a bounded
 /// reader, so even an endless stream (`/dev/zero`) stops here.
 pub const MAX_FILE_BYTES: u64 = 512 * 1024 * 1024;
@@ -1332,16 +1363,7 @@ mod tests {
     fn boucwen() -> Option<std::path::PathBuf> {
         let p = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
             .join("../../shared/data/boucwen_benchmark");
-        if p.is_dir() {
-            return Some(p);
-        }
-        assert!(
-            std::env::var_os("CI").is_none(),
-            "{} not found, and CI is set: the shared data must be beside the checkout",
-            p.display()
-        );
-        eprintln!("SKIPPED: {} not found", p.display());
-        None
+        shared_data_or_skip(&p, "data::tests (Bou-Wen benchmark)")
     }
 
     #[test]

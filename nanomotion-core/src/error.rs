@@ -31,6 +31,9 @@ impl ParamError {
 }
 
 /// Everything that can go wrong between a YAML file and a running graph.
+///
+/// Connection `index` fields are 0-based positions in `connections`; messages
+/// count from 1 ("connection 1" is the first entry), as a reader of the file does.
 #[derive(Debug, Error)]
 pub enum GraphError {
     /// The YAML did not parse or did not match the graph schema (unknown field,
@@ -49,7 +52,7 @@ pub enum GraphError {
     #[error("duplicate block name `{name}`: block names must be unique (rename one of them)")]
     DuplicateName { name: String },
     /// A connection names a block that does not exist.
-    #[error("connection {index} (`{reference}`): unknown block `{block}`{hint}")]
+    #[error("connection {n} (`{reference}`): unknown block `{block}`{hint}", n = .index + 1)]
     UnknownBlock {
         index: usize,
         reference: String,
@@ -58,7 +61,8 @@ pub enum GraphError {
     },
     /// A connection names a port the block does not have.
     #[error(
-        "connection {index} (`{reference}`): block `{block}` has no {direction} port `{port}`; its {direction} ports are: {known}"
+        "connection {n} (`{reference}`): block `{block}` has no {direction} port `{port}`; its {direction} ports are: {known}",
+        n = .index + 1
     )]
     UnknownPort {
         index: usize,
@@ -69,11 +73,12 @@ pub enum GraphError {
         known: String,
     },
     /// A port reference is not of the form `block.port`.
-    #[error("connection {index}: `{reference}` is not a port reference; write it as `block.port`")]
+    #[error("connection {n}: `{reference}` is not a port reference; write it as `block.port`", n = .index + 1)]
     BadReference { index: usize, reference: String },
     /// The two ends of a connection have different widths.
     #[error(
-        "connection {index} (`{from}` -> `{to}`): width mismatch, `{from}` carries {from_width} values but `{to}` expects {to_width}"
+        "connection {n} (`{from}` -> `{to}`): width mismatch, `{from}` carries {from_width} values but `{to}` expects {to_width}",
+        n = .index + 1
     )]
     WidthMismatch {
         index: usize,
@@ -87,7 +92,9 @@ pub enum GraphError {
     Unconnected { block: String, port: String },
     /// An input port is fed twice.
     #[error(
-        "input `{to}` is connected twice (connections {first} and {second}); an input takes exactly one source, use a `sum` block to add signals"
+        "input `{to}` is connected twice (connections {a} and {b}); an input takes exactly one source, use a `sum` block to add signals",
+        a = .first + 1,
+        b = .second + 1
     )]
     DoubleConnection {
         to: String,
@@ -105,7 +112,8 @@ pub enum GraphError {
     },
     /// Connecting blocks of different rates while the graph asked for strict rates.
     #[error(
-        "connection {index} (`{from}` -> `{to}`): rates differ ({from_hz} Hz -> {to_hz} Hz) and `strict_rates: true` forbids implicit rate transitions; insert a `rate_transition` block or give both blocks the same rate"
+        "connection {n} (`{from}` -> `{to}`): rates differ ({from_hz} Hz -> {to_hz} Hz) and `strict_rates: true` forbids implicit rate transitions; insert a `rate_transition` block or give both blocks the same rate",
+        n = .index + 1
     )]
     RateMismatch {
         index: usize,
@@ -133,6 +141,25 @@ pub enum GraphError {
         reference: String,
         problem: String,
     },
+    /// A block produced a non-finite output (found by
+    /// [`Scheduler::check_finite`](crate::scheduler::Scheduler::check_finite)).
+    #[error(
+        "block `{block}` (type `{type_name}`) produced a non-finite output ({value} in `{block}.{port}`) at base tick {tick} (t = {t_s} s), the first in the run (fix: check its parameters and inputs; an unstable loop diverges, see its gains and sample rate)"
+    )]
+    NonFinite {
+        block: String,
+        type_name: String,
+        port: String,
+        value: f64,
+        tick: u64,
+        t_s: f64,
+    },
+    /// A non-finite value was seen but replaying the run from the start did not
+    /// produce it again.
+    #[error(
+        "a non-finite value appeared by base tick {tick} ({place}), but replaying the run from its initial state did not reproduce it (fix: reset the scheduler before running, and do not change blocks during a run)"
+    )]
+    NonFiniteNotReproduced { tick: u64, place: String },
     /// The file could not be read.
     #[error("cannot read `{path}`: {source}")]
     Io {

@@ -38,7 +38,8 @@ use std::fmt::Write as _;
 /// (its `type:` and parameters, flattened into the same YAML map).
 #[derive(Debug, Serialize, Deserialize)]
 pub struct BlockSpec {
-    /// Unique instance name (letters, digits, `_`, `-`; no `.`).
+    /// Unique instance name: ASCII letters, digits, `_`, `-` (no `.`, which separates
+    /// block and port, and no `:`, reserved for inserted blocks).
     pub name: String,
     /// Rate in Hz; must divide the base rate. Default: the base rate.
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -113,6 +114,11 @@ pub struct GraphSpec {
     /// Model outputs to compare with measured columns (needs data: `--data`).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub compare: Vec<CompareSpec>,
+    /// The folder relative file names in block parameters (`calibration_file`)
+    /// are resolved against: the graph file's folder when read with
+    /// [`GraphSpec::from_file`], else the working directory. Not part of the YAML.
+    #[serde(skip)]
+    pub base_dir: Option<std::path::PathBuf>,
 }
 
 /// What the loader did on its own initiative, for the user to see.
@@ -130,6 +136,24 @@ pub type Graph = Scheduler;
 /// Maximum number of base ticks a graph may ask for (keeps memory and time sane).
 pub const MAX_TICKS: f64 = 2.0e9;
 
+/// Lowest base rate and block rate (Hz): 1 mHz.
+pub const MIN_RATE_HZ: f64 = 1e-3;
+/// Highest base rate (Hz): 1 GHz.
+pub const MAX_RATE_HZ: f64 = 1e9;
+
+/// Most memory a built graph may hold, estimated at build (bytes): 4 GiB. The
+/// estimate adds the signal and input buffers, every log (samples × width × 8
+/// bytes, reserved for the whole run) and each block's
+/// [`Block::memory_bytes`]; a graph above it is refused with the breakdown.
+pub const MAX_GRAPH_BYTES: usize = 4 << 30;
+
+/// Longest `title`, in characters.
+pub const MAX_TITLE_CHARS: usize = 200;
+
+/// Prefix of the names of inserted rate transitions. It contains `:`, which user
+/// block names may not contain, so an inserted name can never be a user's name.
+pub const RATE_TRANSITION_PREFIX: &str = "rt:";
+
 impl GraphSpec {
     /// An empty graph at `base_rate_hz` running for `duration_s`, for building graphs
     /// from Rust.
@@ -145,7 +169,18 @@ impl GraphSpec {
             log: Vec::new(),
             score: Vec::new(),
             compare: Vec::new(),
+            base_dir: None,
         }
+    }
+
+    /// Score error signal `signal` (`block.port`), ignoring samples before
+    /// `from_s` seconds.
+    pub fn score(&mut self, signal: &str, from_s: f64) -> &mut Self {
+        self.score.push(ScoreSpec {
+            signal: signal.to_string(),
+            from_s,
+        });
+        self
     }
 
     /// Add a block running at the base rate.
@@ -185,17 +220,30 @@ impl GraphSpec {
 
     /// Parse a graph from YAML text; `origin` (file name) prefixes errors.
     pub fn from_yaml(text: &str, origin: &str) -> Result<Self, GraphError> {
-        crate::yaml::from_str::<GraphSpec>(text, origin).map_err(add_type_suggestion)
+        crate::yaml::from_str::<GraphSpec>(text, origin)
+            .map_err(add_type_suggestion)
+            .map_err(|e| locate_unknown_field(e, text))
     }
 
-    /// Read and parse a graph file.
+    /// Read and parse a graph file (at most [`MAX_GRAPH_FILE_BYTES`]). Relative
+    /// file names in block parameters will resolve against its folder.
     pub fn from_file(path: impl AsRef<std::path::Path>) -> Result<Self, GraphError> {
         let path = path.as_ref();
-        let text = std::fs::read_to_string(path).map_err(|source| GraphError::Io {
-            path: path.display().to_string(),
-            source,
-        })?;
-        Self::from_yaml(&text, &path.display().to_string())
+        let text =
+            read_text_capped(path, MAX_GRAPH_FILE_BYTES).map_err(|source| GraphError::Io {
+                path: path.display().to_string(),
+                source,
+            })?;
+        let mut spec = Self::from_yaml(&text, &path.display().to_string())?;
+        spec.base_dir = Some(
+            path.parent()
+                .filter(|p| !p.as_os_str().is_empty())
+                .map_or_else(
+                    || std::path::PathBuf::from("."),
+                    std::path::Path::to_path_buf,
+                ),
+        );
+        Ok(spec)
     }
 
     /// Validate the graph, build every block, resolve ports, rates and order, and
@@ -212,6 +260,30 @@ impl GraphSpec {
     ) -> Result<(Scheduler, BuildReport), GraphError> {
         compile(self, Some(data))
     }
+}
+
+/// Largest graph file [`GraphSpec::from_file`] reads: 64 MiB.
+pub const MAX_GRAPH_FILE_BYTES: u64 = 64 << 20;
+
+/// Read a UTF-8 text file of at most `max_bytes` bytes through a bounded reader
+/// (so `/dev/zero` or a huge file is an error, not an endless read).
+pub fn read_text_capped(path: &std::path::Path, max_bytes: u64) -> std::io::Result<String> {
+    use std::io::Read as _;
+    let file = std::fs::File::open(path)?;
+    let mut bytes = Vec::new();
+    file.take(max_bytes + 1).read_to_end(&mut bytes)?;
+    if bytes.len() as u64 > max_bytes {
+        return Err(std::io::Error::new(
+            std::io::ErrorKind::InvalidData,
+            format!("larger than {} MiB; is it the right file?", max_bytes >> 20),
+        ));
+    }
+    String::from_utf8(bytes).map_err(|e| {
+        std::io::Error::new(
+            std::io::ErrorKind::InvalidData,
+            format!("not UTF-8 text ({e})"),
+        )
+    })
 }
 
 /// Add "did you mean" to unknown-type errors.
@@ -242,6 +314,56 @@ fn add_type_suggestion(e: GraphError) -> GraphError {
     GraphError::Parse { origin, message }
 }
 
+/// Inside a block, the parser (typetag buffers the block's map) reports an
+/// unknown field at the block's first line and "at line" of its last field. Find
+/// the line that really holds the key and say so, with the text of that line.
+fn locate_unknown_field(e: GraphError, text: &str) -> GraphError {
+    let GraphError::Parse {
+        origin,
+        mut message,
+    } = e
+    else {
+        return e;
+    };
+    let Some(pos) = message.find("unknown field `") else {
+        return GraphError::Parse { origin, message };
+    };
+    let rest = &message[pos + "unknown field `".len()..];
+    let Some(end) = rest.find('`') else {
+        return GraphError::Parse { origin, message };
+    };
+    let field = rest[..end].to_string();
+    // The reported line: "line N column M" at the start of the message.
+    let first_line = message
+        .strip_prefix("line ")
+        .and_then(|r| r.split_whitespace().next())
+        .and_then(|n| n.parse::<usize>().ok())
+        .unwrap_or(1);
+    let is_key_on = |line: &str| {
+        line.match_indices(&format!("{field}:")).any(|(i, _)| {
+            i == 0
+                || line[..i]
+                    .chars()
+                    .next_back()
+                    .is_some_and(|c| c == ' ' || c == '{' || c == ',' || c == '-' || c == '\t')
+        })
+    };
+    if let Some((n, line)) = text
+        .lines()
+        .enumerate()
+        .skip(first_line.saturating_sub(1))
+        .find(|(_, l)| is_key_on(l))
+        && (n + 1 != first_line || !message.contains(&format!("line {} column", n + 1)))
+    {
+        message = format!(
+            "{message}\nnote: the unknown field `{field}` is on line {}: `{}`",
+            n + 1,
+            line.trim()
+        );
+    }
+    GraphError::Parse { origin, message }
+}
+
 /// Levenshtein distance (for suggestions).
 fn edit_distance(a: &str, b: &str) -> usize {
     let b: Vec<char> = b.chars().collect();
@@ -255,6 +377,11 @@ fn edit_distance(a: &str, b: &str) -> usize {
         prev = cur;
     }
     prev[b.len()]
+}
+
+/// Whether `candidate` is near enough to `word` to suggest it ("did you mean").
+pub fn is_near(word: &str, candidate: &str) -> bool {
+    edit_distance(word, candidate) <= (candidate.len().max(word.len()) / 2).max(2)
 }
 
 /// The candidate nearest to `word`, if it is reasonably near.
@@ -292,11 +419,22 @@ fn setting(field: &str, problem: impl Into<String>, fix: impl Into<String>) -> G
     }
 }
 
-fn valid_name(name: &str) -> bool {
+/// The documented block-name rule: non-empty, ASCII letters, digits, `_` and `-`
+/// only (`.` separates block and port; `:` is reserved for inserted blocks such as
+/// rate transitions, so they can never collide with a user's block).
+pub fn valid_block_name(name: &str) -> bool {
     !name.is_empty()
         && name
             .chars()
-            .all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-' || c == ':')
+            .all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-')
+}
+
+fn bytes_text(b: f64) -> String {
+    if b >= (1u64 << 30) as f64 {
+        format!("{:.1} GiB", b / (1u64 << 30) as f64)
+    } else {
+        format!("{:.1} MiB", b / (1u64 << 20) as f64)
+    }
 }
 
 fn compile(
@@ -314,13 +452,30 @@ fn compile(
         log,
         score,
         compare,
+        base_dir,
     } = spec;
-    if !(base_rate_hz.is_finite() && base_rate_hz > 0.0) {
+    if !(MIN_RATE_HZ..=MAX_RATE_HZ).contains(&base_rate_hz) {
         return Err(setting(
             "base_rate_hz",
-            format!("is {base_rate_hz}"),
+            format!("is {base_rate_hz}, outside [{MIN_RATE_HZ}, {MAX_RATE_HZ:e}] Hz"),
             "give a positive rate in Hz, e.g. 4000",
         ));
+    }
+    if let Some(t) = &title {
+        if let Some(c) = t.chars().find(|c| c.is_control()) {
+            return Err(setting(
+                "title",
+                format!("contains the control character U+{:04X}", c as u32),
+                "remove it (titles go into SVG and JSON files; write plain text on one line)",
+            ));
+        }
+        if t.chars().count() > MAX_TITLE_CHARS {
+            return Err(setting(
+                "title",
+                format!("has {} characters", t.chars().count()),
+                format!("shorten it to at most {MAX_TITLE_CHARS} characters"),
+            ));
+        }
     }
     if !(duration_s.is_finite() && duration_s >= 0.0) {
         return Err(setting(
@@ -364,12 +519,13 @@ fn compile(
 
     // 1. Names, rates, build.
     let mut pending: Vec<Pending> = Vec::with_capacity(blocks.len());
+    let mut block_bytes = 0usize;
     for b in blocks {
-        if !valid_name(&b.name) {
+        if !valid_block_name(&b.name) {
             return Err(setting(
                 "blocks.name",
-                format!("`{}` is not a valid block name", b.name),
-                "use letters, digits, `_` and `-` only (no `.`, which separates block and port)",
+                format!("`{}` is not a valid block name", b.name.escape_debug()),
+                "use ASCII letters, digits, `_` and `-` only (`.` separates block and port; `:` is reserved for blocks the loader inserts, such as rate transitions)",
             ));
         }
         if pending.iter().any(|p| p.name == b.name) {
@@ -378,8 +534,7 @@ fn compile(
         let rate_hz = b.rate_hz.unwrap_or(base_rate_hz);
         let ratio = base_rate_hz / rate_hz;
         let period = ratio.round();
-        if !(rate_hz.is_finite() && rate_hz > 0.0)
-            || period < 1.0
+        if !(rate_hz.is_finite() && rate_hz >= MIN_RATE_HZ && (1.0..=MAX_TICKS).contains(&period))
             || (ratio - period).abs() > 1e-9 * ratio
         {
             return Err(GraphError::BadRate {
@@ -393,7 +548,8 @@ fn compile(
         let type_name = b.block.typetag_name().to_string();
         let mut block = b.block;
         let ctx = BuildContext::new(b.name.clone(), dt, derive_seed(seed, &b.name))
-            .with_data(data.clone());
+            .with_data(data.clone())
+            .with_base_dir(base_dir.clone());
         block.build(&ctx).map_err(|source| GraphError::Param {
             block: b.name.clone(),
             type_name: type_name.clone(),
@@ -401,6 +557,39 @@ fn compile(
         })?;
         let inputs = block.inputs();
         let outputs = block.outputs();
+        // Every port of every block (plugins too) within the width bound.
+        for (dir, ports) in [("input", &inputs), ("output", &outputs)] {
+            for port in ports.iter() {
+                if port.width > crate::block::MAX_WIDTH {
+                    return Err(GraphError::Param {
+                        block: b.name.clone(),
+                        type_name: type_name.clone(),
+                        source: crate::ParamError::new(
+                            format!("{dir} port `{}`", port.name),
+                            format!(
+                                "is {} values wide, more than {}",
+                                port.width,
+                                crate::block::MAX_WIDTH
+                            ),
+                            "give the block fewer channels",
+                        ),
+                    });
+                }
+            }
+        }
+        block_bytes = block_bytes.saturating_add(block.memory_bytes());
+        if block_bytes > MAX_GRAPH_BYTES {
+            return Err(setting(
+                "blocks",
+                format!(
+                    "the blocks up to `{}` hold {} of buffers, more than the {} a graph may use",
+                    b.name,
+                    bytes_text(block_bytes as f64),
+                    bytes_text(MAX_GRAPH_BYTES as f64)
+                ),
+                "shorten delays and repetitive memories, or use fewer channels",
+            ));
+        }
         let feedthrough = block.direct_feedthrough();
         pending.push(Pending {
             sources: vec![None; inputs.len()],
@@ -456,11 +645,18 @@ fn compile(
             } else {
                 "decimation (sampling, no anti-alias filter)"
             };
-            let name = format!("rt:{}:{}", c.from.replace('.', ":"), pending[db].name);
-            report.rate_transitions.push(format!(
+            // `:` cannot appear in a user's name, so this cannot collide with one.
+            let name = format!(
+                "{RATE_TRANSITION_PREFIX}{}:{}",
+                c.from.replace('.', ":"),
+                pending[db].name
+            );
+            let note = format!(
                 "`{}` -> `{}`: {kind} {from_hz} Hz -> {to_hz} Hz, inserted as block `{name}`",
                 c.from, c.to
-            ));
+            );
+            tracing::info!(target: "nanomotion_core::graph", "rate transition {note}");
+            report.rate_transitions.push(note);
             let idx = match pending.iter().position(|p| p.name == name) {
                 Some(i) => i,
                 None => {
@@ -627,9 +823,16 @@ fn compile(
             Ok((bi, offs[pi], outs[pi].width))
         };
     let mut logs: Vec<LogChannel> = Vec::new();
+    // Memory estimate, checked before each log buffer is reserved.
+    let mut graph_bytes = (signal_len + input_len)
+        .saturating_mul(8)
+        .saturating_add(block_bytes);
+    let mut log_bytes = 0usize;
     let add_log = |reference: &str,
                    section: &'static str,
-                   logs: &mut Vec<LogChannel>|
+                   logs: &mut Vec<LogChannel>,
+                   graph_bytes: &mut usize,
+                   log_bytes: &mut usize|
      -> Result<usize, GraphError> {
         if let Some(i) = logs.iter().position(|l| l.name == reference) {
             return Ok(i);
@@ -637,6 +840,21 @@ fn compile(
         let (bi, offset, width) = lookup(reference, section)?;
         let period = nodes[bi].period;
         let samples = n_ticks.div_ceil(period) as usize;
+        let bytes = samples.saturating_mul(width).saturating_mul(8);
+        *graph_bytes = graph_bytes.saturating_add(bytes);
+        *log_bytes = log_bytes.saturating_add(bytes);
+        if *graph_bytes > MAX_GRAPH_BYTES {
+            return Err(setting(
+                "log",
+                format!(
+                    "recording `{reference}` ({samples} samples × {width} values) brings the graph to about {} ({} of it logs, which are kept in memory for the whole run), more than the {} limit",
+                    bytes_text(*graph_bytes as f64),
+                    bytes_text(*log_bytes as f64),
+                    bytes_text(MAX_GRAPH_BYTES as f64)
+                ),
+                "log and score fewer signals, shorten duration_s, or give the logged blocks a lower rate_hz",
+            ));
+        }
         logs.push(LogChannel {
             name: reference.to_string(),
             countdown: 0,
@@ -649,7 +867,7 @@ fn compile(
         Ok(logs.len() - 1)
     };
     for l in &log {
-        add_log(l, "log", &mut logs)?;
+        add_log(l, "log", &mut logs, &mut graph_bytes, &mut log_bytes)?;
     }
     let mut scores = Vec::new();
     for s in &score {
@@ -663,7 +881,29 @@ fn compile(
                 ),
             });
         }
-        let channel = add_log(&s.signal, "score", &mut logs)?;
+        let channel = add_log(
+            &s.signal,
+            "score",
+            &mut logs,
+            &mut graph_bytes,
+            &mut log_bytes,
+        )?;
+        let l = &logs[channel];
+        let samples = n_ticks.div_ceil(l.period);
+        let first = (s.from_s * l.rate_hz - 1e-9).ceil().max(0.0);
+        if n_ticks > 0 && first >= samples as f64 {
+            return Err(GraphError::BadSignal {
+                section: "score",
+                reference: s.signal.clone(),
+                problem: format!(
+                    "from_s is {} s but the run records only {} s of it ({samples} samples at {} Hz), so nothing would be scored; give from_s below {} s or run longer",
+                    s.from_s,
+                    n_ticks as f64 / base_rate_hz,
+                    l.rate_hz,
+                    (samples as f64 - 1.0).max(0.0) / l.rate_hz
+                ),
+            });
+        }
         scores.push(ScoreChannel {
             channel,
             from_s: s.from_s,
@@ -672,10 +912,25 @@ fn compile(
 
     let mut compares = Vec::new();
     for c in &compare {
-        let channel = add_log(&c.signal, "compare", &mut logs)?;
+        let channel = add_log(
+            &c.signal,
+            "compare",
+            &mut logs,
+            &mut graph_bytes,
+            &mut log_bytes,
+        )?;
         compares.push((c.signal.clone(), c.column.clone(), channel));
     }
 
+    tracing::debug!(
+        target: "nanomotion_core::graph",
+        blocks = block_list.len(),
+        ticks = n_ticks,
+        memory_bytes = graph_bytes,
+        log_bytes,
+        "graph built; execution order: {}",
+        report.order.join(", ")
+    );
     let sched = Scheduler::new_internal(crate::scheduler::Parts {
         title,
         base_rate_hz,
@@ -716,9 +971,26 @@ fn resolve(
             reference: reference.to_string(),
         })?;
     let Some(bi) = pending.iter().position(|p| p.name == b) else {
-        let hint = nearest(b, pending.iter().map(|p| p.name.as_str()))
+        let mut hint = nearest(b, pending.iter().map(|p| p.name.as_str()))
             .map(|s| format!("; did you mean `{s}`?"))
             .unwrap_or_default();
+        let names: Vec<&str> = pending
+            .iter()
+            .map(|p| p.name.as_str())
+            .filter(|n| !n.contains(':'))
+            .collect();
+        let shown = names
+            .iter()
+            .take(20)
+            .copied()
+            .collect::<Vec<_>>()
+            .join(", ");
+        let more = if names.len() > 20 {
+            format!(", ... ({} in all)", names.len())
+        } else {
+            String::new()
+        };
+        let _ = write!(hint, "; known blocks: {shown}{more}");
         return Err(GraphError::UnknownBlock {
             index,
             reference: reference.to_string(),

@@ -189,8 +189,12 @@ pub struct Scheduler {
     rate_transitions: Vec<String>,
     /// Indices (execution order) of blocks without feed-through.
     updaters: Vec<usize>,
-    /// Set when a block produced a non-finite output.
-    non_finite: Option<(usize, u64)>,
+    /// The first non-finite output, once located: (execution index, output
+    /// offset, base tick, value).
+    non_finite: Option<(usize, usize, u64, f64)>,
+    /// Base ticks done when a chunk check of [`Scheduler::run`] first saw a
+    /// non-finite output (not yet located).
+    seen_non_finite: Option<u64>,
 }
 
 impl std::fmt::Debug for Scheduler {
@@ -232,6 +236,7 @@ impl Scheduler {
             rate_transitions: p.rate_transitions,
             updaters,
             non_finite: None,
+            seen_non_finite: None,
         }
     }
 
@@ -329,6 +334,11 @@ impl Scheduler {
             let n = chunk.min(remaining - done);
             self.step_n(n);
             done += n;
+            // Chunk check (about 100 per run, O(signals) each): remembers that a
+            // non-finite value exists, for `check_finite` to locate exactly.
+            if self.seen_non_finite.is_none() && self.first_non_finite_output().is_some() {
+                self.seen_non_finite = Some(self.k);
+            }
             progress(self.k as f64 / self.n_ticks.max(1) as f64);
         }
         self.result()
@@ -385,29 +395,113 @@ impl Scheduler {
         }
     }
 
-    /// Check that every output is finite; names the first block that produced a
-    /// non-finite value. Cheap enough to call after a run or every few ticks, but
-    /// not done inside [`Scheduler::tick`].
+    /// Check that the run so far produced only finite values; otherwise name the
+    /// block, port and base tick of the *first* non-finite output.
+    ///
+    /// How (issue 13, item 8): nothing is checked inside [`Scheduler::tick`], so the
+    /// real-time path costs what the bench measures. Instead non-finite values are
+    /// *detected* cheaply — [`Scheduler::run`] checks every output after each of its
+    /// ~100 chunks, and this method checks the current outputs and scans every
+    /// log once (a transient `inf` that recovers still sits in the log and would
+    /// reach the CSV) — and then *located* exactly by replaying from the initial
+    /// state ([`Scheduler::reset`] replays bit for bit) with every block's outputs
+    /// checked after every tick, up to the tick where the value was seen. In
+    /// execution order the producer comes before every block it feeds, so the first
+    /// non-finite output of the first bad tick is its producer's. A failed check
+    /// thus costs at most one more run; a passing one costs a scan of the logs.
+    /// Not detected: a non-finite value in an unlogged signal that recovers before
+    /// the next chunk boundary and leaves no trace in any logged or final output.
+    ///
+    /// After an error the scheduler stands at the located tick (its logs hold the
+    /// replay up to there); call [`Scheduler::reset`] to start over.
     pub fn check_finite(&mut self) -> Result<(), GraphError> {
         if self.non_finite.is_none() {
-            for (i, node) in self.nodes.iter().enumerate() {
-                if self.signals[node.outputs.clone()]
-                    .iter()
-                    .any(|v| !v.is_finite())
-                {
-                    self.non_finite = Some((i, self.k));
-                    break;
-                }
+            let seen = self
+                .seen_non_finite
+                .or_else(|| self.first_non_finite_output().map(|_| self.k))
+                .or_else(|| self.first_non_finite_log_tick());
+            if let Some(seen) = seen {
+                tracing::debug!(
+                    target: "nanomotion_core::scheduler",
+                    seen,
+                    "non-finite value detected; replaying to locate it"
+                );
+                self.locate_non_finite(seen)?;
             }
         }
         match self.non_finite {
             None => Ok(()),
-            Some((i, k)) => Err(GraphError::Setting {
-                field: format!("block `{}`", self.names[i]),
-                problem: format!("produced a non-finite output by base tick {k}"),
-                fix: "check its parameters and inputs (an unstable loop diverges; see its gains and sample rate)".into(),
-            }),
+            Some((i, offset, tick, value)) => {
+                let (_, outs, offs) = &self.ports[i];
+                let port = offs
+                    .iter()
+                    .zip(outs)
+                    .find(|(o, p)| (**o..**o + p.width).contains(&offset))
+                    .map(|(o, p)| {
+                        if p.width == 1 {
+                            p.name.clone()
+                        } else {
+                            format!("{}[{}]", p.name, offset - o)
+                        }
+                    })
+                    .unwrap_or_default();
+                Err(GraphError::NonFinite {
+                    block: self.names[i].clone(),
+                    type_name: self.type_names[i].clone(),
+                    port,
+                    value,
+                    tick,
+                    t_s: tick as f64 / self.base_rate_hz,
+                })
+            }
         }
+    }
+
+    /// The first block (execution order) with a non-finite output now:
+    /// (execution index, offset in the signal buffer).
+    fn first_non_finite_output(&self) -> Option<(usize, usize)> {
+        self.nodes.iter().enumerate().find_map(|(i, node)| {
+            let r = node.outputs.clone();
+            self.signals[r.clone()]
+                .iter()
+                .position(|v| !v.is_finite())
+                .map(|j| (i, r.start + j))
+        })
+    }
+
+    /// Ticks done when the earliest non-finite logged sample was recorded.
+    fn first_non_finite_log_tick(&self) -> Option<u64> {
+        self.logs
+            .iter()
+            .filter_map(|l| {
+                let i = l.data.iter().position(|v| !v.is_finite())? / l.width.max(1);
+                Some(i as u64 * l.period + 1)
+            })
+            .min()
+    }
+
+    /// Replay from the initial state until the first non-finite output, at most
+    /// `seen` ticks (where it was detected) — or the ticks done so far.
+    fn locate_non_finite(&mut self, seen: u64) -> Result<(), GraphError> {
+        let end = seen.max(1).min(self.k.max(1));
+        self.reset()?;
+        while self.k < end {
+            self.tick();
+            if let Some((i, offset)) = self.first_non_finite_output() {
+                self.non_finite = Some((i, offset, self.k - 1, self.signals[offset]));
+                tracing::warn!(
+                    target: "nanomotion_core::scheduler",
+                    block = %self.names[i],
+                    tick = self.k - 1,
+                    "first non-finite output located by replay"
+                );
+                return Ok(());
+            }
+        }
+        Err(GraphError::NonFiniteNotReproduced {
+            tick: seen,
+            place: "during the run".into(),
+        })
     }
 
     /// Restart from the initial state: every block is built again with the same
@@ -434,6 +528,7 @@ impl Scheduler {
         }
         self.k = 0;
         self.non_finite = None;
+        self.seen_non_finite = None;
         Ok(())
     }
 

@@ -16,8 +16,56 @@ pub fn from_str<T: DeserializeOwned>(text: &str, origin: &str) -> Result<T, Grap
     );
     serde_saphyr::from_str_with_options(text, opts).map_err(|e| GraphError::Parse {
         origin: origin.to_string(),
-        message: e.to_string(),
+        message: plain_message(&e.to_string(), origin),
     })
+}
+
+/// The parser's message in the user's terms: the snippet names the file instead
+/// of `<input>`, no second `error:` after the file name, and the parser's
+/// internals (its option and function names, its budget's `Debug` output) are
+/// replaced by what they mean for a graph file.
+pub(crate) fn plain_message(message: &str, origin: &str) -> String {
+    let mut m = message
+        .strip_prefix("error: ")
+        .unwrap_or(message)
+        .replace("--> <input>", &format!("--> {origin}"))
+        .replace(
+            ", set DuplicateKeyPolicy in Options if acceptable",
+            " (each key may appear once in a map: remove or merge the repeated one)",
+        )
+        .replace(
+            "use from_str_multiple or from_str_multiple_with_options",
+            "a graph file holds one YAML document: remove the `---` separators and what follows",
+        );
+    for (debug, plain) in [
+        ("Nodes", "values"),
+        ("Events", "parser events"),
+        ("Aliases", "alias uses (`*name`)"),
+        ("Anchors", "anchors (`&name`)"),
+        ("Depth", "levels of nesting"),
+        ("Documents", "documents"),
+        ("ScalarBytes", "bytes of text in values"),
+        ("MergeKeys", "merge keys (`<<`)"),
+    ] {
+        let field = debug.to_lowercase();
+        let field = match debug {
+            "ScalarBytes" => "total_scalar_bytes".to_string(),
+            "MergeKeys" => "merge_keys".to_string(),
+            _ => field,
+        };
+        let prefix = format!("budget breached: {debug} {{ {field}: ");
+        while let Some(start) = m.find(&prefix) {
+            let rest = &m[start + prefix.len()..];
+            let Some(end) = rest.find(" }") else { break };
+            let count = rest[..end].to_string();
+            m = format!(
+                "{}the file is too large or too deeply nested for a graph ({count} {plain}; is it the right file?){}",
+                &m[..start],
+                &rest[end + 2..]
+            );
+        }
+    }
+    m
 }
 
 /// Serialise `value` as YAML.

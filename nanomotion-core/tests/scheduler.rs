@@ -459,6 +459,14 @@ mod mutated_graphs {
             "3.5",
             "2",
             "1000000000000",
+            // Sizes: huge, at the edge of usize, negative, fractional.
+            "18446744073709551615",
+            "4294967296",
+            "16777217",
+            "1025",
+            "-3",
+            "0.5",
+            "1e12",
         ])
         .prop_map(String::from);
         prop_oneof![
@@ -535,6 +543,76 @@ mod mutated_graphs {
                 }
                 out
             }
+        }
+    }
+
+    /// A graph whose numbers are mostly sizes (delay lengths, widths, orders,
+    /// port counts), for the size mutations.
+    const SIZED: &str = r#"
+base_rate_hz: 1000
+duration_s: 0.05
+blocks:
+  - name: src
+    type: constant
+    value: 1
+    width: 2
+  - name: d
+    type: delay
+    d: 3
+    width: 2
+  - name: lp
+    type: low_pass
+    cutoff_hz: 50
+    order: 4
+    width: 2
+  - name: m
+    type: mux
+    widths: [2, 2]
+  - name: p
+    type: product
+    factors: 2
+    width: 4
+  - name: n
+    type: white_noise
+    std: 1
+    width: 4
+connections:
+  - { from: src.y, to: d.u }
+  - { from: d.y, to: lp.u }
+  - { from: lp.y, to: m.in0 }
+  - { from: src.y, to: m.in1 }
+  - { from: m.y, to: p.in0 }
+  - { from: n.y, to: p.in1 }
+log: [p.y]
+"#;
+
+    proptest! {
+        #![proptest_config(ProptestConfig { cases: 300, .. ProptestConfig::default() })]
+        /// Sizes mutated to huge, negative and fractional values: every outcome
+        /// is a value (never an abort), and building allocates a bounded amount.
+        #[test]
+        fn mutated_sizes_never_abort_and_memory_is_bounded(
+            muts in prop::collection::vec(
+                (any::<usize>(), prop::sample::select(vec![
+                    "18446744073709551615", "1000000000000", "4294967296", "16777217",
+                    "1025", "1024", "-3", "0.5", "2.5", "1e12", "-1e12", "0",
+                ])),
+                1..4,
+            )
+        ) {
+            let mut text = SIZED.to_string();
+            for (i, n) in &muts {
+                text = apply(&text, &Mutation::ReplaceNumber(*i, n.to_string()));
+            }
+            let info = allocation_counter::measure(|| {
+                if let Ok(spec) = GraphSpec::from_yaml(&text, "sized.yaml")
+                    && let Ok((mut s, _)) = spec.build()
+                {
+                    s.step_n(s.ticks_total().min(20));
+                    let _ = s.check_finite();
+                }
+            });
+            prop_assert!(info.bytes_max < 1 << 30, "{} bytes for\n{text}", info.bytes_max);
         }
     }
 

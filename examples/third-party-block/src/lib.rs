@@ -67,7 +67,8 @@ impl Block for MovingAverage {
         vec![Port::new("y", 1)]
     }
     fn build(&mut self, _ctx: &BuildContext) -> Result<(), ParamError> {
-        check::at_least_one("window", self.window)?;
+        // A size that allocates: bounded before the allocation, like every block's.
+        check::buffer("window", self.window, 1, 1)?;
         self.ring = vec![0.0; self.window];
         self.head = 0;
         self.sum = 0.0;
@@ -75,6 +76,9 @@ impl Block for MovingAverage {
     }
     fn output(&mut self, _t: Tick, u: &[f64], y: &mut [f64]) {
         y[0] = self.push(u[0]);
+    }
+    fn memory_bytes(&self) -> usize {
+        self.ring.len() * std::mem::size_of::<f64>()
     }
     fn role(&self) -> Role {
         Role::Math

@@ -395,26 +395,29 @@ crate::submit_block_doc! {
 #[serde(deny_unknown_fields)]
 pub struct Pi {
     /// Gain k_p (unit of u per unit of e; for f_α in Hz per m of error).
-    pub kp: f64,
+    kp: f64,
     /// Integrator zero f_i (Hz), ≥ 0 (0 gives a P controller).
-    pub zero_hz: f64,
+    zero_hz: f64,
     /// `tustin` (default) or `backward_euler`.
     #[serde(default)]
-    pub discretisation: PidDiscretisation,
+    discretisation: PidDiscretisation,
     /// Lower output limit (unit of u; none by default).
     #[serde(default)]
-    pub output_min: Option<f64>,
+    output_min: Option<f64>,
     /// Upper output limit (unit of u; none by default).
     #[serde(default)]
-    pub output_max: Option<f64>,
+    output_max: Option<f64>,
     /// `clamping` (default), `back_calculation` or `none`.
     #[serde(default)]
-    pub anti_windup: AntiWindup,
+    anti_windup: AntiWindup,
     /// Tracking time T_t of back-calculation (s, default T_i = 1/(2π f_i)).
     #[serde(default)]
-    pub tracking_time_s: Option<f64>,
+    tracking_time_s: Option<f64>,
     #[serde(skip)]
     pid: Pid,
+    /// The period the controller was last prepared for (s).
+    #[serde(skip)]
+    dt: f64,
 }
 
 impl Pi {
@@ -429,14 +432,71 @@ impl Pi {
             anti_windup: AntiWindup::Clamping,
             tracking_time_s: None,
             pid: Pid::default(),
+            dt,
         };
         p.prepare(dt)?;
         Ok(p)
     }
 
+    /// The same controller with output limits `[output_min, output_max]` and an
+    /// anti-windup scheme, re-prepared (the fields are private so that a limit
+    /// can never be set without taking effect).
+    pub fn with_limits(
+        mut self,
+        output_min: f64,
+        output_max: f64,
+        anti_windup: AntiWindup,
+    ) -> Result<Self, ParamError> {
+        self.output_min = Some(output_min);
+        self.output_max = Some(output_max);
+        self.anti_windup = anti_windup;
+        self.prepare(self.dt)?;
+        Ok(self)
+    }
+
+    /// The same controller with another discretisation, re-prepared.
+    pub fn with_discretisation(mut self, d: PidDiscretisation) -> Result<Self, ParamError> {
+        self.discretisation = d;
+        self.prepare(self.dt)?;
+        Ok(self)
+    }
+
+    /// The same controller with back-calculation tracking time `t_s` (s),
+    /// re-prepared.
+    pub fn with_tracking_time(mut self, t_s: f64) -> Result<Self, ParamError> {
+        self.tracking_time_s = Some(t_s);
+        self.prepare(self.dt)?;
+        Ok(self)
+    }
+
+    /// Gain k_p.
+    pub fn kp(&self) -> f64 {
+        self.kp
+    }
+    /// Integrator zero f_i (Hz).
+    pub fn zero_hz(&self) -> f64 {
+        self.zero_hz
+    }
+    /// Output limits (lower, upper), if set.
+    pub fn output_limits(&self) -> (Option<f64>, Option<f64>) {
+        (self.output_min, self.output_max)
+    }
+
     fn prepare(&mut self, dt: f64) -> Result<(), ParamError> {
+        self.dt = dt;
         check::finite("kp", self.kp)?;
         check::non_negative("zero_hz", self.zero_hz)?;
+        let ki = self.kp * TAU * self.zero_hz;
+        if !ki.is_finite() {
+            return Err(ParamError::new(
+                "kp",
+                format!(
+                    "kp = {} with zero_hz = {} gives an integral gain kp·2π·zero_hz = {ki}, not a finite number",
+                    self.kp, self.zero_hz
+                ),
+                "give a smaller kp or zero_hz",
+            ));
+        }
         self.pid = Pid {
             kp: self.kp,
             ki: self.kp * TAU * self.zero_hz,

@@ -315,6 +315,16 @@ impl TransferFunctionBlock {
     }
 }
 
+/// Highest order of a `transfer_function` (coefficients per polynomial: 65). Its
+/// roots are found by a dense eigenvalue problem at build; higher orders are
+/// numerically meaningless as polynomials (write them as `state_space` or
+/// cascades).
+pub const MAX_TF_ORDER: usize = 64;
+
+/// Most states of a `state_space` block: 256 (its stepper is a dense
+/// matrix–vector product per tick, and discretisation a dense exponential).
+pub const MAX_SS_STATES: usize = 256;
+
 #[typetag::serde(name = "transfer_function")]
 impl Block for TransferFunctionBlock {
     siso_ports!();
@@ -333,7 +343,9 @@ impl Block for TransferFunctionBlock {
     }
 
     fn build(&mut self, ctx: &BuildContext) -> Result<(), ParamError> {
-        check::at_least_one("width", self.width)?;
+        check::width("width", self.width)?;
+        check::size("num (coefficients)", self.num.len(), 0, MAX_TF_ORDER + 1)?;
+        check::size("den (coefficients)", self.den.len(), 0, MAX_TF_ORDER + 1)?;
         check::all_finite("num", &self.num)?;
         check::all_finite("den", &self.den)?;
         if self.den.iter().all(|&v| v == 0.0) {
@@ -478,6 +490,9 @@ impl Block for StateSpaceBlock {
 
     fn build(&mut self, ctx: &BuildContext) -> Result<(), ParamError> {
         let (n, m, p) = self.dims();
+        check::size("a (states)", n, 0, MAX_SS_STATES)?;
+        check::width("b (inputs)", m.max(1))?;
+        check::width("c (outputs)", p.max(1))?;
         if m == 0 || p == 0 {
             return Err(ParamError::new(
                 if n > 0 { "b" } else { "d" },
@@ -567,14 +582,18 @@ impl LowPass {
     }
 }
 
+/// Highest `low_pass` order: 16. Butterworth designs above that are numerically
+/// poor and slow to build, and no loop in the thesis needs more than 4.
+pub const MAX_LOW_PASS_ORDER: usize = 16;
+
 #[typetag::serde(name = "low_pass")]
 impl Block for LowPass {
     siso_ports!();
     core_steps!();
 
     fn build(&mut self, ctx: &BuildContext) -> Result<(), ParamError> {
-        check::at_least_one("width", self.width)?;
-        check::at_least_one("order", self.order)?;
+        check::width("width", self.width)?;
+        check::size("order", self.order, 1, MAX_LOW_PASS_ORDER)?;
         check_below_nyquist("cutoff_hz", self.cutoff_hz, ctx.dt)?;
         let sos = lti::butter_lowpass(self.order, self.cutoff_hz, ctx.dt)
             .map_err(|e| lti_to_param("cutoff_hz", e))?;
@@ -592,7 +611,7 @@ crate::submit_block_doc! {
         summary: "Butterworth low-pass filter (bilinear, pre-warped, unity DC gain), per channel",
         params: &[
             ParamDoc { name: "cutoff_hz", doc: "-3 dB frequency (Hz)", default: None },
-            ParamDoc { name: "order", doc: "filter order", default: Some("2") },
+            ParamDoc { name: "order", doc: "filter order, 1 ≤ order ≤ 16", default: Some("2") },
             ParamDoc { name: "width", doc: "number of independent channels", default: Some("1") },
         ],
         ports: "u[width] -> y[width]",
@@ -660,7 +679,7 @@ impl Block for Notch {
     core_steps!();
 
     fn build(&mut self, ctx: &BuildContext) -> Result<(), ParamError> {
-        check::at_least_one("width", self.width)?;
+        check::width("width", self.width)?;
         check_below_nyquist("centre_hz", self.centre_hz, ctx.dt)?;
         check::positive("damping", self.damping)?;
         check::non_negative("depth", self.depth)?;
@@ -772,7 +791,7 @@ impl Block for LeadLag {
     }
 
     fn build(&mut self, ctx: &BuildContext) -> Result<(), ParamError> {
-        check::at_least_one("width", self.width)?;
+        check::width("width", self.width)?;
         check::positive("zero_hz", self.zero_hz)?;
         check::positive("pole_hz", self.pole_hz)?;
         check::finite("gain", self.gain)?;
@@ -845,6 +864,9 @@ impl Delay {
     }
 }
 
+/// Largest `d · width` for which a `delay` block reports a (dense) LTI model.
+pub const MAX_DENSE_DELAY_STATES: usize = 512;
+
 #[typetag::serde(name = "delay")]
 impl Block for Delay {
     siso_ports!();
@@ -853,8 +875,13 @@ impl Block for Delay {
         self.d == 0
     }
 
+    fn memory_bytes(&self) -> usize {
+        self.buf.len() * std::mem::size_of::<f64>()
+    }
+
     fn build(&mut self, ctx: &BuildContext) -> Result<(), ParamError> {
-        check::at_least_one("width", self.width)?;
+        check::width("width", self.width)?;
+        check::buffer("d", self.d, 0, self.width)?;
         self.buf = vec![0.0; self.d * self.width];
         self.head = 0;
         self.dt = ctx.dt;
@@ -882,8 +909,11 @@ impl Block for Delay {
         }
     }
 
+    /// The dense shift-register model, for delays of at most
+    /// [`MAX_DENSE_DELAY_STATES`] states in all (a longer delay has no LTI model
+    /// here: its dense matrices would be quadratic in `d`).
     fn lti(&self) -> Option<StateSpace> {
-        if self.dt <= 0.0 {
+        if self.dt <= 0.0 || self.d.saturating_mul(self.width) > MAX_DENSE_DELAY_STATES {
             return None;
         }
         lti::append(&vec![lti::delay(self.d, self.dt); self.width]).ok()
@@ -896,7 +926,7 @@ crate::submit_block_doc! {
         role: Role::Math,
         summary: "pure delay z^-d of d samples per channel (no feed-through for d ≥ 1)",
         params: &[
-            ParamDoc { name: "d", doc: "delay (samples)", default: None },
+            ParamDoc { name: "d", doc: "delay (samples), d · width ≤ 2^24", default: None },
             ParamDoc { name: "width", doc: "number of independent channels", default: Some("1") },
         ],
         ports: "u[width] -> y[width]",

@@ -101,7 +101,7 @@ impl Block for Gain {
     }
     fn build(&mut self, ctx: &BuildContext) -> Result<(), ParamError> {
         check::finite("k", self.k)?;
-        check::at_least_one("width", self.width)?;
+        check::width("width", self.width)?;
         self.dt = ctx.dt;
         Ok(())
     }
@@ -166,7 +166,8 @@ impl Sum {
         Ok(s)
     }
     fn parse(&mut self) -> Result<(), ParamError> {
-        check::at_least_one("width", self.width)?;
+        check::width("width", self.width)?;
+        check::size("signs", self.signs.chars().count(), 0, MAX_PORTS)?;
         let mut gains = Vec::with_capacity(self.signs.len());
         for (i, c) in self.signs.chars().enumerate() {
             gains.push(match c {
@@ -290,8 +291,8 @@ impl Block for Product {
         vec![Port::new("y", self.width)]
     }
     fn build(&mut self, _ctx: &BuildContext) -> Result<(), ParamError> {
-        check::at_least_one("factors", self.factors)?;
-        check::at_least_one("width", self.width)
+        check::size("factors", self.factors, 1, MAX_PORTS)?;
+        check::width("width", self.width)
     }
     fn output(&mut self, _tick: Tick, u: &[f64], y: &mut [f64]) {
         self.apply(u, y);
@@ -368,7 +369,7 @@ impl Block for Saturation {
     }
     fn build(&mut self, _ctx: &BuildContext) -> Result<(), ParamError> {
         check::ordered("lower", self.lower, "upper", self.upper)?;
-        check::at_least_one("width", self.width)
+        check::width("width", self.width)
     }
     fn output(&mut self, _tick: Tick, u: &[f64], y: &mut [f64]) {
         self.apply(u, y);
@@ -468,7 +469,7 @@ impl Block for Deadzone {
     }
     fn build(&mut self, _ctx: &BuildContext) -> Result<(), ParamError> {
         check::ordered("lower", self.lower, "upper", self.upper)?;
-        check::at_least_one("width", self.width)
+        check::width("width", self.width)
     }
     fn output(&mut self, _tick: Tick, u: &[f64], y: &mut [f64]) {
         for (yi, &ui) in y.iter_mut().zip(u) {
@@ -495,6 +496,9 @@ crate::submit_block_doc! {
 // mux / demux
 // ---------------------------------------------------------------------------------
 
+/// Most input ports of `sum`, `product`, `mux` and output ports of `demux`: 256.
+pub const MAX_PORTS: usize = 256;
+
 fn check_widths(widths: &[usize]) -> Result<(), ParamError> {
     if widths.is_empty() {
         return Err(ParamError::new(
@@ -503,14 +507,12 @@ fn check_widths(widths: &[usize]) -> Result<(), ParamError> {
             "give one width per port, e.g. [1, 1]",
         ));
     }
-    match widths.iter().position(|&w| w == 0) {
-        Some(i) => Err(ParamError::new(
-            format!("widths[{i}]"),
-            "is 0",
-            "give widths ≥ 1",
-        )),
-        None => Ok(()),
+    check::size("widths", widths.len(), 1, MAX_PORTS)?;
+    for (i, &w) in widths.iter().enumerate() {
+        check::width(&format!("widths[{i}]"), w)?;
     }
+    let total: usize = widths.iter().sum();
+    check::width("widths (sum)", total)
 }
 
 /// A selection matrix: identity of size Σ widths (mux and demux only reorder

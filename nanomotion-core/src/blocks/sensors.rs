@@ -143,7 +143,7 @@ impl Block for Quantizer {
     }
     fn build(&mut self, _ctx: &BuildContext) -> Result<(), ParamError> {
         Self::check_params(self.lsb, self.offset)?;
-        check::at_least_one("width", self.width)
+        check::width("width", self.width)
     }
     fn output(&mut self, tick: Tick, u: &[f64], y: &mut [f64]) {
         self.measure(tick.t, u, y);
@@ -245,7 +245,7 @@ impl MeasurementNoise {
         }
     }
     fn prepare(&mut self, seed: u64) -> Result<(), ParamError> {
-        check::at_least_one("width", self.width)?;
+        check::width("width", self.width)?;
         self.scale = match (self.distribution, self.std, self.bound) {
             (NoiseDistribution::Gaussian, Some(s), None) => {
                 check::non_negative("std", s)?;

@@ -77,7 +77,7 @@ impl Block for Constant {
     }
     fn build(&mut self, _ctx: &BuildContext) -> Result<(), ParamError> {
         check::finite("value", self.value)?;
-        check::at_least_one("width", self.width)
+        check::width("width", self.width)
     }
     fn output(&mut self, tick: Tick, _u: &[f64], y: &mut [f64]) {
         self.sample(tick.t, y);
@@ -843,7 +843,7 @@ impl Block for WhiteNoise {
     }
     fn build(&mut self, ctx: &BuildContext) -> Result<(), ParamError> {
         check::finite("mean", self.mean)?;
-        check::at_least_one("width", self.width)?;
+        check::width("width", self.width)?;
         self.sigma = self.sigma_for(ctx.dt)?;
         self.rng = Rng::new(ctx.seed);
         Ok(())

@@ -430,7 +430,7 @@ pub fn fit_extended(
 /// `shared/data/sma_hysteresis/`). Errors name the file and line.
 pub fn read_forc_csv(path: &Path) -> Result<Vec<(f64, f64)>, AfmError> {
     let file = path.display().to_string();
-    let text = std::fs::read_to_string(path).map_err(|e| AfmError::File {
+    let text = nanomotion_core::data::read_text_capped_data(path).map_err(|e| AfmError::File {
         file: file.clone(),
         line: 0,
         problem: e.to_string(),
@@ -679,13 +679,12 @@ mod tests {
     fn fit_to_measured_sma_reversal_curves() {
         let root =
             Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data/sma_hysteresis");
-        if !root.is_dir() {
-            eprintln!(
-                "SKIPPED: fit_to_measured_sma_reversal_curves: {} not found",
-                root.display()
-            );
+        let Some(root) = nanomotion_core::data::shared_data_or_skip(
+            &root,
+            "fit_to_measured_sma_reversal_curves",
+        ) else {
             return;
-        }
+        };
         for file in ["DataE_raw.csv", "DataT_raw.csv"] {
             let data = read_forc_csv(&root.join(file)).unwrap();
             let (tr, re) = split_forc(&data).unwrap();

@@ -106,6 +106,7 @@ impl FilterSpec {
                 Filter::from_ss(ss, z.preview).map_err(|e| lti_err(field, e))
             }
             FilterSpec::FirLowpass { taps, cutoff_hz } => {
+                check::size(&format!("{field}.taps"), *taps, 1, MAX_FIR_TAPS)?;
                 let h = fir_lowpass(*taps, *cutoff_hz, dt).map_err(|e| {
                     ParamError::new(
                         field,
@@ -126,10 +127,18 @@ impl FilterSpec {
                         "give at least one coefficient",
                     ));
                 }
+                check::size(
+                    &format!("{field}.coefficients"),
+                    coefficients.len(),
+                    1,
+                    MAX_FIR_TAPS,
+                )?;
                 check::all_finite(&format!("{field}.coefficients"), coefficients)?;
+                check::buffer(&format!("{field}.delay"), *delay, 0, 1)?;
                 Ok(Filter::fir(coefficients.clone(), *delay, dt))
             }
             FilterSpec::Iir { num, den, delay } => {
+                check::buffer(&format!("{field}.delay"), *delay, 0, 1)?;
                 check::all_finite(&format!("{field}.num"), num)?;
                 check::all_finite(&format!("{field}.den"), den)?;
                 let t = TransferFunction::new(num.clone(), den.clone(), Some(dt))
@@ -152,6 +161,11 @@ impl FilterSpec {
         self.build_named("filter", dt)
     }
 }
+
+/// Most taps of an FIR learning or robustness filter (`fir_lowpass.taps`, the
+/// length of `fir.coefficients`): 16 385. Each tap costs a multiply-add per
+/// sample; the thesis's Q filters have about 100.
+pub const MAX_FIR_TAPS: usize = 16_385;
 
 /// FIR runtime: a doubled ring buffer so that the convolution is one contiguous
 /// dot product (no wrap-around test in the inner loop).

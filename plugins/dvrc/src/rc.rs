@@ -77,6 +77,8 @@ impl MemoryLoop {
         n_min: usize,
         n_max: usize,
     ) -> Result<Self, ParamError> {
+        check::buffer("n_max", n_max, 0, 1)?;
+        check::buffer("n", n_period, 0, weights.len())?;
         let comp = l.preview_samples() + q.preview_samples();
         if n_min < comp + 1 {
             return Err(ParamError::new(
@@ -121,6 +123,11 @@ impl MemoryLoop {
             wdel: VaryingDelay::new(l_prev.max(1)),
             w: 0.0,
         })
+    }
+
+    /// Bytes held by the memory and preview delay lines.
+    pub fn memory_bytes(&self) -> usize {
+        (self.mem.max_delay() + self.wdel.max_delay() + 2) * std::mem::size_of::<f64>()
     }
 
     /// Phase 1: the RC output w_k for delay N_k (clamped to \[n_min, n_max\]).
@@ -271,6 +278,9 @@ macro_rules! fixed_delay_rc_adapters {
             }
             fn build(&mut self, ctx: &BuildContext) -> Result<(), ParamError> {
                 self.prepare(ctx.dt)
+            }
+            fn memory_bytes(&self) -> usize {
+                self.core.as_ref().map_or(0, MemoryLoop::memory_bytes)
             }
             fn output(&mut self, _tick: Tick, _u: &[f64], y: &mut [f64]) {
                 if let Some(c) = self.core.as_mut() {
@@ -604,6 +614,11 @@ impl Block for Dvrc {
     }
     fn build(&mut self, ctx: &BuildContext) -> Result<(), ParamError> {
         self.prepare(ctx.dt)
+    }
+    fn memory_bytes(&self) -> usize {
+        self.core.as_ref().map_or(0, |(m, _)| {
+            m.memory_bytes() + (self.n_max + 1) * std::mem::size_of::<f64>()
+        })
     }
     fn output(&mut self, _tick: Tick, u: &[f64], y: &mut [f64]) {
         let (w, n) = self.step(u[0], u[1]);

@@ -67,6 +67,9 @@ fn d_timeout() -> f64 {
     0.01
 }
 
+/// Largest `calibration_file` read: 16 MiB (a real calibration is a few kB).
+pub const MAX_CALIBRATION_BYTES: u64 = 16 << 20;
+
 /// `hots_estimator`: the time-stamping estimator of order m with a stored slit
 /// calibration applied to every event before the fit. The calibration comes from
 /// `calibration_file` (a [`SlitCalibration`] as JSON, read once in `build`) or
@@ -120,11 +123,13 @@ impl HotsEstimator {
             edge_offsets_counts: cal.edge_offsets_counts.clone(),
             inner: None,
         };
-        h.prepare()?;
+        h.prepare(&BuildContext::new("hots_estimator", 1.0, 0))?;
         Ok(h)
     }
 
-    fn prepare(&mut self) -> Result<(), ParamError> {
+    /// Validate, read the calibration (a relative `calibration_file` resolves
+    /// against the graph file's folder, `ctx.base_dir`) and build the estimator.
+    fn prepare(&mut self, ctx: &BuildContext) -> Result<(), ParamError> {
         let table = match &self.calibration_file {
             Some(path) => {
                 if !self.edge_offsets_counts.is_empty() {
@@ -134,13 +139,16 @@ impl HotsEstimator {
                         "give one of calibration_file and edge_offsets_counts",
                     ));
                 }
-                let text = std::fs::read_to_string(path).map_err(|e| {
-                    ParamError::new(
-                        "calibration_file",
-                        format!("cannot read `{path}`: {e}"),
-                        "give the path of a JSON calibration",
-                    )
-                })?;
+                let resolved = ctx.resolve(path);
+                let text =
+                    nanomotion_core::graph::read_text_capped(&resolved, MAX_CALIBRATION_BYTES)
+                        .map_err(|e| {
+                            ParamError::new(
+                                "calibration_file",
+                                format!("cannot read `{}`: {e}", resolved.display()),
+                                "give the path of a JSON calibration, relative to the graph file's folder or absolute",
+                            )
+                        })?;
                 let cal: SlitCalibration = serde_json::from_str(&text).map_err(|e| {
                     ParamError::new(
                         "calibration_file",
@@ -180,8 +188,8 @@ impl Block for HotsEstimator {
     fn outputs(&self) -> Vec<Port> {
         vec![Port::new("y", 3), Port::new("status", 1)]
     }
-    fn build(&mut self, _ctx: &BuildContext) -> Result<(), ParamError> {
-        self.prepare()
+    fn build(&mut self, ctx: &BuildContext) -> Result<(), ParamError> {
+        self.prepare(ctx)
     }
     fn output(&mut self, tick: Tick, u: &[f64], y: &mut [f64]) {
         match &mut self.inner {
@@ -208,7 +216,7 @@ nanomotion_core::submit_block_doc! {
             ParamDoc { name: "resolution", doc: "units per count Δ", default: None },
             ParamDoc { name: "band_counts", doc: "fallback band (counts)", default: Some("1") },
             ParamDoc { name: "standstill_timeout_s", doc: "standstill timeout (s); 0 disables", default: Some("0.01") },
-            ParamDoc { name: "calibration_file", doc: "JSON SlitCalibration read at build", default: Some("none") },
+            ParamDoc { name: "calibration_file", doc: "JSON SlitCalibration read at build (≤ 16 MiB; a relative path is relative to the graph file's folder)", default: Some("none") },
             ParamDoc { name: "edge_offsets_counts", doc: "inline calibration ê per edge (counts)", default: Some("[]") },
         ],
         ports: "register[2+2n] -> y[3] = [x, v, a], status",

@@ -24,12 +24,11 @@ pub fn real_profile() -> Option<Vec<f64>> {
         env!("CARGO_MANIFEST_DIR"),
         "/../../../shared/data/usdigital_e2_slit_errors/us_digital_e2_100cpr_tick_errors.csv"
     );
-    let Ok(text) = std::fs::read_to_string(path) else {
-        eprintln!(
-            "SKIPPED: real slit-error profile not found at {path} (expected ../shared/data/usdigital_e2_slit_errors/ beside the workspace)"
-        );
-        return None;
-    };
+    let path = nanomotion_core::data::shared_data_or_skip(
+        std::path::Path::new(path),
+        "hots (real US Digital E2 slit-error profile)",
+    )?;
+    let text = std::fs::read_to_string(path).ok()?;
     let mut v = Vec::new();
     for line in text.lines().skip(1) {
         let cols: Vec<&str> = line.split(',').collect();

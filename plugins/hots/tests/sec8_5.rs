@@ -49,6 +49,10 @@ fn e2_profile() -> Option<Vec<f64>> {
         env!("CARGO_MANIFEST_DIR"),
         "/../../../shared/data/usdigital_e2_slit_errors/us_digital_e2_100cpr_tick_errors.csv"
     );
+    let path = nanomotion_core::data::shared_data_or_skip(
+        std::path::Path::new(path),
+        "sec8_5 (real US Digital E2 slit-error profile)",
+    )?;
     let text = std::fs::read_to_string(path).ok()?;
     text.lines()
         .skip(1)
@@ -125,9 +129,6 @@ fn skip_helps_with_slit_errors_and_hurts_without() {
 #[test]
 fn real_e2_profile_best_skip_beats_no_skip() {
     let Some(profile) = e2_profile() else {
-        eprintln!(
-            "SKIPPED: ../shared/data/usdigital_e2_slit_errors/ not found (read in place relative to the workspace root)"
-        );
         return;
     };
     assert_eq!(profile.len(), 100);

@@ -54,6 +54,10 @@ pub const DEFAULT_REGISTER_LEN: usize = 5;
 /// Largest register length n.
 pub const MAX_REGISTER_LEN: usize = crate::fit::MAX_N;
 
+/// Most slits per revolution (`lines`): 2^20 = 1 048 576 (4·2^20 edges of
+/// slit-error table, 32 MiB).
+pub const MAX_LINES: usize = 1 << 20;
+
 fn d_lines() -> usize {
     100
 }
@@ -182,7 +186,7 @@ impl TimestampEncoder {
     /// Validate the parameters, draw the seeded slit errors and allocate the event
     /// history. Called by [`Block::build`] with the block's seed.
     pub fn prepare(&mut self, seed: u64) -> Result<(), ParamError> {
-        check::at_least_one("lines", self.lines)?;
+        check::size("lines", self.lines, 1, MAX_LINES)?;
         check::positive("revolution", self.revolution)?;
         check::positive("clock_hz", self.clock_hz)?;
         check::at_least_one("register_len", self.register_len)?;
@@ -450,6 +454,10 @@ impl Block for TimestampEncoder {
             Port::new("x_q", 1),
         ]
     }
+    fn memory_bytes(&self) -> usize {
+        // Per-slit and per-edge error tables.
+        self.lines.saturating_mul(5 * std::mem::size_of::<f64>())
+    }
     fn build(&mut self, ctx: &BuildContext) -> Result<(), ParamError> {
         self.prepare(ctx.seed)
     }
@@ -470,7 +478,7 @@ nanomotion_core::submit_block_doc! {
         role: Role::Sensor,
         summary: "optical incremental encoder (Ch. 8): quadrature edges with slit errors, events time-stamped on a 20 MHz clock by crossing detection, register of the last n events with skip σ (8.5)-(8.7)",
         params: &[
-            ParamDoc { name: "lines", doc: "slits per revolution N; 4N counts/rev", default: Some("100") },
+            ParamDoc { name: "lines", doc: "slits per revolution N, 1 ≤ N ≤ 2^20; 4N counts/rev", default: Some("100") },
             ParamDoc { name: "revolution", doc: "input units per revolution (2π rad; scale length in m)", default: Some("6.283185307179586") },
             ParamDoc { name: "clock_hz", doc: "time-stamp clock (Hz)", default: Some("20e6") },
             ParamDoc { name: "register_len", doc: "register length n (events), ≤ 16", default: Some("5") },

@@ -661,10 +661,25 @@ impl FittedStageParams {
         num / (s * (s * s + s * ap1_1 + ap1_0) * (s * s + s * ap2_1 + ap2_0))
     }
 
-    /// The delay in samples at period `dt`, if it is an integer number of periods.
+    /// The delay in samples at period `dt`, if it is an integer number of periods
+    /// and at most [`MAX_FITTED_DELAY_SAMPLES`].
     pub fn delay_samples(&self, dt: f64) -> Result<usize, ParamError> {
+        check::non_negative("delay_s", self.delay_s)?;
         let n = self.delay_s / dt;
         let rounded = n.round();
+        if rounded.is_nan() || rounded > MAX_FITTED_DELAY_SAMPLES as f64 {
+            return Err(ParamError::new(
+                "delay_s",
+                format!(
+                    "{} s is {n:.4e} periods of {dt} s, more than {MAX_FITTED_DELAY_SAMPLES} (the delay is modelled as states of the discrete model)",
+                    self.delay_s
+                ),
+                format!(
+                    "give at most {} s, or put a `delay` block (a ring buffer) in front of the stage",
+                    MAX_FITTED_DELAY_SAMPLES as f64 * dt
+                ),
+            ));
+        }
         if (n - rounded).abs() > 1e-6 * n.max(1.0) {
             return Err(ParamError::new(
                 "delay_s",
@@ -696,6 +711,12 @@ impl FittedStageParams {
         }
     }
 }
+
+/// Longest pure delay of `walking_piezo_fitted`, in samples of its period: 64.
+/// The delay is part of its dense discrete model (so that analyses see it), whose
+/// cost grows with the square of the states; the thesis's delay is 3 samples.
+/// Longer delays belong in a `delay` block, which is a ring buffer.
+pub const MAX_FITTED_DELAY_SAMPLES: usize = 64;
 
 /// The Ch. 5 fitted stage (5.31), discretised at period `dt`.
 ///
@@ -844,7 +865,7 @@ nanomotion_core::submit_block_doc! {
             ParamDoc { name: "b_z1", doc: "its damping coefficient b = 2ζ", default: Some("0.2") },
             ParamDoc { name: "f_p2_hz", doc: "second resonance (Hz)", default: Some("650") },
             ParamDoc { name: "b_p2", doc: "its damping coefficient b = 2ζ", default: Some("0.175") },
-            ParamDoc { name: "delay_s", doc: "pure delay (s), a multiple of the block period", default: Some("0.00075 (3 samples at 4 kHz)") },
+            ParamDoc { name: "delay_s", doc: "pure delay (s), a multiple of the block period, at most 64 periods", default: Some("0.00075 (3 samples at 4 kHz)") },
         ],
         ports: "f_alpha[1] (Hz) -> x_s[1] (m), faults[1] (count of non-finite inputs)",
     }

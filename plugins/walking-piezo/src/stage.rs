@@ -135,6 +135,11 @@ pub struct StageParams {
     pub external_force_input: bool,
 }
 
+/// Most internal sub-steps per block period of `walking_piezo_stage`: 1000.
+pub const MAX_SUBSTEPS: u32 = 1000;
+/// Most fixed-point iterations per sub-step of `walking_piezo_stage`: 100 000.
+pub const MAX_ITER: u32 = 100_000;
+
 fn d_mass() -> f64 {
     0.428
 }
@@ -302,10 +307,23 @@ impl StageParams {
         check::non_negative("strip_height_rms_m", self.strip_height_rms_m)?;
         check::positive("strip_height_corr_m", self.strip_height_corr_m)?;
         check::non_negative("strip_leg_pitch_m", self.strip_leg_pitch_m)?;
-        if self.substeps == 0 {
-            return Err(ParamError::new("substeps", "is 0", "give at least 1"));
+        if !(1..=MAX_SUBSTEPS).contains(&self.substeps) {
+            return Err(ParamError::new(
+                "substeps",
+                format!("is {}, outside [1, {MAX_SUBSTEPS}]", self.substeps),
+                format!(
+                    "give 1 to {MAX_SUBSTEPS} sub-steps per block period (or raise the block's rate_hz)"
+                ),
+            ));
         }
         check::positive("tol_n", self.tol_n)?;
+        if self.max_iter > MAX_ITER {
+            return Err(ParamError::new(
+                "max_iter",
+                format!("is {}, more than {MAX_ITER}", self.max_iter),
+                format!("give at most {MAX_ITER} (e.g. 200)"),
+            ));
+        }
         if self.max_iter == 0 {
             return Err(ParamError::new(
                 "max_iter",
@@ -911,7 +929,7 @@ nanomotion_core::submit_block_doc! {
             ParamDoc { name: "strip_height_rms_m", doc: "rms height of the seeded drive-strip profile (m); 0 = flat strip", default: Some("0") },
             ParamDoc { name: "strip_height_corr_m", doc: "correlation length of the strip profile (m)", default: Some("2e-6") },
             ParamDoc { name: "strip_leg_pitch_m", doc: "pitch of the legs A, B, C, D along the strip (m)", default: Some("2e-3") },
-            ParamDoc { name: "substeps", doc: "internal sub-steps per block period", default: Some("1") },
+            ParamDoc { name: "substeps", doc: "internal sub-steps per block period, 1 to 1000", default: Some("1") },
             ParamDoc { name: "prox_r", doc: "r of (4.18) (N·s/m), below 2/λ_max(W)", default: Some("optimal r* = 2/(λ_min+λ_max)") },
             ParamDoc { name: "tol_n", doc: "fixed-point tolerance ε (N)", default: Some("1e-10") },
             ParamDoc { name: "max_iter", doc: "fixed-point iteration cap (hits are counted in `nonconverged`)", default: Some("200") },

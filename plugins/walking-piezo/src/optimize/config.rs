@@ -290,7 +290,12 @@ impl OptimizeConfig {
     /// Read, parse and validate a file.
     pub fn from_file(path: &Path) -> Result<Self, ConfigError> {
         let origin = path.display().to_string();
-        let text = std::fs::read_to_string(path).map_err(|e| ConfigError::Io {
+        // Bounded like a graph file (`/dev/zero` is an error, not an endless read).
+        let text = nanomotion_core::graph::read_text_capped(
+            path,
+            nanomotion_core::graph::MAX_GRAPH_FILE_BYTES,
+        )
+        .map_err(|e| ConfigError::Io {
             origin: origin.clone(),
             message: e.to_string(),
         })?;

@@ -328,8 +328,11 @@ fn run_file_error(path: &Path, problem: impl Into<String>, fix: &str) -> Optimiz
 
 /// Read a run file.
 pub fn read_run_file(path: &Path) -> Result<RunFile, OptimizeError> {
-    let text = std::fs::read_to_string(path)
-        .map_err(|e| run_file_error(path, e.to_string(), "check the path"))?;
+    let text = nanomotion_core::graph::read_text_capped(
+        path,
+        nanomotion_core::graph::MAX_GRAPH_FILE_BYTES,
+    )
+    .map_err(|e| run_file_error(path, e.to_string(), "check the path"))?;
     let f: RunFile = serde_json::from_str(&text).map_err(|e| {
         run_file_error(
             path,
