@@ -30,7 +30,8 @@ fn missing_hysteresis_of_the_afm_stage_is_named() {
     let v: Vec<f64> = (0..N)
         .map(|k| {
             let t = k as f64 / RATE;
-            50.0 + 14.0 * (2.0 * PI * 0.25 * t).sin() + 6.0 * (2.0 * PI * 0.7 * t + 1.0).sin()
+            50.0 + 14.0 * (2.0 * PI * 0.25 * t).sin()
+                + 6.0 * (2.0 * PI * 0.7 * t + 1.0).sin()
                 + 0.5 * (2.0 * PI * 13.0 * t).sin()
                 + 0.3 * (2.0 * PI * 37.0 * t + 0.4).sin()
         })
@@ -41,8 +42,15 @@ fn missing_hysteresis_of_the_afm_stage_is_named() {
     truth.log.push("split.y0".into());
     let (mut s, _) = truth.build_with_data(Arc::new(drive)).unwrap();
     let r = s.run(|_| {});
-    let x = r.logs.iter().find(|l| l.name == "split.y0").unwrap().data.clone();
-    let data = Dataset::from_columns("afm", RATE, 0.0, vec![("v".into(), v), ("x".into(), x)]).unwrap();
+    let x = r
+        .logs
+        .iter()
+        .find(|l| l.name == "split.y0")
+        .unwrap()
+        .data
+        .clone();
+    let data =
+        Dataset::from_columns("afm", RATE, 0.0, vec![("v".into(), v), ("x".into(), x)]).unwrap();
     // Nominal: no hysteresis (c = b on every axis).
     let linear = ", hysteresis: [{ trace: { alpha: 0.03, b: 1.0, c: 1.0 }, retrace: { alpha: 0.03, b: 1.0, c: 1.0 } }, { trace: { alpha: 0.03, b: 0.98, c: 0.98 }, retrace: { alpha: 0.03, b: 0.98, c: 0.98 } }, { trace: { alpha: 0.03, b: 0.2, c: 0.2 }, retrace: { alpha: 0.03, b: 0.2, c: 0.2 } }]";
     let nominal = GraphSpec::from_yaml(&graph(linear), "nominal.yaml").unwrap();
@@ -54,7 +62,12 @@ fn missing_hysteresis_of_the_afm_stage_is_named() {
     for c in rep.steps.first().map(|s| &s.candidates[..4]).unwrap_or(&[]) {
         eprintln!("    {} {} {:.3e}", c.effect, c.site, c.holdout_rms);
     }
-    assert_eq!(rep.found.first().map(String::as_str), Some("hysteresis"), "{:?}", rep.found);
+    assert_eq!(
+        rep.found.first().map(String::as_str),
+        Some("hysteresis"),
+        "{:?}",
+        rep.found
+    );
     let s = &rep.steps[0];
     assert!(s.site.contains("mux.in0"), "{}", s.site);
     assert!(s.holdout_rms_after < 0.5 * s.holdout_rms_before);
