@@ -8,7 +8,7 @@
 //! ```
 
 use nanomotion_core::graph::GraphSpec;
-use nanomotion_plf::diagnose::{Options, VOCABULARY, diagnose};
+use nanomotion_plf::diagnose::{Options, diagnose, vocabulary};
 use nanomotion_plf::generate;
 use std::collections::BTreeMap;
 use std::time::Instant;
@@ -24,7 +24,7 @@ fn main() {
     type Row = (String, BTreeMap<String, usize>, Vec<f64>, f64);
     let mut rows: Vec<Row> = Vec::new();
     let start = Instant::now();
-    for &effect in VOCABULARY.iter().chain(["none"].iter()) {
+    for effect in vocabulary().into_iter().chain(["none"]) {
         let mut named: BTreeMap<String, usize> = BTreeMap::new();
         let mut cuts = Vec::new();
         let t0 = Instant::now();

@@ -31,22 +31,13 @@ use serde_json::json;
 use std::collections::BTreeMap;
 use std::sync::Arc;
 
-/// The vocabulary, exactly these strings.
-pub const VOCABULARY: [&str; 13] = [
-    "hysteresis",
-    "friction",
-    "time_delay",
-    "repetitive_disturbance",
-    "position_dependent_gain",
-    "quantization",
-    "unmodeled_resonance",
-    "drift",
-    "creep",
-    "axis_coupling",
-    "encoder_slit_error",
-    "saturation",
-    "backlash",
-];
+/// The vocabulary names, in [`Effect::ALL`](crate::effects::Effect::ALL) order.
+pub fn vocabulary() -> Vec<&'static str> {
+    crate::effects::Effect::ALL
+        .iter()
+        .map(|e| e.name())
+        .collect()
+}
 
 /// Options of [`diagnose`].
 #[derive(Debug, Clone, PartialEq)]
@@ -296,10 +287,13 @@ pub fn diagnose_with_progress(
         });
     }
     for e in &opts.effects {
-        if !VOCABULARY.contains(&e.as_str()) {
+        if !vocabulary().contains(&e.as_str()) {
             return Err(PlfError::Option {
                 option: "effects",
-                problem: format!("`{e}` is not in the vocabulary: {}", VOCABULARY.join(", ")),
+                problem: format!(
+                    "`{e}` is not in the vocabulary: {}",
+                    vocabulary().join(", ")
+                ),
             });
         }
     }
@@ -873,28 +867,24 @@ fn enumerate(ctx: &Ctx<'_>, cur: &Current, opts: &Options) -> Result<Vec<Cand>, 
         }
         if want("repetitive_disturbance") {
             if let Some(p) = line_period(r) {
-                let h = 3;
-                out.push(Cand {
-                    effect: "repetitive_disturbance",
-                    site: out_site.clone(),
-                    output: Some(i),
-                    starts: vec![json!({"type": "repetitive_disturbance", "period": p / fs, "variable": "time", "cos": vec![0.0; h], "sin": vec![0.0; h]})],
-                    free: std::iter::once((0, Scale::Log)).chain((1..=2 * h).map(|k| (k, Scale::Linear(sr)))).collect(),
-                    s: vec![],
-                    rate_hz: out_rate,
-                });
+                out.push(repetitive(
+                    out_site.clone(),
+                    Some(i),
+                    p / fs,
+                    vec![],
+                    sr,
+                    out_rate,
+                ));
             }
             if let Some(p) = position_period(r, &pos[..ctx.n_est]) {
-                let h = 3;
-                out.push(Cand {
-                    effect: "repetitive_disturbance",
-                    site: out_site.clone(),
-                    output: Some(i),
-                    starts: vec![json!({"type": "repetitive_disturbance", "period": p, "variable": "signal", "cos": vec![0.0; h], "sin": vec![0.0; h]})],
-                    free: std::iter::once((0, Scale::Log)).chain((1..=2 * h).map(|k| (k, Scale::Linear(sr)))).collect(),
-                    s: vec![ch.position.clone()],
-                    rate_hz: out_rate,
-                });
+                out.push(repetitive(
+                    out_site.clone(),
+                    Some(i),
+                    p,
+                    vec![ch.position.clone()],
+                    sr,
+                    out_rate,
+                ));
             }
         }
         if want("quantization") {
@@ -1155,22 +1145,45 @@ fn enumerate(ctx: &Ctx<'_>, cur: &Current, opts: &Options) -> Result<Vec<Cand>, 
             if want("repetitive_disturbance")
                 && let Some(p) = line_period(r)
             {
-                {
-                    let h = 3;
-                    out.push(Cand {
-                        effect: "repetitive_disturbance",
-                        site: inp.clone(),
-                        output: None,
-                        starts: vec![json!({"type": "repetitive_disturbance", "period": p / fs, "variable": "time", "cos": vec![0.0; h], "sin": vec![0.0; h]})],
-                        free: std::iter::once((0, Scale::Log)).chain((1..=2 * h).map(|k| (k, Scale::Linear(0.1 * su)))).collect(),
-                        s: vec![],
-                        rate_hz: None,
-                    });
-                }
+                out.push(repetitive(
+                    inp.clone(),
+                    None,
+                    p / fs,
+                    vec![],
+                    0.1 * su,
+                    None,
+                ));
             }
         }
     }
     Ok(out)
+}
+
+/// A periodic disturbance of three harmonics with period `period` (s, or in the
+/// unit of the signal `s` when one is given), coefficients on the scale `scale`.
+fn repetitive(
+    site: Site,
+    output: Option<usize>,
+    period: f64,
+    s: Vec<String>,
+    scale: f64,
+    rate_hz: Option<f64>,
+) -> Cand {
+    let h = 3;
+    let variable = if s.is_empty() { "time" } else { "signal" };
+    Cand {
+        effect: "repetitive_disturbance",
+        site,
+        output,
+        starts: vec![
+            json!({"type": "repetitive_disturbance", "period": period, "variable": variable, "cos": vec![0.0; h], "sin": vec![0.0; h]}),
+        ],
+        free: std::iter::once((0, Scale::Log))
+            .chain((1..=2 * h).map(|k| (k, Scale::Linear(scale))))
+            .collect(),
+        s,
+        rate_hz,
+    }
 }
 
 fn resonance(r: &[f64], fs: f64, site: Site, output: Option<usize>, rate_hz: Option<f64>) -> Cand {
