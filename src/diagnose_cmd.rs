@@ -277,14 +277,22 @@ fn write(out: &Path, r: &Report, a: &Args) -> Result<Vec<PathBuf>, String> {
         )
         .map_err(|e| e.to_string())?;
         files.push(path);
-        let (f0, c0) = nanomotion::output::cumulative_psd(before, r.rate_hz);
-        let (f1, c1) = nanomotion::output::cumulative_psd(after, r.rate_hz);
+        // As the thesis reads it: the square root of the cumulative PSD, in the
+        // signal's unit, whose end value is the residual's standard deviation.
+        let root = |(f, c): (Vec<f64>, Vec<f64>)| {
+            (
+                f,
+                c.into_iter().map(|v| v.max(0.0).sqrt()).collect::<Vec<_>>(),
+            )
+        };
+        let (f0, c0) = root(nanomotion::output::cumulative_psd(before, r.rate_hz));
+        let (f1, c1) = root(nanomotion::output::cumulative_psd(after, r.rate_hz));
         let path = out.join(format!("residual_cpsd_{stem}.svg"));
         draw_svg(
             &Figure {
-                title: format!("cumulative PSD of the residual of {signal}"),
+                title: format!("√(cumulative PSD) of the residual of {signal}"),
                 x_label: "frequency (Hz)".into(),
-                y_label: "cumulative PSD (unit²)".into(),
+                y_label: "√(cumulative PSD) (signal unit; end value = std)".into(),
                 x_scale: Scale::Log,
                 series: vec![
                     Series {
