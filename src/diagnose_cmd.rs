@@ -32,7 +32,12 @@ pub fn run(a: Args) -> Result<(), String> {
                 .unwrap_or_default()
         ))
     });
-    std::fs::create_dir_all(&out).map_err(|e| format!("cannot create {}: {e}", out.display()))?;
+    if !(0.05..=0.8).contains(&a.holdout) {
+        return Err(format!(
+            "--holdout {} is outside [0.05, 0.8]: give the fraction of the record, at its end, to hold out (0.3 = the last 30 %)",
+            a.holdout
+        ));
+    }
     let opts = Options {
         max_effects: a.max_effects,
         holdout: a.holdout,
@@ -77,6 +82,7 @@ pub fn run(a: Args) -> Result<(), String> {
         report.runs,
         start.elapsed().as_secs_f64()
     );
+    std::fs::create_dir_all(&out).map_err(|e| format!("cannot create {}: {e}", out.display()))?;
     let files = write(&out, &report, &a)?;
     println!("wrote {} files to {}", files.len(), out.display());
     println!(
@@ -242,9 +248,13 @@ fn write(out: &Path, r: &Report, a: &Args) -> Result<Vec<PathBuf>, String> {
         files.push(path);
     }
     let json = serde_json::to_string_pretty(r).map_err(|e| e.to_string())?;
-    let path = a.json.clone().unwrap_or_else(|| out.join("report.json"));
-    std::fs::write(&path, json).map_err(io(&path))?;
+    let path = out.join("report.json");
+    std::fs::write(&path, &json).map_err(io(&path))?;
     files.push(path);
+    if let Some(extra) = &a.json {
+        std::fs::write(extra, &json).map_err(io(extra))?;
+        files.push(extra.clone());
+    }
     for p in &r.plots {
         let path = out.join(format!("evidence_{}.svg", p.name));
         plot(p, &path)?;

@@ -82,3 +82,70 @@ fn example_is_generated_named_and_the_augmented_model_reproduces_the_report() {
         report.final_scores.rms
     );
 }
+
+fn cli(args: &[&str]) -> (bool, String, String) {
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_nanomotion"))
+        .args(args)
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .output()
+        .unwrap();
+    (
+        out.status.success(),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+#[test]
+fn diagnose_command_reports_bad_input_and_writes_its_files() {
+    let tmp = std::env::temp_dir().join(format!("nm_diag_cli_{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&tmp);
+    // Out-of-range hold-out: a typed error, nothing written.
+    let (ok, _, err) = cli(&[
+        "diagnose",
+        "examples/diagnose/model.yaml",
+        "examples/diagnose/record.csv",
+        "--holdout",
+        "2",
+        "--out",
+        tmp.to_str().unwrap(),
+    ]);
+    assert!(
+        !ok && err.contains("--holdout 2 is outside [0.05, 0.8]"),
+        "{err}"
+    );
+    assert!(!tmp.exists());
+    // A record without the model's columns: the error lists the columns there are.
+    let (ok, _, err) = cli(&[
+        "diagnose",
+        "examples/diagnose/model.yaml",
+        "examples/data_replay/record.csv",
+    ]);
+    assert!(
+        !ok && err.contains("its columns are: u_force_N, y_pos_m"),
+        "{err}"
+    );
+    // Happy path with --json: the report in the folder and at the extra path.
+    let json = tmp.with_extension("json");
+    let (ok, out, err) = cli(&[
+        "diagnose",
+        "examples/diagnose/model.yaml",
+        "examples/diagnose/record.csv",
+        "--out",
+        tmp.to_str().unwrap(),
+        "--json",
+        json.to_str().unwrap(),
+    ]);
+    assert!(ok, "{err}");
+    assert!(out.contains("found: [\"hysteresis\"]"), "{out}");
+    let a = std::fs::read_to_string(tmp.join("report.json")).unwrap();
+    let b = std::fs::read_to_string(&json).unwrap();
+    assert_eq!(a, b);
+    let v: serde_json::Value = serde_json::from_str(&a).unwrap();
+    for key in ["nominal", "found", "steps", "final", "stopped_because"] {
+        assert!(v.get(key).is_some(), "report.json lacks `{key}`");
+    }
+    assert_eq!(v["steps"][0]["block"]["type"], "hysteresis");
+    let _ = std::fs::remove_dir_all(&tmp);
+    let _ = std::fs::remove_file(&json);
+}
