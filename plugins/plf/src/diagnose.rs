@@ -914,18 +914,7 @@ fn enumerate(ctx: &Ctx<'_>, cur: &Current, opts: &Options) -> Result<Vec<Cand>, 
             });
         }
         if want("time_delay") {
-            out.push(Cand {
-                effect: "time_delay",
-                site: out_site.clone(),
-                output: Some(i),
-                starts: [0.5, 2.0, 6.0, 20.0]
-                    .iter()
-                    .map(|d| json!({"type": "time_delay", "max_delay_s": 200.0 / fs, "delay_s": d / fs}))
-                    .collect(),
-                free: vec![(0, Scale::Linear(1.0 / fs))],
-                s: vec![],
-                rate_hz: out_rate,
-            });
+            out.push(time_delay(fs, out_site.clone(), Some(i), out_rate));
         }
         if want("unmodeled_resonance") {
             out.push(resonance(r, fs, out_site.clone(), Some(i), out_rate));
@@ -1067,18 +1056,7 @@ fn enumerate(ctx: &Ctx<'_>, cur: &Current, opts: &Options) -> Result<Vec<Cand>, 
                 });
             }
             if want("time_delay") {
-                out.push(Cand {
-                    effect: "time_delay",
-                    site: inp.clone(),
-                    output: None,
-                    starts: [0.5, 2.0, 6.0, 20.0]
-                        .iter()
-                        .map(|d| json!({"type": "time_delay", "max_delay_s": 200.0 / fs, "delay_s": d / fs}))
-                        .collect(),
-                    free: vec![(0, Scale::Linear(1.0 / fs))],
-                    s: vec![],
-                    rate_hz: None,
-                });
+                out.push(time_delay(fs, inp.clone(), None, None));
             }
             if want("saturation") {
                 let (lo, hi) = u
@@ -1182,6 +1160,22 @@ fn repetitive(
             .chain((1..=2 * h).map(|k| (k, Scale::Linear(scale))))
             .collect(),
         s,
+        rate_hz,
+    }
+}
+
+/// A fractional delay, started at 0.5 to 20 samples (buffer up to 200 samples).
+fn time_delay(fs: f64, site: Site, output: Option<usize>, rate_hz: Option<f64>) -> Cand {
+    Cand {
+        effect: "time_delay",
+        site,
+        output,
+        starts: [0.5, 2.0, 6.0, 20.0]
+            .iter()
+            .map(|d| json!({"type": "time_delay", "max_delay_s": 200.0 / fs, "delay_s": d / fs}))
+            .collect(),
+        free: vec![(0, Scale::Linear(1.0 / fs))],
+        s: vec![],
         rate_hz,
     }
 }
