@@ -335,13 +335,27 @@ pub fn diagnose_with_progress(
     let mut stopped = format!("reached --max-effects {}", opts.max_effects);
     let mut rejected_candidates = Vec::new();
     for step_no in 0..opts.max_effects {
-        // At the noise floor already?
+        // At the noise floor already? The floor is estimated from the residual's
+        // sample-to-sample differences, so a model error that is itself white —
+        // an encoder's rounding when the stage crosses about an lsb per sample —
+        // looks like noise. Only memoryless functions of the measured position
+        // (quantization, slit errors) can be white that way; at the floor only
+        // they are tried, and they must then cut the whole mean square (not an
+        // excess the floor cannot separate from the noise).
         let excess = excess_ms(&ctx, &cur);
-        if excess.iter().all(|&(ms, floor)| ms <= 1.2 * floor * floor) {
-            stopped = "the held-out residual is at its noise floor (mean square within 20 % of the white-noise estimate)".into();
-            break;
+        let at_floor = excess.iter().all(|&(ms, floor)| ms <= 1.2 * floor * floor);
+        let floor_stop = "the held-out residual is at its noise floor (mean square within 20 % of the white-noise estimate)";
+        let mut cands = enumerate(&ctx, &cur, opts)?;
+        if at_floor {
+            cands.retain(|c| {
+                matches!(c.effect, "quantization" | "encoder_slit_error")
+                    && matches!(c.site, Site::Output { .. })
+            });
+            if cands.is_empty() {
+                stopped = floor_stop.into();
+                break;
+            }
         }
-        let cands = enumerate(&ctx, &cur, opts)?;
         let total = cands.len();
         let mut results: Vec<Option<Fitted>> = Vec::with_capacity(total);
         let threads = opts.threads.max(1);
@@ -469,7 +483,11 @@ pub fn diagnose_with_progress(
             .enumerate()
             .map(|(i, (&(_, f), _))| f * f * weight(&ctx, i).powi(2))
             .sum();
-        let excess_before = (before_ms - floor_ms).max(0.0);
+        let excess_before = if at_floor {
+            before_ms
+        } else {
+            (before_ms - floor_ms).max(0.0)
+        };
         let excess_cut = if excess_before > 0.0 {
             (before_ms - after_ms) / excess_before
         } else {
@@ -479,6 +497,17 @@ pub fn diagnose_with_progress(
         let ha = holdout_rms(&ctx, &win.residual);
         if test.p_value >= level || excess_cut < opts.min_excess_cut {
             rejected_candidates = table.clone();
+            if at_floor {
+                stopped = format!(
+                    "{floor_stop}; of the effects that can hide in white noise the best was {} ({}), held-out rms {:.4e} -> {:.4e}, p = {:.2e}",
+                    cand.effect,
+                    cand.site.describe(),
+                    hb,
+                    ha,
+                    test.p_value
+                );
+                break;
+            }
             stopped = format!(
                 "no candidate cut the held-out residual significantly: best was {} ({}), held-out rms {:.4e} -> {:.4e}, p = {:.2e} (needed < {:.1e}), {:.0} % of the excess over the noise floor (needed {:.0} %)",
                 cand.effect,
@@ -889,13 +918,23 @@ fn enumerate(ctx: &Ctx<'_>, cur: &Current, opts: &Options) -> Result<Vec<Cand>, 
         }
         if want("quantization") {
             let q0 = range(r).max(1e-300);
+            // The lsb is hard to find by descent once the record spans many
+            // levels (the fit is exact only on the right grid): when the measured
+            // values sit on a grid, start there.
+            let measured: Vec<f64> = r.iter().zip(yhat).map(|(r, m)| r + m).collect();
+            let grid = stats::lattice(&measured)
+                .map(|(lsb, offset)| json!({"type": "quantizer", "lsb": lsb, "offset": offset}));
             out.push(Cand {
                 effect: "quantization",
                 site: out_site.clone(),
                 output: Some(i),
-                starts: [0.5, 0.8, 1.0, 1.3]
-                    .iter()
-                    .map(|f| json!({"type": "quantizer", "lsb": q0 * f}))
+                starts: grid
+                    .into_iter()
+                    .chain(
+                        [0.5, 0.8, 1.0, 1.3]
+                            .iter()
+                            .map(|f| json!({"type": "quantizer", "lsb": q0 * f})),
+                    )
                     .collect(),
                 free: vec![(0, Scale::Log)],
                 s: vec![],
@@ -1112,7 +1151,11 @@ fn enumerate(ctx: &Ctx<'_>, cur: &Current, opts: &Options) -> Result<Vec<Cand>, 
                     site: inp.clone(),
                     output: None,
                     starts: vec![json!({"type": "position_dependent_gain", "variable": "signal", "center": stats::mean(&pos), "scale": range(&pos) / 2.0, "coeffs": [0.0, 0.0]})],
-                    free: vec![(0, Scale::Linear(0.05)), (1, Scale::Linear(0.05))],
+                    free: vec![
+                        (0, Scale::Linear(0.05)),
+                        (1, Scale::Linear(0.05)),
+                        (2, Scale::Linear(0.05)),
+                    ],
                     s: vec![ch.position.clone()],
                     rate_hz: None,
                 });

@@ -29,13 +29,16 @@ fn one() -> f64 {
 /// `position_dependent_gain`:
 ///
 /// ```text
-/// y = u·(1 + Σ_{i=1..n} g_i·((s − center)/scale)^i)
+/// y = u·(1 + g_0 + Σ_{i=1..n} g_i·((s − center)/scale)^i)
 /// ```
 ///
 /// with s from port `s` (`variable: signal`, default) or s = u (`variable: input`).
-/// 1 ≤ n ≤ [`MAX_ORDER`]. Evaluated by Horner's rule.
+/// 1 ≤ n ≤ [`MAX_ORDER`]. Evaluated by Horner's rule. g_0 (`g0`, default 0) is a
+/// constant relative gain error: a nominal model's gain is rarely exact, and with
+/// the polynomial centred on the record's mean position a gain that varies
+/// linearly about another point needs it.
 ///
-/// [`Tunable`] vector: `[coeffs[0..n]]` (g_1..g_n).
+/// [`Tunable`] vector: `[coeffs[0..n], g0]` (g_1..g_n, then g_0).
 #[derive(Debug, Clone, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct PositionDependentGain {
@@ -50,6 +53,9 @@ pub struct PositionDependentGain {
     pub scale: f64,
     /// g_1..g_n (dimensionless).
     pub coeffs: Vec<f64>,
+    /// g_0: constant relative gain error (dimensionless), default 0.
+    #[serde(default)]
+    pub g0: f64,
 }
 
 impl PositionDependentGain {
@@ -60,17 +66,18 @@ impl PositionDependentGain {
             center,
             scale,
             coeffs,
+            g0: 0.0,
         }
     }
 
-    /// The relative gain 1 + Σ g_i x^i at scheduling value `s`.
+    /// The relative gain 1 + g_0 + Σ g_i x^i at scheduling value `s`.
     pub fn gain(&self, s: f64) -> f64 {
         let x = (s - self.center) / self.scale;
         let mut acc = 0.0;
         for g in self.coeffs.iter().rev() {
             acc = (acc + g) * x;
         }
-        1.0 + acc
+        1.0 + self.g0 + acc
     }
 
     fn check_coeffs(c: &[f64]) -> Result<(), ParamError> {
@@ -96,6 +103,7 @@ impl Block for PositionDependentGain {
     fn build(&mut self, _ctx: &BuildContext) -> Result<(), ParamError> {
         check_bounded("center", self.center, MAX_MAGNITUDE)?;
         check::positive("scale", self.scale)?;
+        check_bounded("g0", self.g0, MAX_MAGNITUDE)?;
         Self::check_coeffs(&self.coeffs)
     }
     fn output(&mut self, _tick: Tick, u: &[f64], y: &mut [f64]) {
@@ -120,15 +128,21 @@ impl Tunable for PositionDependentGain {
     fn param_names(&self) -> Vec<String> {
         (0..self.coeffs.len())
             .map(|i| format!("coeffs[{i}]"))
+            .chain(std::iter::once("g0".to_string()))
             .collect()
     }
     fn params(&self) -> Vec<f64> {
-        self.coeffs.clone()
+        let mut p = self.coeffs.clone();
+        p.push(self.g0);
+        p
     }
     fn set_params(&mut self, p: &[f64]) -> Result<(), ParamError> {
-        check_len(p, self.coeffs.len(), "[coeffs[0..n]]")?;
-        Self::check_coeffs(p)?;
-        self.coeffs.copy_from_slice(p);
+        let n = self.coeffs.len();
+        check_len(p, n + 1, "[coeffs[0..n], g0]")?;
+        Self::check_coeffs(&p[..n])?;
+        check_bounded("g0", p[n], MAX_MAGNITUDE)?;
+        self.coeffs.copy_from_slice(&p[..n]);
+        self.g0 = p[n];
         Ok(())
     }
 }
@@ -137,12 +151,13 @@ nanomotion_core::submit_block_doc! {
     BlockDoc {
         type_name: "position_dependent_gain",
         role: Role::Plant,
-        summary: "PLF effect: y = u·(1 + Σ g_i ((s − center)/scale)^i), s from port s or s = u; tunable [coeffs..]",
+        summary: "PLF effect: y = u·(1 + g0 + Σ g_i ((s − center)/scale)^i), s from port s or s = u; tunable [coeffs.., g0]",
         params: &[
             ParamDoc { name: "variable", doc: "signal (port s) | input (s = u)", default: Some("signal") },
             ParamDoc { name: "center", doc: "polynomial centre (unit of s)", default: Some("0") },
             ParamDoc { name: "scale", doc: "polynomial scale > 0 (unit of s)", default: Some("1") },
             ParamDoc { name: "coeffs", doc: "g_1..g_n (-), 1 ≤ n ≤ 8", default: None },
+            ParamDoc { name: "g0", doc: "constant relative gain error g_0 (-)", default: Some("0") },
         ],
         ports: "u (, s) -> y",
     }
