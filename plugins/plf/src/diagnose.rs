@@ -346,6 +346,14 @@ pub fn diagnose_with_progress(
         let at_floor = excess.iter().all(|&(ms, floor)| ms <= 1.2 * floor * floor);
         let floor_stop = "the held-out residual is at its noise floor (mean square within 20 % of the white-noise estimate)";
         let mut cands = enumerate(&ctx, &cur, opts)?;
+        // A second quantizer or slit table on the same output is never a new
+        // effect (the joint refit adjusts the first).
+        cands.retain(|c| {
+            !(matches!(c.effect, "quantization" | "encoder_slit_error")
+                && steps
+                    .iter()
+                    .any(|s| s.effect == c.effect && s.site == c.site.describe()))
+        });
         if at_floor {
             cands.retain(|c| {
                 matches!(c.effect, "quantization" | "encoder_slit_error")
@@ -475,7 +483,7 @@ pub fn diagnose_with_progress(
         let cand = &cands[bi];
         let after_ms = weighted_holdout_ms(&ctx, &win.residual);
         let (worse, better) = holdout_weighted_vectors(&ctx, &cur.residual, &win.residual);
-        let (test, _rel) = stats::improvement_test(&worse, &better, 20);
+        let (test, _rel) = stats::improvement_test(&worse, &better, 200);
         let level = opts.alpha / total.max(1) as f64;
         let floor_ms: f64 = excess
             .iter()
