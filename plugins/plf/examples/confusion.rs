@@ -4,8 +4,10 @@
 //! Markdown table (docs/plf.md quotes it):
 //!
 //! ```text
-//! cargo run --release -p nanomotion-plf --example confusion [SEEDS]
+//! cargo run --release -p nanomotion-plf --example confusion [SEEDS] [EFFECT ...]
 //! ```
+//!
+//! With effect names, only those rows (and each record's steps on stderr).
 
 use nanomotion_core::graph::GraphSpec;
 use nanomotion_plf::diagnose::{Options, diagnose, vocabulary};
@@ -19,12 +21,17 @@ fn main() {
         .nth(1)
         .and_then(|s| s.parse().ok())
         .unwrap_or(5);
+    let only: Vec<String> = std::env::args().skip(2).collect();
     let n = 12_000;
     // (hidden effect, what was named first with counts, first-step cuts, s per record)
     type Row = (String, BTreeMap<String, usize>, Vec<f64>, f64);
     let mut rows: Vec<Row> = Vec::new();
     let start = Instant::now();
-    for effect in vocabulary().into_iter().chain(["none"]) {
+    for effect in vocabulary()
+        .into_iter()
+        .chain(["none"])
+        .filter(|e| only.is_empty() || only.iter().any(|o| o == e))
+    {
         let mut named: BTreeMap<String, usize> = BTreeMap::new();
         let mut cuts = Vec::new();
         let t0 = Instant::now();
@@ -38,6 +45,16 @@ fn main() {
             let spec =
                 GraphSpec::from_yaml(&rec.nominal_yaml, "generated.yaml").expect("nominal graph");
             let r = diagnose(&spec, &rec.data, &Options::default()).expect("diagnose");
+            if !only.is_empty() {
+                eprintln!("  seed {seed}: {}", rec.truth);
+                for st in &r.steps {
+                    eprintln!(
+                        "    {} {}: held-out rms {:.3e} -> {:.3e}",
+                        st.effect, st.site, st.holdout_rms_before, st.holdout_rms_after
+                    );
+                }
+                eprintln!("    stopped: {}", r.stopped_because);
+            }
             let first = r.found.first().cloned().unwrap_or_else(|| "[]".into());
             *named.entry(first).or_default() += 1;
             if let Some(s) = r.steps.first() {
@@ -57,6 +74,7 @@ fn main() {
             t0.elapsed().as_secs_f64() / seeds as f64,
         ));
     }
+    let records = rows.len() as u64 * seeds;
     println!(
         "| hidden | named first (count of {seeds} seeds) | first step's held-out cut (min / median) | s per record |"
     );
@@ -73,7 +91,7 @@ fn main() {
     }
     println!(
         "\n{} records of {n} samples at 2 kHz in {:.0} s",
-        14 * seeds,
+        records,
         start.elapsed().as_secs_f64()
     );
 }

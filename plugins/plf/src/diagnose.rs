@@ -944,7 +944,7 @@ fn enumerate(ctx: &Ctx<'_>, cur: &Current, opts: &Options) -> Result<Vec<Cand>, 
                             .map(|f| json!({"type": "quantizer", "lsb": q0 * f})),
                     )
                     .collect(),
-                free: vec![(0, Scale::Log)],
+                free: vec![(0, Scale::Log), (1, Scale::Linear(0.05 * q0))],
                 s: vec![],
                 rate_hz: out_rate,
             });
@@ -1262,7 +1262,9 @@ fn quantizer_lsb(spec: &GraphSpec, signal: &str) -> Option<f64> {
         .as_f64()
 }
 
-/// The number of slits per period of the slit errors: the N (2..=min(512, slits/3))
+/// The number of slits per period of the slit errors: the N (2..=min(512, slits/2):
+/// every slit seen on at least two revolutions, so a table repeating every N slits
+/// is told from a static error of each position)
 /// whose per-slit-index means explain the residual best by BIC; `None` if no N
 /// beats "no slit error".
 fn slit_count(r: &[f64], y: &[f64], pitch: f64, slits: usize) -> Option<usize> {
@@ -1270,7 +1272,7 @@ fn slit_count(r: &[f64], y: &[f64], pitch: f64, slits: usize) -> Option<usize> {
     let sse0: f64 = r.iter().map(|v| v * v).sum();
     let mut best: Option<(usize, f64)> = None;
     let bic0 = n * (sse0 / n).ln();
-    for nn in 2..=(slits / 3).min(512) {
+    for nn in 2..=(slits / 2).min(512) {
         let mut sum = vec![0.0; nn];
         let mut cnt = vec![0usize; nn];
         for (v, p) in r.iter().zip(y) {

@@ -470,10 +470,11 @@ pub fn least_squares(
 /// The grid of a quantised record: if the values of `y` sit on levels
 /// o + m·q (plus noise small next to q), returns (q, o) with o ∈ [0, q).
 ///
-/// The sorted values are split into clusters at gaps larger than half the 95th
-/// percentile of the sorted spacings; the spacing of adjacent cluster centres
-/// must be one value (median absolute deviation under 10 % of the median, at
-/// least 10 clusters); then q and o are refined by least squares of the centres
+/// The sorted values are split into clusters where the spacings, sorted
+/// descending, drop most (by a factor of at least 5: gaps between levels against
+/// spacings inside one); the spacing of adjacent cluster centres must be one
+/// value (median absolute deviation under 10 % of the median, at least 5
+/// clusters, none wider than half a step); then q and o are refined by least squares of the centres
 /// on their integer level numbers (counted between neighbours, then re-assigned
 /// from the fitted grid), which is
 /// precise enough to place the grid over thousands of levels. `None` when the
@@ -484,19 +485,33 @@ pub fn lattice(y: &[f64]) -> Option<(f64, f64)> {
         return None;
     }
     v.sort_by(f64::total_cmp);
+    // The gaps between levels are the largest spacings, far above the spacings
+    // inside a level: split where the descending spacings drop most (by ratio).
     let mut gaps: Vec<f64> = v.windows(2).map(|w| w[1] - w[0]).collect();
-    let k95 = ((gaps.len() as f64 * 0.95) as usize).min(gaps.len() - 1);
-    gaps.select_nth_unstable_by(k95, f64::total_cmp);
-    let threshold = 0.5 * gaps[k95];
-    if threshold <= 0.0 {
+    gaps.sort_by(|a, b| b.total_cmp(a));
+    let top = (gaps.len() / 2).max(5);
+    let (mut cut, mut best) = (0usize, 0.0f64);
+    for i in 3..top.min(gaps.len() - 1) {
+        let ratio = gaps[i] / gaps[i + 1].max(f64::MIN_POSITIVE);
+        if ratio > best {
+            (cut, best) = (i, ratio);
+        }
+    }
+    // A grid shows as a drop by a large factor (level gap vs. in-level spacing).
+    if best < 5.0 {
         return None;
     }
-    // Cluster centres (means).
+    let threshold = (gaps[cut] * gaps[cut + 1]).sqrt();
+    // Cluster centres (means) and the widest cluster.
     let mut centres = Vec::new();
+    let mut widest = 0.0f64;
+    let mut first = v[0];
     let (mut sum, mut cnt) = (v[0], 1usize);
     for w in v.windows(2) {
         if w[1] - w[0] > threshold {
             centres.push(sum / cnt as f64);
+            widest = widest.max(w[0] - first);
+            first = w[1];
             sum = 0.0;
             cnt = 0;
         }
@@ -504,13 +519,14 @@ pub fn lattice(y: &[f64]) -> Option<(f64, f64)> {
         cnt += 1;
     }
     centres.push(sum / cnt as f64);
-    if centres.len() < 10 {
+    widest = widest.max(v[v.len() - 1] - first);
+    if centres.len() < 5 {
         return None;
     }
     let d: Vec<f64> = centres.windows(2).map(|w| w[1] - w[0]).collect();
     let q0 = median(&mut d.clone());
     let mut dev: Vec<f64> = d.iter().map(|x| (x - q0).abs()).collect();
-    if !(q0 > 0.0) || median(&mut dev) > 0.1 * q0 {
+    if !(q0 > 0.0) || median(&mut dev) > 0.1 * q0 || widest > 0.5 * q0 {
         return None;
     }
     // Least squares c_j = o + q·m_j on integer level numbers m_j, counted from
@@ -750,6 +766,19 @@ mod tests {
             "{oe} vs {o}"
         );
         assert!(1e-4 * (qe - q).abs() / q < 0.05 * q);
+        // Few levels, slowly visited (many samples per level).
+        let few: Vec<f64> = (0..8400)
+            .map(|k| {
+                let x = 1e-6 * (k as f64 / 8400.0 * 9.0).sin();
+                2.2e-7 * (x / 2.2e-7).round() + 1e-8 * rng.normal()
+            })
+            .collect();
+        let (qf, of) = lattice(&few).expect("a grid of 9 levels");
+        assert!((qf / 2.2e-7 - 1.0).abs() < 1e-3, "{qf}");
+        assert!(
+            ((of / 2.2e-7 + 0.5).rem_euclid(1.0) - 0.5).abs() < 0.01,
+            "{of}"
+        );
         // Not quantised: no grid.
         let smooth: Vec<f64> = (0..8400)
             .map(|k| 1e-4 * (k as f64 / 8400.0 * 7.0).sin() + 2e-9 * rng.normal())

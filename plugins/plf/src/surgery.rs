@@ -261,16 +261,19 @@ pub fn insert(
                 to: to.clone(),
             });
         }
-        Site::Output { compare, signal } => {
-            spec.connections.push(Connection {
-                from: signal.clone(),
-                to: format!("{name}.u"),
-            });
+        Site::Output { compare, .. } => {
+            // In series after what is compared now: after the sensor chain, and
+            // after any output-side effect inserted before (effects stack in the
+            // order they were found, as the fit saw them).
             let c = spec
                 .compare
                 .get_mut(*compare)
                 .ok_or_else(|| PlfError::Model(format!("no compare entry {compare}")))?;
-            c.signal = format!("{name}.y");
+            let from = std::mem::replace(&mut c.signal, format!("{name}.y"));
+            spec.connections.push(Connection {
+                from,
+                to: format!("{name}.u"),
+            });
         }
         Site::Feedback { from, to, position } => {
             let i = find_conn(spec, from, to)?;

@@ -105,6 +105,9 @@ fn two_hidden_effects_are_both_named_each_cutting_the_gap() {
     for (pair, seed) in [
         ("backlash+drift", 3),
         ("hysteresis+repetitive_disturbance", 4),
+        // Both on the output side: the second must stack after the first (the
+        // graph and the fit must see the same chain).
+        ("drift+repetitive_disturbance", 2),
     ] {
         let r = run(pair, seed, 12_000, 3);
         eprintln!("{pair}: found {:?}; {}", r.found, r.stopped_because);
