@@ -298,12 +298,9 @@ pub fn second_order(
         for truth in &truths {
             ym = match truth {
                 Truth::Repetitive { f, amps, phases } => {
-                    meas_x
-                        + (0..3)
-                            .map(|h| {
-                                amps[h] * (2.0 * PI * (h + 1) as f64 * f * t + phases[h]).sin()
-                            })
-                            .sum::<f64>()
+                    ym + (0..3)
+                        .map(|h| amps[h] * (2.0 * PI * (h + 1) as f64 * f * t + phases[h]).sin())
+                        .sum::<f64>()
                 }
                 Truth::Quantization { q } => q * (ym / q).round(),
                 Truth::Drift { a, b, c } => ym + a + b * t + c * t * t,
