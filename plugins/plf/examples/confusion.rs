@@ -1,7 +1,8 @@
 //! The confusion table of the discrepancy workflow over generated records: every
 //! vocabulary effect hidden on the second-order stage (and the two-axis stage for
-//! `axis_coupling`), several seeds each, plus noise-only records. Prints a
-//! Markdown table (docs/plf.md quotes it):
+//! `axis_coupling`), several seeds each, plus noise-only records; then the six
+//! effects of the walking-piezo records (fitted model (5.31) at 4 kHz, rows
+//! `wp:EFFECT`). Prints a Markdown table (docs/plf.md quotes it):
 //!
 //! ```text
 //! cargo run --release -p nanomotion-plf --example confusion [SEEDS] [EFFECT ...]
@@ -15,6 +16,9 @@ use nanomotion_plf::generate;
 use std::collections::BTreeMap;
 use std::time::Instant;
 
+#[path = "../tests/support/walking_piezo.rs"]
+mod wp;
+
 fn main() {
     let _ = std::any::type_name::<nanomotion_plf::effects::Effect>();
     let seeds: u64 = std::env::args()
@@ -27,26 +31,39 @@ fn main() {
     type Row = (String, BTreeMap<String, usize>, Vec<f64>, f64);
     let mut rows: Vec<Row> = Vec::new();
     let start = Instant::now();
-    for effect in vocabulary()
+    let rows_wanted: Vec<String> = vocabulary()
         .into_iter()
         .chain(["none"])
+        .map(str::to_string)
+        .chain(wp::EFFECTS.iter().map(|e| format!("wp:{e}")))
         .filter(|e| only.is_empty() || only.iter().any(|o| o == e))
-    {
+        .collect();
+    for row in &rows_wanted {
+        let (walking, effect) = match row.strip_prefix("wp:") {
+            Some(e) => (true, e),
+            None => (false, row.as_str()),
+        };
         let mut named: BTreeMap<String, usize> = BTreeMap::new();
         let mut cuts = Vec::new();
         let t0 = Instant::now();
         for seed in 1..=seeds {
-            let rec = if effect == "axis_coupling" {
-                generate::two_axis(effect, seed, n)
+            let (nominal_yaml, data, truth) = if walking {
+                let (data, truth) = wp::record(effect, seed);
+                (wp::nominal_yaml(), data, truth)
             } else {
-                generate::second_order(effect, seed, n, false)
-            }
-            .expect("generator");
+                let rec = if effect == "axis_coupling" {
+                    generate::two_axis(effect, seed, n)
+                } else {
+                    generate::second_order(effect, seed, n, false)
+                }
+                .expect("generator");
+                (rec.nominal_yaml, rec.data, rec.truth)
+            };
             let spec =
-                GraphSpec::from_yaml(&rec.nominal_yaml, "generated.yaml").expect("nominal graph");
-            let r = diagnose(&spec, &rec.data, &Options::default()).expect("diagnose");
+                GraphSpec::from_yaml(&nominal_yaml, "generated.yaml").expect("nominal graph");
+            let r = diagnose(&spec, &data, &Options::default()).expect("diagnose");
             if !only.is_empty() {
-                eprintln!("  seed {seed}: {}", rec.truth);
+                eprintln!("  seed {seed}: {truth}");
                 for st in &r.steps {
                     eprintln!(
                         "    {} {}: held-out rms {:.3e} -> {:.3e}",
@@ -66,9 +83,9 @@ fn main() {
                     .or_default() += 1;
             }
         }
-        eprintln!("{effect}: {named:?} in {:.1} s", t0.elapsed().as_secs_f64());
+        eprintln!("{row}: {named:?} in {:.1} s", t0.elapsed().as_secs_f64());
         rows.push((
-            effect.to_string(),
+            row.clone(),
             named,
             cuts,
             t0.elapsed().as_secs_f64() / seeds as f64,
@@ -90,8 +107,9 @@ fn main() {
         println!("| {effect} | {} | {cut} | {secs:.1} |", names.join(", "));
     }
     println!(
-        "\n{} records of {n} samples at 2 kHz in {:.0} s",
+        "\n{} records (second-order: {n} samples at 2 kHz; walking piezo: {} at 4 kHz) in {:.0} s",
         records,
+        wp::N,
         start.elapsed().as_secs_f64()
     );
 }

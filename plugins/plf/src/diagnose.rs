@@ -1152,6 +1152,26 @@ fn enumerate(ctx: &Ctx<'_>, cur: &Current, opts: &Options) -> Result<Vec<Cand>, 
                     s: vec![],
                     rate_hz: None,
                 });
+                // Piezo creep grows with the logarithm of time: one lag per decade
+                // (record/3, /30, /300), gains free, time constants fixed — linear
+                // in its parameters, so it is found where a single lag's time
+                // constant cannot be.
+                out.push(Cand {
+                    effect: "creep",
+                    site: inp.clone(),
+                    output: None,
+                    starts: vec![json!({"type": "creep", "terms": [
+                        {"gain": 0.0, "tau_s": t_len / 3.0},
+                        {"gain": 0.0, "tau_s": t_len / 30.0},
+                        {"gain": 0.0, "tau_s": t_len / 300.0}]})],
+                    free: vec![
+                        (0, Scale::Linear(0.05)),
+                        (2, Scale::Linear(0.05)),
+                        (4, Scale::Linear(0.05)),
+                    ],
+                    s: vec![],
+                    rate_hz: None,
+                });
             }
             if want("position_dependent_gain") {
                 out.push(Cand {

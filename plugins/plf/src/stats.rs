@@ -470,11 +470,11 @@ pub fn least_squares(
 /// The grid of a quantised record: if the values of `y` sit on levels
 /// o + m·q (plus noise small next to q), returns (q, o) with o ∈ [0, q).
 ///
-/// The sorted values are split into clusters where the spacings, sorted
-/// descending, drop most (by a factor of at least 5: gaps between levels against
-/// spacings inside one); the spacing of adjacent cluster centres must be one
-/// value (median absolute deviation under 10 % of the median, at least 5
-/// clusters, none wider than half a step); then q and o are refined by least squares of the centres
+/// The sorted values are split into clusters at the threshold that separates
+/// the log spacings best (Otsu's rule; the class means at least 5× apart: gaps
+/// between levels against spacings inside one); the spacings of adjacent cluster centres must be whole
+/// multiples of one step (nine in ten within 15 %: a fast record skips levels; at
+/// least 5 clusters, none wider than half a step); then q and o are refined by least squares of the centres
 /// on their integer level numbers (counted between neighbours, then re-assigned
 /// from the fitted grid), which is
 /// precise enough to place the grid over thousands of levels. `None` when the
@@ -485,23 +485,58 @@ pub fn lattice(y: &[f64]) -> Option<(f64, f64)> {
         return None;
     }
     v.sort_by(f64::total_cmp);
-    // The gaps between levels are the largest spacings, far above the spacings
-    // inside a level: split where the descending spacings drop most (by ratio).
-    let mut gaps: Vec<f64> = v.windows(2).map(|w| w[1] - w[0]).collect();
-    gaps.sort_by(|a, b| b.total_cmp(a));
-    let top = (gaps.len() / 2).max(5);
-    let (mut cut, mut best) = (0usize, 0.0f64);
-    for i in 3..top.min(gaps.len() - 1) {
-        let ratio = gaps[i] / gaps[i + 1].max(f64::MIN_POSITIVE);
-        if ratio > best {
-            (cut, best) = (i, ratio);
-        }
-    }
-    // A grid shows as a drop by a large factor (level gap vs. in-level spacing).
-    if best < 5.0 {
+    // The gaps between levels are far larger than the spacings inside a level.
+    // Two ways to find the split, tried in turn (the first that gives a
+    // consistent grid wins): the largest drop (by ratio, at least 5×) of the
+    // spacings sorted descending — right when there are few levels, each visited
+    // many times; and Otsu's rule on the log spacings (the threshold maximising
+    // the between-class variance, class means at least 5× apart) — right when a
+    // fast record visits thousands of levels a few times each.
+    let mut lg: Vec<f64> = v
+        .windows(2)
+        .map(|w| w[1] - w[0])
+        .filter(|g| *g > 0.0)
+        .map(f64::ln)
+        .collect();
+    if lg.len() < 20 {
         return None;
     }
-    let threshold = (gaps[cut] * gaps[cut + 1]).sqrt();
+    lg.sort_by(|a, b| b.total_cmp(a));
+    let n = lg.len();
+    let mut thresholds = Vec::new();
+    let (mut drop_at, mut drop) = (0usize, 0.0f64);
+    for i in 3..(n / 2).max(5).min(n - 1) {
+        if lg[i] - lg[i + 1] > drop {
+            (drop_at, drop) = (i, lg[i] - lg[i + 1]);
+        }
+    }
+    if drop >= 5f64.ln() {
+        thresholds.push((0.5 * (lg[drop_at] + lg[drop_at + 1])).exp());
+    }
+    let total: f64 = lg.iter().sum();
+    let (mut best, mut cut, mut sum_hi) = (f64::NEG_INFINITY, 0usize, 0.0);
+    for i in 0..n - 1 {
+        sum_hi += lg[i];
+        let (n_hi, n_lo) = ((i + 1) as f64, (n - i - 1) as f64);
+        let (m_hi, m_lo) = (sum_hi / n_hi, (total - sum_hi) / n_lo);
+        let between = n_lo * n_hi * (m_hi - m_lo).powi(2);
+        if between > best {
+            (best, cut) = (between, i);
+        }
+    }
+    let m_hi = lg[..=cut].iter().sum::<f64>() / (cut + 1) as f64;
+    let m_lo = lg[cut + 1..].iter().sum::<f64>() / (n - cut - 1) as f64;
+    if m_hi - m_lo >= 5f64.ln() && cut >= 3 {
+        thresholds.push((0.5 * (lg[cut] + lg[cut + 1])).exp());
+    }
+    thresholds
+        .into_iter()
+        .find_map(|threshold| grid_at(&v, threshold))
+}
+
+/// The grid of sorted values `v` split into levels at spacings above `threshold`
+/// (see [`lattice`]).
+fn grid_at(v: &[f64], threshold: f64) -> Option<(f64, f64)> {
     // Cluster centres (means) and the widest cluster.
     let mut centres = Vec::new();
     let mut widest = 0.0f64;
@@ -523,10 +558,40 @@ pub fn lattice(y: &[f64]) -> Option<(f64, f64)> {
     if centres.len() < 5 {
         return None;
     }
+    // Adjacent centres are one step apart, or several where the record skipped
+    // levels (a fast stage): the step is the typical smallest spacing (the median
+    // of the lowest fifth), and nine in ten spacings must be whole multiples of
+    // it within 15 %.
     let d: Vec<f64> = centres.windows(2).map(|w| w[1] - w[0]).collect();
-    let q0 = median(&mut d.clone());
-    let mut dev: Vec<f64> = d.iter().map(|x| (x - q0).abs()).collect();
-    if !(q0 > 0.0) || median(&mut dev) > 0.1 * q0 || widest > 0.5 * q0 {
+    let mut sorted = d.clone();
+    sorted.sort_by(f64::total_cmp);
+    let q10 = sorted[sorted.len() / 10];
+    if !(q10 > 0.0) {
+        return None;
+    }
+    // Refined: the median of each spacing divided by its whole number of steps.
+    let mut per_step: Vec<f64> = d
+        .iter()
+        .filter_map(|x| {
+            let m = (x / q10).round();
+            (m >= 1.0).then(|| x / m)
+        })
+        .collect();
+    if per_step.is_empty() {
+        return None;
+    }
+    let q0 = median(&mut per_step);
+    if !(q0 > 0.0) || widest > 0.5 * q0 {
+        return None;
+    }
+    let whole = d
+        .iter()
+        .filter(|x| {
+            let m = *x / q0;
+            (m - m.round()).abs() < 0.15
+        })
+        .count();
+    if (whole as f64) < 0.9 * d.len() as f64 {
         return None;
     }
     // Least squares c_j = o + q·m_j on integer level numbers m_j, counted from
@@ -538,7 +603,7 @@ pub fn lattice(y: &[f64]) -> Option<(f64, f64)> {
             let mut acc = 0.0;
             std::iter::once(0.0)
                 .chain(d.iter().map(|dj| {
-                    acc += (dj / q0).round().max(1.0);
+                    acc += (dj / q0).round();
                     acc
                 }))
                 .collect()
@@ -766,6 +831,15 @@ mod tests {
             "{oe} vs {o}"
         );
         assert!(1e-4 * (qe - q).abs() / q < 0.05 * q);
+        // A fast stage that skips levels: 2400 levels of 42 nm, ~3 samples each.
+        let fast: Vec<f64> = (0..8400)
+            .map(|k| {
+                let x = 1e-4 * (k as f64 / 8400.0 * 11.0).sin();
+                4.2e-8 * (x / 4.2e-8).round() + 2e-9 * rng.normal()
+            })
+            .collect();
+        let (qs, _) = lattice(&fast).expect("a grid with skipped levels");
+        assert!((qs / 4.2e-8 - 1.0).abs() < 1e-4, "{qs}");
         // Few levels, slowly visited (many samples per level).
         let few: Vec<f64> = (0..8400)
             .map(|k| {

@@ -1,0 +1,170 @@
+//! Records of the walking-piezo plant (Ch. 5 fitted model (5.31), 4 kHz) with one
+//! hidden effect, shared by `tests/walking_piezo.rs` and the `confusion` example.
+//! See `tests/walking_piezo.rs` for what each effect is in the truth.
+
+use nanomotion_core::Plant;
+use nanomotion_core::data::Dataset;
+use nanomotion_core::rng::Rng;
+use std::f64::consts::PI;
+use walking_piezo::{FittedStage, FittedStageParams};
+
+pub const RATE: f64 = 4000.0;
+pub const N: usize = 12_000;
+
+pub fn nominal_yaml() -> String {
+    format!(
+        "title: walking piezo stage, fitted model (5.31), nominal\nbase_rate_hz: {RATE}\nduration_s: {}\nblocks:\n  - {{ name: drive, type: data_column, column: f_alpha }}\n  - {{ name: stage, type: walking_piezo_fitted }}\nconnections:\n  - {{ from: drive.y, to: stage.f_alpha }}\ncompare:\n  - {{ signal: stage.x_s, column: x }}\n",
+        N as f64 / RATE
+    )
+}
+
+/// Drive frequency f_α (Hz): slow back-and-forth strokes (peak 40 Hz, so the
+/// stage travels some 100 µm each way) plus a 5–600 Hz multisine of 4 Hz rms
+/// that excites the resonances.
+fn drive(rng: &mut Rng) -> Vec<f64> {
+    let slow: Vec<(f64, f64, f64)> = (0..4)
+        .map(|_| {
+            (
+                rng.uniform_in(0.3, 2.0),
+                rng.uniform_in(0.0, 2.0 * PI),
+                rng.uniform_in(0.5, 1.0),
+            )
+        })
+        .collect();
+    let fast: Vec<(f64, f64)> = (0..30)
+        .map(|_| (rng.uniform_in(5.0, 600.0), rng.uniform_in(0.0, 2.0 * PI)))
+        .collect();
+    let raw: Vec<f64> = (0..N)
+        .map(|k| {
+            let t = k as f64 / RATE;
+            slow.iter()
+                .map(|(f, p, a)| a * (2.0 * PI * f * t + p).sin())
+                .sum::<f64>()
+        })
+        .collect();
+    let peak = raw.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    raw.iter()
+        .enumerate()
+        .map(|(k, v)| {
+            let t = k as f64 / RATE;
+            let q: f64 = fast
+                .iter()
+                .map(|(f, p)| (2.0 * PI * f * t + p).sin())
+                .sum::<f64>()
+                * (2.0 / fast.len() as f64).sqrt();
+            40.0 * v / peak + 4.0 * q
+        })
+        .collect()
+}
+
+/// Simulate the stage on `f` with an input-side transform `input(k, f_k, x_k)`.
+fn simulate(f: &[f64], mut input: impl FnMut(usize, f64, f64) -> f64) -> Vec<f64> {
+    let mut stage = FittedStage::new(FittedStageParams::default(), 1.0 / RATE).unwrap();
+    let mut x = Vec::with_capacity(f.len());
+    let mut y = [0.0];
+    for (k, &fk) in f.iter().enumerate() {
+        stage.plant_output(&mut y);
+        x.push(y[0]);
+        stage.advance(&[input(k, fk, y[0])]);
+    }
+    x
+}
+
+/// A record with `hidden` in the truth, seeded; returns (data, truth in words).
+pub fn record(hidden: &str, seed: u64) -> (Dataset, String) {
+    let mut rng = Rng::new(seed ^ 0x3a1c_0f5e);
+    let f = drive(&mut rng);
+    let nominal = simulate(&f, |_, fk, _| fk);
+    let (lo, hi) = nominal
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
+            (a.min(v), b.max(v))
+        });
+    let (mid, half) = (0.5 * (lo + hi), 0.5 * (hi - lo));
+    let step = FittedStageParams::default().gain_m_per_cycle;
+    let sign = |rng: &mut Rng| if rng.uniform() < 0.5 { -1.0 } else { 1.0 };
+    let (x, truth): (Vec<f64>, String) = match hidden {
+        "position_dependent_gain" => {
+            let g = rng.uniform_in(0.15, 0.3) * sign(&mut rng);
+            (
+                simulate(&f, |_, fk, xk| fk * (1.0 + g * (xk - mid) / half)),
+                format!("step size × (1 + {g:.3}·(x − x̄)/{half:.3e} m)"),
+            )
+        }
+        "time_delay" => {
+            let d = 2 + (rng.uniform() * 5.0) as usize;
+            (
+                simulate(&f, |k, _, _| if k >= d { f[k - d] } else { f[0] }),
+                format!("{d} extra samples of delay"),
+            )
+        }
+        "saturation" => {
+            let peak = f.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+            let lim = rng.uniform_in(0.6, 0.8) * peak;
+            (
+                simulate(&f, |_, fk, _| fk.clamp(-lim, lim)),
+                format!("drive frequency limited to ±{lim:.1} Hz"),
+            )
+        }
+        "quantization" => {
+            let q = rng.uniform_in(40e-9, 80e-9);
+            (
+                nominal.iter().map(|x| q * (x / q).round()).collect(),
+                format!("encoder lsb {q:.3e} m"),
+            )
+        }
+        "repetitive_disturbance" => {
+            let (a1, a2) = (rng.uniform_in(20e-9, 50e-9), rng.uniform_in(0.0, 15e-9));
+            let (p1, p2) = (rng.uniform_in(0.0, 2.0 * PI), rng.uniform_in(0.0, 2.0 * PI));
+            (
+                nominal
+                    .iter()
+                    .map(|x| {
+                        let ph = 2.0 * PI * x / step;
+                        x + a1 * (ph + p1).sin() + a2 * (2.0 * ph + p2).sin()
+                    })
+                    .collect(),
+                format!("step ripple {a1:.2e} m per step of {step:.3e} m"),
+            )
+        }
+        "drift" => {
+            let b = rng.uniform_in(0.2e-6, 0.5e-6) * sign(&mut rng);
+            let a = rng.uniform_in(-0.1e-6, 0.1e-6);
+            let c = rng.uniform_in(-0.02e-6, 0.02e-6);
+            (
+                nominal
+                    .iter()
+                    .enumerate()
+                    .map(|(k, x)| {
+                        let t = k as f64 / RATE;
+                        x + a + b * t + c * t * t
+                    })
+                    .collect(),
+                format!("drift {b:.2e} m/s"),
+            )
+        }
+        other => panic!("no walking-piezo truth for {other}"),
+    };
+    let sigma = 2e-9; // encoder/interferometer noise, 2 nm rms
+    let y: Vec<f64> = x.iter().map(|v| v + sigma * rng.normal()).collect();
+    let data = Dataset::from_columns(
+        "walking_piezo",
+        RATE,
+        0.0,
+        vec![("f_alpha".into(), f), ("x".into(), y)],
+    )
+    .unwrap();
+    (data, truth)
+}
+
+/// The effects the walking-piezo records can hide (the `confusion` example
+/// iterates over them; the tests name each).
+#[allow(dead_code)]
+pub const EFFECTS: [&str; 6] = [
+    "position_dependent_gain",
+    "time_delay",
+    "saturation",
+    "quantization",
+    "repetitive_disturbance",
+    "drift",
+];
