@@ -10,6 +10,7 @@
 //! | what | thesis | Rust | block `type:` |
 //! |---|---|---|---|
 //! | rotation estimate from line scans: correlation, sub-sample peak, shift, angle, averaging | (7.18)–(7.21) | [`estimate::estimate_rotation`] | — |
+//! | rotation R(α) of references, errors and controller outputs between actuator and sample frame | (7.17), Fig. 7.11 | [`frame::FrameRotation`] (glam `DMat2`) | `frame_rotation` |
 //!
 //! The RC itself (7.13) with its learning filter (ZPETC) and robustness filter Q is
 //! the `repetitive_control` block of the `dvrc` plugin; this crate does not depend on
@@ -17,7 +18,9 @@
 //! `docs/directional-rc.md`).
 
 pub mod estimate;
+pub mod frame;
 
 pub use estimate::{
     EstimateError, EstimatorOptions, LineScan, RotationEstimate, estimate_rotation,
 };
+pub use frame::{Direction, FrameRotation, rotation};
