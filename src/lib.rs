@@ -61,6 +61,7 @@ pub use serde;
 /// ```
 pub use typetag;
 
+pub mod image_plot;
 pub mod output;
 pub mod plot;
 

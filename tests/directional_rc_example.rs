@@ -44,3 +44,60 @@ fn drc_recovers_the_rotation_and_lets_rc_learn_the_topography() {
         drc.rms_nm
     );
 }
+
+#[test]
+fn the_yaml_scan_passes_rc_check_runs_and_gives_images_via_the_cli() {
+    let graph = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/examples/directional_rc/scan_rc_vs_drc.yaml"
+    );
+    nanomotion::link_plugins();
+    let report = nanomotion::dvrc::check::rc_check_file(std::path::Path::new(graph)).unwrap();
+    assert_eq!(report.blocks.len(), 2, "{report}");
+    assert!(report.all_hold(), "{report}");
+    let out = std::env::temp_dir().join(format!("nanomotion_drc_scan_{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&out);
+    let exe = env!("CARGO_BIN_EXE_nanomotion");
+    let st = std::process::Command::new(exe)
+        .args(["run", graph, "--duration", "21", "--out"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(
+        st.status.success(),
+        "{}",
+        String::from_utf8_lossy(&st.stderr)
+    );
+    let st = std::process::Command::new(exe)
+        .arg("scan-image")
+        .arg(&out)
+        .args([
+            "--from-s",
+            "4",
+            "--image",
+            "drc_topography=drc_stage.pos[1],drc_stage.pos[0],-drc_stage.pos[2]",
+            "--image",
+            "drc_error=drc_stage.pos[1],drc_stage.pos[0],drc_ez.y",
+        ])
+        .output()
+        .unwrap();
+    assert!(
+        st.status.success(),
+        "{}",
+        String::from_utf8_lossy(&st.stderr)
+    );
+    for f in ["drc_topography.svg", "drc_error.svg"] {
+        let svg = std::fs::read_to_string(out.join(f)).unwrap();
+        assert!(svg.contains("<rect"), "{f}");
+    }
+    // A wrong column is a named error, not a panic.
+    let st = std::process::Command::new(exe)
+        .arg("scan-image")
+        .arg(&out)
+        .args(["--image", "x=nope,drc_stage.pos[0],drc_ez.y"])
+        .output()
+        .unwrap();
+    assert!(!st.status.success());
+    assert!(String::from_utf8_lossy(&st.stderr).contains("no column `nope`"));
+    let _ = std::fs::remove_dir_all(&out);
+}

@@ -42,6 +42,14 @@ fn main() {
                     "RC design: Q cut-off {:.1} Hz (101 taps); criterion (7.16): {}",
                     o.q_cutoff_hz, o.criterion
                 );
+                println!(
+                    "(7.16) with the z piezo's slope at its smallest: {}\n(7.16) with the slope at its largest: {}",
+                    o.criterion_slopes[0], o.criterion_slopes[1]
+                );
+                println!(
+                    "controllers (6.5), f_LP = 60 Hz: k = {:?} V/(m·s); T_z num {:?} den {:?}; start x, y, contact z = {:?} m",
+                    o.k_gains, o.t_num_den.0, o.t_num_den.1, o.start_m
+                );
             }
             rows.push((alpha, drc, o.rms_nm));
         }

@@ -80,8 +80,16 @@ pub struct Outcome {
     pub criterion: RcCriterion,
     /// Q cut-off (Hz).
     pub q_cutoff_hz: f64,
+    /// (7.16) with T_z at the z piezo's smallest and largest small-signal slope.
+    pub criterion_slopes: [RcCriterion; 2],
     /// Image samples (x_a, y_a, z measured, e_z), all m.
     pub image: Vec<[f64; 4]>,
+    /// Integral gains k of the (6.5) controllers x, y, z (V/(m·s)), f_LP = 60 Hz.
+    pub k_gains: [f64; 3],
+    /// T_z(z) numerator and denominator (descending powers of z).
+    pub t_num_den: (Vec<f64>, Vec<f64>),
+    /// Start position x_c, y_c and the contact z (m).
+    pub start_m: [f64; 3],
 }
 
 /// The triangle of `triangular_scan`: 0 at t = 0 rising, +A at T/4, −A at 3T/4.
@@ -110,8 +118,7 @@ pub fn grating(alpha_rad: f64) -> Topography {
 }
 
 /// Discrete model of the z complementary sensitivity T_z (diagonal z mode and K_z).
-fn t_z(stage: &AfmStage, kz: &StateSpace, dt: f64) -> StateSpace {
-    let g = design_gains(stage)[2];
+fn t_z(stage: &AfmStage, g: f64, kz: &StateSpace, dt: f64) -> StateSpace {
     let w = TAU * stage.resonance_hz[2];
     let z = stage.damping[2];
     let p = StateSpace::new(
@@ -161,7 +168,7 @@ pub fn run(cfg: &Config) -> Outcome {
     let kz_ss = c[2].continuous().c2d(dt, C2dMethod::TUSTIN).unwrap();
 
     // RC design: L = ZPETC(T_z), Q by criterion (7.16).
-    let t = t_z(&stage, &kz_ss, dt);
+    let t = t_z(&stage, gains[2], &kz_ss, dt);
     let tf: TransferFunction = t.to_tf().unwrap();
     let l_spec = FilterSpec::Zpetc {
         num: tf.num.clone(),
@@ -170,6 +177,9 @@ pub fn run(cfg: &Config) -> Outcome {
     let l = l_spec.build(dt).unwrap();
     let taps = cfg.q_taps;
     let n = (PERIOD_S / dt).round() as usize;
+    let q_built = |q: &nanomotion::dvrc::stability::QDesign| {
+        nanomotion::dvrc::Filter::fir(q.taps.clone(), (taps - 1) / 2, dt)
+    };
     let q = match cfg.q_cutoff_hz {
         None => nanomotion::dvrc::design_q_cutoff(&t, &l, taps, 0, 0.05).unwrap(),
         Some(fc) => {
@@ -182,6 +192,14 @@ pub fn run(cfg: &Config) -> Outcome {
             }
         }
     };
+    // (7.16) with the z piezo's true small-signal slopes: the Coleman–Hodgdon
+    // operator's slope runs from u (at a reversal) to b (far from one); the design
+    // used their mean.
+    let hz = stage.hysteresis[2].trace;
+    let criterion_slopes = [hz.c, hz.b].map(|g| {
+        let tg = t_z(&stage, g, &kz_ss, dt);
+        nanomotion::dvrc::rc_criterion(&tg, &l, &q_built(&q), n, n).unwrap()
+    });
     let mut rc = RepetitiveControl::built(
         n,
         l_spec,
@@ -301,6 +319,10 @@ pub fn run(cfg: &Config) -> Outcome {
         estimate,
         criterion: q.criterion,
         q_cutoff_hz: q.cutoff_hz,
+        criterion_slopes,
         image,
+        k_gains: [c[0].k, c[1].k, c[2].k],
+        t_num_den: (tf.num.clone(), tf.den.clone()),
+        start_m: [x_c, y_c, stage.contact_z_m],
     }
 }
