@@ -1,7 +1,7 @@
 //! Sec. 7.5 reproduced on the simulated AFM: rms e_z per iteration for RC and DRC
 //! with the grating rotated by 0.022 and 0.015 rad (Fig. 7.17(a), Table 7.3).
 //!
-//! Run: `cargo run --release --example directional_rc [ITERATIONS [FS_HZ [Q_CUTOFF_HZ]]]`
+//! Run: `cargo run --release --example directional_rc [ITERATIONS [FS_HZ [Q_CUTOFF_HZ|design [noiseless]]]]`
 //! (defaults 15, 20 000, designed by (7.16);
 //! about a minute in release). See `sim.rs` for the set-up and
 //! docs/directional-rc.md for the figures and their reading.
@@ -16,9 +16,12 @@ fn main() {
     let fs_hz: f64 = arg(2)
         .map(|a| a.parse().expect("FS_HZ must be a number"))
         .unwrap_or(20e3);
-    let q_cutoff_hz: Option<f64> = arg(3).map(|a| a.parse().expect("Q_CUTOFF_HZ must be a number"));
+    let q_cutoff_hz: Option<f64> = arg(3)
+        .filter(|a| a != "design")
+        .map(|a| a.parse().expect("Q_CUTOFF_HZ must be a number or `design`"));
+    let noiseless = arg(4).is_some_and(|a| a == "noiseless");
     println!(
-        "f_s = {fs_hz} Hz, {iterations} iterations, Q cut-off {q_cutoff_hz:?} Hz (None: designed)"
+        "f_s = {fs_hz} Hz, {iterations} iterations, Q cut-off {q_cutoff_hz:?} Hz (None: designed), noiseless: {noiseless}"
     );
     let mut rows = Vec::new();
     for alpha in [0.022, 0.015] {
@@ -27,6 +30,7 @@ fn main() {
                 fs_hz,
                 q_cutoff_hz,
                 q_taps: 101,
+                noiseless,
                 iterations,
                 alpha_rad: alpha,
                 drc,

@@ -65,6 +65,8 @@ pub struct Config {
     pub q_cutoff_hz: Option<f64>,
     /// Taps of the linear-phase FIR Q (odd); the example uses 101.
     pub q_taps: usize,
+    /// Switch off the interferometer and deflection noise (diagnosis).
+    pub noiseless: bool,
     /// Keep every n-th sample for images (0: none).
     pub image_every: usize,
 }
@@ -148,6 +150,10 @@ pub fn run(cfg: &Config) -> Outcome {
     let mut stage = AfmStage::default();
     stage.topography = grating(cfg.alpha_rad);
     stage.initial_v = [50.0; 3];
+    if cfg.noiseless {
+        stage.noise_bound_m = [0.0; 3];
+        stage.deflection_noise_bound_m = 0.0;
+    }
     // Contact where z starts: build once to read the start position.
     let mut y = [0.0; N_OUTPUTS];
     {
