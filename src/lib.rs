@@ -26,6 +26,7 @@ pub use gain_scheduling;
 pub use hots;
 pub use nanomotion_core as core;
 pub use nanomotion_core::{Block, GraphSpec, Scheduler};
+pub use nanomotion_directional_rc as directional_rc;
 pub use nanomotion_plf as plf;
 pub use timestamp_encoder;
 pub use walking_piezo;
@@ -60,6 +61,7 @@ pub use serde;
 /// ```
 pub use typetag;
 
+pub mod image_plot;
 pub mod output;
 pub mod plot;
 
@@ -76,4 +78,5 @@ pub fn link_plugins() {
     let _ = std::any::type_name::<gain_scheduling::GainSchedule>();
     let _ = std::any::type_name::<dvrc::check::RcCheckReport>();
     let _ = std::any::type_name::<plf::effects::Hysteresis>();
+    let _ = std::any::type_name::<directional_rc::FrameRotation>();
 }

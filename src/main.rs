@@ -2,6 +2,7 @@
 
 mod diagnose_cmd;
 mod optimize_cmd;
+mod scan_image_cmd;
 
 use clap::{Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
@@ -182,6 +183,23 @@ enum Command {
         #[arg(long, value_delimiter = ',')]
         effects: Vec<String>,
     },
+    /// Heat maps of a scan from a run folder (`signals.csv`): for each `--image
+    /// NAME=H,V,VALUE` an SVG `NAME.svg` of VALUE (nm, mean removed; a leading `-`
+    /// flips its sign) over the plane (H, V) in µm, e.g. the topography and the
+    /// error of the AFM scan in examples/directional_rc/scan_rc_vs_drc.yaml.
+    ScanImage {
+        /// The run folder (written by `nanomotion run`).
+        run_dir: PathBuf,
+        /// NAME=H_COLUMN,V_COLUMN,VALUE_COLUMN (repeatable).
+        #[arg(long = "image", value_parser = scan_image_cmd::parse_spec)]
+        images: Vec<scan_image_cmd::ImageSpec>,
+        /// Use samples from this time on (s).
+        #[arg(long, default_value_t = 0.0)]
+        from_s: f64,
+        /// Pixels along H and V.
+        #[arg(long, num_args = 2, value_names = ["NH", "NV"], default_values_t = [200, 40])]
+        pixels: Vec<usize>,
+    },
     /// List the registered block types, with their ports and parameters.
     Blocks {
         /// Show only types whose name contains this text.
@@ -252,6 +270,12 @@ fn main() -> ExitCode {
             seed,
             effects,
         }),
+        Command::ScanImage {
+            run_dir,
+            images,
+            from_s,
+            pixels,
+        } => scan_image_cmd::run(&run_dir, &images, from_s, (pixels[0], pixels[1])),
         Command::Blocks { filter } => blocks(filter.as_deref()),
     };
     match result {
