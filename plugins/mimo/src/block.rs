@@ -119,6 +119,8 @@ struct Runtime {
     x: Vec<f64>,
     xn: Vec<f64>,
     e: Vec<f64>,
+    /// Same as [`Block::direct_feedthrough`]: then the state advances in `output`.
+    feedthrough: bool,
 }
 
 /// `mimo_controller` (see the [module docs](self)).
@@ -252,11 +254,32 @@ impl MimoController {
             x: vec![0.0; n],
             xn: vec![0.0; n],
             e: vec![0.0; p],
+            feedthrough: self.direct_feedthrough(),
         })
     }
 }
 
 impl Runtime {
+    /// x ← A x + B e with the errors of this sample.
+    #[inline]
+    fn advance(&mut self) {
+        let (n, p) = (self.n, self.p);
+        for i in 0..n {
+            let s = self.a_start[i];
+            let arow = &self.a[i * n + s..(i + 1) * n];
+            let mut acc = 0.0;
+            for (aj, xj) in arow.iter().zip(&self.x[s..]) {
+                acc += aj * xj;
+            }
+            let brow = &self.b[i * p..(i + 1) * p];
+            for (bj, ej) in brow.iter().zip(&self.e) {
+                acc += bj * ej;
+            }
+            self.xn[i] = acc;
+        }
+        std::mem::swap(&mut self.x, &mut self.xn);
+    }
+
     #[inline]
     fn errors(&mut self, scale: &[f64], r: &[f64], y: &[f64]) {
         for i in 0..self.p {
@@ -312,25 +335,19 @@ impl Block for MimoController {
             }
             *yi = acc;
         }
+        if rt.feedthrough {
+            rt.advance();
+        }
     }
     fn update(&mut self, _tick: Tick, u: &[f64]) {
-        let Some(rt) = self.rt.as_mut() else { return };
-        let (n, p) = (rt.n, rt.p);
-        rt.errors(&self.error_scale, &u[..p], &u[p..2 * p]);
-        for i in 0..n {
-            let s = rt.a_start[i];
-            let arow = &rt.a[i * n + s..(i + 1) * n];
-            let mut acc = 0.0;
-            for (aj, xj) in arow.iter().zip(&rt.x[s..]) {
-                acc += aj * xj;
-            }
-            let brow = &rt.b[i * p..(i + 1) * p];
-            for (bj, ej) in brow.iter().zip(&rt.e) {
-                acc += bj * ej;
-            }
-            rt.xn[i] = acc;
+        // Blocks with feed-through advance in `output` (the scheduler calls
+        // `update` only for blocks without it).
+        if self.rt.as_ref().is_some_and(|r| !r.feedthrough) {
+            let Some(rt) = self.rt.as_mut() else { return };
+            let p = rt.p;
+            rt.errors(&self.error_scale, &u[..p], &u[p..2 * p]);
+            rt.advance();
         }
-        std::mem::swap(&mut rt.x, &mut rt.xn);
     }
     fn role(&self) -> Role {
         Role::Controller
@@ -401,8 +418,11 @@ mod tests {
             reference.update(&e);
             let mut got = [0.0; 2];
             let tick = Tick::new(t as u64, dt);
+            // As the scheduler does: update only without feed-through.
             blk.output(tick, &inp, &mut got);
-            blk.update(tick, &inp);
+            if !blk.direct_feedthrough() {
+                blk.update(tick, &inp);
+            }
             for i in 0..2 {
                 let w = want[i] + [10.0, -1.0][i];
                 assert!(
