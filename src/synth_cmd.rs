@@ -136,6 +136,12 @@ pub fn synth(config: &Path, out: &Path) -> Result<(), String> {
             d.worst_product,
             d.worst_mu_gap
         );
+        for (band, a, b) in &d.s_o_offdiag_db {
+            println!(
+                "  max off-diagonal |S_o| in {:.0}–{:.0} Hz: H∞ {a:.1} dB, decentralised {b:.1} dB",
+                band[0], band[1]
+            );
+        }
     }
     println!(
         "wrote controller.yaml, report.json, generalized_plant.json and plots into {}",

@@ -341,3 +341,36 @@ pub fn weighted_norm(
     }
     Ok(hinfnorm(&cl).map_err(MimoError::lti("‖F_l(P, K)‖∞"))?.norm)
 }
+
+/// Largest off-diagonal |S_o(j2πf)_{ji}| (j ≠ i) over the grid frequencies in
+/// `band_hz` (the coupling of a disturbance on one output into the error of
+/// another, Fig. 7.10), from frequency responses.
+pub fn offdiag_sensitivity(
+    g: &StateSpace,
+    k: &StateSpace,
+    f_hz: &[f64],
+    band_hz: [f64; 2],
+) -> Result<f64, MimoError> {
+    let p = g.noutputs();
+    let mut worst: f64 = 0.0;
+    for &f in f_hz.iter().filter(|&&f| f >= band_hz[0] && f <= band_hz[1]) {
+        let sj = Complex::new(0.0, TAU * f);
+        let s = (CMatrix::identity(p, p) + g.evalfr(sj) * k.evalfr(sj))
+            .try_inverse()
+            .ok_or_else(|| {
+                MimoError::param(
+                    "controller",
+                    format!("I + GK singular at {f} Hz"),
+                    "check the loop",
+                )
+            })?;
+        for j in 0..p {
+            for i in 0..p {
+                if i != j {
+                    worst = worst.max(s[(j, i)].norm());
+                }
+            }
+        }
+    }
+    Ok(worst)
+}
