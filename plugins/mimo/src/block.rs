@@ -10,7 +10,8 @@
 //! at the block's rate (`dt_s` must equal it) or continuous (discretised by
 //! Tustin at build). At build the state basis is changed to the real Schur form
 //! of A (an orthogonal similarity: same input–output behaviour), so that A x
-//! costs about n²/2 multiply–adds instead of n²; a tick allocates nothing.
+//! costs about n²/2 multiply–adds instead of n², stored by columns so that every
+//! product is a sum of independent axpy updates; a tick allocates nothing.
 
 use crate::error::MimoError;
 use nalgebra::DMatrix;
@@ -110,9 +111,12 @@ struct Runtime {
     n: usize,
     p: usize,
     m: usize,
-    /// Row-major quasi-triangular A, with the first non-zero column per row.
+    /// Column-major quasi-triangular A, with the row count of each column's
+    /// non-zero head (column j: rows 0..a_end[j]).
     a: Vec<f64>,
-    a_start: Vec<usize>,
+    a_end: Vec<usize>,
+    /// Column-major B (n × p), C (m × n), D (m × p): every product is a sum of
+    /// independent axpy updates (vectorisable, no serial dependency chain).
     b: Vec<f64>,
     c: Vec<f64>,
     d: Vec<f64>,
@@ -222,32 +226,25 @@ impl MimoController {
         let b = u.transpose() * &kd.b;
         let c = &kd.c * &u;
         let mut a = Vec::with_capacity(n * n);
-        let mut a_start = Vec::with_capacity(n);
-        for i in 0..n {
-            a_start.push(if i > 0 && t[(i, i - 1)] != 0.0 {
-                i - 1
+        let mut a_end = Vec::with_capacity(n);
+        for j in 0..n {
+            a_end.push(if j + 1 < n && t[(j + 1, j)] != 0.0 {
+                j + 2
             } else {
-                i
+                j + 1
             });
-            for j in 0..n {
-                a.push(if j + 1 < i { 0.0 } else { t[(i, j)] });
+            for i in 0..n {
+                a.push(if i > j + 1 { 0.0 } else { t[(i, j)] });
             }
         }
-        let flat = |mm: &DMatrix<f64>| -> Vec<f64> {
-            let mut v = Vec::with_capacity(mm.len());
-            for i in 0..mm.nrows() {
-                for j in 0..mm.ncols() {
-                    v.push(mm[(i, j)]);
-                }
-            }
-            v
-        };
+        // nalgebra stores column-major: as_slice is the column-major layout.
+        let flat = |mm: &DMatrix<f64>| -> Vec<f64> { mm.as_slice().to_vec() };
         Ok(Runtime {
             n,
             p,
             m,
             a,
-            a_start,
+            a_end,
             b: flat(&b),
             c: flat(&c),
             d: flat(&kd.d),
@@ -260,22 +257,24 @@ impl MimoController {
 }
 
 impl Runtime {
-    /// x ← A x + B e with the errors of this sample.
+    /// x ← A x + B e with the errors of this sample (column axpys).
     #[inline]
     fn advance(&mut self) {
-        let (n, p) = (self.n, self.p);
-        for i in 0..n {
-            let s = self.a_start[i];
-            let arow = &self.a[i * n + s..(i + 1) * n];
-            let mut acc = 0.0;
-            for (aj, xj) in arow.iter().zip(&self.x[s..]) {
-                acc += aj * xj;
+        let n = self.n;
+        self.xn.fill(0.0);
+        for (j, ej) in self.e.iter().enumerate() {
+            let col = &self.b[j * n..(j + 1) * n];
+            for (xi, bij) in self.xn.iter_mut().zip(col) {
+                *xi += bij * ej;
             }
-            let brow = &self.b[i * p..(i + 1) * p];
-            for (bj, ej) in brow.iter().zip(&self.e) {
-                acc += bj * ej;
+        }
+        for j in 0..n {
+            let xj = self.x[j];
+            let end = self.a_end[j];
+            let col = &self.a[j * n..j * n + end];
+            for (xi, aij) in self.xn[..end].iter_mut().zip(col) {
+                *xi += aij * xj;
             }
-            self.xn[i] = acc;
         }
         std::mem::swap(&mut self.x, &mut self.xn);
     }
@@ -313,27 +312,30 @@ impl Block for MimoController {
         };
         let p = rt.p;
         rt.errors(&self.error_scale, &u[..p], &u[p..2 * p]);
-        for (i, yi) in y.iter_mut().enumerate().take(rt.m) {
-            let mut acc = if self.u_offset.is_empty() {
-                0.0
-            } else {
-                self.u_offset[i]
-            };
-            let crow = &rt.c[i * rt.n..(i + 1) * rt.n];
-            for (cj, xj) in crow.iter().zip(&rt.x) {
-                acc += cj * xj;
+        let m = rt.m;
+        let y = &mut y[..m];
+        if self.u_offset.is_empty() {
+            y.fill(0.0);
+        } else {
+            y.copy_from_slice(&self.u_offset);
+        }
+        for (j, xj) in rt.x.iter().enumerate() {
+            for (yi, cij) in y.iter_mut().zip(&rt.c[j * m..(j + 1) * m]) {
+                *yi += cij * xj;
             }
-            let drow = &rt.d[i * p..(i + 1) * p];
-            for (dj, ej) in drow.iter().zip(&rt.e) {
-                acc += dj * ej;
+        }
+        for (j, ej) in rt.e.iter().enumerate() {
+            for (yi, dij) in y.iter_mut().zip(&rt.d[j * m..(j + 1) * m]) {
+                *yi += dij * ej;
             }
+        }
+        for yi in y.iter_mut() {
             if let Some(lo) = self.u_min {
-                acc = acc.max(lo);
+                *yi = yi.max(lo);
             }
             if let Some(hi) = self.u_max {
-                acc = acc.min(hi);
+                *yi = yi.min(hi);
             }
-            *yi = acc;
         }
         if rt.feedthrough {
             rt.advance();
@@ -355,7 +357,7 @@ impl Block for MimoController {
     fn memory_bytes(&self) -> usize {
         self.rt.as_ref().map_or(0, |r| {
             8 * (r.a.len() + r.b.len() + r.c.len() + r.d.len() + r.x.len() * 2 + r.e.len())
-                + std::mem::size_of::<usize>() * r.a_start.len()
+                + std::mem::size_of::<usize>() * r.a_end.len()
         })
     }
 }
