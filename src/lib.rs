@@ -27,6 +27,7 @@ pub use hots;
 pub use nanomotion_core as core;
 pub use nanomotion_core::{Block, GraphSpec, Scheduler};
 pub use nanomotion_directional_rc as directional_rc;
+pub use nanomotion_mimo as mimo;
 pub use nanomotion_plf as plf;
 pub use timestamp_encoder;
 pub use walking_piezo;
@@ -79,4 +80,5 @@ pub fn link_plugins() {
     let _ = std::any::type_name::<dvrc::check::RcCheckReport>();
     let _ = std::any::type_name::<plf::effects::Hysteresis>();
     let _ = std::any::type_name::<directional_rc::FrameRotation>();
+    let _ = std::any::type_name::<mimo::MimoController>();
 }

@@ -3,6 +3,7 @@
 mod diagnose_cmd;
 mod optimize_cmd;
 mod scan_image_cmd;
+mod synth_cmd;
 
 use clap::{Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
@@ -200,6 +201,17 @@ enum Command {
         #[arg(long, num_args = 2, value_names = ["NH", "NV"], default_values_t = [200, 40])]
         pixels: Vec<usize>,
     },
+    /// H∞ mixed-sensitivity synthesis (thesis Sec. 7.3.2) from a YAML config of
+    /// plant, weights (7.10)–(7.12) and control rate. Writes `controller.yaml` (a
+    /// `mimo_controller` block entry), `report.json`, `generalized_plant.json` and
+    /// SVG plots of K, S_o, T_o, the characteristic loci and the (7.4) test.
+    Synth {
+        /// The synthesis config (YAML), e.g. examples/mimo/afm_synth.yaml.
+        config: PathBuf,
+        /// Output folder (created if missing).
+        #[arg(long, short, default_value = "out/synth")]
+        out: PathBuf,
+    },
     /// List the registered block types, with their ports and parameters.
     Blocks {
         /// Show only types whose name contains this text.
@@ -276,6 +288,7 @@ fn main() -> ExitCode {
             from_s,
             pixels,
         } => scan_image_cmd::run(&run_dir, &images, from_s, (pixels[0], pixels[1])),
+        Command::Synth { config, out } => synth_cmd::synth(&config, &out),
         Command::Blocks { filter } => blocks(filter.as_deref()),
     };
     match result {

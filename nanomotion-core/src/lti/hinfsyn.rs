@@ -421,8 +421,10 @@ fn hinfsyn_continuous(
     opts: &HinfSynOptions,
 ) -> Result<HinfSyn, LtiError> {
     let s = shifted(p, ny, nu)?;
-    // Lower bound: ‖D̄₁₁‖ (the loop-shifted direct term cannot be reduced).
-    let lb = s.d11.norm().max(s.d11.clone().singular_values().max());
+    // Lower bound: ‖D̄₁₁‖₂, the largest singular value (the loop-shifted direct
+    // term cannot be reduced). Not the Frobenius norm, which is larger for a
+    // MIMO D̄₁₁ (√3·k_S for the thesis's 3-axis W_S) and would cut the γ search.
+    let lb = s.d11.clone().singular_values().max();
     // A starting γ from the data, not from γ = 1: the gain scale
     // ‖C₁‖‖B₁‖/‖A‖ of the open loop w → z plus its direct term.
     let sp = &s.parts;

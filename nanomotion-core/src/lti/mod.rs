@@ -72,6 +72,7 @@ use nalgebra::DMatrix;
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
+pub mod balred;
 pub mod discretise;
 pub mod filters;
 pub mod hinf;
