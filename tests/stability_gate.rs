@@ -184,3 +184,59 @@ fn check_and_run_obey_the_gate() {
     );
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// The gate's learning criterion for a graph file's text, and rc-check's (whose T
+/// comes from the block's `t_model`, not from the loop).
+fn learning_both(text: &str) -> (gate::GateReport, nanomotion::dvrc::check::RcCheckReport) {
+    nanomotion::link_plugins();
+    let spec = GraphSpec::from_yaml(text, "rc").unwrap();
+    let rc = nanomotion::dvrc::check::rc_check_graph(&GraphSpec::from_yaml(text, "rc").unwrap());
+    let require = spec.require.clone().unwrap_or_default();
+    let (sched, _) = spec.build().unwrap();
+    (gate::analyse(&sched, &require), rc)
+}
+
+#[test]
+fn learning_blocks_are_judged_by_their_criterion_with_the_loops_t() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples");
+    for (file, criterion) in [("rc_standard.yaml", "(5.5)"), ("rc_dvrc.yaml", "(5.9)")] {
+        let text = std::fs::read_to_string(root.join(file)).unwrap();
+        let (g, rc) = learning_both(&text);
+        assert!(g.passes() && g.proven(), "{file}:\n{g}");
+        let c = &g.loops[0].points[0].learning[0];
+        assert_eq!(c.criterion(), criterion);
+        // T assembled from the loop (gain, stage, sums) equals the declared
+        // t_model: the same ‖H‖∞ as rc-check.
+        let rc_hinf = rc.blocks[0].criterion.as_ref().unwrap().hinf;
+        assert!(
+            (c.hinf - rc_hinf).abs() < 1e-9 * rc_hinf,
+            "{} vs {rc_hinf}",
+            c.hinf
+        );
+    }
+    // Widening the DVRC delay range to [150, 400] lowers the bound of (5.9) to
+    // 1/√251 = 0.063 < ‖H‖∞ = 0.091: refused, naming the block and the criterion.
+    let text = std::fs::read_to_string(root.join("rc_dvrc.yaml"))
+        .unwrap()
+        .replace("n_max: 250", "n_max: 400");
+    let (g, rc) = learning_both(&text);
+    assert!(!rc.all_hold());
+    assert!(!g.passes());
+    let f = g.failures().join("\n");
+    assert!(f.contains("learning block `rc` violates (5.9)"), "{f}");
+    // A learning filter inverting a T four times too small (L·T ≈ 4, so
+    // |1 − T L| ≈ 3) breaks (5.5) for the standard RC, as rc-check (with the
+    // declared t_model) also finds.
+    let text = std::fs::read_to_string(root.join("rc_standard.yaml"))
+        .unwrap()
+        .replace(
+            "learning: { kind: zpetc, num: [0.22]",
+            "learning: { kind: zpetc, num: [0.05]",
+        );
+    let (g, rc) = learning_both(&text);
+    let c = &g.loops[0].points[0].learning[0];
+    let rc_c = rc.blocks[0].criterion.as_ref().unwrap();
+    assert!((c.hinf - rc_c.hinf).abs() < 1e-9 * rc_c.hinf);
+    assert!(!c.holds() && !rc_c.holds(), "{c}");
+    assert!(g.failures().join("\n").contains("violates (5.5)"));
+}

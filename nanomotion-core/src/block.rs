@@ -239,6 +239,14 @@ pub trait Block: Send + Debug {
     fn linearisation(&self) -> Option<Linearisation> {
         None
     }
+    /// For learning blocks (repetitive control and its variants): the filters and
+    /// delay range the stability gate ([`crate::gate`]) needs to evaluate the
+    /// convergence criteria (5.5)/(5.9) with the T of the loop the block is in.
+    /// The gate then analyses the loop with the block's output set to zero and
+    /// checks the criterion on top. Valid after [`Block::build`].
+    fn learning(&self) -> Option<crate::gate::LearningModel> {
+        None
+    }
     /// Heap memory (bytes) the block holds after [`Block::build`] beyond its ports:
     /// delay lines, memories, tables. The graph compiler adds these up with the
     /// signal and log buffers and refuses a graph above

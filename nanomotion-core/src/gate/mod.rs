@@ -66,9 +66,11 @@
 //! ```
 
 mod assemble;
+pub mod learning;
 mod loops;
 mod require;
 
+pub use learning::{LearningCheck, LearningModel};
 pub use require::{Bounds, Require};
 
 use crate::block::{Block, Role};
@@ -144,6 +146,9 @@ pub struct PointAnalysis {
     pub nyquist: Option<Nyquist>,
     /// MIMO: smallest |1 + λ_i(L(e^{jωT}))| over the characteristic loci.
     pub loci_min_distance: Option<f64>,
+    /// The criteria of the learning blocks of the loop (evaluated with the loop
+    /// closed without them).
+    pub learning: Vec<LearningCheck>,
     /// Anything the analysis could not do, or cross-checks that disagreed.
     pub notes: Vec<String>,
 }
@@ -176,7 +181,12 @@ pub struct LoopReport {
 impl LoopReport {
     /// The loop was analysed and every schedule point is stable.
     pub fn stable(&self) -> bool {
-        self.unproven.is_empty() && !self.points.is_empty() && self.points.iter().all(|p| p.stable)
+        self.unproven.is_empty()
+            && !self.points.is_empty()
+            && self
+                .points
+                .iter()
+                .all(|p| p.stable && p.learning.iter().all(LearningCheck::holds))
     }
     /// Stable and within every bound, or unproven with a reason to run.
     pub fn passes(&self) -> bool {
@@ -206,6 +216,17 @@ impl LoopReport {
                     self.name,
                     at_label(&p.label),
                     p.spectral_radius
+                ));
+            }
+            for c in p.learning.iter().filter(|c| !c.holds()) {
+                v.push(format!(
+                    "loop `{}`{}: learning block `{}` violates {}: ‖Q(z^-l − T L_c)‖∞ = {:.4} ≥ bound {:.4} (convergence not guaranteed; fix: lower the learning gain or the Q cut-off, or narrow [n_min, n_max])",
+                    self.name,
+                    at_label(&p.label),
+                    c.block,
+                    c.criterion(),
+                    c.hinf,
+                    c.bound
                 ));
             }
         }
@@ -331,6 +352,8 @@ impl fmt::Display for GateReport {
                 });
                 let verdict = if !p.stable {
                     "UNSTABLE"
+                } else if !p.learning.iter().all(LearningCheck::holds) {
+                    "LEARNING FAILS"
                 } else if !l.violations.is_empty() {
                     "VIOLATES"
                 } else if l.linearised.is_empty() {
@@ -374,6 +397,9 @@ impl fmt::Display for GateReport {
                 writeln!(f, "    allowed to run unproven: {r}")?;
             }
             for p in &l.points {
+                for c in &p.learning {
+                    writeln!(f, "    {c}")?;
+                }
                 if let Some(d) = p.loci_min_distance {
                     writeln!(
                         f,
@@ -407,6 +433,16 @@ fn block_models(block: &dyn Block, w: &BlockWiring) -> Result<BlockModels, Strin
             vec![(
                 String::new(),
                 StateSpace::gain(DMatrix::identity(out_w, in_w), None),
+            )],
+            None,
+        )
+    } else if block.learning().is_some() {
+        // Learning blocks: the loop is analysed without them (w = 0) and their
+        // criterion is checked on top (`learning.rs`).
+        (
+            vec![(
+                String::new(),
+                StateSpace::gain(DMatrix::zeros(out_w, in_w), None),
             )],
             None,
         )
@@ -680,6 +716,39 @@ fn analyse_loop(
             fast.join(", ")
         )
     };
+    // Learning blocks: at the analysis rate, SISO error and output, the error
+    // coming from inside the loop.
+    let mut learners: Vec<(usize, LearningModel)> = Vec::new();
+    for &i in members {
+        let Some(lm) = sched.block_at(i).and_then(|b| b.learning()) else {
+            continue;
+        };
+        let w = &wiring[i];
+        let ok_ports = w.inputs.get(lm.error_input).is_some_and(|p| p.width == 1)
+            && w.outputs.get(lm.output).is_some_and(|p| p.width == 1);
+        if !ok_ports {
+            lr.unproven.push(format!(
+                "learning block `{}`: its error input or learning output is not a port of width 1",
+                w.name
+            ));
+        } else if w.period != slow {
+            lr.unproven.push(format!(
+                "learning block `{}` runs faster than the loop's slowest rate; its criterion is evaluated at the analysis rate only",
+                w.name
+            ));
+        } else if members.binary_search(&w.sources[lm.error_input].0).is_err() {
+            lr.unproven.push(format!(
+                "learning block `{}`: its error input does not come from the loop",
+                w.name
+            ));
+        } else {
+            lr.linearised.push(format!(
+                "`{}`: learning block: the loop is analysed with its output w = 0, and its convergence criterion with that loop's T",
+                w.name
+            ));
+            learners.push((i, lm));
+        }
+    }
     if !lr.unproven.is_empty() {
         return lr;
     }
@@ -715,7 +784,7 @@ fn analyse_loop(
             .map(|((&i, &c), m)| format!("{}: {}", wiring[i].name, m[c].0))
             .collect();
         let mut point = analyse_point(
-            wiring, roles, members, &models, &choice, &edges, &periods, slow_dt,
+            wiring, roles, members, &models, &choice, &edges, &periods, slow_dt, &learners,
         );
         point.label = label.join(", ");
         if combo == 0 && total > count {
@@ -746,6 +815,7 @@ fn analyse_point(
     edges: &[Edge],
     periods: &[u64],
     slow_dt: f64,
+    learners: &[(usize, LearningModel)],
 ) -> PointAnalysis {
     let mut out = PointAnalysis {
         label: String::new(),
@@ -759,6 +829,7 @@ fn analyse_point(
         t_hinf: f64::NAN,
         nyquist: None,
         loci_min_distance: None,
+        learning: Vec::new(),
         notes: Vec::new(),
     };
     // Level by level, fastest first: compose, then lift to the next rate. A
@@ -822,9 +893,24 @@ fn analyse_point(
             0
         }
     };
+    if out.stable {
+        for (b, lm) in learners {
+            match learning_t(&closed, &top, wiring, *b, lm, slow_dt).and_then(|t| {
+                learning::criterion(&wiring[*b].name, &t, lm).map_err(|e| e.to_string())
+            }) {
+                Ok(c) => out.learning.push(c),
+                Err(e) => out.notes.push(format!(
+                    "learning block `{}`: criterion not evaluated: {e}",
+                    wiring[*b].name
+                )),
+            }
+        }
+    }
+    let is_learner = |i: usize| learners.iter().any(|(b, _)| *b == i);
     let Some(brk) = top
         .iter()
         .copied()
+        .filter(|e| !is_learner(e.0.0) && !is_learner(e.1.0))
         .max_by_key(|e| (score(e), std::cmp::Reverse(e.1)))
     else {
         out.notes
@@ -867,6 +953,48 @@ fn analyse_point(
     };
     loop_measures(&l, &mut out);
     out
+}
+
+/// T = −(transfer from the learning output w to the learning block's error
+/// input e) of the loop closed without learning (w injected at every input it
+/// feeds).
+fn learning_t(
+    closed: &Part,
+    top: &[Edge],
+    wiring: &[BlockWiring],
+    b: usize,
+    lm: &LearningModel,
+    dt: f64,
+) -> Result<StateSpace, String> {
+    let src = wiring[b].sources[lm.error_input];
+    let (row, _) = closed
+        .output_offset(src)
+        .ok_or("the error input's source is not at the analysis rate")?;
+    let n = closed.a.nrows();
+    let mut bcol = DMatrix::zeros(n, 1);
+    let mut d = 0.0;
+    let mut any = false;
+    for &(from, to) in top {
+        if from == (b, lm.output) {
+            let (col, _) = closed
+                .input_offset(to)
+                .ok_or("the learning output feeds a block outside the analysis rate")?;
+            bcol += closed.b.column(col);
+            d += closed.d[(row, col)];
+            any = true;
+        }
+    }
+    if !any {
+        return Err("the learning output w does not feed the loop".into());
+    }
+    StateSpace::new(
+        closed.a.clone(),
+        -bcol,
+        closed.c.rows(row, 1).into_owned(),
+        DMatrix::from_element(1, 1, -d),
+        Some(dt),
+    )
+    .map_err(|e| e.to_string())
 }
 
 /// Margins, norms and Nyquist count of the loop transfer `l` (discrete).
