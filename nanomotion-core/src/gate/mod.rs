@@ -591,10 +591,17 @@ fn check_bounds(lr: &LoopReport, b: &Bounds) -> Vec<String> {
             continue;
         }
         let siso_only = |v: &mut Vec<String>, what: &str| {
-            v.push(format!(
-                "{what} required but not evaluated{at} (the loop is broken at a {}-wide connection; gain, phase and delay margins are SISO: bound modulus_margin_db / max_t_db instead)",
-                p.width
-            ));
+            if p.width == 1 {
+                v.push(format!(
+                    "{what} required but the margins could not be computed{at} ({})",
+                    p.notes.join("; ")
+                ));
+            } else {
+                v.push(format!(
+                    "{what} required but not evaluated{at} (the loop is broken at a {}-wide connection; gain, phase and delay margins are SISO: bound modulus_margin_db / max_t_db instead)",
+                    p.width
+                ));
+            }
         };
         if let Some(req) = b.gain_margin_db {
             match &p.margins {
