@@ -1,6 +1,7 @@
 //! The `nanomotion` command: run, check and inspect YAML controller graphs.
 
 mod diagnose_cmd;
+mod gate_cmd;
 mod optimize_cmd;
 mod scan_image_cmd;
 mod synth_cmd;
@@ -122,6 +123,10 @@ enum Command {
         /// Sample rate (Hz) of a `.mat` data file that has no time vector `t`.
         #[arg(long, value_name = "HZ", requires = "data")]
         data_rate: Option<f64>,
+        /// Run even if the stability gate refuses the graph (an unstable,
+        /// unproven or out-of-bounds loop); the run's report says so.
+        #[arg(long)]
+        allow_unproven: bool,
     },
     /// Validate a graph without running it: parse, build every block, resolve ports,
     /// rates and execution order, and report inserted rate transitions.
@@ -233,6 +238,7 @@ fn main() -> ExitCode {
             no_files,
             data,
             data_rate,
+            allow_unproven,
         } => run(RunArgs {
             graph,
             out,
@@ -242,6 +248,7 @@ fn main() -> ExitCode {
             no_files,
             data,
             data_rate,
+            allow_unproven,
         }),
         Command::Check { graph } => check(graph),
         Command::RcCheck { graph } => match nanomotion::dvrc::check::rc_check_file(&graph) {
@@ -306,7 +313,9 @@ fn load(graph: &PathBuf) -> Result<GraphSpec, String> {
 
 fn check(graph: PathBuf) -> Result<(), String> {
     let spec = load(&graph)?;
+    let require = spec.require.clone();
     let (sched, report) = spec.build().map_err(|e| e.to_string())?;
+    let gate = gate_cmd::analyse(&sched, require.as_ref());
     say!("{}: ok", graph.display());
     say!(
         "  base rate {} Hz, {} ticks",
@@ -325,7 +334,8 @@ fn check(graph: PathBuf) -> Result<(), String> {
             say!("    {r}");
         }
     }
-    Ok(())
+    say!("{}", gate.to_string().trim_end());
+    gate_cmd::verdict(&gate)
 }
 
 /// The arguments of `nanomotion run`.
@@ -338,6 +348,7 @@ struct RunArgs {
     no_files: bool,
     data: Vec<PathBuf>,
     data_rate: Option<f64>,
+    allow_unproven: bool,
 }
 
 fn run(args: RunArgs) -> Result<(), String> {
@@ -350,6 +361,7 @@ fn run(args: RunArgs) -> Result<(), String> {
         no_files,
         data,
         data_rate,
+        allow_unproven,
     } = args;
     let mut spec = load(&graph)?;
     if let Some(s) = seed {
@@ -377,11 +389,14 @@ fn run(args: RunArgs) -> Result<(), String> {
         (None, Some(d)) => spec.duration_s = d.duration_s(),
         (None, None) => {}
     }
+    let require = spec.require.clone();
     let (mut sched, report) = match &data {
         Some(d) => spec.build_with_data(d.clone()),
         None => spec.build(),
     }
     .map_err(|e| e.to_string())?;
+    let gate_lines =
+        gate_cmd::before_run(&gate_cmd::analyse(&sched, require.as_ref()), allow_unproven)?;
     for r in &report.rate_transitions {
         eprintln!("note: rate transition {r}");
     }
@@ -437,6 +452,9 @@ fn run(args: RunArgs) -> Result<(), String> {
         wall,
         result.duration_s / wall.max(1e-9)
     );
+    for l in &gate_lines {
+        say!("stability gate: {l}");
+    }
     if !result.scores.is_empty() && sched.ticks_total() > 0 {
         say!(
             "{:<32} {:>12} {:>12} {:>12} {:>8}",

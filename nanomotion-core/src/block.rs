@@ -229,6 +229,24 @@ pub trait Block: Send + Debug {
     fn lti(&self) -> Option<StateSpace> {
         None
     }
+    /// The linear model(s) a loop through this block is *judged on* when the block
+    /// is not exactly LTI (a saturation: gain 1; a quantiser: gain 1; a plant:
+    /// its model at the operating point; a gain-scheduled controller: one model
+    /// per schedule point). The stability gate ([`crate::gate`]) uses this before
+    /// [`Block::lti`] and says in its report that the loop was judged on a
+    /// linearisation. `None`: use [`Block::lti`] (or, if that is `None` too, the
+    /// block cannot be linearised and its loops are "unproven").
+    fn linearisation(&self) -> Option<Linearisation> {
+        None
+    }
+    /// For learning blocks (repetitive control and its variants): the filters and
+    /// delay range the stability gate ([`crate::gate`]) needs to evaluate the
+    /// convergence criteria (5.5)/(5.9) with the T of the loop the block is in.
+    /// The gate then analyses the loop with the block's output set to zero and
+    /// checks the criterion on top. Valid after [`Block::build`].
+    fn learning(&self) -> Option<crate::gate::LearningModel> {
+        None
+    }
     /// Heap memory (bytes) the block holds after [`Block::build`] beyond its ports:
     /// delay lines, memories, tables. The graph compiler adds these up with the
     /// signal and log buffers and refuses a graph above
@@ -248,6 +266,29 @@ pub trait Block: Send + Debug {
     /// Mutable access to the block's fittable parameters.
     fn tunable_mut(&mut self) -> Option<&mut dyn Tunable> {
         None
+    }
+}
+
+/// What [`Block::linearisation`] returns: the model(s) the block is judged on and
+/// why they are not exact.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Linearisation {
+    /// One model per operating/schedule point, each with a label (e.g.
+    /// `"K = 2.5"`); discrete at the block's rate, inputs and outputs as for
+    /// [`Block::lti`]. At least one.
+    pub points: Vec<(String, StateSpace)>,
+    /// What the linearisation leaves out, e.g. `"output limits ignored (gain 1
+    /// inside [-2000, 2000])"`.
+    pub note: String,
+}
+
+impl Linearisation {
+    /// A single model with a note.
+    pub fn single(model: StateSpace, note: impl Into<String>) -> Self {
+        Self {
+            points: vec![(String::new(), model)],
+            note: note.into(),
+        }
     }
 }
 

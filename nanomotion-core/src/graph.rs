@@ -114,6 +114,10 @@ pub struct GraphSpec {
     /// Model outputs to compare with measured columns (needs data: `--data`).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub compare: Vec<CompareSpec>,
+    /// Stability requirements on the feedback loops (`require:`), checked by the
+    /// stability gate ([`crate::gate`]) before the graph runs.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub require: Option<crate::gate::Require>,
     /// The folder relative file names in block parameters (`calibration_file`)
     /// are resolved against: the graph file's folder when read with
     /// [`GraphSpec::from_file`], else the working directory. Not part of the YAML.
@@ -169,6 +173,7 @@ impl GraphSpec {
             log: Vec::new(),
             score: Vec::new(),
             compare: Vec::new(),
+            require: None,
             base_dir: None,
         }
     }
@@ -452,6 +457,7 @@ fn compile(
         log,
         score,
         compare,
+        require: _,
         base_dir,
     } = spec;
     if !(MIN_RATE_HZ..=MAX_RATE_HZ).contains(&base_rate_hz) {

@@ -30,6 +30,7 @@ pub mod block;
 pub mod blocks;
 pub mod data;
 pub mod error;
+pub mod gate;
 pub mod graph;
 pub mod lti;
 pub mod models;
@@ -44,7 +45,9 @@ pub mod yaml;
 /// nalgebra dependency of their own: `use nanomotion_core::nalgebra::DMatrix;`.
 pub use nalgebra;
 
-pub use block::{Block, BlockDoc, BuildContext, ParamDoc, Port, Role, Tick, Tunable};
+pub use block::{
+    Block, BlockDoc, BuildContext, Linearisation, ParamDoc, Port, Role, Tick, Tunable,
+};
 pub use error::{GraphError, ParamError};
 pub use graph::{Graph, GraphSpec};
 pub use roles::{Actuator, Controller, Estimator, LearningFilter, Plant, Sensor, Source};

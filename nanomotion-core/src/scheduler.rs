@@ -623,6 +623,45 @@ impl Scheduler {
     pub fn lti_of(&self, name: &str) -> Option<StateSpace> {
         self.block(name)?.lti()
     }
+    /// How every block is wired, in execution order: what analyses of the built
+    /// graph need (the stability gate, [`crate::gate`], finds loops with it).
+    pub fn wiring(&self) -> Vec<BlockWiring> {
+        // Output offset -> (block, output port); ports have width >= 1, so the
+        // offsets are distinct.
+        let mut at = std::collections::HashMap::new();
+        for (j, (_, outs, offs)) in self.ports.iter().enumerate() {
+            for (pi, (o, &off)) in outs.iter().zip(offs).enumerate() {
+                if o.width > 0 {
+                    at.insert(off, (j, pi));
+                }
+            }
+        }
+        self.names
+            .iter()
+            .enumerate()
+            .map(|(i, name)| {
+                let (ins, outs, _) = &self.ports[i];
+                let node = &self.nodes[i];
+                BlockWiring {
+                    name: name.clone(),
+                    type_name: self.type_names[i].clone(),
+                    period: node.period,
+                    dt: node.dt,
+                    inputs: ins.clone(),
+                    outputs: outs.clone(),
+                    sources: self.gathers[node.gathers.clone()]
+                        .iter()
+                        .map(|g| at.get(&g.src).copied().unwrap_or((usize::MAX, 0)))
+                        .collect(),
+                    feedthrough: node.feedthrough,
+                }
+            })
+            .collect()
+    }
+    /// The block at execution index `i` (see [`Scheduler::wiring`]).
+    pub fn block_at(&self, i: usize) -> Option<&dyn Block> {
+        self.blocks.get(i).map(|b| b.as_ref())
+    }
     /// One line per block: name, type, role, rate, ports.
     pub fn describe(&self) -> Vec<String> {
         self.names
@@ -652,6 +691,28 @@ impl Scheduler {
             })
             .collect()
     }
+}
+
+/// How one block of a built graph is wired ([`Scheduler::wiring`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct BlockWiring {
+    /// Instance name (inserted rate transitions start with `rt:`).
+    pub name: String,
+    /// The `type:` tag.
+    pub type_name: String,
+    /// Period in base ticks.
+    pub period: u64,
+    /// Period in seconds.
+    pub dt: f64,
+    /// Input ports.
+    pub inputs: Vec<Port>,
+    /// Output ports.
+    pub outputs: Vec<Port>,
+    /// For each input port: (execution index of the source block, index of its
+    /// output port).
+    pub sources: Vec<(usize, usize)>,
+    /// Whether the block has direct feed-through.
+    pub feedthrough: bool,
 }
 
 /// Copy each gather's source values into the input buffer.

@@ -354,6 +354,9 @@ impl Block for Pid {
     fn lti(&self) -> Option<StateSpace> {
         Some(self.state_space())
     }
+    fn linearisation(&self) -> Option<crate::block::Linearisation> {
+        limits_linearisation(self.state_space(), self.output_min, self.output_max)
+    }
     fn role(&self) -> Role {
         Role::Controller
     }
@@ -542,6 +545,9 @@ impl Block for Pi {
     fn lti(&self) -> Option<StateSpace> {
         Some(self.pid.state_space())
     }
+    fn linearisation(&self) -> Option<crate::block::Linearisation> {
+        limits_linearisation(self.pid.state_space(), self.output_min, self.output_max)
+    }
     fn role(&self) -> Role {
         Role::Controller
     }
@@ -563,6 +569,25 @@ crate::submit_block_doc! {
         ],
         ports: "e -> u",
     }
+}
+
+/// The note of a PID/PI judged without its output limits, if it has any.
+fn limits_linearisation(
+    model: StateSpace,
+    lo: Option<f64>,
+    hi: Option<f64>,
+) -> Option<crate::block::Linearisation> {
+    if lo.is_none() && hi.is_none() {
+        return None;
+    }
+    let lo = lo.unwrap_or(f64::NEG_INFINITY);
+    let hi = hi.unwrap_or(f64::INFINITY);
+    Some(crate::block::Linearisation::single(
+        model,
+        format!(
+            "output limits [{lo}, {hi}] ignored: judged inside them (saturation as gain 1, anti-windup inactive)"
+        ),
+    ))
 }
 
 #[cfg(test)]

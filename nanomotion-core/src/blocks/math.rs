@@ -374,6 +374,15 @@ impl Block for Saturation {
     fn output(&mut self, _tick: Tick, u: &[f64], y: &mut [f64]) {
         self.apply(u, y);
     }
+    fn linearisation(&self) -> Option<crate::block::Linearisation> {
+        Some(crate::block::Linearisation::single(
+            StateSpace::gain(nalgebra::DMatrix::identity(self.width, self.width), None),
+            format!(
+                "saturation to [{}, {}] judged as gain 1 (valid while the signal stays inside)",
+                self.lower, self.upper
+            ),
+        ))
+    }
     fn tunable(&self) -> Option<&dyn crate::Tunable> {
         Some(self)
     }

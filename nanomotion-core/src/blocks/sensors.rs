@@ -148,6 +148,15 @@ impl Block for Quantizer {
     fn output(&mut self, tick: Tick, u: &[f64], y: &mut [f64]) {
         self.measure(tick.t, u, y);
     }
+    fn linearisation(&self) -> Option<crate::block::Linearisation> {
+        Some(crate::block::Linearisation::single(
+            crate::lti::StateSpace::gain(nalgebra::DMatrix::identity(self.width, self.width), None),
+            format!(
+                "quantiser (lsb {}) judged as gain 1 (its error, at most lsb/2, is bounded noise)",
+                self.lsb
+            ),
+        ))
+    }
     fn role(&self) -> Role {
         Role::Sensor
     }

@@ -223,6 +223,26 @@ impl TfModel {
     }
 }
 
+/// What the stability gate needs of a built memory loop (`Block::learning`):
+/// the filters as they are run and the delay range.
+fn learning_of(
+    m: &MemoryLoop,
+    n_min: usize,
+    n_max: usize,
+    weight_sum: Option<f64>,
+) -> nanomotion_core::gate::LearningModel {
+    nanomotion_core::gate::LearningModel {
+        l_causal: m.learning().model().clone(),
+        preview: m.learning().preview_samples(),
+        q: m.robustness().model().clone(),
+        n_min,
+        n_max,
+        weight_sum,
+        error_input: 0,
+        output: 0,
+    }
+}
+
 /// The plain-Rust sample methods (`step`, `output_w`, `learn`) and the
 /// [`Controller`]/[`Block`] adapters shared by the constant-delay RC blocks
 /// ([`RepetitiveControl`], [`HighOrderRc`]): both hold `n: usize` and
@@ -295,6 +315,9 @@ macro_rules! fixed_delay_rc_adapters {
             fn role(&self) -> Role {
                 Role::Controller
             }
+            fn learning(&self) -> Option<nanomotion_core::gate::LearningModel> {
+                self.learning_model()
+            }
         }
     };
 }
@@ -325,6 +348,10 @@ pub struct RepetitiveControl {
 }
 
 impl RepetitiveControl {
+    /// The gate's view: (5.5) with N fixed.
+    fn learning_model(&self) -> Option<nanomotion_core::gate::LearningModel> {
+        Some(learning_of(self.core.as_ref()?, self.n, self.n, None))
+    }
     /// Standard RC with delay `n`, learning `l` and robustness `q`; call
     /// [`Block::build`] (or use [`RepetitiveControl::built`]).
     pub fn new(n: usize, learning: FilterSpec, robustness: FilterSpec) -> Self {
@@ -410,6 +437,11 @@ pub struct HighOrderRc {
 }
 
 impl HighOrderRc {
+    /// The gate's view: the small-gain condition with Σ|w_i|.
+    fn learning_model(&self) -> Option<nanomotion_core::gate::LearningModel> {
+        let ws = self.weights.iter().map(|w| w.abs()).sum();
+        Some(learning_of(self.core.as_ref()?, self.n, self.n, Some(ws)))
+    }
     /// High-order RC with W = 2 − z^-N.
     pub fn new(n: usize, learning: FilterSpec, robustness: FilterSpec) -> Self {
         Self {
@@ -627,6 +659,10 @@ impl Block for Dvrc {
     }
     fn role(&self) -> Role {
         Role::Controller
+    }
+    fn learning(&self) -> Option<nanomotion_core::gate::LearningModel> {
+        let (m, _) = self.core.as_ref()?;
+        Some(learning_of(m, self.n_min, self.n_max, None))
     }
 }
 

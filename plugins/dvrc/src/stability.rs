@@ -22,22 +22,18 @@ use nanomotion_core::LearningFilter;
 use nanomotion_core::lti::lmi::{
     LmiConstraint, LmiError, LmiOptions, LmiProblem, LmiStatus, LmiVar,
 };
-use nanomotion_core::lti::{
-    Complex, LtiError, StateSpace, delay, fir_lowpass, hinfnorm, parallel, series,
-};
+use nanomotion_core::lti::{Complex, LtiError, StateSpace, fir_lowpass, hinfnorm};
 use std::f64::consts::PI;
 use std::fmt;
 
 /// H(z) = Q(z)(z^-l − T(z)·L_c(z)) with L_c = z^-l L the causal learning filter
 /// (preview l): the map from the delay block's output to its input in Fig. 5.2.
 /// |H(e^{jω})| = |Q(1 − T L z^l)| at every frequency.
+///
+/// The formula lives in the core ([`nanomotion_core::gate::learning::loop_h`]),
+/// where the stability gate evaluates the same criteria for any graph.
 pub fn loop_h(t: &StateSpace, l: &Filter, q: &Filter) -> Result<StateSpace, LtiError> {
-    let dt =
-        t.dt.ok_or_else(|| LtiError::Domain("T(z) must be discrete".into()))?;
-    let tl = series(l.model(), t)?;
-    let zl = delay(l.preview_samples(), dt);
-    let inner = parallel(&zl, &tl.scaled(-1.0))?;
-    series(&inner, q.model())
+    nanomotion_core::gate::learning::loop_h(t, l.model(), l.preview_samples(), q.model())
 }
 
 /// Result of [`rc_criterion`].

@@ -523,6 +523,64 @@ impl Block for GainScheduledBlock {
     fn role(&self) -> Role {
         Role::Controller
     }
+    /// For the stability gate: the inner controller's model times K at every
+    /// schedule point — the gains at the table breakpoints (piecewise-linear
+    /// laws, in K or in dB, take their extremes there) and constants; K = Π K_i
+    /// over every combination (at most 64). The `sigma` input and `gain` output
+    /// do not enter the linear model (K is frozen at each point). A `power_db`
+    /// law is continuous with no points to check: no linearisation (unproven).
+    fn linearisation(&self) -> Option<nanomotion_core::Linearisation> {
+        let (inner, inner_note) = match self.controller.linearisation() {
+            Some(l) => (l.points.into_iter().next()?.1, Some(l.note)),
+            None => (self.controller.lti()?, None),
+        };
+        let mut gains = vec![1.0];
+        for law in &self.schedule.laws {
+            let ks: Vec<f64> = match law {
+                GainLaw::Constant { gain } => vec![*gain],
+                GainLaw::Table { gain, .. } => gain.clone(),
+                GainLaw::TableDb { gain_db, .. } => {
+                    gain_db.iter().map(|g| 10f64.powf(g / 20.0)).collect()
+                }
+                GainLaw::PowerDb { .. } => return None,
+            };
+            gains = gains
+                .iter()
+                .flat_map(|g| ks.iter().map(move |k| g * k))
+                .take(64)
+                .collect();
+        }
+        let (n_sigma, n_in, n_out) = (self.schedule.len(), inner.ninputs(), inner.noutputs());
+        let points = gains
+            .into_iter()
+            .map(|k| {
+                let mut m = inner.clone();
+                // Input placement scales B and D (C(K e)); output scales C and D.
+                if self.placement == Placement::Input {
+                    m.b *= k;
+                } else {
+                    m.c *= k;
+                }
+                m.d *= k;
+                let mut b = nanomotion_core::nalgebra::DMatrix::zeros(m.nstates(), n_in + n_sigma);
+                b.columns_mut(0, n_in).copy_from(&m.b);
+                let mut c = nanomotion_core::nalgebra::DMatrix::zeros(n_out + 1, m.nstates());
+                c.rows_mut(0, n_out).copy_from(&m.c);
+                let mut d = nanomotion_core::nalgebra::DMatrix::zeros(n_out + 1, n_in + n_sigma);
+                d.view_mut((0, 0), (n_out, n_in)).copy_from(&m.d);
+                m.b = b;
+                m.c = c;
+                m.d = d;
+                (format!("K = {k:.4}"), m)
+            })
+            .collect();
+        let mut note =
+            "gain-scheduled controller judged at each schedule point (K frozen)".to_string();
+        if let Some(n) = inner_note {
+            note = format!("{note}; inner controller: {n}");
+        }
+        Some(nanomotion_core::Linearisation { points, note })
+    }
 }
 
 nanomotion_core::submit_block_doc! {

@@ -201,3 +201,53 @@ schedule: [{kind: constant, gain: 2.0}]
         prev = e;
     }
 }
+
+/// The stability gate judges a gain-scheduled loop at every schedule point: with
+/// K ∈ {0.5, 2.5} (table breakpoints) around L = K/(z − 1), K = 0.5 is stable
+/// (pole 0.5) and K = 2.5 is not (pole −1.5), and the refusal names the point.
+#[test]
+fn the_gate_judges_each_schedule_point() {
+    let _ = GainLaw::Constant { gain: 1.0 }; // link this crate's blocks
+    let yaml = |gains: &str| {
+        format!(
+            r#"base_rate_hz: 1000
+duration_s: 0.1
+blocks:
+  - {{ name: ref, type: constant, value: 1.0 }}
+  - {{ name: sigma, type: constant, value: 0.3 }}
+  - {{ name: err, type: sum, signs: "+-" }}
+  - name: k
+    type: gain_scheduled
+    controller: {{ type: gain, k: 1.0 }}
+    schedule: [ {{ kind: table, x: [0.0, 1.0], gain: {gains} }} ]
+  - {{ name: plant, type: transfer_function, num: [1.0], den: [1.0, -1.0], discrete: true }}
+connections:
+  - {{ from: ref.y, to: err.in0 }}
+  - {{ from: plant.y, to: err.in1 }}
+  - {{ from: err.y, to: k.u }}
+  - {{ from: sigma.y, to: k.sigma }}
+  - {{ from: k.y, to: plant.u }}
+"#
+        )
+    };
+    let report = |gains: &str| {
+        let spec = nanomotion_core::GraphSpec::from_yaml(&yaml(gains), "gs").unwrap();
+        let (sched, _) = spec.build().unwrap();
+        nanomotion_core::gate::analyse(&sched, &Default::default())
+    };
+    let ok = report("[0.5, 1.5]");
+    assert!(ok.passes(), "{ok}");
+    let radii: Vec<f64> = ok.loops[0]
+        .points
+        .iter()
+        .map(|p| p.spectral_radius)
+        .collect();
+    assert_eq!(radii.len(), 2);
+    assert!((radii[0] - 0.5).abs() < 1e-12 && (radii[1] - 0.5).abs() < 1e-12);
+    assert!(ok.loops[0].linearised[0].contains("each schedule point"));
+    let bad = report("[0.5, 2.5]");
+    assert!(!bad.passes());
+    let f = bad.failures();
+    assert_eq!(f.len(), 1, "{f:?}");
+    assert!(f[0].contains("at k: K = 2.5000 is unstable"), "{f:?}");
+}
