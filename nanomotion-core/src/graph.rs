@@ -141,9 +141,15 @@ pub const MIN_RATE_HZ: f64 = 1e-3;
 /// Highest base rate (Hz): 1 GHz.
 pub const MAX_RATE_HZ: f64 = 1e9;
 
+/// Base ticks a streamed log holds between two hand-overs to the sink
+/// ([`GraphSpec::build_streamed`]): 2^16. A log of width w at period p keeps
+/// ⌈2^16 / p⌉ · w values (at most 512 KiB per value of width).
+pub const LOG_CHUNK_TICKS: u64 = 1 << 16;
+
 /// Most memory a built graph may hold, estimated at build (bytes): 4 GiB. The
 /// estimate adds the signal and input buffers, every log (samples × width × 8
-/// bytes, reserved for the whole run) and each block's
+/// bytes, reserved for the whole run, or for [`LOG_CHUNK_TICKS`] when streamed)
+/// and each block's
 /// [`Block::memory_bytes`]; a graph above it is refused with the breakdown.
 pub const MAX_GRAPH_BYTES: usize = 4 << 30;
 
@@ -249,7 +255,21 @@ impl GraphSpec {
     /// Validate the graph, build every block, resolve ports, rates and order, and
     /// return the ready-to-run scheduler with a report of what was inserted.
     pub fn build(self) -> Result<(Scheduler, BuildReport), GraphError> {
-        compile(self, None)
+        compile(self, None, None)
+    }
+
+    /// [`GraphSpec::build`] for a run whose logs are streamed: each log keeps
+    /// room for [`LOG_CHUNK_TICKS`] base ticks only (not the whole run), and
+    /// [`Scheduler::run_streamed`] hands the recorded samples to a sink chunk by
+    /// chunk, so the run's memory is bounded and independent of `duration_s`.
+    /// The memory estimate ([`MAX_GRAPH_BYTES`]) then counts one chunk per log.
+    /// `data`: measured data for `data_column` blocks, as in
+    /// [`GraphSpec::build_with_data`] (`compare:` needs whole logs: use that).
+    pub fn build_streamed(
+        self,
+        data: Option<std::sync::Arc<crate::data::Dataset>>,
+    ) -> Result<(Scheduler, BuildReport), GraphError> {
+        compile(self, data, Some(LOG_CHUNK_TICKS))
     }
 
     /// [`GraphSpec::build`] with measured data attached: blocks that play recorded
@@ -258,7 +278,7 @@ impl GraphSpec {
         self,
         data: std::sync::Arc<crate::data::Dataset>,
     ) -> Result<(Scheduler, BuildReport), GraphError> {
-        compile(self, Some(data))
+        compile(self, Some(data), None)
     }
 }
 
@@ -440,6 +460,7 @@ fn bytes_text(b: f64) -> String {
 fn compile(
     spec: GraphSpec,
     data: Option<std::sync::Arc<crate::data::Dataset>>,
+    chunk_ticks: Option<u64>,
 ) -> Result<(Scheduler, BuildReport), GraphError> {
     let GraphSpec {
         title,
@@ -839,7 +860,10 @@ fn compile(
         }
         let (bi, offset, width) = lookup(reference, section)?;
         let period = nodes[bi].period;
-        let samples = n_ticks.div_ceil(period) as usize;
+        let total_samples = n_ticks.div_ceil(period);
+        // Samples kept in memory: the whole run, or one chunk when streamed.
+        let samples =
+            chunk_ticks.map_or(total_samples, |c| c.min(n_ticks).div_ceil(period)) as usize;
         let bytes = samples.saturating_mul(width).saturating_mul(8);
         *graph_bytes = graph_bytes.saturating_add(bytes);
         *log_bytes = log_bytes.saturating_add(bytes);
@@ -847,12 +871,12 @@ fn compile(
             return Err(setting(
                 "log",
                 format!(
-                    "recording `{reference}` ({samples} samples × {width} values) brings the graph to about {} ({} of it logs, which are kept in memory for the whole run), more than the {} limit",
+                    "recording `{reference}` ({samples} samples × {width} values) brings the graph to about {} ({} of it logs, which are kept in memory for the whole run unless streamed), more than the {} limit",
                     bytes_text(*graph_bytes as f64),
                     bytes_text(*log_bytes as f64),
                     bytes_text(MAX_GRAPH_BYTES as f64)
                 ),
-                "log and score fewer signals, shorten duration_s, or give the logged blocks a lower rate_hz",
+                "log and score fewer signals, shorten duration_s, or give the logged blocks a lower rate_hz (`nanomotion run` streams logs to disk when the graph has no `compare:`; from Rust use GraphSpec::build_streamed)",
             ));
         }
         logs.push(LogChannel {
@@ -863,6 +887,9 @@ fn compile(
             period,
             rate_hz: base_rate_hz / period as f64,
             data: Vec::with_capacity(samples * width),
+            total_samples,
+            streamed: 0,
+            dropped: 0,
         });
         Ok(logs.len() - 1)
     };
@@ -907,6 +934,8 @@ fn compile(
         scores.push(ScoreChannel {
             channel,
             from_s: s.from_s,
+            first: first as u64,
+            acc: vec![crate::scheduler::ScoreAcc::default(); l.width],
         });
     }
 
@@ -948,6 +977,7 @@ fn compile(
         scores,
         compares,
         rate_transitions: report.rate_transitions.clone(),
+        chunk_ticks,
     });
     Ok((sched, report))
 }

@@ -281,6 +281,29 @@ fn a_transient_inf_in_a_logged_signal_is_found() {
 }
 
 #[test]
+fn a_transient_inf_in_a_streamed_log_is_found_after_its_chunk_was_handed_over() {
+    // Streamed: the log holding the inf is emptied after its chunk (100 ticks
+    // here), long before the end; the chunk scan still notices it.
+    let yaml = SPIKE
+        .replace("log: [last.y]", "log: [spike.y]")
+        .replace("duration_s: 1.0", "duration_s: 10.0");
+    let spec = GraphSpec::from_yaml(&yaml, "spike.yaml").unwrap();
+    let (mut s, _) = spec.build_streamed(None).unwrap();
+    let mut handed = 0;
+    s.run_streamed(
+        |c| {
+            handed += c[0].data.len();
+            Ok::<(), ()>(())
+        },
+        |_| {},
+    )
+    .unwrap();
+    assert_eq!(handed, 10_000);
+    let e = s.check_finite().unwrap_err().to_string();
+    assert!(e.contains("`spike`") && e.contains("tick 321"), "{e}");
+}
+
+#[test]
 fn a_persistent_nan_is_blamed_on_its_producer_not_the_first_block() {
     // `acc` (a delay, no feed-through) comes first in execution order and holds
     // the NaN at the end; the NaN comes from `spike` at tick 321 and persists
