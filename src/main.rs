@@ -420,21 +420,23 @@ fn run(args: RunArgs) -> Result<(), String> {
     );
     if !result.scores.is_empty() && sched.ticks_total() > 0 {
         say!(
-            "{:<32} {:>12} {:>12} {:>12} {:>8}",
+            "{:<32} {:>12} {:>12} {:>12} {:>8} {:<6}",
             "signal",
             "rms",
             "max |.|",
             "mean",
-            "from (s)"
+            "from (s)",
+            "unit"
         );
         for s in &result.scores {
             say!(
-                "{:<32} {:>12.4e} {:>12.4e} {:>12.4e} {:>8}",
+                "{:<32} {:>12.4e} {:>12.4e} {:>12.4e} {:>8} {:<6}",
                 s.signal,
                 s.rms,
                 s.max_abs,
                 s.mean,
-                s.from_s
+                s.from_s,
+                s.unit.as_deref().unwrap_or("")
             );
         }
     }

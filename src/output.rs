@@ -225,8 +225,15 @@ pub struct CumulativePsdEnd {
     pub signal: String,
     /// Samples before this time (s) were left out, as for the score.
     pub from_s: f64,
-    /// The end value (unit²): the variance of the scored samples.
+    /// Unit of `end` (the signal's unit squared), if the signal's unit is known.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub unit: Option<String>,
+    /// The end value (unit²): the variance of the scored samples (mean square
+    /// minus squared mean; the squared rms only when the mean is zero).
     pub end: f64,
+    /// √end in the signal's unit: the standard deviation of the scored
+    /// samples, the end value of the plotted √(cumulative PSD).
+    pub std: f64,
 }
 
 /// File-name-safe form of a signal name.
@@ -242,12 +249,14 @@ pub fn file_stem(name: &str) -> String {
         .collect()
 }
 
-/// Column names of a log: `name` or `name[j]`.
-fn column_names(name: &str, width: usize) -> Vec<String> {
+/// Column names of a log: `name` or `name[j]`, followed by ` (unit)` when the
+/// unit is known (`stage.y (m)`).
+fn column_names(name: &str, width: usize, unit: Option<&str>) -> Vec<String> {
+    let tail = unit.map_or(String::new(), |u| format!(" ({u})"));
     if width == 1 {
-        vec![name.to_string()]
+        vec![format!("{name}{tail}")]
     } else {
-        (0..width).map(|j| format!("{name}[{j}]")).collect()
+        (0..width).map(|j| format!("{name}[{j}]{tail}")).collect()
     }
 }
 
@@ -455,8 +464,8 @@ pub struct RunWriter {
     /// `(log name, from_s)` of each score.
     scored: Vec<(String, f64)>,
     groups: Vec<CsvGroup>,
-    /// Per log: name, width, rate and one decimator per element.
-    traces: Vec<(String, usize, f64, Vec<TraceDecimator>)>,
+    /// Per log: name, width, unit and one decimator per element.
+    traces: Vec<(String, usize, Option<String>, Vec<TraceDecimator>)>,
     /// Per score and element: (log index, element, from_s, first sample, accumulator).
     psds: Vec<(usize, usize, f64, u64, Option<OnlineWelch>)>,
     started: bool,
@@ -509,7 +518,11 @@ impl RunWriter {
             let mut writer = csv::Writer::from_path(&path).map_err(csv_err(&path))?;
             let mut header = vec!["t_s".to_string()];
             for &i in &logs {
-                header.extend(column_names(chunks[i].name, chunks[i].width));
+                header.extend(column_names(
+                    chunks[i].name,
+                    chunks[i].width,
+                    chunks[i].unit,
+                ));
             }
             writer.write_record(&header).map_err(csv_err(&path))?;
             self.groups.push(CsvGroup {
@@ -524,8 +537,12 @@ impl RunWriter {
             let decimators = (0..c.width)
                 .map(|_| TraceDecimator::new(c.total_samples, c.rate_hz))
                 .collect();
-            self.traces
-                .push((c.name.to_string(), c.width, c.rate_hz, decimators));
+            self.traces.push((
+                c.name.to_string(),
+                c.width,
+                c.unit.map(str::to_string),
+                decimators,
+            ));
         }
         for (name, from_s) in &self.scored {
             let Some(li) = chunks.iter().position(|c| c.name == name) else {
@@ -636,11 +653,11 @@ impl RunWriter {
             .unwrap_or_else(|| "nanomotion run".into());
 
         // One trace plot per logged signal (none for an empty log: `duration_s: 0`).
-        for (name, width, _, decs) in &traces {
+        for (name, width, unit, decs) in &traces {
             if decs.iter().all(|d| d.x.is_empty()) {
                 continue;
             }
-            let labels = column_names(name, *width);
+            let labels = column_names(name, *width, None);
             let series = decs
                 .iter()
                 .zip(labels)
@@ -654,6 +671,7 @@ impl RunWriter {
                 title: format!("{title}: {name}"),
                 x_label: "time (s)".into(),
                 y_label: name.clone(),
+                y_unit: unit.clone(),
                 x_scale: Scale::Linear,
                 series,
             };
@@ -667,8 +685,9 @@ impl RunWriter {
         tell("cumulative PSD");
         let mut cps = Vec::new();
         let mut cp_series = Vec::new();
+        let mut cp_units: Vec<Option<String>> = Vec::new();
         for (li, j, from_s, _, acc) in psds {
-            let (name, width, _, _) = &traces[li];
+            let (name, width, unit, _) = &traces[li];
             let signal = if *width == 1 {
                 name.clone()
             } else {
@@ -680,20 +699,33 @@ impl RunWriter {
                 cps.push(CumulativePsdEnd {
                     signal: signal.clone(),
                     from_s,
+                    unit: unit.as_deref().map(squared),
                     end,
+                    std: end.sqrt(),
                 });
+                let u = unit.as_deref().unwrap_or("");
+                // √ of the cumulative PSD, in the signal's unit: its end value
+                // reads as the standard deviation (the rms when the mean is 0).
                 cp_series.push(Series {
-                    label: format!("{signal} from {from_s} s (end {end:.3e})"),
+                    label: format!("{signal} from {from_s} s (end {:.3e} {u})", end.sqrt())
+                        .replace(" )", ")"),
                     x: f,
-                    y: c,
+                    y: c.iter().map(|v| v.max(0.0).sqrt()).collect(),
                 });
+                cp_units.push(unit.clone());
             }
         }
         if !cp_series.is_empty() {
             let fig = Figure {
-                title: format!("{title}: cumulative PSD of the scored signals"),
+                title: format!("{title}: √(cumulative PSD) of the scored signals"),
                 x_label: "frequency (Hz)".into(),
-                y_label: "cumulative PSD (unit²)".into(),
+                y_label: "√(cumulative PSD)".into(),
+                // One unit on the axis when all scored signals share it.
+                y_unit: if cp_units.windows(2).all(|w| w[0] == w[1]) {
+                    cp_units.first().cloned().flatten()
+                } else {
+                    None
+                },
                 x_scale: Scale::Log,
                 series: cp_series,
             };
@@ -721,6 +753,15 @@ impl RunWriter {
     }
 }
 
+/// `u²` for a plain unit (`m²`), `(u)²` for a compound one (`(m/s)²`).
+fn squared(u: &str) -> String {
+    if u.chars().all(char::is_alphabetic) {
+        format!("{u}²")
+    } else {
+        format!("({u})²")
+    }
+}
+
 fn csv_err(path: &Path) -> impl Fn(csv::Error) -> OutputError + '_ {
     move |e| OutputError::Csv {
         path: path.display().to_string(),
@@ -737,6 +778,7 @@ fn whole_chunks(logs: &[SignalLog]) -> Vec<LogChunk<'_>> {
             width: l.width,
             start_sample: 0,
             total_samples: l.len() as u64,
+            unit: l.unit.as_deref(),
             data: &l.data,
         })
         .collect()
@@ -821,6 +863,7 @@ pub fn write_comparisons(
             title: format!("{title}: {} against measured `{}`", c.signal, c.column),
             x_label: "time (s)".into(),
             y_label: c.column.clone(),
+            y_unit: None,
             x_scale: Scale::Linear,
             series: vec![
                 Series {
@@ -842,6 +885,7 @@ pub fn write_comparisons(
             ),
             x_label: "time (s)".into(),
             y_label: "residual".into(),
+            y_unit: None,
             x_scale: Scale::Linear,
             series: vec![Series {
                 label: "measured − model".into(),

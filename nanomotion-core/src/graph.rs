@@ -114,6 +114,10 @@ pub struct GraphSpec {
     /// Model outputs to compare with measured columns (needs data: `--data`).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub compare: Vec<CompareSpec>,
+    /// Units of signals (`block.port: unit`), setting or overriding what the
+    /// blocks declare; shown in CSV headers, `metrics.json` and plots.
+    #[serde(default, skip_serializing_if = "std::collections::BTreeMap::is_empty")]
+    pub units: std::collections::BTreeMap<String, String>,
     /// The folder relative file names in block parameters (`calibration_file`)
     /// are resolved against: the graph file's folder when read with
     /// [`GraphSpec::from_file`], else the working directory. Not part of the YAML.
@@ -175,6 +179,7 @@ impl GraphSpec {
             log: Vec::new(),
             score: Vec::new(),
             compare: Vec::new(),
+            units: std::collections::BTreeMap::new(),
             base_dir: None,
         }
     }
@@ -473,6 +478,7 @@ fn compile(
         log,
         score,
         compare,
+        units,
         base_dir,
     } = spec;
     if !(MIN_RATE_HZ..=MAX_RATE_HZ).contains(&base_rate_hz) {
@@ -780,6 +786,55 @@ fn compile(
             Box::new(crate::scheduler::RateTransition::new(0)),
         )));
     }
+    // Units: the graph's `units:` section over what the blocks declare.
+    for (reference, unit) in &units {
+        let bad = |problem: String| GraphError::BadSignal {
+            section: "units",
+            reference: reference.clone(),
+            problem,
+        };
+        let (b, port) = reference
+            .split_once('.')
+            .ok_or_else(|| bad("write signals as `block.port`".into()))?;
+        let Some(p) = pending.iter_mut().find(|p| p.name == b) else {
+            return Err(bad(format!("there is no block `{b}`")));
+        };
+        let Some(o) = p.outputs.iter_mut().find(|o| o.name == port) else {
+            return Err(bad(format!("block `{b}` has no output `{port}`")));
+        };
+        if unit.is_empty() || unit.len() > 32 || unit.chars().any(char::is_control) {
+            return Err(bad(format!(
+                "unit `{}` must be 1 to 32 printable characters (e.g. m, m/s, V)",
+                unit.escape_debug()
+            )));
+        }
+        o.unit = Some(unit.clone());
+    }
+    // Then units taken from an input's source (repeat until settled: chains of
+    // pass-through blocks in any order, loops included).
+    for _ in 0..n.max(1) {
+        let mut changed = false;
+        for i in 0..n {
+            for o in 0..pending[i].outputs.len() {
+                if pending[i].outputs[o].unit.is_some() {
+                    continue;
+                }
+                let Some(k) = pending[i].outputs[o].unit_from_input else {
+                    continue;
+                };
+                let Some(Some((s, sp, _))) = pending[i].sources.get(k).copied() else {
+                    continue;
+                };
+                if let Some(u) = pending[s].outputs[sp].unit.clone() {
+                    pending[i].outputs[o].unit = Some(u);
+                    changed = true;
+                }
+            }
+        }
+        if !changed {
+            break;
+        }
+    }
     let mut block_list: Vec<Box<dyn Block>> = Vec::with_capacity(n);
     for &i in &order {
         let p = &pending[i];
@@ -817,32 +872,33 @@ fn compile(
 
     // 5. Logs and scores.
     let n_ticks = n_ticks_f as u64;
-    let lookup =
-        |reference: &str, section: &'static str| -> Result<(usize, usize, usize), GraphError> {
-            let bad = |problem: String| GraphError::BadSignal {
-                section,
-                reference: reference.to_string(),
-                problem,
-            };
-            let (b, port) = reference
-                .split_once('.')
-                .ok_or_else(|| bad("write signals as `block.port`".into()))?;
-            let Some(bi) = names.iter().position(|n| n == b) else {
-                let hint = nearest(b, names.iter().map(String::as_str))
-                    .map(|s| format!("; did you mean `{s}`?"))
-                    .unwrap_or_default();
-                return Err(bad(format!("no block named `{b}`{hint}")));
-            };
-            let (_, outs, offs) = &port_tables[bi];
-            let Some(pi) = outs.iter().position(|o| o.name == port) else {
-                let known: Vec<&str> = outs.iter().map(|o| o.name.as_str()).collect();
-                return Err(bad(format!(
-                    "block `{b}` has no output `{port}`; its outputs are: {}",
-                    known.join(", ")
-                )));
-            };
-            Ok((bi, offs[pi], outs[pi].width))
+    let lookup = |reference: &str,
+                  section: &'static str|
+     -> Result<(usize, usize, usize, Option<String>), GraphError> {
+        let bad = |problem: String| GraphError::BadSignal {
+            section,
+            reference: reference.to_string(),
+            problem,
         };
+        let (b, port) = reference
+            .split_once('.')
+            .ok_or_else(|| bad("write signals as `block.port`".into()))?;
+        let Some(bi) = names.iter().position(|n| n == b) else {
+            let hint = nearest(b, names.iter().map(String::as_str))
+                .map(|s| format!("; did you mean `{s}`?"))
+                .unwrap_or_default();
+            return Err(bad(format!("no block named `{b}`{hint}")));
+        };
+        let (_, outs, offs) = &port_tables[bi];
+        let Some(pi) = outs.iter().position(|o| o.name == port) else {
+            let known: Vec<&str> = outs.iter().map(|o| o.name.as_str()).collect();
+            return Err(bad(format!(
+                "block `{b}` has no output `{port}`; its outputs are: {}",
+                known.join(", ")
+            )));
+        };
+        Ok((bi, offs[pi], outs[pi].width, outs[pi].unit.clone()))
+    };
     let mut logs: Vec<LogChannel> = Vec::new();
     // Memory estimate, checked before each log buffer is reserved.
     let mut graph_bytes = (signal_len + input_len)
@@ -858,7 +914,7 @@ fn compile(
         if let Some(i) = logs.iter().position(|l| l.name == reference) {
             return Ok(i);
         }
-        let (bi, offset, width) = lookup(reference, section)?;
+        let (bi, offset, width, unit) = lookup(reference, section)?;
         let period = nodes[bi].period;
         let total_samples = n_ticks.div_ceil(period);
         // Samples kept in memory: the whole run, or one chunk when streamed.
@@ -887,6 +943,7 @@ fn compile(
             period,
             rate_hz: base_rate_hz / period as f64,
             data: Vec::with_capacity(samples * width),
+            unit,
             total_samples,
             streamed: 0,
             dropped: 0,

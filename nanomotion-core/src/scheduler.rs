@@ -67,6 +67,8 @@ pub(crate) struct LogChannel {
     pub period: u64,
     pub rate_hz: f64,
     pub data: Vec<f64>,
+    /// Unit of the values, if known.
+    pub unit: Option<String>,
     /// Samples of the whole run.
     pub total_samples: u64,
     /// Samples already handed to a sink (streamed runs) before `data[0]`.
@@ -127,6 +129,8 @@ pub struct LogChunk<'a> {
     pub start_sample: u64,
     /// Samples of the whole run (known in advance).
     pub total_samples: u64,
+    /// Unit of the values, if known.
+    pub unit: Option<&'a str>,
     /// New samples, row-major (`data.len() / width` of them; may be none).
     pub data: &'a [f64],
 }
@@ -171,6 +175,9 @@ pub struct SignalLog {
     pub rate_hz: f64,
     /// Values per sample.
     pub width: usize,
+    /// Unit of the values, if known (SI, e.g. `m`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub unit: Option<String>,
     /// Samples, row-major: `data[i * width + j]` is element j of sample i, taken at
     /// t = i / rate_hz.
     pub data: Vec<f64>,
@@ -207,6 +214,9 @@ pub struct Score {
     pub signal: String,
     /// Samples before this time (s) were ignored.
     pub from_s: f64,
+    /// Unit of rms, max_abs and mean, if known.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub unit: Option<String>,
     /// Root mean square.
     pub rms: f64,
     /// Largest absolute value.
@@ -470,6 +480,7 @@ impl Scheduler {
                     width: l.width,
                     start_sample: 0,
                     total_samples: l.total_samples,
+                    unit: l.unit.as_deref(),
                     data: &l.data,
                 })
                 .collect();
@@ -509,6 +520,7 @@ impl Scheduler {
                     width: l.width,
                     start_sample: l.streamed,
                     total_samples: l.total_samples,
+                    unit: l.unit.as_deref(),
                     data: &l.data,
                 })
                 .collect();
@@ -555,6 +567,7 @@ impl Scheduler {
                 name: l.name.clone(),
                 rate_hz: l.rate_hz,
                 width: l.width,
+                unit: l.unit.clone(),
                 data: l.data.clone(),
             })
             .collect();
@@ -571,6 +584,7 @@ impl Scheduler {
                             format!("{}[{j}]", log.name)
                         },
                         from_s: s.from_s,
+                        unit: log.unit.clone(),
                         rms,
                         max_abs,
                         mean,
@@ -600,6 +614,7 @@ impl Scheduler {
                 scores.push(Score {
                     signal,
                     from_s: s.from_s,
+                    unit: log.unit.clone(),
                     rms,
                     max_abs,
                     mean,
@@ -923,7 +938,7 @@ impl Block for RateTransition {
         vec![Port::new("u", self.width)]
     }
     fn outputs(&self) -> Vec<Port> {
-        vec![Port::new("y", self.width)]
+        vec![Port::new("y", self.width).unit_of_input(0)]
     }
     fn output(&mut self, _tick: Tick, u: &[f64], y: &mut [f64]) {
         y.copy_from_slice(u);

@@ -863,7 +863,10 @@ impl Block for FittedStageBlock {
         vec![Port::new("f_alpha", 1)]
     }
     fn outputs(&self) -> Vec<Port> {
-        vec![Port::new("x_s", 1), Port::new("faults", 1)]
+        vec![
+            Port::new("x_s", 1).with_unit("m"),
+            Port::new("faults", 1).with_unit("count"),
+        ]
     }
     fn direct_feedthrough(&self) -> bool {
         false
