@@ -114,6 +114,10 @@ pub struct GraphSpec {
     /// Model outputs to compare with measured columns (needs data: `--data`).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub compare: Vec<CompareSpec>,
+    /// Where each connection is in the file (origin, 1-based lines), when it
+    /// was read from YAML in block style; connection errors then name the line.
+    #[serde(skip)]
+    pub connection_lines: Option<(String, Vec<usize>)>,
     /// Units of signals (`block.port: unit`), setting or overriding what the
     /// blocks declare; shown in CSV headers, `metrics.json` and plots.
     #[serde(default, skip_serializing_if = "std::collections::BTreeMap::is_empty")]
@@ -180,6 +184,7 @@ impl GraphSpec {
             score: Vec::new(),
             compare: Vec::new(),
             units: std::collections::BTreeMap::new(),
+            connection_lines: None,
             base_dir: None,
         }
     }
@@ -231,9 +236,14 @@ impl GraphSpec {
 
     /// Parse a graph from YAML text; `origin` (file name) prefixes errors.
     pub fn from_yaml(text: &str, origin: &str) -> Result<Self, GraphError> {
-        crate::yaml::from_str::<GraphSpec>(text, origin)
+        let mut spec = crate::yaml::from_str::<GraphSpec>(text, origin)
             .map_err(add_type_suggestion)
-            .map_err(|e| locate_unknown_field(e, text))
+            .map_err(|e| locate_unknown_field(e, text))?;
+        let lines = connection_lines(text);
+        if lines.len() == spec.connections.len() {
+            spec.connection_lines = Some((origin.to_string(), lines));
+        }
+        Ok(spec)
     }
 
     /// Read and parse a graph file (at most [`MAX_GRAPH_FILE_BYTES`]). Relative
@@ -373,20 +383,79 @@ fn locate_unknown_field(e: GraphError, text: &str) -> GraphError {
                     .is_some_and(|c| c == ' ' || c == '{' || c == ',' || c == '-' || c == '\t')
         })
     };
-    if let Some((n, line)) = text
+    let Some((n, line)) = text
         .lines()
         .enumerate()
         .skip(first_line.saturating_sub(1))
         .find(|(_, l)| is_key_on(l))
-        && (n + 1 != first_line || !message.contains(&format!("line {} column", n + 1)))
-    {
-        message = format!(
-            "{message}\nnote: the unknown field `{field}` is on line {}: `{}`",
-            n + 1,
-            line.trim()
-        );
+    else {
+        return GraphError::Parse { origin, message };
+    };
+    // What the parser said about the field, without its locations.
+    let first = message.lines().next().unwrap_or("");
+    let what = first[first.find("unknown field `").unwrap_or(0)..]
+        .split(" at line ")
+        .next()
+        .unwrap_or("")
+        .to_string();
+    let column = line
+        .match_indices(&format!("{field}:"))
+        .map(|(i, _)| i + 1)
+        .next()
+        .unwrap_or(1);
+    // The message rebuilt at the typo's own line, with the lines around it.
+    let lines: Vec<&str> = text.lines().collect();
+    let width = (n + 2).to_string().len();
+    let mut out = format!(
+        "line {} column {column}: {what}\n{:width$}--> {origin}:{}:{column}\n{:width$} |\n",
+        n + 1,
+        "",
+        n + 1,
+        ""
+    );
+    let from = n.saturating_sub(1);
+    for (k, l) in lines.iter().enumerate().take(n + 1).skip(from) {
+        out.push_str(&format!("{:>width$} | {l}\n", k + 1));
     }
+    out.push_str(&format!(
+        "{:width$} | {}^ {what}\n",
+        "",
+        " ".repeat(column - 1)
+    ));
+    if let Some(next) = lines.get(n + 1) {
+        out.push_str(&format!("{:>width$} | {next}\n", n + 2));
+    }
+    out.push_str(&format!("{:width$} |", ""));
+    message = out;
     GraphError::Parse { origin, message }
+}
+
+/// 1-based lines of the entries of a block-style top-level `connections:` list
+/// (`- ` items at its first indentation); empty for a flow-style list.
+fn connection_lines(text: &str) -> Vec<usize> {
+    let mut out = Vec::new();
+    let mut inside = false;
+    let mut indent: Option<usize> = None;
+    for (n, line) in text.lines().enumerate() {
+        let trimmed = line.trim_start();
+        if trimmed.is_empty() || trimmed.starts_with('#') {
+            continue;
+        }
+        let ind = line.len() - trimmed.len();
+        if ind == 0 {
+            inside = trimmed.starts_with("connections:")
+                && trimmed["connections:".len()..]
+                    .trim_start()
+                    .split('#')
+                    .next()
+                    == Some("");
+            continue;
+        }
+        if inside && trimmed.starts_with('-') && *indent.get_or_insert(ind) == ind {
+            out.push(n + 1);
+        }
+    }
+    out
 }
 
 /// Levenshtein distance (for suggestions).
@@ -479,6 +548,7 @@ fn compile(
         score,
         compare,
         units,
+        connection_lines,
         base_dir,
     } = spec;
     if !(MIN_RATE_HZ..=MAX_RATE_HZ).contains(&base_rate_hz) {
@@ -632,90 +702,106 @@ fn compile(
         });
     }
 
-    // 2. Connections.
+    // 2. Connections (an error names the entry's line when it is known).
     let mut report = BuildReport::default();
-    for (index, c) in connections.iter().enumerate() {
-        let (sb, sp) = resolve(&pending, &c.from, index, Direction::Output)?;
-        let (db, dp) = resolve(&pending, &c.to, index, Direction::Input)?;
-        let fw = pending[sb].outputs[sp].width;
-        let tw = pending[db].inputs[dp].width;
-        if fw != tw {
-            return Err(GraphError::WidthMismatch {
-                index,
-                from: c.from.clone(),
-                to: c.to.clone(),
-                from_width: fw,
-                to_width: tw,
-            });
+    let at = |index: usize| {
+        move |e: GraphError| match &connection_lines {
+            Some((origin, lines)) if index < lines.len() => GraphError::At {
+                origin: origin.clone(),
+                line: lines[index],
+                source: Box::new(e),
+            },
+            _ => e,
         }
-        if let Some((_, _, first)) = pending[db].sources[dp] {
-            return Err(GraphError::DoubleConnection {
-                to: c.to.clone(),
-                first,
-                second: index,
-            });
-        }
-        let (src_block, src_port) = if pending[sb].period != pending[db].period {
-            let (from_hz, to_hz) = (pending[sb].rate_hz, pending[db].rate_hz);
-            if strict_rates {
-                return Err(GraphError::RateMismatch {
+    };
+    let mut current = 0;
+    let mut connect = || -> Result<(), GraphError> {
+        for (index, c) in connections.iter().enumerate() {
+            current = index;
+            let (sb, sp) = resolve(&pending, &c.from, index, Direction::Output)?;
+            let (db, dp) = resolve(&pending, &c.to, index, Direction::Input)?;
+            let fw = pending[sb].outputs[sp].width;
+            let tw = pending[db].inputs[dp].width;
+            if fw != tw {
+                return Err(GraphError::WidthMismatch {
                     index,
                     from: c.from.clone(),
                     to: c.to.clone(),
-                    from_hz,
-                    to_hz,
+                    from_width: fw,
+                    to_width: tw,
                 });
             }
-            // Insert an explicit rate transition running at the destination's rate.
-            let kind = if to_hz > from_hz {
-                "zero-order hold"
-            } else {
-                "decimation (sampling, no anti-alias filter)"
-            };
-            // `:` cannot appear in a user's name, so this cannot collide with one.
-            let name = format!(
-                "{RATE_TRANSITION_PREFIX}{}:{}",
-                c.from.replace('.', ":"),
-                pending[db].name
-            );
-            let note = format!(
-                "`{}` -> `{}`: {kind} {from_hz} Hz -> {to_hz} Hz, inserted as block `{name}`",
-                c.from, c.to
-            );
-            tracing::info!(target: "nanomotion_core::graph", "rate transition {note}");
-            report.rate_transitions.push(note);
-            let idx = match pending.iter().position(|p| p.name == name) {
-                Some(i) => i,
-                None => {
-                    let mut block: Box<dyn Block> =
-                        Box::new(crate::scheduler::RateTransition::new(fw));
-                    let ctx = BuildContext::new(name.clone(), pending[db].ctx.dt, 0);
-                    block.build(&ctx).map_err(|source| GraphError::Param {
-                        block: name.clone(),
-                        type_name: "rate_transition".into(),
-                        source,
-                    })?;
-                    pending.push(Pending {
-                        sources: vec![Some((sb, sp, index))],
-                        name: name.clone(),
-                        type_name: "rate_transition".into(),
-                        inputs: block.inputs(),
-                        outputs: block.outputs(),
-                        feedthrough: true,
-                        block,
-                        period: pending[db].period,
-                        rate_hz: to_hz,
-                        ctx,
+            if let Some((_, _, first)) = pending[db].sources[dp] {
+                return Err(GraphError::DoubleConnection {
+                    to: c.to.clone(),
+                    first,
+                    second: index,
+                });
+            }
+            let (src_block, src_port) = if pending[sb].period != pending[db].period {
+                let (from_hz, to_hz) = (pending[sb].rate_hz, pending[db].rate_hz);
+                if strict_rates {
+                    return Err(GraphError::RateMismatch {
+                        index,
+                        from: c.from.clone(),
+                        to: c.to.clone(),
+                        from_hz,
+                        to_hz,
                     });
-                    pending.len() - 1
                 }
+                // Insert an explicit rate transition running at the destination's rate.
+                let kind = if to_hz > from_hz {
+                    "zero-order hold"
+                } else {
+                    "decimation (sampling, no anti-alias filter)"
+                };
+                // `:` cannot appear in a user's name, so this cannot collide with one.
+                let name = format!(
+                    "{RATE_TRANSITION_PREFIX}{}:{}",
+                    c.from.replace('.', ":"),
+                    pending[db].name
+                );
+                let note = format!(
+                    "`{}` -> `{}`: {kind} {from_hz} Hz -> {to_hz} Hz, inserted as block `{name}`",
+                    c.from, c.to
+                );
+                tracing::info!(target: "nanomotion_core::graph", "rate transition {note}");
+                report.rate_transitions.push(note);
+                let idx = match pending.iter().position(|p| p.name == name) {
+                    Some(i) => i,
+                    None => {
+                        let mut block: Box<dyn Block> =
+                            Box::new(crate::scheduler::RateTransition::new(fw));
+                        let ctx = BuildContext::new(name.clone(), pending[db].ctx.dt, 0);
+                        block.build(&ctx).map_err(|source| GraphError::Param {
+                            block: name.clone(),
+                            type_name: "rate_transition".into(),
+                            source,
+                        })?;
+                        pending.push(Pending {
+                            sources: vec![Some((sb, sp, index))],
+                            name: name.clone(),
+                            type_name: "rate_transition".into(),
+                            inputs: block.inputs(),
+                            outputs: block.outputs(),
+                            feedthrough: true,
+                            block,
+                            period: pending[db].period,
+                            rate_hz: to_hz,
+                            ctx,
+                        });
+                        pending.len() - 1
+                    }
+                };
+                (idx, 0)
+            } else {
+                (sb, sp)
             };
-            (idx, 0)
-        } else {
-            (sb, sp)
-        };
-        pending[db].sources[dp] = Some((src_block, src_port, index));
-    }
+            pending[db].sources[dp] = Some((src_block, src_port, index));
+        }
+        Ok(())
+    };
+    connect().map_err(|e| at(current)(e))?;
     for p in &pending {
         for (i, s) in p.sources.iter().enumerate() {
             if s.is_none() {

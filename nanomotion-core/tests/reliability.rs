@@ -409,6 +409,7 @@ fn overflowing_pi_gain_names_kp() {
     let yaml = "base_rate_hz: 1000\nduration_s: 1\nblocks:\n  - { name: a, type: pi, kp: 1e308, zero_hz: 5 }\n  - { name: c, type: constant, value: 1 }\nconnections:\n  - { from: c.y, to: a.e }\n";
     let e = build_err(yaml);
     assert!(e.contains("`kp`") && !e.contains("`ki`"), "{e}");
+    assert!(!e.contains("000000000000"), "numbers in e-notation: {e}");
 }
 
 #[test]
@@ -427,7 +428,31 @@ fn an_unknown_field_inside_a_block_is_located_on_its_own_line() {
     let e = GraphSpec::from_yaml(yaml, "f.yaml")
         .unwrap_err()
         .to_string();
-    assert!(e.contains("`kk` is on line 7: `kk: 2`"), "{e}");
+    // The message and its snippet are at the typo's line (7), not at the
+    // block's first line (4) with "at line" of its last field.
+    assert!(
+        e.contains("line 7 column 5: unknown field `kk`") && e.contains("--> f.yaml:7:5"),
+        "{e}"
+    );
+    assert!(
+        e.contains("7 |     kk: 2\n  |     ^ unknown field `kk`"),
+        "{e}"
+    );
+    assert!(!e.contains("line 4") && !e.contains("at line"), "{e}");
+}
+
+#[test]
+fn connection_errors_name_the_file_line() {
+    let yaml = "base_rate_hz: 1000\nduration_s: 1\nblocks:\n  - { name: amp, type: gain, k: 1 }\n  - { name: c, type: constant, value: 1 }\nconnections:\n  # the loop\n  - { from: c.y, to: amp.u }\n\n  - from: c.y\n    to: amp.x\n";
+    let e = GraphSpec::from_yaml(yaml, "g.yaml")
+        .unwrap()
+        .build()
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.starts_with("g.yaml: line 10: connection 2 (`amp.x`)") && e.contains("u (width 1)"),
+        "{e}"
+    );
 }
 
 #[test]
