@@ -511,6 +511,14 @@ pub fn optimize(
                 return ControlFlow::Break(());
             }
         }
+        tracing::debug!(
+            target: "walking_piezo::optimize",
+            phase = p.phase.name(),
+            chunks_done = p.chunks_done,
+            best_cost = p.best_cost,
+            evaluations = p.evaluations,
+            "waveform optimisation chunk done"
+        );
         progress(p)
     })?;
     if let Some(e) = write_err {
