@@ -217,6 +217,7 @@ fn plot(p: &PlotData, path: &Path) -> Result<(), String> {
             title: p.title.clone(),
             x_label: p.x_label.clone(),
             y_label: p.y_label.clone(),
+            y_unit: None,
             x_scale: Scale::Linear,
             series,
         },
@@ -269,6 +270,7 @@ fn write(out: &Path, r: &Report, a: &Args) -> Result<Vec<PathBuf>, String> {
                 title: format!("residual of {signal}, before and after"),
                 x_label: "time (s)".into(),
                 y_label: "measured − model".into(),
+                y_unit: None,
                 x_scale: Scale::Linear,
                 series: vec![
                     Series {
@@ -303,6 +305,7 @@ fn write(out: &Path, r: &Report, a: &Args) -> Result<Vec<PathBuf>, String> {
                 title: format!("√(cumulative PSD) of the residual of {signal}"),
                 x_label: "frequency (Hz)".into(),
                 y_label: "√(cumulative PSD) (signal unit; end value = std)".into(),
+                y_unit: None,
                 x_scale: Scale::Log,
                 series: vec![
                     Series {

@@ -390,9 +390,13 @@ fn run(args: RunArgs) -> Result<(), String> {
         (None, None) => {}
     }
     let require = spec.require.clone();
-    let (mut sched, report) = match &data {
-        Some(d) => spec.build_with_data(d.clone()),
-        None => spec.build(),
+    // Logs are streamed to the CSV files while the run goes (memory independent
+    // of the duration), except for `compare:`, which needs whole logs.
+    let streamed = spec.compare.is_empty();
+    let (mut sched, report) = match (&data, streamed) {
+        (d, true) => spec.build_streamed(d.clone()),
+        (Some(d), false) => spec.build_with_data(d.clone()),
+        (None, false) => spec.build(),
     }
     .map_err(|e| e.to_string())?;
     let gate_lines =
@@ -418,28 +422,42 @@ fn run(args: RunArgs) -> Result<(), String> {
             "note: duration 0 s: nothing is simulated, logs are empty and no plots are drawn"
         );
     }
+    let mut writer = match &folder {
+        Some(f) => Some(
+            nanomotion::output::RunWriter::new(f.dir(), sched.score_signals())
+                .map_err(|e| e.to_string())?,
+        ),
+        None => None,
+    };
     let start = Instant::now();
     let mut bar: Option<ProgressBar> = None;
-    let result = sched.run(|fraction| {
-        // Show a bar only for runs that last more than a second.
-        if bar.is_none() && start.elapsed() > Duration::from_millis(300) && fraction < 0.7 {
-            let b = ProgressBar::new(1000);
-            b.set_style(
-                ProgressStyle::with_template(
-                    "{spinner} simulating [{bar:40}] {percent:>3}% (eta {eta})",
-                )
-                .expect("static template")
-                .progress_chars("=> "),
-            );
-            bar = Some(b);
-        }
-        if let Some(b) = &bar {
-            b.set_position((fraction * 1000.0) as u64);
-        }
-    });
+    let result = sched.run_streamed(
+        |chunks| match &mut writer {
+            Some(w) => w.chunk(chunks),
+            None => Ok(()),
+        },
+        |fraction| {
+            // Show a bar only for runs that last more than a second.
+            if bar.is_none() && start.elapsed() > Duration::from_millis(300) && fraction < 0.7 {
+                let b = ProgressBar::new(1000);
+                b.set_style(
+                    ProgressStyle::with_template(
+                        "{spinner} simulating [{bar:40}] {percent:>3}% (eta {eta})",
+                    )
+                    .expect("static template")
+                    .progress_chars("=> "),
+                );
+                bar = Some(b);
+            }
+            if let Some(b) = &bar {
+                b.set_position((fraction * 1000.0) as u64);
+            }
+        },
+    );
     if let Some(b) = bar {
         b.finish_and_clear();
     }
+    let result = result.map_err(|e| e.to_string())?;
     let wall = start.elapsed().as_secs_f64();
     sched.check_finite().map_err(|e| e.to_string())?;
     say!(
@@ -457,21 +475,23 @@ fn run(args: RunArgs) -> Result<(), String> {
     }
     if !result.scores.is_empty() && sched.ticks_total() > 0 {
         say!(
-            "{:<32} {:>12} {:>12} {:>12} {:>8}",
+            "{:<32} {:>12} {:>12} {:>12} {:>8} {:<6}",
             "signal",
             "rms",
             "max |.|",
             "mean",
-            "from (s)"
+            "from (s)",
+            "unit"
         );
         for s in &result.scores {
             say!(
-                "{:<32} {:>12.4e} {:>12.4e} {:>12.4e} {:>8}",
+                "{:<32} {:>12.4e} {:>12.4e} {:>12.4e} {:>8} {:<6}",
                 s.signal,
                 s.rms,
                 s.max_abs,
                 s.mean,
-                s.from_s
+                s.from_s,
+                s.unit.as_deref().unwrap_or("")
             );
         }
     }
@@ -508,16 +528,13 @@ fn run(args: RunArgs) -> Result<(), String> {
             );
         }
     }
-    if let Some(folder) = folder {
+    if let (Some(folder), Some(writer)) = (folder, writer) {
         eprintln!("writing files to {} ...", out.display());
         let dir = folder.dir().to_path_buf();
         let started = Instant::now();
         let mut wbar: Option<ProgressBar> = None;
-        let mut files = nanomotion::output::write_all_with_progress(
-            &dir,
-            &result,
-            &report.rate_transitions,
-            |what, fraction| {
+        let mut files = writer
+            .finish(&result, &report.rate_transitions, |what, fraction| {
                 // A bar once writing takes noticeable time.
                 if wbar.is_none() && started.elapsed() > Duration::from_millis(300) {
                     let b = ProgressBar::new(1000);
@@ -532,9 +549,8 @@ fn run(args: RunArgs) -> Result<(), String> {
                     b.set_position((fraction * 1000.0) as u64);
                     b.set_message(what.to_string());
                 }
-            },
-        )
-        .map_err(|e| e.to_string())?;
+            })
+            .map_err(|e| e.to_string())?;
         if let Some(b) = wbar {
             b.finish_and_clear();
         }

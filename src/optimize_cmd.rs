@@ -41,7 +41,9 @@ pub fn optimize_waveform(config: &Path, out: &Path, budget: Option<f64>) -> Resu
     if run_file.exists() {
         let f = read_run_file(&run_file).map_err(|e| e.to_string())?;
         let done: u32 = f.search.phases.iter().map(|p| p.chunks_done).sum();
-        eprintln!("resuming from {} ({done} chunks done)", run_file.display());
+        if f.fingerprint == prepared.fingerprint() {
+            eprintln!("resuming from {} ({done} chunks done)", run_file.display());
+        }
     }
     let total: u32 = [
         cfg.budget.sa.chunks,

@@ -30,8 +30,11 @@ pub struct Figure {
     pub title: String,
     /// Label of the x axis, with unit.
     pub x_label: String,
-    /// Label of the y axis, with unit.
+    /// Label of the y axis (without the unit when `y_unit` is given).
     pub y_label: String,
+    /// Unit of the y values (SI, e.g. `m`): the axis is then drawn in an
+    /// engineering prefix of it (`nm`, `µm/s`) instead of a `×1e-9` factor.
+    pub y_unit: Option<String>,
     /// Scaling of the x axis.
     pub x_scale: Scale,
     /// The curves.
@@ -82,6 +85,43 @@ pub fn decimate_min_max(x: &[f64], y: &[f64], buckets: usize) -> (Vec<f64>, Vec<
         }
     }
     (xo, yo)
+}
+
+/// SI prefix of 10^exponent (exponent a multiple of 3 in [−18, 18]).
+fn si_prefix(exponent: i32) -> Option<&'static str> {
+    Some(match exponent {
+        -18 => "a",
+        -15 => "f",
+        -12 => "p",
+        -9 => "n",
+        -6 => "µ",
+        -3 => "m",
+        0 => "",
+        3 => "k",
+        6 => "M",
+        9 => "G",
+        12 => "T",
+        _ => return None,
+    })
+}
+
+/// The y-axis label for values divided by 10^exponent: `label (nm)` when the
+/// unit takes a prefix (a plain unit such as `m`, `m/s`, `V`, `Hz`, `N`),
+/// else `label (×1e-9 unit)`.
+pub fn axis_label(label: &str, unit: Option<&str>, exponent: i32) -> String {
+    let prefixable = |u: &str| {
+        !u.is_empty()
+            && u.chars().next().is_some_and(|c| c.is_alphabetic())
+            && !u.contains(['²', '³', '^', ' ', '·', '*'])
+            && !matches!(u, "count" | "counts" | "%" | "-" | "1" | "kg" | "dB")
+    };
+    match (unit, si_prefix(exponent)) {
+        (Some(u), _) if exponent == 0 => format!("{label} ({u})"),
+        (Some(u), Some(p)) if prefixable(u) => format!("{label} ({p}{u})"),
+        (Some(u), _) => format!("{label} (×1e{exponent} {u})"),
+        (None, _) if exponent == 0 => label.to_string(),
+        (None, _) => format!("{label} (×1e{exponent})"),
+    }
 }
 
 const COLORS: [RGBColor; 6] = [
@@ -160,10 +200,15 @@ fn draw_on(
         .into_iter()
         .map(|(l, p)| (l, p.into_iter().map(|(x, y)| (x, y * scale)).collect()))
         .collect();
-    let y_label = if exponent == 0 {
-        fig.y_label.clone()
-    } else {
-        format!("{} (×1e{exponent})", fig.y_label)
+    let y_label = axis_label(&fig.y_label, fig.y_unit.as_deref(), exponent);
+    // A logarithmic y axis where positive data spans more than two decades
+    // (spectra, cumulative PSDs on a log frequency axis).
+    let y_log = fig.x_scale == Scale::Log && {
+        let ys = series.iter().flat_map(|(_, p)| p.iter().map(|&(_, y)| y));
+        let (lo, hi, all_pos) = ys.fold((f64::INFINITY, 0.0f64, true), |(lo, hi, ok), y| {
+            (lo.min(y), hi.max(y), ok && y > 0.0)
+        });
+        all_pos && hi > 0.0 && hi / lo > 100.0
     };
     let all = series.iter().flat_map(|(_, p)| p.iter());
     let (mut x0, mut x1, mut y0, mut y1) = (
@@ -189,7 +234,11 @@ fn draw_on(
     } else {
         y0.abs().max(1e-12) * 0.1
     };
-    let (y0, y1) = (y0 - pad, y1 + pad);
+    let (y0, y1) = if y_log {
+        (y0 / 1.2, y1 * 1.2)
+    } else {
+        (y0 - pad, y1 + pad)
+    };
 
     macro_rules! body {
         ($chart:expr) => {{
@@ -198,7 +247,13 @@ fn draw_on(
                 .configure_mesh()
                 .x_desc(fig.x_label.as_str())
                 .y_desc(y_label.as_str())
-                .y_label_formatter(&|v| format!("{v:.3}"))
+                .y_label_formatter(&|v| {
+                    if y_log {
+                        format!("{v:.2e}")
+                    } else {
+                        format!("{v:.3}")
+                    }
+                })
                 .draw()
                 .map_err(|e| err(e.to_string()))?;
             for (i, (label, pts)) in series.iter().enumerate() {
@@ -232,15 +287,20 @@ fn draw_on(
         .margin(12)
         .x_label_area_size(40)
         .y_label_area_size(80);
-    match fig.x_scale {
-        Scale::Linear => body!(
+    match (fig.x_scale, y_log) {
+        (Scale::Linear, _) => body!(
             builder
                 .build_cartesian_2d(x0..x1, y0..y1)
                 .map_err(|e| err(e.to_string()))?
         ),
-        Scale::Log => body!(
+        (Scale::Log, false) => body!(
             builder
                 .build_cartesian_2d((x0..x1).log_scale(), y0..y1)
+                .map_err(|e| err(e.to_string()))?
+        ),
+        (Scale::Log, true) => body!(
+            builder
+                .build_cartesian_2d((x0..x1).log_scale(), (y0..y1).log_scale())
                 .map_err(|e| err(e.to_string()))?
         ),
     }
@@ -264,6 +324,18 @@ mod tests {
     }
 
     #[test]
+    fn axes_use_engineering_prefixes_of_the_unit() {
+        assert_eq!(axis_label("stage.y", Some("m"), -9), "stage.y (nm)");
+        assert_eq!(axis_label("v", Some("m/s"), -6), "v (µm/s)");
+        assert_eq!(axis_label("f", Some("Hz"), 3), "f (kHz)");
+        assert_eq!(axis_label("y", Some("m"), 0), "y (m)");
+        // Powers and counts take no prefix (n(m²) is not (nm)²).
+        assert_eq!(axis_label("p", Some("m²"), -18), "p (×1e-18 m²)");
+        assert_eq!(axis_label("c", Some("count"), 3), "c (×1e3 count)");
+        assert_eq!(axis_label("e", None, -9), "e (×1e-9)");
+    }
+
+    #[test]
     fn svg_is_written() {
         let dir = std::env::temp_dir().join(format!("nm-plot-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
@@ -271,7 +343,8 @@ mod tests {
         let fig = Figure {
             title: "t".into(),
             x_label: "time (s)".into(),
-            y_label: "y (m)".into(),
+            y_label: "y".into(),
+            y_unit: Some("m".into()),
             x_scale: Scale::Log,
             series: vec![Series {
                 label: "s".into(),

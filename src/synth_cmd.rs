@@ -189,6 +189,7 @@ fn plots(cfg: &SynthConfig, r: &SynthResult, out: &Path) -> Result<(), String> {
             title: "Controller: singular values of K (H∞) and diagonal of K_d (7.2)".into(),
             x_label: "f (Hz)".into(),
             y_label: "dB".into(),
+            y_unit: None,
             x_scale: Scale::Log,
             series,
         },
@@ -254,6 +255,7 @@ fn plots(cfg: &SynthConfig, r: &SynthResult, out: &Path) -> Result<(), String> {
                 title: format!("{title}: {}", if off { "off-diagonal" } else { "diagonal" }),
                 x_label: "f (Hz)".into(),
                 y_label: "dB".into(),
+                y_unit: None,
                 x_scale: Scale::Log,
                 series,
             });
@@ -288,6 +290,7 @@ fn plots(cfg: &SynthConfig, r: &SynthResult, out: &Path) -> Result<(), String> {
             title: "Characteristic loci λ(GK(j2πf)) near −1 (|λ| < 5)".into(),
             x_label: "Re".into(),
             y_label: "Im".into(),
+            y_unit: None,
             x_scale: Scale::Linear,
             series,
         },
@@ -304,6 +307,7 @@ fn plots(cfg: &SynthConfig, r: &SynthResult, out: &Path) -> Result<(), String> {
                     .into(),
                 x_label: "f (Hz)".into(),
                 y_label: "dB".into(),
+                y_unit: None,
                 x_scale: Scale::Log,
                 series: vec![
                     Series {
@@ -335,6 +339,7 @@ fn plots(cfg: &SynthConfig, r: &SynthResult, out: &Path) -> Result<(), String> {
             title: format!("σ̄(N(j2πf)) of (7.9) and γ = {:.4}", r.synthesis.gamma),
             x_label: "f (Hz)".into(),
             y_label: "dB".into(),
+            y_unit: None,
             x_scale: Scale::Log,
             series: vec![
                 Series {

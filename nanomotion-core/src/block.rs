@@ -55,6 +55,13 @@ pub struct Port {
     pub name: String,
     /// Number of `f64` values the port carries.
     pub width: usize,
+    /// Unit of an output's values in SI (`m`, `m/s`, `V`, `Hz`, `N`, `count`), if
+    /// known; shown in CSV headers, `metrics.json` and plot axes. A graph's
+    /// `units:` section sets or overrides it per signal.
+    pub unit: Option<String>,
+    /// For outputs in the unit of an input (sums, limiters, delays, rate
+    /// transitions): the index of that input. Resolved when the graph is built.
+    pub unit_from_input: Option<usize>,
 }
 
 impl Port {
@@ -63,7 +70,19 @@ impl Port {
         Self {
             name: name.into(),
             width,
+            unit: None,
+            unit_from_input: None,
         }
+    }
+    /// This output carries values in `unit` (SI, e.g. `m`).
+    pub fn with_unit(mut self, unit: &str) -> Self {
+        self.unit = Some(unit.to_string());
+        self
+    }
+    /// This output carries values in the unit of input `index`.
+    pub fn unit_of_input(mut self, index: usize) -> Self {
+        self.unit_from_input = Some(index);
+        self
     }
 }
 

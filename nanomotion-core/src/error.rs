@@ -36,6 +36,17 @@ impl ParamError {
 /// count from 1 ("connection 1" is the first entry), as a reader of the file does.
 #[derive(Debug, Error)]
 pub enum GraphError {
+    /// An error about one entry of the file, with where it is.
+    #[error("{origin}: line {line}: {source}")]
+    At {
+        /// The graph file.
+        origin: String,
+        /// Line of the entry (1-based).
+        line: usize,
+        /// The error.
+        #[source]
+        source: Box<GraphError>,
+    },
     /// The YAML did not parse or did not match the graph schema (unknown field,
     /// wrong type, unknown block type, ...). The message carries line and column.
     #[error("{origin}: {message}")]
@@ -167,4 +178,14 @@ pub enum GraphError {
         #[source]
         source: std::io::Error,
     },
+}
+
+impl GraphError {
+    /// The error itself, without the file location an [`GraphError::At`] adds.
+    pub fn root(&self) -> &GraphError {
+        match self {
+            GraphError::At { source, .. } => source.root(),
+            e => e,
+        }
+    }
 }

@@ -118,6 +118,14 @@ pub struct GraphSpec {
     /// stability gate ([`crate::gate`]) before the graph runs.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub require: Option<crate::gate::Require>,
+    /// Where each connection is in the file (origin, 1-based lines), when it
+    /// was read from YAML in block style; connection errors then name the line.
+    #[serde(skip)]
+    pub connection_lines: Option<(String, Vec<usize>)>,
+    /// Units of signals (`block.port: unit`), setting or overriding what the
+    /// blocks declare; shown in CSV headers, `metrics.json` and plots.
+    #[serde(default, skip_serializing_if = "std::collections::BTreeMap::is_empty")]
+    pub units: std::collections::BTreeMap<String, String>,
     /// The folder relative file names in block parameters (`calibration_file`)
     /// are resolved against: the graph file's folder when read with
     /// [`GraphSpec::from_file`], else the working directory. Not part of the YAML.
@@ -145,9 +153,15 @@ pub const MIN_RATE_HZ: f64 = 1e-3;
 /// Highest base rate (Hz): 1 GHz.
 pub const MAX_RATE_HZ: f64 = 1e9;
 
+/// Base ticks a streamed log holds between two hand-overs to the sink
+/// ([`GraphSpec::build_streamed`]): 2^16. A log of width w at period p keeps
+/// ⌈2^16 / p⌉ · w values (at most 512 KiB per value of width).
+pub const LOG_CHUNK_TICKS: u64 = 1 << 16;
+
 /// Most memory a built graph may hold, estimated at build (bytes): 4 GiB. The
 /// estimate adds the signal and input buffers, every log (samples × width × 8
-/// bytes, reserved for the whole run) and each block's
+/// bytes, reserved for the whole run, or for [`LOG_CHUNK_TICKS`] when streamed)
+/// and each block's
 /// [`Block::memory_bytes`]; a graph above it is refused with the breakdown.
 pub const MAX_GRAPH_BYTES: usize = 4 << 30;
 
@@ -174,6 +188,8 @@ impl GraphSpec {
             score: Vec::new(),
             compare: Vec::new(),
             require: None,
+            units: std::collections::BTreeMap::new(),
+            connection_lines: None,
             base_dir: None,
         }
     }
@@ -225,9 +241,14 @@ impl GraphSpec {
 
     /// Parse a graph from YAML text; `origin` (file name) prefixes errors.
     pub fn from_yaml(text: &str, origin: &str) -> Result<Self, GraphError> {
-        crate::yaml::from_str::<GraphSpec>(text, origin)
+        let mut spec = crate::yaml::from_str::<GraphSpec>(text, origin)
             .map_err(add_type_suggestion)
-            .map_err(|e| locate_unknown_field(e, text))
+            .map_err(|e| locate_unknown_field(e, text))?;
+        let lines = connection_lines(text);
+        if lines.len() == spec.connections.len() {
+            spec.connection_lines = Some((origin.to_string(), lines));
+        }
+        Ok(spec)
     }
 
     /// Read and parse a graph file (at most [`MAX_GRAPH_FILE_BYTES`]). Relative
@@ -254,7 +275,21 @@ impl GraphSpec {
     /// Validate the graph, build every block, resolve ports, rates and order, and
     /// return the ready-to-run scheduler with a report of what was inserted.
     pub fn build(self) -> Result<(Scheduler, BuildReport), GraphError> {
-        compile(self, None)
+        compile(self, None, None)
+    }
+
+    /// [`GraphSpec::build`] for a run whose logs are streamed: each log keeps
+    /// room for [`LOG_CHUNK_TICKS`] base ticks only (not the whole run), and
+    /// [`Scheduler::run_streamed`] hands the recorded samples to a sink chunk by
+    /// chunk, so the run's memory is bounded and independent of `duration_s`.
+    /// The memory estimate ([`MAX_GRAPH_BYTES`]) then counts one chunk per log.
+    /// `data`: measured data for `data_column` blocks, as in
+    /// [`GraphSpec::build_with_data`] (`compare:` needs whole logs: use that).
+    pub fn build_streamed(
+        self,
+        data: Option<std::sync::Arc<crate::data::Dataset>>,
+    ) -> Result<(Scheduler, BuildReport), GraphError> {
+        compile(self, data, Some(LOG_CHUNK_TICKS))
     }
 
     /// [`GraphSpec::build`] with measured data attached: blocks that play recorded
@@ -263,7 +298,7 @@ impl GraphSpec {
         self,
         data: std::sync::Arc<crate::data::Dataset>,
     ) -> Result<(Scheduler, BuildReport), GraphError> {
-        compile(self, Some(data))
+        compile(self, Some(data), None)
     }
 }
 
@@ -353,20 +388,79 @@ fn locate_unknown_field(e: GraphError, text: &str) -> GraphError {
                     .is_some_and(|c| c == ' ' || c == '{' || c == ',' || c == '-' || c == '\t')
         })
     };
-    if let Some((n, line)) = text
+    let Some((n, line)) = text
         .lines()
         .enumerate()
         .skip(first_line.saturating_sub(1))
         .find(|(_, l)| is_key_on(l))
-        && (n + 1 != first_line || !message.contains(&format!("line {} column", n + 1)))
-    {
-        message = format!(
-            "{message}\nnote: the unknown field `{field}` is on line {}: `{}`",
-            n + 1,
-            line.trim()
-        );
+    else {
+        return GraphError::Parse { origin, message };
+    };
+    // What the parser said about the field, without its locations.
+    let first = message.lines().next().unwrap_or("");
+    let what = first[first.find("unknown field `").unwrap_or(0)..]
+        .split(" at line ")
+        .next()
+        .unwrap_or("")
+        .to_string();
+    let column = line
+        .match_indices(&format!("{field}:"))
+        .map(|(i, _)| i + 1)
+        .next()
+        .unwrap_or(1);
+    // The message rebuilt at the typo's own line, with the lines around it.
+    let lines: Vec<&str> = text.lines().collect();
+    let width = (n + 2).to_string().len();
+    let mut out = format!(
+        "line {} column {column}: {what}\n{:width$}--> {origin}:{}:{column}\n{:width$} |\n",
+        n + 1,
+        "",
+        n + 1,
+        ""
+    );
+    let from = n.saturating_sub(1);
+    for (k, l) in lines.iter().enumerate().take(n + 1).skip(from) {
+        out.push_str(&format!("{:>width$} | {l}\n", k + 1));
     }
+    out.push_str(&format!(
+        "{:width$} | {}^ {what}\n",
+        "",
+        " ".repeat(column - 1)
+    ));
+    if let Some(next) = lines.get(n + 1) {
+        out.push_str(&format!("{:>width$} | {next}\n", n + 2));
+    }
+    out.push_str(&format!("{:width$} |", ""));
+    message = out;
     GraphError::Parse { origin, message }
+}
+
+/// 1-based lines of the entries of a block-style top-level `connections:` list
+/// (`- ` items at its first indentation); empty for a flow-style list.
+fn connection_lines(text: &str) -> Vec<usize> {
+    let mut out = Vec::new();
+    let mut inside = false;
+    let mut indent: Option<usize> = None;
+    for (n, line) in text.lines().enumerate() {
+        let trimmed = line.trim_start();
+        if trimmed.is_empty() || trimmed.starts_with('#') {
+            continue;
+        }
+        let ind = line.len() - trimmed.len();
+        if ind == 0 {
+            inside = trimmed.starts_with("connections:")
+                && trimmed["connections:".len()..]
+                    .trim_start()
+                    .split('#')
+                    .next()
+                    == Some("");
+            continue;
+        }
+        if inside && trimmed.starts_with('-') && *indent.get_or_insert(ind) == ind {
+            out.push(n + 1);
+        }
+    }
+    out
 }
 
 /// Levenshtein distance (for suggestions).
@@ -445,6 +539,7 @@ fn bytes_text(b: f64) -> String {
 fn compile(
     spec: GraphSpec,
     data: Option<std::sync::Arc<crate::data::Dataset>>,
+    chunk_ticks: Option<u64>,
 ) -> Result<(Scheduler, BuildReport), GraphError> {
     let GraphSpec {
         title,
@@ -458,6 +553,8 @@ fn compile(
         score,
         compare,
         require: _,
+        units,
+        connection_lines,
         base_dir,
     } = spec;
     if !(MIN_RATE_HZ..=MAX_RATE_HZ).contains(&base_rate_hz) {
@@ -611,90 +708,106 @@ fn compile(
         });
     }
 
-    // 2. Connections.
+    // 2. Connections (an error names the entry's line when it is known).
     let mut report = BuildReport::default();
-    for (index, c) in connections.iter().enumerate() {
-        let (sb, sp) = resolve(&pending, &c.from, index, Direction::Output)?;
-        let (db, dp) = resolve(&pending, &c.to, index, Direction::Input)?;
-        let fw = pending[sb].outputs[sp].width;
-        let tw = pending[db].inputs[dp].width;
-        if fw != tw {
-            return Err(GraphError::WidthMismatch {
-                index,
-                from: c.from.clone(),
-                to: c.to.clone(),
-                from_width: fw,
-                to_width: tw,
-            });
+    let at = |index: usize| {
+        move |e: GraphError| match &connection_lines {
+            Some((origin, lines)) if index < lines.len() => GraphError::At {
+                origin: origin.clone(),
+                line: lines[index],
+                source: Box::new(e),
+            },
+            _ => e,
         }
-        if let Some((_, _, first)) = pending[db].sources[dp] {
-            return Err(GraphError::DoubleConnection {
-                to: c.to.clone(),
-                first,
-                second: index,
-            });
-        }
-        let (src_block, src_port) = if pending[sb].period != pending[db].period {
-            let (from_hz, to_hz) = (pending[sb].rate_hz, pending[db].rate_hz);
-            if strict_rates {
-                return Err(GraphError::RateMismatch {
+    };
+    let mut current = 0;
+    let mut connect = || -> Result<(), GraphError> {
+        for (index, c) in connections.iter().enumerate() {
+            current = index;
+            let (sb, sp) = resolve(&pending, &c.from, index, Direction::Output)?;
+            let (db, dp) = resolve(&pending, &c.to, index, Direction::Input)?;
+            let fw = pending[sb].outputs[sp].width;
+            let tw = pending[db].inputs[dp].width;
+            if fw != tw {
+                return Err(GraphError::WidthMismatch {
                     index,
                     from: c.from.clone(),
                     to: c.to.clone(),
-                    from_hz,
-                    to_hz,
+                    from_width: fw,
+                    to_width: tw,
                 });
             }
-            // Insert an explicit rate transition running at the destination's rate.
-            let kind = if to_hz > from_hz {
-                "zero-order hold"
-            } else {
-                "decimation (sampling, no anti-alias filter)"
-            };
-            // `:` cannot appear in a user's name, so this cannot collide with one.
-            let name = format!(
-                "{RATE_TRANSITION_PREFIX}{}:{}",
-                c.from.replace('.', ":"),
-                pending[db].name
-            );
-            let note = format!(
-                "`{}` -> `{}`: {kind} {from_hz} Hz -> {to_hz} Hz, inserted as block `{name}`",
-                c.from, c.to
-            );
-            tracing::info!(target: "nanomotion_core::graph", "rate transition {note}");
-            report.rate_transitions.push(note);
-            let idx = match pending.iter().position(|p| p.name == name) {
-                Some(i) => i,
-                None => {
-                    let mut block: Box<dyn Block> =
-                        Box::new(crate::scheduler::RateTransition::new(fw));
-                    let ctx = BuildContext::new(name.clone(), pending[db].ctx.dt, 0);
-                    block.build(&ctx).map_err(|source| GraphError::Param {
-                        block: name.clone(),
-                        type_name: "rate_transition".into(),
-                        source,
-                    })?;
-                    pending.push(Pending {
-                        sources: vec![Some((sb, sp, index))],
-                        name: name.clone(),
-                        type_name: "rate_transition".into(),
-                        inputs: block.inputs(),
-                        outputs: block.outputs(),
-                        feedthrough: true,
-                        block,
-                        period: pending[db].period,
-                        rate_hz: to_hz,
-                        ctx,
+            if let Some((_, _, first)) = pending[db].sources[dp] {
+                return Err(GraphError::DoubleConnection {
+                    to: c.to.clone(),
+                    first,
+                    second: index,
+                });
+            }
+            let (src_block, src_port) = if pending[sb].period != pending[db].period {
+                let (from_hz, to_hz) = (pending[sb].rate_hz, pending[db].rate_hz);
+                if strict_rates {
+                    return Err(GraphError::RateMismatch {
+                        index,
+                        from: c.from.clone(),
+                        to: c.to.clone(),
+                        from_hz,
+                        to_hz,
                     });
-                    pending.len() - 1
                 }
+                // Insert an explicit rate transition running at the destination's rate.
+                let kind = if to_hz > from_hz {
+                    "zero-order hold"
+                } else {
+                    "decimation (sampling, no anti-alias filter)"
+                };
+                // `:` cannot appear in a user's name, so this cannot collide with one.
+                let name = format!(
+                    "{RATE_TRANSITION_PREFIX}{}:{}",
+                    c.from.replace('.', ":"),
+                    pending[db].name
+                );
+                let note = format!(
+                    "`{}` -> `{}`: {kind} {from_hz} Hz -> {to_hz} Hz, inserted as block `{name}`",
+                    c.from, c.to
+                );
+                tracing::info!(target: "nanomotion_core::graph", "rate transition {note}");
+                report.rate_transitions.push(note);
+                let idx = match pending.iter().position(|p| p.name == name) {
+                    Some(i) => i,
+                    None => {
+                        let mut block: Box<dyn Block> =
+                            Box::new(crate::scheduler::RateTransition::new(fw));
+                        let ctx = BuildContext::new(name.clone(), pending[db].ctx.dt, 0);
+                        block.build(&ctx).map_err(|source| GraphError::Param {
+                            block: name.clone(),
+                            type_name: "rate_transition".into(),
+                            source,
+                        })?;
+                        pending.push(Pending {
+                            sources: vec![Some((sb, sp, index))],
+                            name: name.clone(),
+                            type_name: "rate_transition".into(),
+                            inputs: block.inputs(),
+                            outputs: block.outputs(),
+                            feedthrough: true,
+                            block,
+                            period: pending[db].period,
+                            rate_hz: to_hz,
+                            ctx,
+                        });
+                        pending.len() - 1
+                    }
+                };
+                (idx, 0)
+            } else {
+                (sb, sp)
             };
-            (idx, 0)
-        } else {
-            (sb, sp)
-        };
-        pending[db].sources[dp] = Some((src_block, src_port, index));
-    }
+            pending[db].sources[dp] = Some((src_block, src_port, index));
+        }
+        Ok(())
+    };
+    connect().map_err(|e| at(current)(e))?;
     for p in &pending {
         for (i, s) in p.sources.iter().enumerate() {
             if s.is_none() {
@@ -765,6 +878,55 @@ fn compile(
             Box::new(crate::scheduler::RateTransition::new(0)),
         )));
     }
+    // Units: the graph's `units:` section over what the blocks declare.
+    for (reference, unit) in &units {
+        let bad = |problem: String| GraphError::BadSignal {
+            section: "units",
+            reference: reference.clone(),
+            problem,
+        };
+        let (b, port) = reference
+            .split_once('.')
+            .ok_or_else(|| bad("write signals as `block.port`".into()))?;
+        let Some(p) = pending.iter_mut().find(|p| p.name == b) else {
+            return Err(bad(format!("there is no block `{b}`")));
+        };
+        let Some(o) = p.outputs.iter_mut().find(|o| o.name == port) else {
+            return Err(bad(format!("block `{b}` has no output `{port}`")));
+        };
+        if unit.is_empty() || unit.len() > 32 || unit.chars().any(char::is_control) {
+            return Err(bad(format!(
+                "unit `{}` must be 1 to 32 printable characters (e.g. m, m/s, V)",
+                unit.escape_debug()
+            )));
+        }
+        o.unit = Some(unit.clone());
+    }
+    // Then units taken from an input's source (repeat until settled: chains of
+    // pass-through blocks in any order, loops included).
+    for _ in 0..n.max(1) {
+        let mut changed = false;
+        for i in 0..n {
+            for o in 0..pending[i].outputs.len() {
+                if pending[i].outputs[o].unit.is_some() {
+                    continue;
+                }
+                let Some(k) = pending[i].outputs[o].unit_from_input else {
+                    continue;
+                };
+                let Some(Some((s, sp, _))) = pending[i].sources.get(k).copied() else {
+                    continue;
+                };
+                if let Some(u) = pending[s].outputs[sp].unit.clone() {
+                    pending[i].outputs[o].unit = Some(u);
+                    changed = true;
+                }
+            }
+        }
+        if !changed {
+            break;
+        }
+    }
     let mut block_list: Vec<Box<dyn Block>> = Vec::with_capacity(n);
     for &i in &order {
         let p = &pending[i];
@@ -802,32 +964,33 @@ fn compile(
 
     // 5. Logs and scores.
     let n_ticks = n_ticks_f as u64;
-    let lookup =
-        |reference: &str, section: &'static str| -> Result<(usize, usize, usize), GraphError> {
-            let bad = |problem: String| GraphError::BadSignal {
-                section,
-                reference: reference.to_string(),
-                problem,
-            };
-            let (b, port) = reference
-                .split_once('.')
-                .ok_or_else(|| bad("write signals as `block.port`".into()))?;
-            let Some(bi) = names.iter().position(|n| n == b) else {
-                let hint = nearest(b, names.iter().map(String::as_str))
-                    .map(|s| format!("; did you mean `{s}`?"))
-                    .unwrap_or_default();
-                return Err(bad(format!("no block named `{b}`{hint}")));
-            };
-            let (_, outs, offs) = &port_tables[bi];
-            let Some(pi) = outs.iter().position(|o| o.name == port) else {
-                let known: Vec<&str> = outs.iter().map(|o| o.name.as_str()).collect();
-                return Err(bad(format!(
-                    "block `{b}` has no output `{port}`; its outputs are: {}",
-                    known.join(", ")
-                )));
-            };
-            Ok((bi, offs[pi], outs[pi].width))
+    let lookup = |reference: &str,
+                  section: &'static str|
+     -> Result<(usize, usize, usize, Option<String>), GraphError> {
+        let bad = |problem: String| GraphError::BadSignal {
+            section,
+            reference: reference.to_string(),
+            problem,
         };
+        let (b, port) = reference
+            .split_once('.')
+            .ok_or_else(|| bad("write signals as `block.port`".into()))?;
+        let Some(bi) = names.iter().position(|n| n == b) else {
+            let hint = nearest(b, names.iter().map(String::as_str))
+                .map(|s| format!("; did you mean `{s}`?"))
+                .unwrap_or_default();
+            return Err(bad(format!("no block named `{b}`{hint}")));
+        };
+        let (_, outs, offs) = &port_tables[bi];
+        let Some(pi) = outs.iter().position(|o| o.name == port) else {
+            let known: Vec<&str> = outs.iter().map(|o| o.name.as_str()).collect();
+            return Err(bad(format!(
+                "block `{b}` has no output `{port}`; its outputs are: {}",
+                known.join(", ")
+            )));
+        };
+        Ok((bi, offs[pi], outs[pi].width, outs[pi].unit.clone()))
+    };
     let mut logs: Vec<LogChannel> = Vec::new();
     // Memory estimate, checked before each log buffer is reserved.
     let mut graph_bytes = (signal_len + input_len)
@@ -843,9 +1006,12 @@ fn compile(
         if let Some(i) = logs.iter().position(|l| l.name == reference) {
             return Ok(i);
         }
-        let (bi, offset, width) = lookup(reference, section)?;
+        let (bi, offset, width, unit) = lookup(reference, section)?;
         let period = nodes[bi].period;
-        let samples = n_ticks.div_ceil(period) as usize;
+        let total_samples = n_ticks.div_ceil(period);
+        // Samples kept in memory: the whole run, or one chunk when streamed.
+        let samples =
+            chunk_ticks.map_or(total_samples, |c| c.min(n_ticks).div_ceil(period)) as usize;
         let bytes = samples.saturating_mul(width).saturating_mul(8);
         *graph_bytes = graph_bytes.saturating_add(bytes);
         *log_bytes = log_bytes.saturating_add(bytes);
@@ -853,12 +1019,12 @@ fn compile(
             return Err(setting(
                 "log",
                 format!(
-                    "recording `{reference}` ({samples} samples × {width} values) brings the graph to about {} ({} of it logs, which are kept in memory for the whole run), more than the {} limit",
+                    "recording `{reference}` ({samples} samples × {width} values) brings the graph to about {} ({} of it logs, which are kept in memory for the whole run unless streamed), more than the {} limit",
                     bytes_text(*graph_bytes as f64),
                     bytes_text(*log_bytes as f64),
                     bytes_text(MAX_GRAPH_BYTES as f64)
                 ),
-                "log and score fewer signals, shorten duration_s, or give the logged blocks a lower rate_hz",
+                "log and score fewer signals, shorten duration_s, or give the logged blocks a lower rate_hz (`nanomotion run` streams logs to disk when the graph has no `compare:`; from Rust use GraphSpec::build_streamed)",
             ));
         }
         logs.push(LogChannel {
@@ -869,6 +1035,10 @@ fn compile(
             period,
             rate_hz: base_rate_hz / period as f64,
             data: Vec::with_capacity(samples * width),
+            unit,
+            total_samples,
+            streamed: 0,
+            dropped: 0,
         });
         Ok(logs.len() - 1)
     };
@@ -913,6 +1083,8 @@ fn compile(
         scores.push(ScoreChannel {
             channel,
             from_s: s.from_s,
+            first: first as u64,
+            acc: vec![crate::scheduler::ScoreAcc::default(); l.width],
         });
     }
 
@@ -954,6 +1126,7 @@ fn compile(
         scores,
         compares,
         rate_transitions: report.rate_transitions.clone(),
+        chunk_ticks,
     });
     Ok((sched, report))
 }

@@ -14,6 +14,13 @@
 //!    all of this sample) and advances its state;
 //! 3. logging: due log channels append to preallocated buffers.
 //!
+//! Logs are kept whole (reserved for the whole run at build) or, for a graph
+//! built with [`GraphSpec::build_streamed`](crate::graph::GraphSpec::build_streamed),
+//! streamed: each log holds one chunk of [`LOG_CHUNK_TICKS`](crate::graph::LOG_CHUNK_TICKS)
+//! base ticks, and [`Scheduler::run_streamed`] hands every chunk to a sink (e.g.
+//! a CSV writer) between ticks and computes the scores online, so memory does
+//! not grow with the duration.
+//!
 //! Multi-rate: a block at rate f runs on every (f_base / f)-th base tick; its
 //! outputs hold in between. Connections between different rates go through
 //! explicit [`RateTransition`] blocks that the loader inserts and reports (or
@@ -60,13 +67,72 @@ pub(crate) struct LogChannel {
     pub period: u64,
     pub rate_hz: f64,
     pub data: Vec<f64>,
+    /// Unit of the values, if known.
+    pub unit: Option<String>,
+    /// Samples of the whole run.
+    pub total_samples: u64,
+    /// Samples already handed to a sink (streamed runs) before `data[0]`.
+    pub streamed: u64,
+    /// Samples that found no room (a streamed log stepped past its chunk
+    /// without [`Scheduler::run_streamed`]); never written, counted.
+    pub dropped: u64,
 }
 
-/// A scored signal: index of its log channel and the settle time.
+/// A scored signal: index of its log channel, the settle time and (for
+/// streamed runs) the online sums of each element.
 #[derive(Debug, Clone)]
 pub(crate) struct ScoreChannel {
     pub channel: usize,
     pub from_s: f64,
+    /// First scored sample (`from_s` in samples).
+    pub first: u64,
+    pub acc: Vec<ScoreAcc>,
+}
+
+/// Online sums of one scored element, accumulated in sample order (the same
+/// order as the whole-log formulas, so the results agree bit for bit).
+#[derive(Debug, Clone, Copy, Default)]
+pub(crate) struct ScoreAcc {
+    n: usize,
+    sum: f64,
+    sum_sq: f64,
+    max_abs: f64,
+}
+
+impl ScoreAcc {
+    fn add(&mut self, x: f64) {
+        self.n += 1;
+        self.sum += x;
+        self.sum_sq += x * x;
+        self.max_abs = self.max_abs.max(x.abs());
+    }
+    /// (rms, max_abs, mean), NaN without samples.
+    fn finish(&self) -> (f64, f64, f64) {
+        if self.n == 0 {
+            return (f64::NAN, f64::NAN, f64::NAN);
+        }
+        let n = self.n as f64;
+        ((self.sum_sq / n).sqrt(), self.max_abs, self.sum / n)
+    }
+}
+
+/// Samples of one log handed to a [`Scheduler::run_streamed`] sink.
+#[derive(Debug, Clone, Copy)]
+pub struct LogChunk<'a> {
+    /// `block.port`.
+    pub name: &'a str,
+    /// Sample rate of the log (Hz).
+    pub rate_hz: f64,
+    /// Values per sample.
+    pub width: usize,
+    /// Index (in the whole run) of the first sample in `data`.
+    pub start_sample: u64,
+    /// Samples of the whole run (known in advance).
+    pub total_samples: u64,
+    /// Unit of the values, if known.
+    pub unit: Option<&'a str>,
+    /// New samples, row-major (`data.len() / width` of them; may be none).
+    pub data: &'a [f64],
 }
 
 /// Everything the graph compiler hands to the scheduler.
@@ -88,6 +154,8 @@ pub(crate) struct Parts {
     /// `(signal, measured column, log channel)` of each `compare:` entry.
     pub compares: Vec<(String, String, usize)>,
     pub rate_transitions: Vec<String>,
+    /// Base ticks per log chunk when logs are streamed (`None`: whole logs).
+    pub chunk_ticks: Option<u64>,
 }
 
 /// A handle to an output signal, resolved once with [`Scheduler::signal_id`] and
@@ -107,6 +175,9 @@ pub struct SignalLog {
     pub rate_hz: f64,
     /// Values per sample.
     pub width: usize,
+    /// Unit of the values, if known (SI, e.g. `m`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub unit: Option<String>,
     /// Samples, row-major: `data[i * width + j]` is element j of sample i, taken at
     /// t = i / rate_hz.
     pub data: Vec<f64>,
@@ -143,6 +214,9 @@ pub struct Score {
     pub signal: String,
     /// Samples before this time (s) were ignored.
     pub from_s: f64,
+    /// Unit of rms, max_abs and mean, if known.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub unit: Option<String>,
     /// Root mean square.
     pub rms: f64,
     /// Largest absolute value.
@@ -195,6 +269,8 @@ pub struct Scheduler {
     /// Base ticks done when a chunk check of [`Scheduler::run`] first saw a
     /// non-finite output (not yet located).
     seen_non_finite: Option<u64>,
+    /// Base ticks per log chunk when logs are streamed (`None`: whole logs).
+    chunk_ticks: Option<u64>,
 }
 
 impl std::fmt::Debug for Scheduler {
@@ -237,6 +313,7 @@ impl Scheduler {
             updaters,
             non_finite: None,
             seen_non_finite: None,
+            chunk_ticks: p.chunk_ticks,
         }
     }
 
@@ -312,6 +389,8 @@ impl Scheduler {
             if log.data.len() + log.width <= log.data.capacity() {
                 log.data
                     .extend_from_slice(&signals[log.offset..log.offset + log.width]);
+            } else {
+                log.dropped += 1;
             }
         }
         self.k += 1;
@@ -326,7 +405,21 @@ impl Scheduler {
 
     /// Run the whole duration from the current state, calling `progress` with the
     /// fraction done (0..=1) about a hundred times, and return the logs and scores.
+    ///
+    /// On a streamed graph ([`GraphSpec::build_streamed`](crate::graph::GraphSpec::build_streamed))
+    /// this is [`Scheduler::run_streamed`] with a sink that discards the samples:
+    /// the scores are computed, the returned logs are empty.
     pub fn run(&mut self, mut progress: impl FnMut(f64)) -> RunResult {
+        if self.chunk_ticks.is_some() {
+            let r: Result<RunResult, std::convert::Infallible> =
+                self.run_chunked(&mut |_| Ok(()), &mut progress);
+            return r.unwrap_or_else(|e| match e {});
+        }
+        self.run_whole(&mut progress)
+    }
+
+    /// [`Scheduler::run`] with whole logs.
+    fn run_whole(&mut self, progress: &mut dyn FnMut(f64)) -> RunResult {
         let remaining = self.n_ticks.saturating_sub(self.k);
         let chunk = (self.n_ticks / 100).max(1);
         let mut done = 0;
@@ -344,8 +437,129 @@ impl Scheduler {
         self.result()
     }
 
+    /// Whether logs are streamed (built with
+    /// [`GraphSpec::build_streamed`](crate::graph::GraphSpec::build_streamed)).
+    pub fn is_streamed(&self) -> bool {
+        self.chunk_ticks.is_some()
+    }
+
+    /// Bytes reserved for logs now (their capacity): the whole run's samples
+    /// for whole logs, one chunk for streamed logs.
+    pub fn log_capacity_bytes(&self) -> usize {
+        self.logs.iter().map(|l| l.data.capacity() * 8).sum()
+    }
+
+    /// Run the whole duration from the current state with streamed logs: after
+    /// every chunk of at most [`LOG_CHUNK_TICKS`](crate::graph::LOG_CHUNK_TICKS)
+    /// base ticks (and about a hundred times per run, for `progress`), `sink`
+    /// gets the new samples of every log (one [`LogChunk`] per log, in log order)
+    /// and the log buffers are emptied for the next chunk; the scores are summed
+    /// online (same values as [`Scheduler::result`] on whole logs). Ticks stay
+    /// allocation-free; memory does not depend on the duration. Non-finite
+    /// samples are noticed in each chunk for [`Scheduler::check_finite`].
+    ///
+    /// The returned [`RunResult`] has the scores and no log samples. A sink error
+    /// stops the run and is returned. On a graph with whole logs this runs like
+    /// [`Scheduler::run`] and hands each log over once, at the end.
+    pub fn run_streamed<E>(
+        &mut self,
+        mut sink: impl FnMut(&[LogChunk<'_>]) -> Result<(), E>,
+        mut progress: impl FnMut(f64),
+    ) -> Result<RunResult, E> {
+        if self.chunk_ticks.is_some() {
+            return self.run_chunked(&mut sink, &mut progress);
+        }
+        {
+            let result = self.run_whole(&mut progress);
+            let chunks: Vec<LogChunk<'_>> = self
+                .logs
+                .iter()
+                .map(|l| LogChunk {
+                    name: &l.name,
+                    rate_hz: l.rate_hz,
+                    width: l.width,
+                    start_sample: 0,
+                    total_samples: l.total_samples,
+                    unit: l.unit.as_deref(),
+                    data: &l.data,
+                })
+                .collect();
+            sink(&chunks)?;
+            Ok(result)
+        }
+    }
+
+    /// [`Scheduler::run_streamed`] on a streamed graph.
+    fn run_chunked<E>(
+        &mut self,
+        sink: &mut dyn FnMut(&[LogChunk<'_>]) -> Result<(), E>,
+        progress: &mut dyn FnMut(f64),
+    ) -> Result<RunResult, E> {
+        let chunk_ticks = self.chunk_ticks.unwrap_or(u64::MAX);
+        let remaining = self.n_ticks.saturating_sub(self.k);
+        let step = (self.n_ticks / 100).clamp(1, chunk_ticks.max(1));
+        let mut done = 0;
+        while done < remaining {
+            let n = step.min(remaining - done);
+            self.step_n(n);
+            done += n;
+            if self.seen_non_finite.is_none() && self.first_non_finite_output().is_some() {
+                self.seen_non_finite = Some(self.k);
+            }
+            self.fold_scores();
+            if self.seen_non_finite.is_none() {
+                self.seen_non_finite = self.first_non_finite_log_tick();
+            }
+            // One small Vec per chunk (outside the ticks).
+            let chunks: Vec<LogChunk<'_>> = self
+                .logs
+                .iter()
+                .map(|l| LogChunk {
+                    name: &l.name,
+                    rate_hz: l.rate_hz,
+                    width: l.width,
+                    start_sample: l.streamed,
+                    total_samples: l.total_samples,
+                    unit: l.unit.as_deref(),
+                    data: &l.data,
+                })
+                .collect();
+            sink(&chunks)?;
+            for l in &mut self.logs {
+                l.streamed += (l.data.len() / l.width.max(1)) as u64;
+                l.data.clear();
+            }
+            progress(self.k as f64 / self.n_ticks.max(1) as f64);
+        }
+        let mut result = self.result();
+        result.logs.iter_mut().for_each(|l| l.data = Vec::new());
+        Ok(result)
+    }
+
+    /// Add the samples now in the logs to the online score sums (streamed runs).
+    fn fold_scores(&mut self) {
+        for s in &mut self.scores {
+            let l = &self.logs[s.channel];
+            let w = l.width.max(1);
+            let skip = s.first.saturating_sub(l.streamed) as usize;
+            for row in l.data.chunks_exact(w).skip(skip) {
+                for (a, &x) in s.acc.iter_mut().zip(row) {
+                    a.add(x);
+                }
+            }
+        }
+    }
+
     /// Logs and scores of what has run so far.
     pub fn result(&self) -> RunResult {
+        for l in self.logs.iter().filter(|l| l.dropped > 0) {
+            tracing::warn!(
+                target: "nanomotion_core::scheduler",
+                log = %l.name,
+                dropped = l.dropped,
+                "a streamed log was stepped past its chunk outside run_streamed; these samples were not recorded"
+            );
+        }
         let logs: Vec<SignalLog> = self
             .logs
             .iter()
@@ -353,12 +567,32 @@ impl Scheduler {
                 name: l.name.clone(),
                 rate_hz: l.rate_hz,
                 width: l.width,
+                unit: l.unit.clone(),
                 data: l.data.clone(),
             })
             .collect();
         let mut scores = Vec::new();
         for s in &self.scores {
             let log = &logs[s.channel];
+            if self.chunk_ticks.is_some() {
+                for (j, a) in s.acc.iter().enumerate() {
+                    let (rms, max_abs, mean) = a.finish();
+                    scores.push(Score {
+                        signal: if log.width == 1 {
+                            log.name.clone()
+                        } else {
+                            format!("{}[{j}]", log.name)
+                        },
+                        from_s: s.from_s,
+                        unit: log.unit.clone(),
+                        rms,
+                        max_abs,
+                        mean,
+                        samples: a.n,
+                    });
+                }
+                continue;
+            }
             let first = (s.from_s * log.rate_hz - 1e-9).ceil().max(0.0) as usize;
             for j in 0..log.width {
                 let col: Vec<f64> = log.column(j).into_iter().skip(first).collect();
@@ -380,6 +614,7 @@ impl Scheduler {
                 scores.push(Score {
                     signal,
                     from_s: s.from_s,
+                    unit: log.unit.clone(),
                     rms,
                     max_abs,
                     mean,
@@ -475,7 +710,7 @@ impl Scheduler {
             .iter()
             .filter_map(|l| {
                 let i = l.data.iter().position(|v| !v.is_finite())? / l.width.max(1);
-                Some(i as u64 * l.period + 1)
+                Some((l.streamed + i as u64) * l.period + 1)
             })
             .min()
     }
@@ -525,11 +760,24 @@ impl Scheduler {
         for l in &mut self.logs {
             l.data.clear();
             l.countdown = 0;
+            l.streamed = 0;
+            l.dropped = 0;
+        }
+        for s in &mut self.scores {
+            s.acc.iter_mut().for_each(|a| *a = ScoreAcc::default());
         }
         self.k = 0;
         self.non_finite = None;
         self.seen_non_finite = None;
         Ok(())
+    }
+
+    /// The `score:` entries: `(log name, from_s)` in graph order.
+    pub fn score_signals(&self) -> Vec<(String, f64)> {
+        self.scores
+            .iter()
+            .map(|s| (self.logs[s.channel].name.clone(), s.from_s))
+            .collect()
     }
 
     /// The `compare:` entries: `(signal, measured column)` in graph order.
@@ -751,7 +999,7 @@ impl Block for RateTransition {
         vec![Port::new("u", self.width)]
     }
     fn outputs(&self) -> Vec<Port> {
-        vec![Port::new("y", self.width)]
+        vec![Port::new("y", self.width).unit_of_input(0)]
     }
     fn output(&mut self, _tick: Tick, u: &[f64], y: &mut [f64]) {
         y.copy_from_slice(u);

@@ -281,6 +281,29 @@ fn a_transient_inf_in_a_logged_signal_is_found() {
 }
 
 #[test]
+fn a_transient_inf_in_a_streamed_log_is_found_after_its_chunk_was_handed_over() {
+    // Streamed: the log holding the inf is emptied after its chunk (100 ticks
+    // here), long before the end; the chunk scan still notices it.
+    let yaml = SPIKE
+        .replace("log: [last.y]", "log: [spike.y]")
+        .replace("duration_s: 1.0", "duration_s: 10.0");
+    let spec = GraphSpec::from_yaml(&yaml, "spike.yaml").unwrap();
+    let (mut s, _) = spec.build_streamed(None).unwrap();
+    let mut handed = 0;
+    s.run_streamed(
+        |c| {
+            handed += c[0].data.len();
+            Ok::<(), ()>(())
+        },
+        |_| {},
+    )
+    .unwrap();
+    assert_eq!(handed, 10_000);
+    let e = s.check_finite().unwrap_err().to_string();
+    assert!(e.contains("`spike`") && e.contains("tick 321"), "{e}");
+}
+
+#[test]
 fn a_persistent_nan_is_blamed_on_its_producer_not_the_first_block() {
     // `acc` (a delay, no feed-through) comes first in execution order and holds
     // the NaN at the end; the NaN comes from `spike` at tick 321 and persists
@@ -386,6 +409,7 @@ fn overflowing_pi_gain_names_kp() {
     let yaml = "base_rate_hz: 1000\nduration_s: 1\nblocks:\n  - { name: a, type: pi, kp: 1e308, zero_hz: 5 }\n  - { name: c, type: constant, value: 1 }\nconnections:\n  - { from: c.y, to: a.e }\n";
     let e = build_err(yaml);
     assert!(e.contains("`kp`") && !e.contains("`ki`"), "{e}");
+    assert!(!e.contains("000000000000"), "numbers in e-notation: {e}");
 }
 
 #[test]
@@ -404,7 +428,31 @@ fn an_unknown_field_inside_a_block_is_located_on_its_own_line() {
     let e = GraphSpec::from_yaml(yaml, "f.yaml")
         .unwrap_err()
         .to_string();
-    assert!(e.contains("`kk` is on line 7: `kk: 2`"), "{e}");
+    // The message and its snippet are at the typo's line (7), not at the
+    // block's first line (4) with "at line" of its last field.
+    assert!(
+        e.contains("line 7 column 5: unknown field `kk`") && e.contains("--> f.yaml:7:5"),
+        "{e}"
+    );
+    assert!(
+        e.contains("7 |     kk: 2\n  |     ^ unknown field `kk`"),
+        "{e}"
+    );
+    assert!(!e.contains("line 4") && !e.contains("at line"), "{e}");
+}
+
+#[test]
+fn connection_errors_name_the_file_line() {
+    let yaml = "base_rate_hz: 1000\nduration_s: 1\nblocks:\n  - { name: amp, type: gain, k: 1 }\n  - { name: c, type: constant, value: 1 }\nconnections:\n  # the loop\n  - { from: c.y, to: amp.u }\n\n  - from: c.y\n    to: amp.x\n";
+    let e = GraphSpec::from_yaml(yaml, "g.yaml")
+        .unwrap()
+        .build()
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.starts_with("g.yaml: line 10: connection 2 (`amp.x`)") && e.contains("u (width 1)"),
+        "{e}"
+    );
 }
 
 #[test]

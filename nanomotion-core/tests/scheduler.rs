@@ -226,7 +226,10 @@ log: [fast.y, slower.y, slow.t]
         .unwrap()
         .build()
         .unwrap_err();
-    assert!(matches!(err, GraphError::RateMismatch { .. }), "{err}");
+    assert!(
+        matches!(err.root(), GraphError::RateMismatch { .. }),
+        "{err}"
+    );
 }
 
 #[test]

@@ -494,7 +494,7 @@ impl Pi {
             return Err(ParamError::new(
                 "kp",
                 format!(
-                    "kp = {} with zero_hz = {} gives an integral gain kp·2π·zero_hz = {ki}, not a finite number",
+                    "kp = {:e} with zero_hz = {:e} gives an integral gain kp·2π·zero_hz = {ki:e}, not a finite number",
                     self.kp, self.zero_hz
                 ),
                 "give a smaller kp or zero_hz",

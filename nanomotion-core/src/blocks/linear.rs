@@ -216,6 +216,15 @@ macro_rules! siso_ports {
             vec![Port::new("y", self.width)]
         }
     };
+    // Filters and delays whose output is in the input's unit.
+    (same_unit) => {
+        fn inputs(&self) -> Vec<Port> {
+            vec![Port::new("u", self.width)]
+        }
+        fn outputs(&self) -> Vec<Port> {
+            vec![Port::new("y", self.width).unit_of_input(0)]
+        }
+    };
 }
 
 macro_rules! core_steps {
@@ -588,7 +597,7 @@ pub const MAX_LOW_PASS_ORDER: usize = 16;
 
 #[typetag::serde(name = "low_pass")]
 impl Block for LowPass {
-    siso_ports!();
+    siso_ports!(same_unit);
     core_steps!();
 
     fn build(&mut self, ctx: &BuildContext) -> Result<(), ParamError> {
@@ -675,7 +684,7 @@ impl Notch {
 
 #[typetag::serde(name = "notch")]
 impl Block for Notch {
-    siso_ports!();
+    siso_ports!(same_unit);
     core_steps!();
 
     fn build(&mut self, ctx: &BuildContext) -> Result<(), ParamError> {
@@ -869,7 +878,7 @@ pub const MAX_DENSE_DELAY_STATES: usize = 512;
 
 #[typetag::serde(name = "delay")]
 impl Block for Delay {
-    siso_ports!();
+    siso_ports!(same_unit);
 
     fn direct_feedthrough(&self) -> bool {
         self.d == 0

@@ -215,7 +215,7 @@ impl Block for Sum {
         numbered_ports("in", self.signs.chars().map(|_| self.width))
     }
     fn outputs(&self) -> Vec<Port> {
-        vec![Port::new("y", self.width)]
+        vec![Port::new("y", self.width).unit_of_input(0)]
     }
     fn build(&mut self, ctx: &BuildContext) -> Result<(), ParamError> {
         self.parse()?;
@@ -365,7 +365,7 @@ impl Block for Saturation {
         vec![Port::new("u", self.width)]
     }
     fn outputs(&self) -> Vec<Port> {
-        vec![Port::new("y", self.width)]
+        vec![Port::new("y", self.width).unit_of_input(0)]
     }
     fn build(&mut self, _ctx: &BuildContext) -> Result<(), ParamError> {
         check::ordered("lower", self.lower, "upper", self.upper)?;
@@ -474,7 +474,7 @@ impl Block for Deadzone {
         vec![Port::new("u", self.width)]
     }
     fn outputs(&self) -> Vec<Port> {
-        vec![Port::new("y", self.width)]
+        vec![Port::new("y", self.width).unit_of_input(0)]
     }
     fn build(&mut self, _ctx: &BuildContext) -> Result<(), ParamError> {
         check::ordered("lower", self.lower, "upper", self.upper)?;

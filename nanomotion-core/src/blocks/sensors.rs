@@ -139,7 +139,7 @@ impl Block for Quantizer {
         vec![Port::new("u", self.width)]
     }
     fn outputs(&self) -> Vec<Port> {
-        vec![Port::new("y", self.width)]
+        vec![Port::new("y", self.width).unit_of_input(0)]
     }
     fn build(&mut self, _ctx: &BuildContext) -> Result<(), ParamError> {
         Self::check_params(self.lsb, self.offset)?;
@@ -302,7 +302,7 @@ impl Block for MeasurementNoise {
         vec![Port::new("u", self.width)]
     }
     fn outputs(&self) -> Vec<Port> {
-        vec![Port::new("y", self.width)]
+        vec![Port::new("y", self.width).unit_of_input(0)]
     }
     fn build(&mut self, ctx: &BuildContext) -> Result<(), ParamError> {
         self.prepare(ctx.seed)

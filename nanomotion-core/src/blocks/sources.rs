@@ -225,7 +225,10 @@ impl Source for ConstantVelocity {
 #[typetag::serde(name = "constant_velocity")]
 impl Block for ConstantVelocity {
     fn outputs(&self) -> Vec<Port> {
-        vec![Port::new("y", 1), Port::new("v", 1)]
+        vec![
+            Port::new("y", 1).with_unit("m"),
+            Port::new("v", 1).with_unit("m/s"),
+        ]
     }
     fn build(&mut self, _ctx: &BuildContext) -> Result<(), ParamError> {
         check::finite("velocity_m_s", self.velocity_m_s)?;
@@ -723,7 +726,11 @@ impl Source for PointToPoint {
 #[typetag::serde(name = "point_to_point")]
 impl Block for PointToPoint {
     fn outputs(&self) -> Vec<Port> {
-        vec![Port::new("y", 1), Port::new("v", 1), Port::new("a", 1)]
+        vec![
+            Port::new("y", 1).with_unit("m"),
+            Port::new("v", 1).with_unit("m/s"),
+            Port::new("a", 1).with_unit("m/s²"),
+        ]
     }
     fn build(&mut self, _ctx: &BuildContext) -> Result<(), ParamError> {
         self.plan()

@@ -388,6 +388,12 @@ pub fn care_general_solution(
         .as_ref()
         .is_none_or(|b| b.1 > 1e-13 && care_backward(&a_s, &g_s, &q_s, &b.0) > 1e-14)
     {
+        tracing::debug!(
+            target: "nanomotion_core::lti::riccati",
+            n = a_s.nrows(),
+            reasons = %reasons.join("; "),
+            "CARE: sign iteration not accurate enough; trying the ordered Schur method"
+        );
         match care_schur(&a_s, &g_s, &q_s) {
             Ok(x) => {
                 let (x, rel, steps) = care_newton(&a_s, &g_s, &q_s, x, 6);
@@ -948,6 +954,12 @@ pub fn dare(
             Err(why) => reasons.push(why),
         }
         if best.as_ref().is_none_or(|b| b.1 > 1e-13) {
+            tracing::debug!(
+                target: "nanomotion_core::lti::riccati",
+                n = a_s.nrows(),
+                reasons = %reasons.join("; "),
+                "DARE: doubling not accurate enough; trying the ordered Schur method"
+            );
             match dare_schur(&a_s, &g_s, &q_s) {
                 Ok(x) => {
                     let (x, rel, steps) = dare_newton(&a_s, &b_s, &q_s, &r_s, x, 6);

@@ -377,9 +377,29 @@ pub fn identify(
         p
     };
     let mut f = |z: &[f64]| objective(&to_params(z), records, proto, channels);
+    tracing::info!(
+        target: "walking_piezo::identify",
+        parameters = which.len(),
+        records = records.len(),
+        particles = settings.particles,
+        iterations = settings.swarm_iterations,
+        "identification: particle swarm"
+    );
     let global = particle_swarm(which.len(), &mut f, settings);
+    tracing::info!(
+        target: "walking_piezo::identify",
+        cost = global.f,
+        evaluations = global.evaluations,
+        "identification: swarm done; Nelder–Mead refinement"
+    );
     let local = nelder_mead(&global.z, 0.05, &mut f, settings.local_evaluations);
     let best = if local.f <= global.f { &local } else { &global };
+    tracing::info!(
+        target: "walking_piezo::identify",
+        cost = best.f,
+        evaluations = global.evaluations + local.evaluations,
+        "identification done"
+    );
     Ok(Identified {
         params: to_params(&best.z),
         cost_global: global.f,

@@ -89,7 +89,8 @@ pub use driver::{
 pub use kinematics::{LegKinematics, LegKinematicsBlock, LegTips};
 pub use linear::{
     FittedStage, FittedStageBlock, FittedStageParams, LinearStage, LinearStageBlock,
-    LinearStageParams, SwitchedStage, SwitchedStageBlock, SwitchedStageParams,
+    LinearStageParams, MAX_FITTED_DELAY_MODEL_SAMPLES, MAX_FITTED_DELAY_SAMPLES, SwitchedStage,
+    SwitchedStageBlock, SwitchedStageParams,
 };
 pub use stage::{
     StageCounters, StageParams, StageSignals, StepError, StepReport, WalkingPiezoStage,

@@ -671,13 +671,10 @@ impl FittedStageParams {
             return Err(ParamError::new(
                 "delay_s",
                 format!(
-                    "{} s is {n:.4e} periods of {dt} s, more than {MAX_FITTED_DELAY_SAMPLES} (the delay is modelled as states of the discrete model)",
+                    "{} s is {n:.4e} periods of {dt} s, more than {MAX_FITTED_DELAY_SAMPLES} (the delay's ring buffer would exceed 128 MiB)",
                     self.delay_s
                 ),
-                format!(
-                    "give at most {} s, or put a `delay` block (a ring buffer) in front of the stage",
-                    MAX_FITTED_DELAY_SAMPLES as f64 * dt
-                ),
+                format!("give at most {} s", MAX_FITTED_DELAY_SAMPLES as f64 * dt),
             ));
         }
         if (n - rounded).abs() > 1e-6 * n.max(1.0) {
@@ -693,16 +690,31 @@ impl FittedStageParams {
         Ok(rounded as usize)
     }
 
-    /// The discrete model at period `dt`: ZOH of the cascade, then the delay as
-    /// states.
-    pub fn discrete(&self, dt: f64) -> Result<StateSpace, ParamError> {
+    /// The discrete delay-free model at period `dt` (ZOH of the cascade).
+    pub fn discrete_delay_free(&self, dt: f64) -> Result<StateSpace, ParamError> {
         self.validate()?;
         check::positive("dt", dt)?;
-        let nd = self.delay_samples(dt)?;
         let sys = self.continuous().map_err(|e| lti_to_param("f_p1_hz", e))?;
-        let d = sys
-            .c2d(dt, C2dMethod::Zoh)
-            .map_err(|e| lti_to_param("f_p1_hz", e))?;
+        sys.c2d(dt, C2dMethod::Zoh)
+            .map_err(|e| lti_to_param("f_p1_hz", e))
+    }
+
+    /// The discrete model at period `dt`: ZOH of the cascade, then the delay as
+    /// states z^-d (for analyses; the simulation uses a ring buffer). Refused for
+    /// delays above [`MAX_FITTED_DELAY_MODEL_SAMPLES`] (a dense model of
+    /// thousands of delay states would cost seconds and gigabytes).
+    pub fn discrete(&self, dt: f64) -> Result<StateSpace, ParamError> {
+        let d = self.discrete_delay_free(dt)?;
+        let nd = self.delay_samples(dt)?;
+        if nd > MAX_FITTED_DELAY_MODEL_SAMPLES {
+            return Err(ParamError::new(
+                "delay_s",
+                format!(
+                    "is {nd} samples; a state-space model has delay states only up to {MAX_FITTED_DELAY_MODEL_SAMPLES}"
+                ),
+                "analyse the delay-free model (discrete_delay_free) with the delay as e^{-jωd·dt}",
+            ));
+        }
         if nd == 0 {
             Ok(d)
         } else {
@@ -712,13 +724,19 @@ impl FittedStageParams {
     }
 }
 
-/// Longest pure delay of `walking_piezo_fitted`, in samples of its period: 64.
-/// The delay is part of its dense discrete model (so that analyses see it), whose
-/// cost grows with the square of the states; the thesis's delay is 3 samples.
-/// Longer delays belong in a `delay` block, which is a ring buffer.
-pub const MAX_FITTED_DELAY_SAMPLES: usize = 64;
+/// Longest pure delay of `walking_piezo_fitted`, in samples of its period:
+/// 2^24 (the per-block buffer bound, 128 MiB). The delay is simulated by a
+/// ring buffer, so building costs O(1) and a tick O(1) whatever its length.
+pub const MAX_FITTED_DELAY_SAMPLES: usize = nanomotion_core::block::MAX_BUFFER_VALUES;
 
-/// The Ch. 5 fitted stage (5.31), discretised at period `dt`.
+/// Longest delay of `walking_piezo_fitted` that its LTI model
+/// ([`Block::lti`], for analyses) carries as states: 512 samples (as for the
+/// core `delay` block). Longer delays simulate normally but report no LTI model.
+pub const MAX_FITTED_DELAY_MODEL_SAMPLES: usize = 512;
+
+/// The Ch. 5 fitted stage (5.31), discretised at period `dt`: the delay-free
+/// model stepped in state space, its output delayed by a ring buffer of
+/// `delay_s / dt` samples.
 ///
 /// ```
 /// use walking_piezo::{FittedStage, FittedStageParams};
@@ -733,50 +751,83 @@ pub const MAX_FITTED_DELAY_SAMPLES: usize = 64;
 #[derive(Debug, Clone)]
 pub struct FittedStage {
     params: FittedStageParams,
-    discrete: StateSpace,
+    /// The model with delay states, when the delay is short enough to carry them.
+    discrete: Option<StateSpace>,
     delay: usize,
     stepper: SsStepper,
+    /// Past outputs of the delay-free model: `ring[head]` is y[k − delay].
+    ring: Vec<f64>,
+    head: usize,
 }
 
 impl FittedStage {
     /// Validate and discretise at `dt` (s).
     pub fn new(params: FittedStageParams, dt: f64) -> Result<Self, ParamError> {
-        let discrete = params.discrete(dt)?;
+        let free = params.discrete_delay_free(dt)?;
         let delay = params.delay_samples(dt)?;
-        let stepper = SsStepper::new(&discrete).map_err(|e| lti_to_param("f_p1_hz", e))?;
+        let discrete = if delay <= MAX_FITTED_DELAY_MODEL_SAMPLES {
+            Some(params.discrete(dt)?)
+        } else {
+            None
+        };
+        let stepper = SsStepper::new(&free).map_err(|e| lti_to_param("f_p1_hz", e))?;
         Ok(Self {
             params,
             discrete,
             delay,
             stepper,
+            ring: vec![0.0; delay],
+            head: 0,
         })
     }
     /// The parameters.
     pub fn params(&self) -> &FittedStageParams {
         &self.params
     }
-    /// The discrete model including the delay states.
-    pub fn discrete(&self) -> &StateSpace {
-        &self.discrete
+    /// The discrete model including the delay states (none for delays above
+    /// [`MAX_FITTED_DELAY_MODEL_SAMPLES`]).
+    pub fn discrete(&self) -> Option<&StateSpace> {
+        self.discrete.as_ref()
     }
     /// The delay in samples.
     pub fn delay_samples(&self) -> usize {
         self.delay
     }
+    /// Bytes held by the delay line.
+    pub fn memory_bytes(&self) -> usize {
+        self.ring.len() * 8
+    }
     /// Back to rest.
     pub fn reset(&mut self) {
         self.stepper.reset();
+        self.ring.iter_mut().for_each(|v| *v = 0.0);
+        self.head = 0;
     }
 }
 
 impl Plant for FittedStage {
     /// `y = [x_s (m)]`.
     fn plant_output(&self, y: &mut [f64]) {
-        // Strictly proper (D = 0): y = C x, the input slice is not read.
-        self.stepper.output(&[0.0], y);
+        if self.delay == 0 {
+            // Strictly proper (D = 0): y = C x, the input slice is not read.
+            self.stepper.output(&[0.0], y);
+        } else {
+            y[0] = self.ring[self.head];
+        }
     }
-    /// `u = [f_α (Hz)]`; a non-finite input is ignored (state held).
+    /// `u = [f_α (Hz)]`; a non-finite input is ignored (state held, the delay
+    /// line moves on).
     fn advance(&mut self, u: &[f64]) {
+        if self.delay > 0 {
+            let mut y = [0.0];
+            self.stepper.output(&[0.0], &mut y);
+            self.ring[self.head] = y[0];
+            self.head = if self.head + 1 == self.delay {
+                0
+            } else {
+                self.head + 1
+            };
+        }
         if u[0].is_finite() {
             self.stepper.update(u);
         }
@@ -812,7 +863,10 @@ impl Block for FittedStageBlock {
         vec![Port::new("f_alpha", 1)]
     }
     fn outputs(&self) -> Vec<Port> {
-        vec![Port::new("x_s", 1), Port::new("faults", 1)]
+        vec![
+            Port::new("x_s", 1).with_unit("m"),
+            Port::new("faults", 1).with_unit("count"),
+        ]
     }
     fn direct_feedthrough(&self) -> bool {
         false
@@ -836,8 +890,11 @@ impl Block for FittedStageBlock {
             s.advance(u);
         }
     }
+    fn memory_bytes(&self) -> usize {
+        self.sim.as_ref().map_or(0, FittedStage::memory_bytes)
+    }
     fn lti(&self) -> Option<StateSpace> {
-        let d = self.sim.as_ref()?.discrete.clone();
+        let d = self.sim.as_ref()?.discrete.clone()?;
         let n = d.nstates();
         let mut c = DMatrix::zeros(2, n);
         c.view_mut((0, 0), (1, n)).copy_from(&d.c);
@@ -865,7 +922,7 @@ nanomotion_core::submit_block_doc! {
             ParamDoc { name: "b_z1", doc: "its damping coefficient b = 2ζ", default: Some("0.2") },
             ParamDoc { name: "f_p2_hz", doc: "second resonance (Hz)", default: Some("650") },
             ParamDoc { name: "b_p2", doc: "its damping coefficient b = 2ζ", default: Some("0.175") },
-            ParamDoc { name: "delay_s", doc: "pure delay (s), a multiple of the block period, at most 64 periods", default: Some("0.00075 (3 samples at 4 kHz)") },
+            ParamDoc { name: "delay_s", doc: "pure delay (s), a multiple of the block period, at most 2^24 periods (a ring buffer; the LTI model carries it as states up to 512)", default: Some("0.00075 (3 samples at 4 kHz)") },
         ],
         ports: "f_alpha[1] (Hz) -> x_s[1] (m), faults[1] (count of non-finite inputs)",
     }
@@ -976,6 +1033,91 @@ mod tests {
         // A delay that is not a whole number of samples is refused by name.
         let bad = FittedStageParams { delay_s: 1e-4, ..p };
         assert_eq!(bad.discrete(dt).unwrap_err().field, "delay_s");
+    }
+
+    #[test]
+    fn a_long_fitted_delay_is_a_ring_buffer_with_the_output_delayed_exactly() {
+        // Issue 13 item 4: 3 s at 4 kHz (12 000 samples) used to build a dense
+        // 12 005-state model (61 s, 2.3 GB). Now: the delay-free model and a ring.
+        let dt = 1.0 / 4000.0;
+        let nd = 12_000;
+        let long = FittedStageParams {
+            delay_s: 3.0,
+            ..Default::default()
+        };
+        let free = FittedStageParams {
+            delay_s: 0.0,
+            ..Default::default()
+        };
+        let info = allocation_counter::measure(|| {
+            let g = FittedStage::new(long.clone(), dt).unwrap();
+            assert_eq!(g.delay_samples(), nd);
+            assert!(g.discrete().is_none());
+        });
+        // The ring (96 kB) and a few small matrices, not (n + 12 000)² values.
+        assert!(info.bytes_max < 1 << 20, "{} bytes", info.bytes_max);
+        let mut a = FittedStage::new(long.clone(), dt).unwrap();
+        let mut b = FittedStage::new(free, dt).unwrap();
+        let mut ya = Vec::new();
+        let mut yb = Vec::new();
+        let mut y = [0.0];
+        for k in 0..nd + 3000 {
+            let u = [if k < 2000 {
+                10.0
+            } else {
+                -3.0 + (k % 7) as f64
+            }];
+            a.plant_output(&mut y);
+            ya.push(y[0]);
+            b.plant_output(&mut y);
+            yb.push(y[0]);
+            a.advance(&u);
+            b.advance(&u);
+        }
+        assert!(ya[..nd].iter().all(|&v| v == 0.0));
+        assert_eq!(&ya[nd..], &yb[..3000], "delayed bit for bit");
+        assert!(yb[2999] != 0.0);
+        // The short thesis delay keeps its LTI model, equal to the ring's output.
+        let g = FittedStage::new(FittedStageParams::default(), dt).unwrap();
+        assert_eq!(g.discrete().unwrap().nstates(), 5 + 3);
+        // The block reports its ring to the memory estimate and no LTI model.
+        let mut blk = FittedStageBlock::new(long.clone());
+        blk.build(&BuildContext::new("g", dt, 0)).unwrap();
+        assert_eq!(blk.memory_bytes(), nd * 8);
+        assert!(blk.lti().is_none());
+        // Above the bound: a ParamError naming delay_s, not an allocation.
+        let huge = FittedStageParams {
+            delay_s: (MAX_FITTED_DELAY_SAMPLES + 1) as f64 * dt,
+            ..Default::default()
+        };
+        assert_eq!(FittedStage::new(huge, dt).unwrap_err().field, "delay_s");
+    }
+
+    #[test]
+    fn the_ring_delay_equals_the_dense_delay_model() {
+        let dt = 1.0 / 4000.0;
+        let p = FittedStageParams {
+            delay_s: 40.0 * dt,
+            ..Default::default()
+        };
+        let mut g = FittedStage::new(p.clone(), dt).unwrap();
+        let dense = p.discrete(dt).unwrap();
+        assert_eq!(dense.nstates(), 45);
+        let mut st = SsStepper::new(&dense).unwrap();
+        let (mut y1, mut y2) = ([0.0], [0.0]);
+        for k in 0..500 {
+            let u = [((k * 37) % 11) as f64 - 5.0];
+            g.plant_output(&mut y1);
+            st.output(&[0.0], &mut y2);
+            assert!(
+                (y1[0] - y2[0]).abs() <= 1e-12 * y2[0].abs().max(1e-9),
+                "k = {k}: {} vs {}",
+                y1[0],
+                y2[0]
+            );
+            g.advance(&u);
+            st.update(&u);
+        }
     }
 
     #[test]

@@ -281,6 +281,19 @@ fn run_file_resume_gives_the_same_bits_as_an_uninterrupted_run() {
     .unwrap_err()
     .to_string();
     assert!(err.contains("another configuration"), "{err}");
+    // The refusal says what changed and how to continue.
+    assert!(err.contains("seed: 5 -> 6"), "{err}");
+    assert!(err.contains("--budget"), "{err}");
+    let mut other = cfg.clone();
+    other.budget.sa.iterations = 30;
+    let err = optimize(
+        &Prepared::new(&other).unwrap(),
+        Some(&full_path),
+        &mut |_| ControlFlow::Continue(()),
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(err.contains("budget.sa.iterations: 15 -> 30"), "{err}");
     std::fs::remove_dir_all(&dir).ok();
 }
 

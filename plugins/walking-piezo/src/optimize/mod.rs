@@ -299,6 +299,98 @@ pub struct RunFile {
     pub finished: bool,
     /// The search state.
     pub search: SearchState,
+    /// The configuration it belongs to (to explain a refused resume); absent in
+    /// run files written before it was recorded.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub config: Option<serde_json::Value>,
+}
+
+/// Where two configurations (as JSON) differ: `path: old -> new` lines, at
+/// most `max` of them.
+fn config_differences(old: &serde_json::Value, new: &serde_json::Value, max: usize) -> Vec<String> {
+    fn walk(path: &str, a: &serde_json::Value, b: &serde_json::Value, out: &mut Vec<String>) {
+        use serde_json::Value;
+        match (a, b) {
+            (Value::Object(x), Value::Object(y)) => {
+                let mut keys: Vec<&String> = x.keys().chain(y.keys()).collect();
+                keys.sort();
+                keys.dedup();
+                for k in keys {
+                    let p = if path.is_empty() {
+                        k.clone()
+                    } else {
+                        format!("{path}.{k}")
+                    };
+                    walk(
+                        &p,
+                        x.get(k).unwrap_or(&Value::Null),
+                        y.get(k).unwrap_or(&Value::Null),
+                        out,
+                    );
+                }
+            }
+            _ if a != b => out.push(format!("{path}: {a} -> {b}")),
+            _ => {}
+        }
+    }
+    let mut out = Vec::new();
+    walk("", old, new, &mut out);
+    let n = out.len();
+    out.truncate(max);
+    if n > max {
+        out.push(format!("... and {} more", n - max));
+    }
+    out
+}
+
+/// Why run file `f` does not belong to `prepared`, in the user's terms.
+fn refusal_reason(f: &RunFile, prepared: &Prepared) -> String {
+    let c = &prepared.config;
+    let mut diffs = match (&f.config, serde_json::to_value(c)) {
+        (Some(old), Ok(new)) => config_differences(old, &new, 6),
+        _ => Vec::new(),
+    };
+    if diffs.is_empty() {
+        // An older run file: compare what it does record.
+        if f.objective != c.objective {
+            diffs.push(format!(
+                "objective: {} -> {}",
+                f.objective.name(),
+                c.objective.name()
+            ));
+        }
+        if f.search.seed != c.seed {
+            diffs.push(format!("seed: {} -> {}", f.search.seed, c.seed));
+        }
+        let now = [
+            c.budget.sa.chunks,
+            c.budget.pso.chunks,
+            c.budget.local.chunks,
+        ];
+        for (rec, n) in f.search.phases.iter().zip(now) {
+            if rec.chunks != n {
+                diffs.push(format!(
+                    "{} chunks: {} -> {n}",
+                    rec.phase.name(),
+                    rec.chunks
+                ));
+            }
+        }
+    }
+    if f.amplitude_v.to_bits() != prepared.drive.amplitude_v.to_bits() {
+        diffs.push(format!(
+            "amplitude A: {} V -> {} V",
+            f.amplitude_v, prepared.drive.amplitude_v
+        ));
+    }
+    if diffs.is_empty() {
+        "belongs to another configuration (or budget)".into()
+    } else {
+        format!(
+            "belongs to another configuration (or budget): {} (--budget scales the budget's iterations, so a different --budget is a different run)",
+            diffs.join("; ")
+        )
+    }
 }
 
 /// Result of [`optimize`].
@@ -376,8 +468,8 @@ pub fn optimize(
             if f.fingerprint != fingerprint {
                 return Err(run_file_error(
                     path,
-                    "belongs to another configuration (or budget)",
-                    "delete it, or write to another --out folder",
+                    refusal_reason(&f, prepared),
+                    "run with the configuration and --budget it was made with to continue it, or delete it (or write to another --out folder) to start afresh",
                 ));
             }
             let x = f.search.start.point();
@@ -412,12 +504,21 @@ pub fn optimize(
                 amplitude_v: prepared.drive.amplitude_v,
                 finished: s.finished(),
                 search: s.clone(),
+                config: serde_json::to_value(c).ok(),
             };
             if let Err(e) = write_run_file(path, &f) {
                 write_err = Some(e);
                 return ControlFlow::Break(());
             }
         }
+        tracing::debug!(
+            target: "walking_piezo::optimize",
+            phase = p.phase.name(),
+            chunks_done = p.chunks_done,
+            best_cost = p.best_cost,
+            evaluations = p.evaluations,
+            "waveform optimisation chunk done"
+        );
         progress(p)
     })?;
     if let Some(e) = write_err {
@@ -436,6 +537,7 @@ pub fn optimize(
                 amplitude_v: prepared.drive.amplitude_v,
                 finished,
                 search: state.clone(),
+                config: serde_json::to_value(c).ok(),
             },
         )?;
     }
