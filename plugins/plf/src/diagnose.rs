@@ -357,7 +357,7 @@ pub fn diagnose_with_progress(
         if at_floor {
             cands.retain(|c| {
                 matches!(c.effect, "quantization" | "encoder_slit_error")
-                    && matches!(c.site, Site::Output { .. })
+                    && matches!(c.site, Site::Output { .. } | Site::Sensor { .. })
             });
             if cands.is_empty() {
                 stopped = floor_stop.into();
@@ -874,7 +874,9 @@ fn enumerate(ctx: &Ctx<'_>, cur: &Current, opts: &Options) -> Result<Vec<Cand>, 
     let mut out = Vec::new();
     let fs = ctx.fs;
     let t_len = ctx.n as f64 / fs;
+    let spec_now = cur.spec()?;
     for (i, ch) in ctx.channels.iter().enumerate() {
+        let first_of_channel = out.len();
         let r = &cur.residual[i][..ctx.n_est];
         let yhat = &cur.model[i];
         let pos = signal(ctx, cur, &ch.position)?;
@@ -1002,6 +1004,33 @@ fn enumerate(ctx: &Ctx<'_>, cur: &Current, opts: &Options) -> Result<Vec<Cand>, 
                 s: others,
                 rate_hz: out_rate,
             });
+        }
+        // A compared signal that also feeds back (closed-loop data): the sensor
+        // effects are tried in the measurement path too, where the controller
+        // acts on them; the held-out score decides which place it is.
+        let compared = spec_now
+            .compare
+            .get(i)
+            .map(|c| c.signal.clone())
+            .unwrap_or_default();
+        if spec_now.connections.iter().any(|k| k.from == compared) {
+            let in_loop: Vec<Cand> = out[first_of_channel..]
+                .iter()
+                .filter(|c| matches!(c.effect, "time_delay" | "quantization" | "drift"))
+                .map(|c| Cand {
+                    effect: c.effect,
+                    site: Site::Sensor {
+                        compare: i,
+                        signal: compared.clone(),
+                    },
+                    output: None,
+                    starts: c.starts.clone(),
+                    free: c.free.clone(),
+                    s: c.s.clone(),
+                    rate_hz: None,
+                })
+                .collect();
+            out.extend(in_loop);
         }
         // Input side and inside the loop, for every scalar input of the plant.
         for (from, to) in &ch.plant_inputs {
@@ -1478,7 +1507,7 @@ fn revealing_variable(ctx: &Ctx<'_>, cur: &Current, c: &Cand) -> (String, Vec<f6
             Site::Feedback { position, .. } => signal(ctx, cur, position)
                 .ok()
                 .map(|v| (position.clone(), v)),
-            Site::Output { .. } => None,
+            Site::Output { .. } | Site::Sensor { .. } => None,
         }
     };
     match c.effect {

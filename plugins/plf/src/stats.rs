@@ -388,7 +388,7 @@ pub fn improvement_test(worse: &[f64], better: &[f64], max_lag: usize) -> (Test,
         let w = 1.0 - j as f64 / (l + 1) as f64;
         v += if j == 0 { 1.0 } else { 2.0 * w } * gamma_r * c_delta;
     }
-    if !(v > 0.0) || !cross.is_finite() {
+    if v.is_nan() || v <= 0.0 || !cross.is_finite() {
         return (none, rel);
     }
     let z = cross / v.sqrt();
@@ -515,8 +515,8 @@ pub fn lattice(y: &[f64]) -> Option<(f64, f64)> {
     }
     let total: f64 = lg.iter().sum();
     let (mut best, mut cut, mut sum_hi) = (f64::NEG_INFINITY, 0usize, 0.0);
-    for i in 0..n - 1 {
-        sum_hi += lg[i];
+    for (i, l) in lg[..n - 1].iter().enumerate() {
+        sum_hi += l;
         let (n_hi, n_lo) = ((i + 1) as f64, (n - i - 1) as f64);
         let (m_hi, m_lo) = (sum_hi / n_hi, (total - sum_hi) / n_lo);
         let between = n_lo * n_hi * (m_hi - m_lo).powi(2);
@@ -566,7 +566,7 @@ fn grid_at(v: &[f64], threshold: f64) -> Option<(f64, f64)> {
     let mut sorted = d.clone();
     sorted.sort_by(f64::total_cmp);
     let q10 = sorted[sorted.len() / 10];
-    if !(q10 > 0.0) {
+    if q10.is_nan() || q10 <= 0.0 {
         return None;
     }
     // Refined: the median of each spacing divided by its whole number of steps.
@@ -581,7 +581,7 @@ fn grid_at(v: &[f64], threshold: f64) -> Option<(f64, f64)> {
         return None;
     }
     let q0 = median(&mut per_step);
-    if !(q0 > 0.0) || widest > 0.5 * q0 {
+    if q0.is_nan() || q0 <= 0.0 || widest > 0.5 * q0 {
         return None;
     }
     let whole = d
@@ -620,7 +620,7 @@ fn grid_at(v: &[f64], threshold: f64) -> Option<(f64, f64)> {
         }
         q = (n * smc - sm * sc) / det;
         o = (sc - q * sm) / n;
-        if !(q > 0.0) {
+        if q.is_nan() || q <= 0.0 {
             return None;
         }
     }

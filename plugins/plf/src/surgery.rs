@@ -7,7 +7,11 @@
 //!   read `effect.y`, `effect.u ← signal`; nothing that feeds back changes;
 //! - **feedback** — inside the plant's loop: the effect reads the plant's position
 //!   and its output is added to the plant's input through a new `sum`
-//!   (friction and hysteretic restoring forces).
+//!   (friction and hysteretic restoring forces);
+//! - **sensor** — in the measurement path of a closed loop: every reader of the
+//!   compared signal (the controller and the comparison) reads `effect.y` instead,
+//!   `effect.u ← signal` (an encoder's rounding or delay that the controller acts
+//!   on changes the loop, which an effect on the comparison alone cannot show).
 //!
 //! Effects that need a scheduling signal (port `s`: position for a
 //! position-dependent gain, other axes for coupling) get it wired too.
@@ -53,6 +57,14 @@ pub enum Site {
         /// The compared model signal `block.port`.
         signal: String,
     },
+    /// In the measurement path of a closed loop: every reader of `signal` (the
+    /// controller and the `compare` entry with index `compare`) reads the effect.
+    Sensor {
+        /// Index into the graph's `compare:` list.
+        compare: usize,
+        /// The measured model signal `block.port`, which also feeds back.
+        signal: String,
+    },
     /// Added to the plant input `to` (fed by `from`), computed from `position`.
     Feedback {
         /// Source `block.port` of the plant input's connection.
@@ -70,6 +82,7 @@ impl Site {
         match self {
             Site::Input { .. } => "input",
             Site::Output { .. } => "output",
+            Site::Sensor { .. } => "sensor",
             Site::Feedback { .. } => "feedback",
         }
     }
@@ -78,6 +91,9 @@ impl Site {
         match self {
             Site::Input { from, to } => format!("input side, in series on {from} -> {to}"),
             Site::Output { signal, .. } => format!("output side, on the measured {signal}"),
+            Site::Sensor { signal, .. } => {
+                format!("in the sensor path inside the loop, on {signal} as the controller sees it")
+            }
             Site::Feedback { to, position, .. } => {
                 format!("inside the loop, from {position} added to {to}")
             }
@@ -245,7 +261,9 @@ pub fn insert(
         Site::Input { to, .. } | Site::Feedback { to, .. } => {
             rate_hz.or_else(|| rate_of(spec, split(to).0))
         }
-        Site::Output { signal, .. } => rate_hz.or_else(|| rate_of(spec, split(signal).0)),
+        Site::Output { signal, .. } | Site::Sensor { signal, .. } => {
+            rate_hz.or_else(|| rate_of(spec, split(signal).0))
+        }
     };
     spec.blocks.push(BlockSpec {
         name: name.clone(),
@@ -272,6 +290,19 @@ pub fn insert(
             let from = std::mem::replace(&mut c.signal, format!("{name}.y"));
             spec.connections.push(Connection {
                 from,
+                to: format!("{name}.u"),
+            });
+        }
+        Site::Sensor { signal, .. } => {
+            let out = format!("{name}.y");
+            for c in spec.connections.iter_mut().filter(|c| c.from == *signal) {
+                c.from = out.clone();
+            }
+            for c in spec.compare.iter_mut().filter(|c| c.signal == *signal) {
+                c.signal = out.clone();
+            }
+            spec.connections.push(Connection {
+                from: signal.clone(),
                 to: format!("{name}.u"),
             });
         }
