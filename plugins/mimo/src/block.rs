@@ -147,6 +147,10 @@ pub struct MimoController {
     pub u_max: Option<f64>,
     #[serde(skip)]
     rt: Option<Runtime>,
+    /// The discrete model from (r, y) to u at the block's period, set at build
+    /// (for the stability gate).
+    #[serde(skip)]
+    loop_model: Option<StateSpace>,
 }
 
 impl MimoController {
@@ -158,6 +162,7 @@ impl MimoController {
             u_offset: Vec::new(),
             u_min: None,
             u_max: None,
+            loop_model: None,
             rt: None,
         }
     }
@@ -165,6 +170,35 @@ impl MimoController {
     /// The controller state (after build; in the Schur basis).
     pub fn state(&self) -> &[f64] {
         self.rt.as_ref().map_or(&[], |r| &r.x)
+    }
+
+    /// The controller from the stacked inputs (r, y) to u at period `dt`:
+    /// u = C x + D s⊙(r − y), x ← A x + B s⊙(r − y), limits and u₀ left out.
+    pub fn discrete_loop_model(&self, dt: f64) -> Result<StateSpace, MimoError> {
+        let k = self.model.to_ss()?;
+        let kd = match k.dt {
+            Some(_) => k,
+            None => c2d(&k, dt, C2dMethod::TUSTIN).map_err(MimoError::lti("model (Tustin)"))?,
+        };
+        let p = kd.ninputs();
+        let s = DMatrix::from_fn(p, p, |i, j| {
+            if i != j {
+                0.0
+            } else if self.error_scale.is_empty() {
+                1.0
+            } else {
+                self.error_scale[i]
+            }
+        });
+        let (bs, ds) = (&kd.b * &s, &kd.d * &s);
+        let b = DMatrix::from_fn(kd.nstates(), 2 * p, |i, j| {
+            if j < p { bs[(i, j)] } else { -bs[(i, j - p)] }
+        });
+        let d = DMatrix::from_fn(kd.noutputs(), 2 * p, |i, j| {
+            if j < p { ds[(i, j)] } else { -ds[(i, j - p)] }
+        });
+        StateSpace::new(kd.a.clone(), b, kd.c.clone(), d, kd.dt)
+            .map_err(MimoError::lti("controller loop model"))
     }
 
     fn make_runtime(&self, ctx: &BuildContext) -> Result<Runtime, MimoError> {
@@ -303,7 +337,31 @@ impl Block for MimoController {
     }
     fn build(&mut self, ctx: &BuildContext) -> Result<(), ParamError> {
         self.rt = Some(self.make_runtime(ctx)?);
+        self.loop_model = self.discrete_loop_model(ctx.dt).ok();
         Ok(())
+    }
+    /// Without output limits: the controller from (r, y) to u, discrete at the
+    /// block's period (B and D scaled by ±s; the offset u₀ does not change
+    /// stability).
+    fn lti(&self) -> Option<StateSpace> {
+        if self.u_min.is_some() || self.u_max.is_some() {
+            return None;
+        }
+        self.loop_model.clone()
+    }
+    /// With output limits: the same model, judged inside the limits.
+    fn linearisation(&self) -> Option<nanomotion_core::block::Linearisation> {
+        if self.u_min.is_none() && self.u_max.is_none() {
+            return None;
+        }
+        Some(nanomotion_core::block::Linearisation::single(
+            self.loop_model.clone()?,
+            format!(
+                "output limits [{}, {}] ignored: judged inside them",
+                self.u_min.unwrap_or(f64::NEG_INFINITY),
+                self.u_max.unwrap_or(f64::INFINITY)
+            ),
+        ))
     }
     fn output(&mut self, _tick: Tick, u: &[f64], y: &mut [f64]) {
         let Some(rt) = self.rt.as_mut() else {
