@@ -9,9 +9,10 @@
 //! [`Workspace`] built with the block — the same computation as the offline
 //! [`estimate_rotation`](crate::estimate::estimate_rotation), bit for bit, without
 //! allocating. Its cost is O(pairs · n · L) multiply-adds (n samples per line, L
-//! lags): for four lines of 5 000 samples at ±22 lags about 1 ms, for 20 000
-//! samples at ±82 lags about 10 ms (`cargo bench -p nanomotion-directional-rc
-//! --bench drc_step`, docs/performance.md) — many sample periods. In a simulation
+//! lags): for four lines of 5 000 samples at ±22 lags 1.2 ms (6 sample periods at
+//! 5 kHz), for 20 000 samples at ±82 lags 16 ms (320 sample periods at 20 kHz)
+//! (`cargo bench -p nanomotion-directional-rc --bench drc_step`,
+//! docs/performance.md). In a simulation
 //! this only costs wall time; on a real-time target the tick overruns once, at the
 //! end of the estimation phase, while the scan is between phases (the plan's
 //! lead-in keeps RC off then).
