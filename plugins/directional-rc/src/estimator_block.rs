@@ -36,7 +36,7 @@
 //! (with the error's message) from Rust.
 //!
 //! Buffers: `lines` × (`max_line_s`/t_s + 2) samples, bounded by
-//! [`MAX_LINES`](crate::plan::MAX_LINES) lines and the core's
+//! [`MAX_LINES`] lines and the core's
 //! `MAX_BUFFER_VALUES`, allocated in `build`.
 
 use crate::estimate::{
