@@ -22,6 +22,7 @@ fn drc_recovers_the_rotation_and_lets_rc_learn_the_topography() {
         q_taps: 21,
         noiseless: false,
         unquantized: false,
+        linear_z: false,
         image_every: 0,
     };
     let rc = sim::run(&cfg(false));

@@ -1,7 +1,7 @@
 //! Sec. 7.5 reproduced on the simulated AFM: rms e_z per iteration for RC and DRC
 //! with the grating rotated by 0.022 and 0.015 rad (Fig. 7.17(a), Table 7.3).
 //!
-//! Run: `cargo run --release --example directional_rc [ITERATIONS [FS_HZ [Q_CUTOFF_HZ|design [noiseless] [unquantized]]]]`
+//! Run: `cargo run --release --example directional_rc [ITERATIONS [FS_HZ [Q_CUTOFF_HZ|design [noiseless] [unquantized] [linear_z]]]]`
 //! or `cargo run --release --example directional_rc loop-check [FS_HZ [Q_CUTOFF_HZ|design [noiseless] [flat]]]`
 //! (defaults 15, 20 000, designed by (7.16);
 //! about a minute in release). See `sim.rs` for the set-up and
@@ -15,7 +15,10 @@ fn main() {
         let flag = |f: &str| std::env::args().skip(4).any(|a| a == f);
         let w_nm: f64 = std::env::args()
             .skip(4)
-            .find_map(|a| a.strip_prefix("w=").map(|v| v.parse().expect("w=NM: a number")))
+            .find_map(|a| {
+                a.strip_prefix("w=")
+                    .map(|v| v.parse().expect("w=NM: a number"))
+            })
             .unwrap_or(2.0);
         return loop_check(
             arg(2),
@@ -34,9 +37,10 @@ fn main() {
         .filter(|a| a != "design")
         .map(|a| a.parse().expect("Q_CUTOFF_HZ must be a number or `design`"));
     let flag = |f: &str| std::env::args().skip(4).any(|a| a == f);
-    let (noiseless, unquantized) = (flag("noiseless"), flag("unquantized"));
+    let (noiseless, unquantized, linear_z) =
+        (flag("noiseless"), flag("unquantized"), flag("linear_z"));
     println!(
-        "f_s = {fs_hz} Hz, {iterations} iterations, Q cut-off {q_cutoff_hz:?} Hz (None: designed), noiseless: {noiseless}, unquantized: {unquantized}"
+        "f_s = {fs_hz} Hz, {iterations} iterations, Q cut-off {q_cutoff_hz:?} Hz (None: designed), noiseless: {noiseless}, unquantized: {unquantized}, linear z piezo: {linear_z}"
     );
     let mut rows = Vec::new();
     for alpha in [0.022, 0.015] {
@@ -47,6 +51,7 @@ fn main() {
                 q_taps: 101,
                 noiseless,
                 unquantized,
+                linear_z,
                 iterations,
                 alpha_rad: alpha,
                 drc,
@@ -125,6 +130,7 @@ fn loop_check(fs: Option<String>, q: Option<String>, flags: [bool; 3], w_nm: f64
         q_taps: 101,
         noiseless,
         unquantized,
+        linear_z: false,
         iterations: 0,
         alpha_rad: 0.022,
         drc: true,

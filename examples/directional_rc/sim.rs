@@ -70,6 +70,9 @@ pub struct Config {
     pub noiseless: bool,
     /// Switch off the interferometer and deflection quantisation (diagnosis).
     pub unquantized: bool,
+    /// A linear z piezo (diagnosis): b = c = the design slope (b + c)/2 on trace
+    /// and retrace, so the Coleman–Hodgdon operator is y = slope·u.
+    pub linear_z: bool,
     /// Keep every n-th sample for images (0: none).
     pub image_every: usize,
 }
@@ -191,6 +194,17 @@ pub fn setup(cfg: &Config) -> Setup {
     let mut stage = AfmStage::default();
     stage.topography = grating(cfg.alpha_rad);
     stage.initial_v = [50.0; 3];
+    if cfg.linear_z {
+        let h = stage.hysteresis[2].trace;
+        let g = 0.5 * (h.b + h.c);
+        for p in [
+            &mut stage.hysteresis[2].trace,
+            &mut stage.hysteresis[2].retrace,
+        ] {
+            p.b = g;
+            p.c = g;
+        }
+    }
     if cfg.unquantized {
         stage.resolution_m = [0.0; 3];
         stage.deflection_resolution_m = 0.0;
@@ -509,7 +523,10 @@ pub fn loop_check(
     let (mut ux, mut uy, mut uz) = ([0.0], [0.0], [0.0]);
     let v0 = 50.0;
     let total = (periods + 1) * n;
-    let (mut ws, mut es) = (Vec::with_capacity(periods * n), Vec::with_capacity(periods * n));
+    let (mut ws, mut es) = (
+        Vec::with_capacity(periods * n),
+        Vec::with_capacity(periods * n),
+    );
     for k in 0..total {
         let tk = k as f64 * dt;
         let d = to_a.apply([SLOW_M_S * tk, triangle(tk)]);
@@ -544,8 +561,18 @@ pub fn loop_check(
         .iter()
         .map(|&f| t.freqresp_siso_at(TAU * f))
         .collect();
-    let crit_meas = h.freq_hz.iter().zip(&h.response).map(|(&f, &tv)| crit(tv, f)).collect();
-    let crit_model = h.freq_hz.iter().zip(&t_model).map(|(&f, &tv)| crit(tv, f)).collect();
+    let crit_meas = h
+        .freq_hz
+        .iter()
+        .zip(&h.response)
+        .map(|(&f, &tv)| crit(tv, f))
+        .collect();
+    let crit_model = h
+        .freq_hz
+        .iter()
+        .zip(&t_model)
+        .map(|(&f, &tv)| crit(tv, f))
+        .collect();
     LoopCheck {
         f_hz: h.freq_hz.clone(),
         t_meas: h.response.clone(),
