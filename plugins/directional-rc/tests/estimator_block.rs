@@ -138,3 +138,58 @@ fn bad_parameters_name_the_field() {
         assert_eq!(e.field, field, "{yaml}: {e:?}");
     }
 }
+
+/// In a graph: a flat sample makes the estimate fail; with `on_failure: stop` the
+/// run's non-finite check names the estimator's `alpha` port, and `status` says
+/// why (−7: flat line).
+#[test]
+fn a_failed_estimate_stops_the_run_at_the_estimator() {
+    use nanomotion_core::{GraphError, GraphSpec};
+    let yaml = |on_failure: &str| {
+        format!(
+            r#"
+base_rate_hz: 1000
+duration_s: 22.0
+blocks:
+  - {{ name: plan, type: drc_scan_plan, amplitude_m: 25.0e-6, period_s: 4.0, slow_velocity_m_s: 125.0e-9, estimation_lines: 4, line_spacing_m: 1.0e-6 }}
+  - {{ name: z, type: constant, value: 3.0e-9 }}
+  - {{ name: est, type: rotation_estimator, lines: 4, max_line_s: 1.0, on_failure: {on_failure} }}
+  - {{ name: to_a, type: frame_rotation, alpha_input: true, direction: to_actuator }}
+connections:
+  - {{ from: z.y, to: est.z }}
+  - {{ from: plan.line, to: est.line }}
+  - {{ from: plan.r, to: est.r }}
+  - {{ from: plan.r, to: to_a.u }}
+  - {{ from: est.alpha, to: to_a.alpha }}
+log: [est.status, to_a.y]
+"#
+        )
+    };
+    let (mut s, _) = GraphSpec::from_yaml(&yaml("stop"), "flat.yaml")
+        .unwrap()
+        .build()
+        .unwrap();
+    let r = s.run(|_| {});
+    let status = &r.logs.iter().find(|l| l.name == "est.status").unwrap().data;
+    assert_eq!(*status.last().unwrap(), -7.0);
+    match s.check_finite() {
+        Err(GraphError::NonFinite {
+            block, port, tick, ..
+        }) => {
+            assert_eq!((block.as_str(), port.as_str()), ("est", "alpha"));
+            // Line 3 ends at 17 s: the estimate runs in the update of tick 17 000,
+            // α is NaN from the next tick.
+            assert_eq!(tick, 17_001);
+        }
+        other => panic!("{other:?}"),
+    }
+    // plain_rc: the scan continues unrotated.
+    let (mut s, _) = GraphSpec::from_yaml(&yaml("plain_rc"), "flat.yaml")
+        .unwrap()
+        .build()
+        .unwrap();
+    let r = s.run(|_| {});
+    assert!(s.check_finite().is_ok());
+    let status = &r.logs.iter().find(|l| l.name == "est.status").unwrap().data;
+    assert_eq!(*status.last().unwrap(), -7.0);
+}
