@@ -149,9 +149,10 @@ impl Workspace {
         &self.pairs
     }
 
-    /// Heap bytes held.
+    /// Heap bytes held (two prefix-sum pairs of max_samples + 1 values, the
+    /// correlation and second-difference buffers, the pairs).
     pub fn memory_bytes(&self) -> usize {
-        (2 * (self.max_samples + 1) + self.r.capacity() + self.d2.capacity())
+        (4 * (self.max_samples + 1) + self.r.capacity() + self.d2.capacity())
             * std::mem::size_of::<f64>()
             + self.pairs.capacity() * std::mem::size_of::<PairEstimate>()
     }

@@ -27,7 +27,8 @@
 //!   lag window, 3 non-finite data, 4 different spacings, 5 zero spacing, 6 two
 //!   lines at the same x, 7 a flat line, 8 ambiguous (repeating structure), 9 weak
 //!   correlation, 10 peak at the window edge, 11 bad option, 12 a line longer than
-//!   the buffers, 13 a line index ≥ `lines`).
+//!   the buffers, 13 a line index ≥ `lines` while the lines are recorded; lines
+//!   flagged after line `lines − 1` has ended are ignored).
 //!
 //! On failure `on_failure: stop` (default) makes `alpha` NaN: the run stops with
 //! the non-finite error naming this block's `alpha` port and the tick, and the
