@@ -112,6 +112,33 @@ pub fn colour(t: f64) -> RGBColor {
     RGBColor(mix(a.0, b.0), mix(a.1, b.1), mix(a.2, b.2))
 }
 
+/// Font size of axis and colour-bar labels in plotters' units (its SVG backend
+/// writes font-size = size/1.24 px: 20 → 16.1 px, readable at the SVG's natural
+/// size of 1000 × 520; plotters' default 12 gave 9.7 px).
+pub const LABEL_SIZE: u32 = 20;
+
+/// Decimals of the colour-bar tick labels for a value span: enough to tell about
+/// five ticks apart (the first significant digit of a tick step ≈ span/5).
+pub fn bar_decimals(span: f64) -> usize {
+    if !(span.is_finite() && span > 0.0) {
+        return 0;
+    }
+    (-(span / 5.0).log10().floor()).clamp(0.0, 12.0) as usize
+}
+
+/// A colour-bar tick label with `decimals` decimals, without a negative zero.
+pub fn tick_label(v: f64, decimals: usize) -> String {
+    let s = format!("{v:.decimals$}");
+    if s.trim_start_matches('-')
+        .chars()
+        .all(|c| c == '0' || c == '.')
+    {
+        s.trim_start_matches('-').to_string()
+    } else {
+        s
+    }
+}
+
 /// Draw `img` as an SVG heat map with a colour bar spanning the 1 %–99 % quantiles
 /// of the cell values.
 pub fn draw_heat_map(
@@ -128,14 +155,14 @@ pub fn draw_heat_map(
     };
     let root = SVGBackend::new(path, (1000, 520)).into_drawing_area();
     root.fill(&WHITE).map_err(|e| err(&e))?;
-    let (main, bar) = root.split_horizontally(880);
+    let (main, bar) = root.split_horizontally(810);
     let (lo, hi) = img.robust_range(0.01);
     let span = if hi > lo { hi - lo } else { 1.0 };
     let mut chart = ChartBuilder::on(&main)
         .caption(title, ("sans-serif", 18))
         .margin(10)
-        .x_label_area_size(40)
-        .y_label_area_size(60)
+        .x_label_area_size(50)
+        .y_label_area_size(70)
         .build_cartesian_2d(img.h_range.0..img.h_range.1, img.v_range.0..img.v_range.1)
         .map_err(|e| err(&e))?;
     chart
@@ -143,6 +170,8 @@ pub fn draw_heat_map(
         .disable_mesh()
         .x_desc(h_label)
         .y_desc(v_label)
+        .label_style(("sans-serif", LABEL_SIZE))
+        .axis_desc_style(("sans-serif", LABEL_SIZE))
         .draw()
         .map_err(|e| err(&e))?;
     let (dh, dv) = (
@@ -166,16 +195,20 @@ pub fn draw_heat_map(
     // Colour bar.
     let mut cb = ChartBuilder::on(&bar)
         .margin_top(40)
-        .margin_bottom(50)
-        .margin_right(50)
+        .margin_bottom(60)
+        .margin_right(10)
         .y_label_area_size(0)
-        .right_y_label_area_size(45)
-        .caption(value_label, ("sans-serif", 13))
+        .right_y_label_area_size(90)
+        .caption(value_label, ("sans-serif", LABEL_SIZE))
         .build_cartesian_2d(0.0..1.0, lo..lo + span)
         .map_err(|e| err(&e))?;
+    let decimals = bar_decimals(span);
     cb.configure_mesh()
         .disable_mesh()
         .disable_x_axis()
+        .y_labels(6)
+        .y_label_style(("sans-serif", LABEL_SIZE))
+        .y_label_formatter(&|v| tick_label(*v, decimals))
         .draw()
         .map_err(|e| err(&e))?;
     let steps = 64;
@@ -210,6 +243,42 @@ mod tests {
         assert_eq!(img.value_range(), (2.0, 4.0));
         assert!(Image::bin(&[1.0], &[1.0], &[1.0], 2, 2).is_none());
         assert_eq!(img.robust_range(0.0), (2.0, 4.0));
+    }
+
+    #[test]
+    fn colour_bar_labels_are_large_and_distinct() {
+        assert_eq!(bar_decimals(20.0), 0); // step 4 → "−8", "−4", …
+        assert_eq!(bar_decimals(2.0), 1); // step 0.4
+        assert_eq!(bar_decimals(0.05), 2); // step 0.01
+        assert_eq!(bar_decimals(f64::NAN), 0);
+        assert_eq!(tick_label(-1e-17, 1), "0.0");
+        assert_eq!(tick_label(-0.25, 1), "-0.2");
+        let h: Vec<f64> = (0..400).map(|i| (i % 20) as f64).collect();
+        let v: Vec<f64> = (0..400).map(|i| (i / 20) as f64).collect();
+        let z: Vec<f64> = (0..400).map(|i| (i % 20) as f64 * 0.1 - 1.0).collect();
+        let img = Image::bin(&h, &v, &z, 20, 20).unwrap();
+        let path = std::env::temp_dir().join(format!("nm_heat_{}.svg", std::process::id()));
+        draw_heat_map(&img, "t", "h", "v", "z (nm)", &path).unwrap();
+        let svg = std::fs::read_to_string(&path).unwrap();
+        let _ = std::fs::remove_file(&path);
+        // The bar's caption and tick labels (range −1 … 0.9 at 1 %/99 %): one
+        // decimal, at least 16 px.
+        let labels: Vec<&str> = svg
+            .split("<text")
+            .skip(1)
+            .filter(|t| {
+                let size = t
+                    .split("font-size=\"")
+                    .nth(1)
+                    .and_then(|r| r.split('"').next());
+                size.and_then(|v| v.parse::<f64>().ok())
+                    .is_some_and(|px| px >= 16.0)
+            })
+            .filter_map(|t| Some(t.split('>').nth(1)?.split('<').next()?.trim()))
+            .collect();
+        for want in ["z (nm)", "-0.5", "0.0", "0.5"] {
+            assert!(labels.contains(&want), "{labels:?}");
+        }
     }
 
     #[test]

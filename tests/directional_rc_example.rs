@@ -21,6 +21,8 @@ fn drc_recovers_the_rotation_and_lets_rc_learn_the_topography() {
         q_cutoff_hz: None,
         q_taps: 21,
         noiseless: false,
+        unquantized: false,
+        linear_z: false,
         image_every: 0,
     };
     let rc = sim::run(&cfg(false));
@@ -46,6 +48,68 @@ fn drc_recovers_the_rotation_and_lets_rc_learn_the_topography() {
     );
 }
 
+/// The YAML scan: one graph does the estimation (four lines, `rotation_estimator`)
+/// and then DRC. Its α̂ is the offline estimator's on the logged lines (bit for
+/// bit), within tolerance of the hidden 0.022 rad, and no tick allocates — the
+/// estimation tick included.
+#[test]
+fn the_yaml_scan_estimates_in_the_graph_without_allocating() {
+    use nanomotion::directional_rc::estimate::{EstimatorOptions, LineScan, estimate_rotation};
+    nanomotion::link_plugins();
+    let graph = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/examples/directional_rc/scan_rc_vs_drc.yaml"
+    );
+    let text = std::fs::read_to_string(graph).unwrap();
+    let (mut s, _) = nanomotion::core::GraphSpec::from_yaml(&text, graph)
+        .unwrap()
+        .build()
+        .unwrap();
+    // Line 3 is recorded in period 4 (16 s) while y_r rises: 1 s = 5 000 samples;
+    // the estimate runs in the update phase of tick 85 000 (the line has ended).
+    let end: usize = 4 * 20_000 + 5_000;
+    s.step_n(end as u64 - 10);
+    let info = allocation_counter::measure(|| s.step_n(20));
+    assert_eq!(info.count_total, 0, "{info:?}");
+    s.step_n(10_000);
+    let r = s.result();
+    let log = |n: &str| &r.logs.iter().find(|l| l.name == n).unwrap().data;
+    let (plan_r, line, pos, alpha, sigma, status) = (
+        log("plan.r"),
+        log("plan.line"),
+        log("drc_stage.pos"),
+        log("drc_est.alpha"),
+        log("drc_est.sigma"),
+        log("drc_est.status"),
+    );
+    // Before: 0, estimating; from tick end + 1 on: the estimate, valid.
+    assert_eq!((alpha[end], status[end]), (0.0, 0.0));
+    assert_eq!(status[end + 1], 1.0);
+    let a_hat = alpha[end + 1];
+    // Offline, on the logged lines: z = measured z position, x and y0 of the
+    // plan at each line's first sample, dy from its first and last.
+    let lines: Vec<LineScan> = (0..4)
+        .map(|i| {
+            let ks: Vec<usize> = (0..line.len()).filter(|&k| line[k] == i as f64).collect();
+            let (k0, k1) = (ks[0], *ks.last().unwrap());
+            let dy = (plan_r[2 * k1 + 1] - plan_r[2 * k0 + 1]) / (ks.len() - 1) as f64;
+            let z = ks.iter().map(|&k| pos[3 * k + 2]).collect();
+            LineScan::new(plan_r[2 * k0], plan_r[2 * k0 + 1], dy, z)
+        })
+        .collect();
+    assert!(lines.iter().all(|l| l.z_m.len() == 5_000));
+    let off = estimate_rotation(&lines, &EstimatorOptions::default()).unwrap();
+    assert_eq!(
+        a_hat.to_bits(),
+        off.alpha_rad.to_bits(),
+        "graph {a_hat}, offline {off}"
+    );
+    assert_eq!(sigma[end + 1].to_bits(), off.std_error_rad.to_bits());
+    // The hidden rotation: the estimator's stated tolerance (2e-3 rad, 4σ).
+    assert!((a_hat - 0.022).abs() < 2e-3, "{off}");
+    assert!((a_hat - 0.022).abs() < 4.0 * off.std_error_rad, "{off}");
+}
+
 #[test]
 fn the_yaml_scan_passes_rc_check_runs_and_gives_images_via_the_cli() {
     let graph = concat!(
@@ -60,7 +124,7 @@ fn the_yaml_scan_passes_rc_check_runs_and_gives_images_via_the_cli() {
     let _ = std::fs::remove_dir_all(&out);
     let exe = env!("CARGO_BIN_EXE_nanomotion");
     let st = std::process::Command::new(exe)
-        .args(["run", graph, "--duration", "21", "--out"])
+        .args(["run", graph, "--out"])
         .arg(&out)
         .output()
         .unwrap();
@@ -74,7 +138,7 @@ fn the_yaml_scan_passes_rc_check_runs_and_gives_images_via_the_cli() {
         .arg(&out)
         .args([
             "--from-s",
-            "4",
+            "20",
             "--image",
             "drc_topography=drc_stage.pos[1],drc_stage.pos[0],-drc_stage.pos[2]",
             "--image",

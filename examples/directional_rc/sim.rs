@@ -20,6 +20,7 @@
 
 #![allow(dead_code)]
 
+use nanomotion::afm_stage::control::IntegralLowPass;
 use nanomotion::afm_stage::experiments::{decentralised_controllers, design_gains};
 use nanomotion::afm_stage::stage::{AfmStage, N_OUTPUTS, Topography};
 use nanomotion::core::lti::{C2dMethod, StateSpace, TransferFunction, feedback, series};
@@ -67,6 +68,11 @@ pub struct Config {
     pub q_taps: usize,
     /// Switch off the interferometer and deflection noise (diagnosis).
     pub noiseless: bool,
+    /// Switch off the interferometer and deflection quantisation (diagnosis).
+    pub unquantized: bool,
+    /// A linear z piezo (diagnosis): b = c = the design slope (b + c)/2 on trace
+    /// and retrace, so the Coleman–Hodgdon operator is y = slope·u.
+    pub linear_z: bool,
     /// Keep every n-th sample for images (0: none).
     pub image_every: usize,
 }
@@ -84,6 +90,16 @@ pub struct Outcome {
     pub q_cutoff_hz: f64,
     /// (7.16) with T_z at the z piezo's smallest and largest small-signal slope.
     pub criterion_slopes: [RcCriterion; 2],
+    /// rms of the RC output w per iteration (nm, as a z error equivalent).
+    pub w_rms_nm: Vec<f64>,
+    /// rms of e_z above 1 kHz per iteration (nm), from a Welch PSD.
+    pub ez_hf_nm: Vec<f64>,
+    /// rms of w above 1 kHz per iteration (nm).
+    pub w_hf_nm: Vec<f64>,
+    /// Drive samples the stage clipped to its voltage range (all axes, whole run).
+    pub clips: u64,
+    /// rms of the z controller output u_z per iteration (V).
+    pub uz_rms_v: Vec<f64>,
     /// Image samples (x_a, y_a, z measured, e_z), all m.
     pub image: Vec<[f64; 4]>,
     /// Integral gains k of the (6.5) controllers x, y, z (V/(m·s)), f_LP = 60 Hz.
@@ -144,12 +160,55 @@ fn t_z(stage: &AfmStage, g: f64, kz: &StateSpace, dt: f64) -> StateSpace {
     feedback(&series(kz, &p).unwrap(), &one, -1.0).unwrap()
 }
 
-/// Run one scan.
-pub fn run(cfg: &Config) -> Outcome {
+/// The simulated AFM, its controllers and the RC design of a configuration.
+pub struct Setup {
+    /// Sample time (s).
+    pub dt: f64,
+    /// The stage, built, at its start.
+    pub stage: AfmStage,
+    /// Design slopes (µm/V) of x, y, z.
+    pub gains: [f64; 3],
+    /// The (6.5) controllers (plain Rust, discrete).
+    pub c: [IntegralLowPass; 3],
+    /// Model T_z (discrete).
+    pub t: StateSpace,
+    /// T_z as a transfer function.
+    pub tf: TransferFunction,
+    /// L = ZPETC(T_z).
+    pub l_spec: FilterSpec,
+    /// L built.
+    pub l: nanomotion::dvrc::Filter,
+    /// Q design.
+    pub q: nanomotion::dvrc::stability::QDesign,
+    /// (7.16) at the z piezo's slope range.
+    pub criterion_slopes: [RcCriterion; 2],
+    /// RC period N (samples).
+    pub n: usize,
+    /// Start x, y (m).
+    pub start: [f64; 2],
+}
+
+/// Build the stage, the controllers and the RC design of `cfg`.
+pub fn setup(cfg: &Config) -> Setup {
     let dt = 1.0 / cfg.fs_hz;
     let mut stage = AfmStage::default();
     stage.topography = grating(cfg.alpha_rad);
     stage.initial_v = [50.0; 3];
+    if cfg.linear_z {
+        let h = stage.hysteresis[2].trace;
+        let g = 0.5 * (h.b + h.c);
+        for p in [
+            &mut stage.hysteresis[2].trace,
+            &mut stage.hysteresis[2].retrace,
+        ] {
+            p.b = g;
+            p.c = g;
+        }
+    }
+    if cfg.unquantized {
+        stage.resolution_m = [0.0; 3];
+        stage.deflection_resolution_m = 0.0;
+    }
     if cfg.noiseless {
         stage.noise_bound_m = [0.0; 3];
         stage.deflection_noise_bound_m = 0.0;
@@ -168,9 +227,6 @@ pub fn run(cfg: &Config) -> Outcome {
         .unwrap();
     let gains = design_gains(&stage);
     let (c, _) = decentralised_controllers(&stage, gains, 60.0).unwrap();
-    let mut kx = c[0].discrete(dt).unwrap();
-    let mut ky = c[1].discrete(dt).unwrap();
-    let mut kz = c[2].discrete(dt).unwrap();
     let kz_ss = c[2].continuous().c2d(dt, C2dMethod::TUSTIN).unwrap();
 
     // RC design: L = ZPETC(T_z), Q by criterion (7.16).
@@ -206,6 +262,43 @@ pub fn run(cfg: &Config) -> Outcome {
         let tg = t_z(&stage, g, &kz_ss, dt);
         nanomotion::dvrc::rc_criterion(&tg, &l, &q_built(&q), n, n).unwrap()
     });
+    Setup {
+        dt,
+        stage,
+        gains,
+        c,
+        t,
+        tf,
+        l_spec,
+        l,
+        q,
+        criterion_slopes,
+        n,
+        start: [x_c, y_c],
+    }
+}
+
+/// Run one scan.
+pub fn run(cfg: &Config) -> Outcome {
+    let Setup {
+        dt,
+        mut stage,
+        gains,
+        c,
+        t: _,
+        tf,
+        l_spec,
+        l: _,
+        q,
+        criterion_slopes,
+        n,
+        start: [x_c, y_c],
+    } = setup(cfg);
+    let taps = cfg.q_taps;
+    let mut y = [0.0; N_OUTPUTS];
+    let mut kx = c[0].discrete(dt).unwrap();
+    let mut ky = c[1].discrete(dt).unwrap();
+    let mut kz = c[2].discrete(dt).unwrap();
     let mut rc = RepetitiveControl::built(
         n,
         l_spec,
@@ -286,6 +379,25 @@ pub fn run(cfg: &Config) -> Outcome {
     // period without RC (start-up transients of the x/y loops are not repetitive;
     // RC would learn them), then RC from iteration k = 1.
     let mut rms = Vec::with_capacity(cfg.iterations);
+    let (mut w_rms, mut ez_hf, mut w_hf) = (Vec::new(), Vec::new(), Vec::new());
+    let (mut ez_rec, mut w_rec) = (Vec::with_capacity(n), Vec::with_capacity(n));
+    let (mut uz_acc, mut uz_rms) = (0.0, Vec::new());
+    let hf = |x: &[f64]| {
+        let p = nanomotion::core::analysis::psd_welch(
+            x,
+            1.0 / dt,
+            &nanomotion::core::analysis::WelchOptions::new(4096),
+        )
+        .unwrap();
+        let s: f64 = p
+            .freq_hz
+            .iter()
+            .zip(&p.density)
+            .filter(|(f, _)| **f > 1000.0)
+            .map(|(_, d)| d * p.df_hz)
+            .sum();
+        s.sqrt() * 1e9
+    };
     let mut image = Vec::new();
     let (mut acc, mut cnt) = (0.0, 0usize);
     let mut w = [0.0];
@@ -311,10 +423,20 @@ pub fn run(cfg: &Config) -> Outcome {
         }
         acc += e_z * e_z;
         cnt += 1;
+        ez_rec.push(e_z);
+        w_rec.push(w[0]);
+        uz_acc += uz[0] * uz[0];
         if cnt == n {
             rms.push((acc / n as f64).sqrt() * 1e9);
             acc = 0.0;
             cnt = 0;
+            w_rms.push((w_rec.iter().map(|v| v * v).sum::<f64>() / n as f64).sqrt() * 1e9);
+            ez_hf.push(hf(&ez_rec));
+            w_hf.push(hf(&w_rec));
+            ez_rec.clear();
+            w_rec.clear();
+            uz_rms.push((uz_acc / n as f64).sqrt());
+            uz_acc = 0.0;
         }
         if cfg.image_every > 0 && k % cfg.image_every == 0 {
             image.push([y[0], y[1], y[2], e_z]);
@@ -322,6 +444,11 @@ pub fn run(cfg: &Config) -> Outcome {
     }
     Outcome {
         rms_nm: rms,
+        w_rms_nm: w_rms,
+        ez_hf_nm: ez_hf,
+        w_hf_nm: w_hf,
+        clips: stage.clip_count(),
+        uz_rms_v: uz_rms,
         estimate,
         criterion: q.criterion,
         q_cutoff_hz: q.cutoff_hz,
@@ -330,5 +457,130 @@ pub fn run(cfg: &Config) -> Outcome {
         k_gains: [c[0].k, c[1].k, c[2].k],
         t_num_den: (tf.num.clone(), tf.den.clone()),
         start_m: [x_c, y_c, stage.contact_z_m],
+    }
+}
+
+/// The learning criterion (7.16) with the loop the simulation really closes:
+/// white noise w (std `w_std_m`, seeded) is injected where RC adds its output
+/// (before K_z) while the DRC scan runs with RC off; T from w to −e_z is estimated
+/// by Welch H1 (segments of `segment` samples), and |Q(1 − T L z^l)| is evaluated
+/// with that T and with the model T_z at the same frequencies.
+pub struct LoopCheck {
+    /// Frequencies (Hz).
+    pub f_hz: Vec<f64>,
+    /// Measured T (complex) and its coherence.
+    pub t_meas: Vec<nanomotion::core::nalgebra::Complex<f64>>,
+    /// Coherence of the estimate.
+    pub coherence: Vec<f64>,
+    /// Model T_z at the same frequencies.
+    pub t_model: Vec<nanomotion::core::nalgebra::Complex<f64>>,
+    /// |Q(1 − T L z^l)| with the measured T.
+    pub crit_meas: Vec<f64>,
+    /// The same with the model.
+    pub crit_model: Vec<f64>,
+    /// Q cut-off (Hz).
+    pub q_cutoff_hz: f64,
+    /// Drive samples clipped by the stage.
+    pub clips: u64,
+}
+
+/// See [`LoopCheck`].
+pub fn loop_check(
+    cfg: &Config,
+    w_std_m: f64,
+    periods: usize,
+    segment: usize,
+    flat: bool,
+) -> LoopCheck {
+    use nanomotion::core::LearningFilter;
+    use nanomotion::core::analysis::{WelchOptions, frf_h1};
+    use nanomotion::core::nalgebra::Complex;
+    let Setup {
+        dt,
+        mut stage,
+        gains,
+        c,
+        t,
+        l,
+        q,
+        n,
+        start: [x_c, y_c],
+        ..
+    } = setup(cfg);
+    if flat {
+        // No topography: e_z = −T w (+ noise, hysteresis) only.
+        if let Topography::Grating { height_m, .. } = &mut stage.topography {
+            *height_m = 0.0;
+        }
+    }
+    let mut kx = c[0].discrete(dt).unwrap();
+    let mut ky = c[1].discrete(dt).unwrap();
+    let mut kz = c[2].discrete(dt).unwrap();
+    let to_a = FrameRotation::new(cfg.alpha_rad, Direction::ToActuator, 2);
+    let to_s = FrameRotation::new(cfg.alpha_rad, Direction::ToSample, 2);
+    let mut rng = nanomotion::core::rng::Rng::new(cfg.seed ^ 0x5eed);
+    let mut y = [0.0; N_OUTPUTS];
+    let (mut ux, mut uy, mut uz) = ([0.0], [0.0], [0.0]);
+    let v0 = 50.0;
+    let total = (periods + 1) * n;
+    let (mut ws, mut es) = (
+        Vec::with_capacity(periods * n),
+        Vec::with_capacity(periods * n),
+    );
+    for k in 0..total {
+        let tk = k as f64 * dt;
+        let d = to_a.apply([SLOW_M_S * tk, triangle(tk)]);
+        let r_a = [x_c + d[0], y_c + d[1]];
+        stage.plant_output(&mut y);
+        let e_s = to_s.apply([r_a[0] - y[0], r_a[1] - y[1]]);
+        kx.control(&[e_s[0]], &mut ux);
+        ky.control(&[e_s[1]], &mut uy);
+        let e_z = -y[3];
+        let w = if k >= n { w_std_m * rng.normal() } else { 0.0 };
+        kz.control(&[e_z + w], &mut uz);
+        let u_a = to_a.apply([ux[0], uy[0]]);
+        let ffx = v0 + (r_a[0] - x_c) * 1e6 / gains[0];
+        let ffy = v0 + (r_a[1] - y_c) * 1e6 / gains[1];
+        stage.advance(&[ffx + u_a[0], ffy + u_a[1], v0 + uz[0]]);
+        if k >= n {
+            ws.push(w);
+            es.push(-e_z);
+        }
+    }
+    let fs = 1.0 / dt;
+    let h = frf_h1(&ws, &es, fs, &WelchOptions::new(segment)).unwrap();
+    let qf = nanomotion::dvrc::Filter::fir(q.taps.clone(), (cfg.q_taps - 1) / 2, dt);
+    let lp = l.preview_samples() as f64;
+    let crit = |tv: Complex<f64>, f: f64| {
+        let w = TAU * f;
+        let tl = tv * l.freqresp_at(w) * Complex::from_polar(1.0, w * dt * lp);
+        (qf.freqresp_at(w) * (Complex::new(1.0, 0.0) - tl)).norm()
+    };
+    let t_model: Vec<Complex<f64>> = h
+        .freq_hz
+        .iter()
+        .map(|&f| t.freqresp_siso_at(TAU * f))
+        .collect();
+    let crit_meas = h
+        .freq_hz
+        .iter()
+        .zip(&h.response)
+        .map(|(&f, &tv)| crit(tv, f))
+        .collect();
+    let crit_model = h
+        .freq_hz
+        .iter()
+        .zip(&t_model)
+        .map(|(&f, &tv)| crit(tv, f))
+        .collect();
+    LoopCheck {
+        f_hz: h.freq_hz.clone(),
+        t_meas: h.response.clone(),
+        coherence: h.coherence.clone(),
+        t_model,
+        crit_meas,
+        crit_model,
+        q_cutoff_hz: q.cutoff_hz,
+        clips: stage.clip_count(),
     }
 }

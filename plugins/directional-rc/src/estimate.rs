@@ -89,6 +89,94 @@ impl LineScan {
     }
 }
 
+/// A borrowed line scan: what the estimator reads ([`LineScan`] owns its heights,
+/// the `rotation_estimator` block keeps them in one preallocated buffer).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct LineRef<'a> {
+    /// Slow-axis position x_i of the line (m).
+    pub x_m: f64,
+    /// y of the first sample (m).
+    pub y0_m: f64,
+    /// Signed sample spacing along y (m).
+    pub dy_m: f64,
+    /// Measured heights z_i (m).
+    pub z_m: &'a [f64],
+}
+
+impl LineScan {
+    /// The borrowed view the estimator reads.
+    pub fn as_ref(&self) -> LineRef<'_> {
+        LineRef {
+            x_m: self.x_m,
+            y0_m: self.y0_m,
+            dy_m: self.dy_m,
+            z_m: &self.z_m,
+        }
+    }
+}
+
+/// Preallocated work buffers of the estimator: with a workspace built for lines of
+/// up to `max_samples` samples and `max_lines` lines, [`estimate_rotation_in`] does
+/// not allocate. The lag window L can never exceed (max_samples/4 − 1)/2 (a longer
+/// window is refused with [`EstimateError::TooShort`] before it is used), so the
+/// correlation buffers need about max_samples/4 values.
+#[derive(Debug, Clone)]
+pub struct Workspace {
+    p1: Prefix,
+    p2: Prefix,
+    r: Vec<f64>,
+    d2: Vec<f64>,
+    pairs: Vec<PairEstimate>,
+    max_samples: usize,
+}
+
+impl Workspace {
+    /// Buffers for up to `max_lines` lines of up to `max_samples` samples.
+    pub fn new(max_lines: usize, max_samples: usize) -> Self {
+        let lags = max_window(max_samples) * 2 + 1;
+        Self {
+            p1: Prefix::with_capacity(max_samples),
+            p2: Prefix::with_capacity(max_samples),
+            r: Vec::with_capacity(lags),
+            d2: Vec::with_capacity(lags),
+            pairs: Vec::with_capacity(max_lines.saturating_sub(1)),
+            max_samples,
+        }
+    }
+
+    /// The pair estimates of the last [`estimate_rotation_in`] call.
+    pub fn pairs(&self) -> &[PairEstimate] {
+        &self.pairs
+    }
+
+    /// Heap bytes held (two prefix-sum pairs of max_samples + 1 values, the
+    /// correlation and second-difference buffers, the pairs).
+    pub fn memory_bytes(&self) -> usize {
+        (4 * (self.max_samples + 1) + self.r.capacity() + self.d2.capacity())
+            * std::mem::size_of::<f64>()
+            + self.pairs.capacity() * std::mem::size_of::<PairEstimate>()
+    }
+}
+
+/// The largest lag window L a line of `n` samples admits: 4(2L + 1) ≤ n.
+fn max_window(n: usize) -> usize {
+    (n / 4).saturating_sub(1) / 2
+}
+
+/// The combined estimate without the pairs (what [`estimate_rotation_in`] returns;
+/// the pairs stay in the [`Workspace`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Combined {
+    /// Inverse-variance weighted mean of the pair angles (rad).
+    pub alpha_rad: f64,
+    /// Propagated standard error (rad).
+    pub propagated_rad: f64,
+    /// Spread of the pair angles / √pairs (rad), with ≥ 2 pairs.
+    pub spread_rad: Option<f64>,
+    /// max(propagated, spread) (rad).
+    pub std_error_rad: f64,
+}
+
 /// Options of [`estimate_rotation`].
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct EstimatorOptions {
@@ -288,11 +376,53 @@ pub enum EstimateError {
         /// The limit in use.
         max_angle: f64,
     },
+    /// A line is longer than the workspace (the block's buffers) holds.
+    #[error(
+        "line {line} has {len} samples but the estimator holds at most {max}: raise max_line_s (the block) or build a larger workspace"
+    )]
+    TooLong {
+        /// Line index.
+        line: usize,
+        /// Its length.
+        len: usize,
+        /// The capacity.
+        max: usize,
+    },
+    /// More lines than the workspace holds.
+    #[error("{lines} lines given but the estimator holds at most {max}")]
+    TooManyLines {
+        /// Lines given.
+        lines: usize,
+        /// The capacity.
+        max: usize,
+    },
     /// Bad options.
     #[error(
         "option {0} must be finite and in its range (max_angle_rad in (0, 1.5), levels in (0, 1))"
     )]
     BadOption(&'static str),
+}
+
+impl EstimateError {
+    /// A number per kind (1 … 13, in declaration order), for the
+    /// `rotation_estimator` block's `status` output (−code on failure).
+    pub fn code(&self) -> u8 {
+        match self {
+            Self::TooFewLines(_) => 1,
+            Self::TooShort { .. } => 2,
+            Self::NonFinite { .. } => 3,
+            Self::SpacingMismatch { .. } => 4,
+            Self::ZeroSpacing(_) => 5,
+            Self::SameX { .. } => 6,
+            Self::Flat { .. } => 7,
+            Self::Ambiguous { .. } => 8,
+            Self::WeakCorrelation { .. } => 9,
+            Self::PeakAtEdge { .. } => 10,
+            Self::BadOption(_) => 11,
+            Self::TooLong { .. } => 12,
+            Self::TooManyLines { .. } => 13,
+        }
+    }
 }
 
 /// Mean and standard deviation (population) of `z`.
@@ -304,25 +434,37 @@ fn mean_std(z: &[f64]) -> (f64, f64) {
 }
 
 /// Prefix sums of z and z² for O(1) overlap statistics.
+#[derive(Debug, Clone)]
 struct Prefix {
     s: Vec<f64>,
     s2: Vec<f64>,
 }
 
 impl Prefix {
+    fn with_capacity(n: usize) -> Self {
+        Self {
+            s: Vec::with_capacity(n + 1),
+            s2: Vec::with_capacity(n + 1),
+        }
+    }
     fn new(z: &[f64]) -> Self {
-        let mut s = Vec::with_capacity(z.len() + 1);
-        let mut s2 = Vec::with_capacity(z.len() + 1);
+        let mut p = Self::with_capacity(z.len());
+        p.fill(z);
+        p
+    }
+    /// Refill from `z` (no allocation within the capacity).
+    fn fill(&mut self, z: &[f64]) {
+        self.s.clear();
+        self.s2.clear();
         let (mut a, mut b) = (0.0, 0.0);
-        s.push(0.0);
-        s2.push(0.0);
+        self.s.push(0.0);
+        self.s2.push(0.0);
         for v in z {
             a += v;
             b += v * v;
-            s.push(a);
-            s2.push(b);
+            self.s.push(a);
+            self.s2.push(b);
         }
-        Self { s, s2 }
     }
     /// (mean, variance) of z\[k0..k1\].
     fn stats(&self, k0: usize, k1: usize) -> (f64, f64) {
@@ -362,8 +504,23 @@ pub fn cross_correlation(z1: &[f64], z2: &[f64], max_lag: usize) -> Vec<f64> {
     let n = z1.len().min(z2.len());
     let (z1, z2) = (&z1[..n], &z2[..n]);
     let (p1, p2) = (Prefix::new(z1), Prefix::new(z2));
+    let mut r = Vec::with_capacity(2 * max_lag + 1);
+    correlation_into(z1, &p1, z2, &p2, max_lag, &mut r);
+    r
+}
+
+/// [`cross_correlation`] into `r` (cleared; no allocation within its capacity).
+fn correlation_into(
+    z1: &[f64],
+    p1: &Prefix,
+    z2: &[f64],
+    p2: &Prefix,
+    max_lag: usize,
+    r: &mut Vec<f64>,
+) {
     let l = max_lag as i64;
-    (-l..=l).map(|t| rho(z1, &p1, z2, &p2, t)).collect()
+    r.clear();
+    r.extend((-l..=l).map(|t| rho(z1, p1, z2, p2, t)));
 }
 
 /// Vertex of the parabola through (−1, r_m), (0, r_0), (1, r_p): offset in (−0.5,
@@ -412,10 +569,15 @@ fn ls_parabola(r: &[f64], c: usize, w: usize) -> (f64, f64, f64, f64) {
 /// absolute second difference of `r`, scaled for white noise), and refitted once
 /// around the vertex found.
 pub fn refine_peak(r: &[f64], imax: usize) -> PeakFit {
-    let mut d2: Vec<f64> = r
-        .windows(3)
-        .map(|w| (w[0] - 2.0 * w[1] + w[2]).abs())
-        .collect();
+    let mut d2 = Vec::with_capacity(r.len());
+    refine_peak_in(r, imax, &mut d2)
+}
+
+/// [`refine_peak`] with a caller's buffer for the second differences (no
+/// allocation within its capacity).
+fn refine_peak_in(r: &[f64], imax: usize, d2: &mut Vec<f64>) -> PeakFit {
+    d2.clear();
+    d2.extend(r.windows(3).map(|w| (w[0] - 2.0 * w[1] + w[2]).abs()));
     let sigma = if d2.is_empty() {
         0.0
     } else {
@@ -482,7 +644,7 @@ pub struct PeakFit {
     pub var_offset: f64,
 }
 
-fn validate(lines: &[LineScan], o: &EstimatorOptions) -> Result<(), EstimateError> {
+fn validate(lines: &[LineRef<'_>], o: &EstimatorOptions) -> Result<(), EstimateError> {
     if !(o.max_angle_rad.is_finite() && o.max_angle_rad > 0.0 && o.max_angle_rad < 1.5) {
         return Err(EstimateError::BadOption("max_angle_rad"));
     }
@@ -535,6 +697,19 @@ pub fn estimate_pair(
     b: usize,
     o: &EstimatorOptions,
 ) -> Result<PairEstimate, EstimateError> {
+    let refs: Vec<LineRef<'_>> = lines.iter().map(LineScan::as_ref).collect();
+    let n = lines.iter().map(|l| l.z_m.len()).max().unwrap_or(0);
+    pair_in(&refs, a, b, o, &mut Workspace::new(lines.len(), n))
+}
+
+/// [`estimate_pair`] in a workspace: allocation-free when the lines fit it.
+fn pair_in(
+    lines: &[LineRef<'_>],
+    a: usize,
+    b: usize,
+    o: &EstimatorOptions,
+    ws: &mut Workspace,
+) -> Result<PairEstimate, EstimateError> {
     let (la, lb) = (&lines[a], &lines[b]);
     let dx = lb.x_m - la.x_m;
     if dx == 0.0 {
@@ -556,6 +731,13 @@ pub fn estimate_pair(
             });
         }
     }
+    if n > ws.max_samples {
+        return Err(EstimateError::TooLong {
+            line: if la.z_m.len() >= lb.z_m.len() { a } else { b },
+            len: n,
+            max: ws.max_samples,
+        });
+    }
     let (z1, z2) = (&la.z_m[..n], &lb.z_m[..n]);
     let (_, s1) = mean_std(z1);
     let (_, s2) = mean_std(z2);
@@ -566,10 +748,12 @@ pub fn estimate_pair(
         }
     }
     // Alias test: does line a's structure repeat within 2L?
-    let p1 = Prefix::new(z1);
+    ws.p1.fill(z1);
+    ws.p2.fill(z2);
+    let p1 = &ws.p1;
     let mut below = false;
     for t in 1..=(2 * window).min(n / 2) {
-        let r = rho(z1, &p1, z1, &p1, t as i64);
+        let r = rho(z1, p1, z1, p1, t as i64);
         // Hysteresis: the central lobe must fall clearly below the level (by 0.25)
         // before a climb back counts, so that estimation noise on a slowly
         // decaying lobe is no repeat.
@@ -580,7 +764,7 @@ pub fn estimate_pair(
             let t_cross = t;
             let (mut t, mut r) = (t, r);
             while t + 1 < n / 2 {
-                let r2 = rho(z1, &p1, z1, &p1, t as i64 + 1);
+                let r2 = rho(z1, p1, z1, p1, t as i64 + 1);
                 if r2 <= r {
                     break;
                 }
@@ -600,7 +784,8 @@ pub fn estimate_pair(
             });
         }
     }
-    let r = cross_correlation(z1, z2, window);
+    correlation_into(z1, &ws.p1, z2, &ws.p2, window, &mut ws.r);
+    let r = &ws.r;
     let (imax, _) = r
         .iter()
         .enumerate()
@@ -616,7 +801,7 @@ pub fn estimate_pair(
             max_angle: o.max_angle_rad,
         });
     }
-    let fit = refine_peak(&r, imax);
+    let fit = refine_peak_in(r, imax, &mut ws.d2);
     let (frac, peak) = (fit.offset, fit.peak);
     if peak < o.min_correlation {
         return Err(EstimateError::WeakCorrelation {
@@ -649,10 +834,44 @@ pub fn estimate_rotation(
     lines: &[LineScan],
     o: &EstimatorOptions,
 ) -> Result<RotationEstimate, EstimateError> {
+    let refs: Vec<LineRef<'_>> = lines.iter().map(LineScan::as_ref).collect();
+    let n = lines.iter().map(|l| l.z_m.len()).max().unwrap_or(0);
+    let mut ws = Workspace::new(lines.len(), n);
+    let c = estimate_rotation_in(&refs, o, &mut ws)?;
+    let est = RotationEstimate {
+        alpha_rad: c.alpha_rad,
+        propagated_rad: c.propagated_rad,
+        spread_rad: c.spread_rad,
+        std_error_rad: c.std_error_rad,
+        pairs: ws.pairs,
+    };
+    tracing::debug!(%est, "rotation estimate");
+    Ok(est)
+}
+
+/// [`estimate_rotation`] in a preallocated [`Workspace`]: the same computation,
+/// allocation-free when the lines fit the workspace (more lines or longer lines
+/// than it was built for are refused with [`EstimateError::TooLong`] /
+/// [`EstimateError::TooManyLines`]). The pairs are left in
+/// [`Workspace::pairs`]. Cost: per pair O(n·L) multiply-adds (n samples, L lags).
+pub fn estimate_rotation_in(
+    lines: &[LineRef<'_>],
+    o: &EstimatorOptions,
+    ws: &mut Workspace,
+) -> Result<Combined, EstimateError> {
     validate(lines, o)?;
-    let pairs = (0..lines.len() - 1)
-        .map(|i| estimate_pair(lines, i, i + 1, o))
-        .collect::<Result<Vec<_>, _>>()?;
+    ws.pairs.clear();
+    if lines.len() - 1 > ws.pairs.capacity() {
+        return Err(EstimateError::TooManyLines {
+            lines: lines.len(),
+            max: ws.pairs.capacity() + 1,
+        });
+    }
+    for i in 0..lines.len() - 1 {
+        let p = pair_in(lines, i, i + 1, o, ws)?;
+        ws.pairs.push(p);
+    }
+    let pairs = &ws.pairs;
     let wsum: f64 = pairs
         .iter()
         .map(|p| 1.0 / (p.sigma_rad * p.sigma_rad))
@@ -669,15 +888,12 @@ pub fn estimate_rotation(
         let v = pairs.iter().map(|p| (p.alpha_rad - m).powi(2)).sum::<f64>() / (n - 1.0);
         (v / n).sqrt()
     });
-    let est = RotationEstimate {
+    Ok(Combined {
         alpha_rad: alpha,
         propagated_rad: propagated,
         spread_rad: spread,
         std_error_rad: propagated.max(spread.unwrap_or(0.0)),
-        pairs,
-    };
-    tracing::debug!(%est, "rotation estimate");
-    Ok(est)
+    })
 }
 
 #[cfg(test)]

@@ -65,8 +65,14 @@ pub fn rotation(alpha_rad: f64) -> DMat2 {
 #[serde(deny_unknown_fields)]
 pub struct FrameRotation {
     /// Sample rotation α about z (rad), e.g. from
-    /// [`estimate_rotation`](crate::estimate::estimate_rotation).
+    /// [`estimate_rotation`](crate::estimate::estimate_rotation). Default 0; must
+    /// stay 0 with `alpha_input`.
+    #[serde(default)]
     pub alpha_rad: f64,
+    /// Take α from an input port `alpha` (e.g. a `rotation_estimator`) instead of
+    /// `alpha_rad`. The matrix is recomputed only when the value changes.
+    #[serde(default)]
+    pub alpha_input: bool,
     /// `to_sample` (R) or `to_actuator` (Rᵀ).
     pub direction: Direction,
     /// Width of `u` and `y`: 2 (x, y) or 3 (x, y, z). Default 2.
@@ -74,6 +80,9 @@ pub struct FrameRotation {
     pub width: usize,
     #[serde(skip)]
     m: Option<DMat2>,
+    /// The α (bits) `m` was computed for, with `alpha_input`.
+    #[serde(skip)]
+    alpha_bits: u64,
 }
 
 impl FrameRotation {
@@ -81,9 +90,11 @@ impl FrameRotation {
     pub fn new(alpha_rad: f64, direction: Direction, width: usize) -> Self {
         let mut f = Self {
             alpha_rad,
+            alpha_input: false,
             direction,
             width,
             m: None,
+            alpha_bits: alpha_rad.to_bits(),
         };
         f.m = Some(f.matrix());
         f
@@ -91,7 +102,11 @@ impl FrameRotation {
 
     /// The 2×2 matrix applied: R(α) or R(α)ᵀ.
     pub fn matrix(&self) -> DMat2 {
-        let r = rotation(self.alpha_rad);
+        self.matrix_for(self.alpha_rad)
+    }
+
+    fn matrix_for(&self, alpha_rad: f64) -> DMat2 {
+        let r = rotation(alpha_rad);
         match self.direction {
             Direction::ToSample => r,
             Direction::ToActuator => r.transpose(),
@@ -109,13 +124,24 @@ impl FrameRotation {
 #[typetag::serde(name = "frame_rotation")]
 impl Block for FrameRotation {
     fn inputs(&self) -> Vec<Port> {
-        vec![Port::new("u", self.width)]
+        if self.alpha_input {
+            vec![Port::new("u", self.width), Port::new("alpha", 1)]
+        } else {
+            vec![Port::new("u", self.width)]
+        }
     }
     fn outputs(&self) -> Vec<Port> {
         vec![Port::new("y", self.width)]
     }
     fn build(&mut self, _ctx: &BuildContext) -> Result<(), ParamError> {
         check::finite("alpha_rad", self.alpha_rad)?;
+        if self.alpha_input && self.alpha_rad != 0.0 {
+            return Err(ParamError::new(
+                "alpha_rad",
+                format!("is {} with alpha_input: true", self.alpha_rad),
+                "give either alpha_rad or alpha_input: true (α from the `alpha` port), not both",
+            ));
+        }
         if !(self.width == 2 || self.width == 3) {
             return Err(ParamError::new(
                 "width",
@@ -130,10 +156,19 @@ impl Block for FrameRotation {
             );
         }
         self.m = Some(self.matrix());
+        self.alpha_bits = self.alpha_rad.to_bits();
         Ok(())
     }
     #[inline]
     fn output(&mut self, _tick: Tick, u: &[f64], y: &mut [f64]) {
+        if self.alpha_input {
+            // α from the port: new trigonometry only when it changes.
+            let a = u[self.width];
+            if a.to_bits() != self.alpha_bits || self.m.is_none() {
+                self.alpha_bits = a.to_bits();
+                self.m = Some(self.matrix_for(a));
+            }
+        }
         let m = match self.m {
             Some(m) => m,
             None => self.matrix(),
@@ -156,11 +191,12 @@ nanomotion_core::submit_block_doc! {
         role: Role::Controller,
         summary: "DRC coordinate rotation (7.17): in-plane (x, y) by R(α) (to_sample) or R(α)ᵀ (to_actuator); z passes",
         params: &[
-            ParamDoc { name: "alpha_rad", doc: "sample rotation α about z (rad)", default: None },
+            ParamDoc { name: "alpha_rad", doc: "sample rotation α about z (rad)", default: Some("0") },
+            ParamDoc { name: "alpha_input", doc: "take α from the input port `alpha` (e.g. rotation_estimator.alpha)", default: Some("false") },
             ParamDoc { name: "direction", doc: "to_sample (R: errors into the controller frame) or to_actuator (Rᵀ: references, controller outputs)", default: None },
             ParamDoc { name: "width", doc: "2 (x, y) or 3 (x, y, z)", default: Some("2") },
         ],
-        ports: "u[width] -> y[width]",
+        ports: "u[width] (, alpha with alpha_input) -> y[width]",
     }
 }
 
@@ -195,6 +231,35 @@ mod tests {
         // Rᵀ e_x = first row of R = (c, s).
         assert!((y[0] - c).abs() < 1e-15 && (y[1] - s).abs() < 1e-15);
         assert_eq!(y[2], 7.0);
+    }
+
+    #[test]
+    fn alpha_from_the_port_equals_the_parameter() {
+        let mut a: Box<dyn Block> = nanomotion_core::yaml::from_str(
+            "type: frame_rotation\nalpha_input: true\ndirection: to_sample\n",
+            "t",
+        )
+        .unwrap();
+        a.build(&BuildContext::new("r", 1e-3, 0)).unwrap();
+        assert_eq!(a.inputs().len(), 2);
+        let mut y = [0.0; 2];
+        // α = 0 first: identity; then 0.022: as the fixed-α block.
+        a.output(Tick::new(0, 1e-3), &[1.5, -2.0, 0.0], &mut y);
+        assert_eq!(y, [1.5, -2.0]);
+        let mut fixed = FrameRotation::new(0.022, Direction::ToSample, 2);
+        let mut yf = [0.0; 2];
+        fixed.output(Tick::new(0, 1e-3), &[1.5, -2.0], &mut yf);
+        a.output(Tick::new(1, 1e-3), &[1.5, -2.0, 0.022], &mut y);
+        assert_eq!(y, yf);
+        let mut b: Box<dyn Block> = nanomotion_core::yaml::from_str(
+            "type: frame_rotation\nalpha_input: true\nalpha_rad: 0.1\ndirection: to_sample\n",
+            "t",
+        )
+        .unwrap();
+        assert_eq!(
+            b.build(&BuildContext::new("r", 1e-3, 0)).unwrap_err().field,
+            "alpha_rad"
+        );
     }
 
     #[test]

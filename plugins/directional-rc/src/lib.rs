@@ -10,6 +10,8 @@
 //! | what | thesis | Rust | block `type:` |
 //! |---|---|---|---|
 //! | rotation estimate from line scans: correlation, sub-sample peak, shift, angle, averaging | (7.18)–(7.21) | [`estimate::estimate_rotation`] | — |
+//! | the estimate inside a graph: records the lines, estimates once (preallocated, one tick), outputs α | (7.18)–(7.21) | [`estimator_block::RotationEstimator`] | `rotation_estimator` |
+//! | the scan plan: estimation lines, then the raster scan in the sample frame | Sec. 7.4.3, Fig. 7.11 | [`plan::ScanPlan`] | `drc_scan_plan` |
 //! | rotation R(α) of references, errors and controller outputs between actuator and sample frame | (7.17), Fig. 7.11 | [`frame::FrameRotation`] (glam `DMat2`) | `frame_rotation` |
 //!
 //! The RC itself (7.13) with its learning filter (ZPETC) and robustness filter Q is
@@ -18,9 +20,13 @@
 //! `docs/directional-rc.md`).
 
 pub mod estimate;
+pub mod estimator_block;
 pub mod frame;
+pub mod plan;
 
 pub use estimate::{
     EstimateError, EstimatorOptions, LineScan, RotationEstimate, estimate_rotation,
 };
+pub use estimator_block::{OnFailure, RotationEstimator};
 pub use frame::{Direction, FrameRotation, rotation};
+pub use plan::ScanPlan;
