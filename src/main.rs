@@ -578,6 +578,7 @@ fn run(args: RunArgs) -> Result<(), String> {
                 title: &result.title,
                 files: names,
                 complete: true,
+                stability_gate: &gate_lines,
             })
             .map_err(|e| e.to_string())?;
         say!("wrote {} files to {}", files.len() + 1, out.display());

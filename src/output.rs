@@ -57,6 +57,10 @@ pub struct Manifest<'a> {
     pub files: Vec<String>,
     /// Always `true`: the run was written completely.
     pub complete: bool,
+    /// What the stability gate let through and why (`require: allow_unproven`
+    /// reasons, or the refusal that `--allow-unproven` overrode); empty when
+    /// every loop was proven.
+    pub stability_gate: &'a [String],
 }
 
 /// An output folder being written: files go into a hidden temporary sibling

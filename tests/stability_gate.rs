@@ -182,6 +182,27 @@ fn check_and_run_obey_the_gate() {
             && stdout.contains("unstable"),
         "{stdout}"
     );
+    // With files, the run folder's manifest says so too.
+    let run_dir = dir.join("run");
+    let (code, _, stderr) = out(nm().arg("run").arg(&g).arg("--out").arg(&run_dir).args([
+        "--allow-unproven",
+        "--duration",
+        "0.05",
+    ]));
+    assert_eq!(code, Some(0), "{stderr}");
+    let manifest: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(run_dir.join("nanomotion-run.json")).unwrap(),
+    )
+    .unwrap();
+    let gate_lines = manifest["stability_gate"]
+        .as_array()
+        .expect("stability_gate");
+    assert!(
+        gate_lines
+            .iter()
+            .any(|l| l.as_str().unwrap_or("").contains("--allow-unproven")),
+        "{manifest}"
+    );
     std::fs::remove_dir_all(&dir).ok();
 }
 
