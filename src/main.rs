@@ -129,7 +129,10 @@ enum Command {
         allow_unproven: bool,
     },
     /// Validate a graph without running it: parse, build every block, resolve ports,
-    /// rates and execution order, and report inserted rate transitions.
+    /// rates and execution order, report inserted rate transitions, and analyse every
+    /// feedback loop (the stability gate: closed-loop poles, margins, ‖S‖∞, ‖T‖∞,
+    /// learning criteria). Exits with status 1 naming the loop when one is unstable,
+    /// unproven without a stated reason, or misses a `require:` bound.
     Check {
         /// The graph file (YAML).
         graph: PathBuf,
