@@ -51,7 +51,7 @@ pub struct Options {
     /// Family-wise false-alarm level of a step (default 0.01).
     pub alpha: f64,
     /// Share of the mean square above the noise floor an effect must remove
-    /// (default 0.2).
+    /// (default 0.3).
     pub min_excess_cut: f64,
     /// Restrict the candidates to these vocabulary names (empty: all).
     pub effects: Vec<String>,
@@ -66,7 +66,7 @@ impl Default for Options {
             holdout: 0.3,
             seed: None,
             alpha: 0.01,
-            min_excess_cut: 0.2,
+            min_excess_cut: 0.3,
             effects: Vec::new(),
             threads: 2,
         }
