@@ -276,9 +276,10 @@ pub struct Sec85Row {
 
 /// Speed threshold of the "moving" error window of the Sec. 8.5 comparison
 /// (rad/s, ≈ 20 % of the peak speed π² rad/s): near the turning points the edges
-/// stop for tens of ms, the standstill and out-of-band fallbacks take over and
-/// dominate the rms errors of every setting alike; the moving window shows the
-/// fit itself. Judged on the true velocity.
+/// stop for tens of ms and the extrapolation leaves the ±1-count band: the
+/// estimator's out-of-band rule (and under `zero_standstill` its standstill rule)
+/// takes over and can dominate the rms errors; the moving window shows the fit
+/// itself. Judged on the true velocity.
 pub const SEC85_MOVING_SPEED: f64 = 2.0;
 
 /// Read rate of the Sec. 8.5 runs (Hz).
