@@ -52,7 +52,7 @@ use nanomotion_core::{
     Block, BlockDoc, BuildContext, Estimator, ParamDoc, ParamError, Port, Role, Tick,
 };
 use serde::{Deserialize, Serialize};
-use timestamp_encoder::TimestampEstimator;
+use timestamp_encoder::{Fallback, TimestampEstimator};
 
 fn d_m() -> usize {
     2
@@ -92,7 +92,12 @@ pub struct HotsEstimator {
     /// Fallback band (counts), default 1.
     #[serde(default = "d_band")]
     pub band_counts: f64,
-    /// Standstill timeout (s), default 0.01.
+    /// Out-of-band rule (Sec. 8.3): `thesis` (default: position → count, v̂/â
+    /// from the fit) or `zero_standstill` (also v̂ = â = 0, plus the standstill
+    /// rule); see `timestamp_encoder::Fallback`.
+    #[serde(default)]
+    pub fallback: Fallback,
+    /// Standstill timeout (s), default 0.01 (`fallback: zero_standstill` only).
     #[serde(default = "d_timeout")]
     pub standstill_timeout_s: f64,
     /// Path of a JSON [`SlitCalibration`], read in `build`.
@@ -118,6 +123,7 @@ impl HotsEstimator {
             register_len: n,
             resolution,
             band_counts: d_band(),
+            fallback: Fallback::Thesis,
             standstill_timeout_s: d_timeout(),
             calibration_file: None,
             edge_offsets_counts: cal.edge_offsets_counts.clone(),
@@ -163,6 +169,7 @@ impl HotsEstimator {
         check::all_finite("edge_offsets_counts", &table)?;
         let mut e = TimestampEstimator::new(self.order, self.register_len, self.resolution)?;
         e.band_counts = self.band_counts;
+        e.fallback = self.fallback;
         e.standstill_timeout_s = self.standstill_timeout_s;
         e.edge_offsets_counts = table;
         e.validate()?;
@@ -215,7 +222,8 @@ nanomotion_core::submit_block_doc! {
             ParamDoc { name: "register_len", doc: "register length n of the encoder, n > m", default: Some("5") },
             ParamDoc { name: "resolution", doc: "units per count Δ", default: None },
             ParamDoc { name: "band_counts", doc: "fallback band (counts)", default: Some("1") },
-            ParamDoc { name: "standstill_timeout_s", doc: "standstill timeout (s); 0 disables", default: Some("0.01") },
+            ParamDoc { name: "fallback", doc: "out-of-band rule: thesis (position → count, v/a from the fit) or zero_standstill (also v = a = 0, plus standstill)", default: Some("thesis") },
+            ParamDoc { name: "standstill_timeout_s", doc: "zero_standstill only: standstill timeout (s); 0 disables", default: Some("0.01") },
             ParamDoc { name: "calibration_file", doc: "JSON SlitCalibration read at build (≤ 16 MiB; a relative path is relative to the graph file's folder)", default: Some("none") },
             ParamDoc { name: "edge_offsets_counts", doc: "inline calibration ê per edge (counts)", default: Some("[]") },
         ],

@@ -6,20 +6,26 @@
 //! by a polynomial of order m ([`crate::fit`]) and the polynomial and its first two
 //! derivatives are evaluated at t_c. Outputs are in input units: x̂ = Δ·x̂_counts.
 //!
-//! **Fallback (Sec. 8.3).** The count c says the true position lies in the cell
-//! [c, c + 1) counts, so the count's own estimate is the cell centre c + ½. If the
-//! extrapolated position leaves the band |x̂ − (c + ½)| ≤ `band_counts` (default 1
-//! count, the thesis's rule), the estimate is replaced by the cell centre, and the
-//! velocity and acceleration by 0 (status 1): an extrapolation that has left its
-//! cell means the polynomial no longer describes the motion, which in practice
-//! happens when the motion stopped or reversed since the newest event.
+//! **Fallback (Sec. 8.3), `fallback: thesis` (default).** The count c says the true
+//! position lies in the cell [c, c + 1) counts, so the count's own estimate — the
+//! thesis's quantized measurement x(t), with our half-count convention — is the cell
+//! centre c + ½. If the extrapolated position leaves the band |x̂ − (c + ½)| ≤
+//! `band_counts` (default 1 count, the thesis's rule), only the *position* is
+//! replaced by the cell centre; the velocity and acceleration stay those of the fit
+//! (status 1), as in the thesis's x̂′(t). If the fit itself fails (no finite
+//! solution) the output is the cell centre with zero derivatives (status 1).
 //!
-//! **Standstill.** If the newest event is older than both `standstill_timeout_s`
-//! (default 10 ms, as the public phobos `encoderhots` inserts a pseudo-event after
-//! 10 ms without edges) and twice the window's mean time per count
-//! (T / max(|x_1 − x_n|, 1)), the output is the cell centre with zero velocity and
-//! acceleration (status 3). The second condition keeps a slow but steady motion
-//! (events further apart than the timeout) from being declared standstill. With no event at all: the cell centre, zero derivatives (status 2).
+//! **`fallback: zero_standstill`** (the rule this crate used before issue 18; not the
+//! thesis's). Out of band: the cell centre *and* v̂ = â = 0. Standstill: if the newest
+//! event is older than both `standstill_timeout_s` (default 10 ms, as the public
+//! phobos `encoderhots` waits 10 ms before inserting a pseudo-event) and twice the
+//! window's mean time per count (T / max(|x_1 − x_n|, 1)), the output is the cell
+//! centre with zero velocity and acceleration (status 3). The second condition keeps
+//! a slow but steady motion (events further apart than the timeout) from being
+//! declared standstill. `standstill_timeout_s` is only used by this rule.
+//!
+//! With no event at all, under either rule: the cell centre, zero derivatives
+//! (status 2).
 //!
 //! **Reversals.** Events keep their edge level whichever the direction, so a window
 //! spanning a reversal holds a turning trajectory; an order m ≥ 2 follows it, m = 1
@@ -50,16 +56,31 @@ fn d_timeout() -> f64 {
     0.01
 }
 
+/// What the estimator does when the fit leaves the ±band around the count (Sec. 8.3).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Fallback {
+    /// The thesis's rule: the position is replaced by the count (cell centre),
+    /// velocity and acceleration stay those of the fit. No standstill rule.
+    #[default]
+    Thesis,
+    /// Position → cell centre and v̂ = â = 0 out of band, plus the standstill rule
+    /// (no event for `standstill_timeout_s` and twice the window's time per count).
+    ZeroStandstill,
+}
+
 /// Why an estimate is what it is (the `status` output).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Status {
     /// The polynomial fit, within the band.
     Fitted = 0,
-    /// The fit left the ±band around the count: cell centre, zero derivatives.
+    /// The fit left the ±band around the count: cell centre; derivatives from the
+    /// fit ([`Fallback::Thesis`]) or zero ([`Fallback::ZeroStandstill`]).
     OutOfBand = 1,
     /// No event yet: cell centre, zero derivatives.
     NoEvents = 2,
-    /// No event for longer than the standstill timeout: cell centre, zeros.
+    /// No event for longer than the standstill timeout: cell centre, zeros
+    /// ([`Fallback::ZeroStandstill`] only).
     Standstill = 3,
 }
 
@@ -94,8 +115,12 @@ pub struct TimestampEstimator {
     /// Fallback band around the cell centre (counts), default 1 (Sec. 8.3).
     #[serde(default = "d_band")]
     pub band_counts: f64,
+    /// What happens out of band: `thesis` (default) or `zero_standstill`.
+    #[serde(default)]
+    pub fallback: Fallback,
     /// Minimum age of the newest event for standstill (s), default 0.01; 0
-    /// disables (see the module documentation for the full rule).
+    /// disables. Used by `fallback: zero_standstill` only (see the module
+    /// documentation for the full rule).
     #[serde(default = "d_timeout")]
     pub standstill_timeout_s: f64,
     /// Slit calibration ê (counts) per edge, indexed by level mod its length
@@ -115,6 +140,7 @@ impl TimestampEstimator {
             register_len: n,
             resolution,
             band_counts: d_band(),
+            fallback: Fallback::Thesis,
             standstill_timeout_s: d_timeout(),
             edge_offsets_counts: Vec::new(),
             status: None,
@@ -188,26 +214,46 @@ impl TimestampEstimator {
             };
         }
         let d = self.resolution;
+        let zero = self.fallback == Fallback::ZeroStandstill;
         let status = if n_valid == 0 {
             Status::NoEvents
-        } else if self.standstill_timeout_s > 0.0 && t_c - ts[0] > self.standstill_timeout_s && {
-            let span = ts[0] - ts[n_valid - 1];
-            let counts = (xs[0] - xs[n_valid - 1]).abs().max(1.0);
-            t_c - ts[0] > 2.0 * span / counts
-        } {
+        } else if zero
+            && self.standstill_timeout_s > 0.0
+            && t_c - ts[0] > self.standstill_timeout_s
+            && {
+                let span = ts[0] - ts[n_valid - 1];
+                let counts = (xs[0] - xs[n_valid - 1]).abs().max(1.0);
+                t_c - ts[0] > 2.0 * span / counts
+            }
+        {
             Status::Standstill
         } else {
             match fit_events(&ts[..n_valid], &xs[..n_valid], self.order, t_c) {
-                Some(f) if f.x.is_finite() && (f.x - centre).abs() <= self.band_counts => {
-                    out[0] = f.x * d;
-                    out[1] = f.v * d;
-                    out[2] = f.a * d;
-                    Status::Fitted
+                Some(f) if f.x.is_finite() && f.v.is_finite() && f.a.is_finite() => {
+                    // x̂′ (Sec. 8.3): the fit if within ±band of the count, else the count.
+                    let in_band = (f.x - centre).abs() <= self.band_counts;
+                    out[0] = if in_band { f.x } else { centre } * d;
+                    if in_band || !zero {
+                        out[1] = f.v * d;
+                        out[2] = f.a * d;
+                        if in_band {
+                            Status::Fitted
+                        } else {
+                            Status::OutOfBand
+                        }
+                    } else {
+                        out[1] = 0.0;
+                        out[2] = 0.0;
+                        Status::OutOfBand
+                    }
                 }
-                _ => Status::OutOfBand,
+                _ => {
+                    out[..3].copy_from_slice(&[centre * d, 0.0, 0.0]);
+                    Status::OutOfBand
+                }
             }
         };
-        if status != Status::Fitted {
+        if matches!(status, Status::NoEvents | Status::Standstill) {
             out[0] = centre * d;
             out[1] = 0.0;
             out[2] = 0.0;
@@ -250,13 +296,14 @@ nanomotion_core::submit_block_doc! {
     BlockDoc {
         type_name: "timestamp_estimator",
         role: Role::Estimator,
-        summary: "time-stamping estimator (8.1)-(8.4): LS polynomial of order m through the register's events, scaled time, extrapolated to the sample for x, v, a; count fallback outside ±band",
+        summary: "time-stamping estimator (8.1)-(8.4): LS polynomial of order m through the register's events, scaled time, extrapolated to the sample for x, v, a; fallback outside ±band: thesis (x → count, v/a kept) or zero_standstill (x → count, v = a = 0, 10 ms standstill)",
         params: &[
             ParamDoc { name: "order", doc: "polynomial order m (8.1), ≤ 4", default: Some("2") },
             ParamDoc { name: "register_len", doc: "register length n of the encoder, n > m", default: Some("5") },
             ParamDoc { name: "resolution", doc: "units per count Δ (2π/400 rad for 100 lines)", default: None },
             ParamDoc { name: "band_counts", doc: "fallback band around the cell centre (counts)", default: Some("1") },
-            ParamDoc { name: "standstill_timeout_s", doc: "newest event older than this → standstill (s); 0 disables", default: Some("0.01") },
+            ParamDoc { name: "fallback", doc: "out-of-band rule: thesis (Sec. 8.3: position → count, v/a from the fit) or zero_standstill (also v = a = 0, plus standstill)", default: Some("thesis") },
+            ParamDoc { name: "standstill_timeout_s", doc: "zero_standstill only: newest event older than this → standstill (s); 0 disables", default: Some("0.01") },
             ParamDoc { name: "edge_offsets_counts", doc: "slit calibration ê per edge (counts), added to events (hots crate)", default: Some("[]") },
         ],
         ports: "register[2+2n] -> y[3] = [x, v, a] (units, /s, /s²), status (0 fit, 1 out of band, 2 no events, 3 standstill)",

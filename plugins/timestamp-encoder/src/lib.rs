@@ -7,7 +7,7 @@
 //! | what | thesis | Rust type | block `type:` |
 //! |---|---|---|---|
 //! | encoder: quadrature edges with slit errors, eccentricity, A/B misplacement; events time-stamped on a 20 MHz clock; register of the last n events with skip σ | Sec. 8.2, 8.4, (8.5)–(8.7) | [`TimestampEncoder`] | `timestamp_encoder` |
-//! | LS polynomial fit through the register, scaled time, extrapolation to the sample, ±1-count fallback | Sec. 8.3, (8.1)–(8.4) | [`TimestampEstimator`], [`fit::fit_events`] | `timestamp_estimator` |
+//! | LS polynomial fit through the register, scaled time, extrapolation to the sample, ±1-count fallback (position → count; `fallback: zero_standstill` also zeroes v, a) | Sec. 8.3, (8.1)–(8.4) | [`TimestampEstimator`], [`fit::fit_events`] | `timestamp_estimator` |
 //! | skip index k_σ(k, i) and the register K(k) | (8.5)–(8.7) | [`skip::skip_index`], [`skip::register_indices`] | — |
 //!
 //! The encoder sees the plant's continuous trajectory: its input is the position
@@ -47,4 +47,4 @@ pub mod poly;
 pub mod skip;
 
 pub use encoder::TimestampEncoder;
-pub use estimator::{Status, TimestampEstimator};
+pub use estimator::{Fallback, Status, TimestampEstimator};

@@ -3,7 +3,7 @@
 use nanomotion_core::{Block, BuildContext, Estimator, Sensor, Tick};
 use std::f64::consts::{FRAC_PI_2, PI, TAU};
 use timestamp_encoder::skip::register_indices;
-use timestamp_encoder::{Status, TimestampEncoder, TimestampEstimator};
+use timestamp_encoder::{Fallback, Status, TimestampEncoder, TimestampEstimator};
 
 const CLOCK: f64 = 50e-9;
 
@@ -270,12 +270,98 @@ fn estimator_recovers_a_quadratic_trajectory() {
     }
 }
 
+/// A hand-built register: the five levels 0..4 crossed by p(t) = v0 t + ½ a0 t²
+/// (counts, s), newest first, count `c`. Times solve p(t_L) = L in closed form.
+fn quadratic_register(v0: f64, a0: f64, c: f64) -> Vec<f64> {
+    let mut reg = vec![c, 5.0];
+    for level in (0..5).rev() {
+        let l = level as f64;
+        reg.push((-v0 + (v0 * v0 + 2.0 * a0 * l).sqrt()) / a0);
+        reg.push(l);
+    }
+    reg
+}
+
+#[test]
+fn fallback_rules_on_a_constructed_register() {
+    // Events exactly on p(t) = v0 t + ½ a0 t² (counts); m = 2, n = 5 fits p exactly,
+    // so the fit's x̂, v̂, â at t_c are p(t_c), p'(t_c) = v0 + a0 t_c, p'' = a0.
+    // The count says 4 (cell centre 4.5, band ±1): p(t_c) = 5 is in band, p(t_c) = 6
+    // is 1.5 counts out.
+    let (v0, a0, d) = (1000.0, 1e5, 0.5);
+    let reg = quadratic_register(v0, a0, 4.0);
+    let t_at = |x: f64| (-v0 + (v0 * v0 + 2.0 * a0 * x).sqrt()) / a0;
+    let close = |a: f64, b: f64| (a - b).abs() <= 1e-7 * b.abs().max(1.0);
+    for fallback in [Fallback::Thesis, Fallback::ZeroStandstill] {
+        let mut est = TimestampEstimator::new(2, 5, d).unwrap();
+        est.fallback = fallback;
+        let mut y = [0.0; 3];
+        // In band: the fit, under both rules.
+        let tc = t_at(5.0);
+        assert_eq!(est.estimate_from_register(tc, &reg, &mut y), Status::Fitted);
+        assert!(close(y[0], 5.0 * d), "{fallback:?} {y:?}");
+        assert!(close(y[1], (v0 + a0 * tc) * d), "{fallback:?} {y:?}");
+        assert!(close(y[2], a0 * d), "{fallback:?} {y:?}");
+        // Out of band: position = the count's cell centre under both rules.
+        let tc = t_at(6.0);
+        assert_eq!(
+            est.estimate_from_register(tc, &reg, &mut y),
+            Status::OutOfBand
+        );
+        assert_eq!(y[0], 4.5 * d, "{fallback:?}");
+        match fallback {
+            // Sec. 8.3: only x̂ is replaced; v̂, â are the fit's.
+            Fallback::Thesis => {
+                assert!(close(y[1], (v0 + a0 * tc) * d), "{y:?}");
+                assert!(close(y[2], a0 * d), "{y:?}");
+            }
+            Fallback::ZeroStandstill => assert_eq!([y[1], y[2]], [0.0, 0.0]),
+        }
+        // 20 ms after the newest event (window span 3.4 ms): standstill only under
+        // the zero_standstill rule; the thesis rule still extrapolates (far out of
+        // band: x = centre, v̂ and â from the fit).
+        let t_new = reg[2];
+        let tc = t_new + 0.02;
+        let s = est.estimate_from_register(tc, &reg, &mut y);
+        assert_eq!(y[0], 4.5 * d);
+        match fallback {
+            Fallback::Thesis => {
+                assert_eq!(s, Status::OutOfBand);
+                assert!(close(y[1], (v0 + a0 * tc) * d), "{y:?}");
+            }
+            Fallback::ZeroStandstill => {
+                assert_eq!(s, Status::Standstill);
+                assert_eq!([y[1], y[2]], [0.0, 0.0]);
+            }
+        }
+    }
+    // YAML: the default is the thesis's rule; the other is named; a typo is an error.
+    let est: Box<dyn Block> =
+        nanomotion_core::yaml::from_str("type: timestamp_estimator\nresolution: 1\n", "t").unwrap();
+    assert!(format!("{est:?}").contains("fallback: Thesis"));
+    let est: Box<dyn Block> = nanomotion_core::yaml::from_str(
+        "type: timestamp_estimator\nresolution: 1\nfallback: zero_standstill\n",
+        "t",
+    )
+    .unwrap();
+    assert!(format!("{est:?}").contains("fallback: ZeroStandstill"));
+    assert!(
+        nanomotion_core::yaml::from_str::<Box<dyn Block>>(
+            "type: timestamp_estimator\nresolution: 1\nfallback: zero\n",
+            "t"
+        )
+        .is_err()
+    );
+}
+
 #[test]
 fn standstill_and_reversal() {
     let mut enc = TimestampEncoder::default();
     enc.prepare(0).unwrap();
     let d = enc.resolution();
+    // The zero-and-standstill rule (the thesis's rule has no standstill state).
     let mut est = TimestampEstimator::new(2, 5, d).unwrap();
+    est.fallback = Fallback::ZeroStandstill;
     let (mut reg, mut y) = (vec![0.0; 12], [0.0; 3]);
     // No events yet.
     enc.measure(0.0, &[0.25 * d, 0.0], &mut reg);
