@@ -45,6 +45,34 @@ fn jogging_error(shape: &str, velocity: f64) -> f64 {
 }
 
 #[test]
+fn the_loops_see_the_stage_through_a_5_nm_encoder_count() {
+    // The thesis's errors include its 5 nm encoder resolution (Sec. 2.4.2): both
+    // example graphs feed back a count, x_enc = 5 nm · floor(x_s / 5 nm).
+    for file in ["walking_piezo_jogging.yaml", "walking_piezo_ff_gs.yaml"] {
+        let logs = run(file, 0.4, |t| t);
+        let (x, x_enc, r, e) = (
+            col(&logs, "stage.x_s"),
+            col(&logs, "enc.y"),
+            col(&logs, "ref.y"),
+            col(&logs, "err.y"),
+        );
+        let lsb = 5e-9;
+        for (k, (&x, &q)) in x.iter().zip(x_enc).enumerate() {
+            let counts = q / lsb;
+            assert!(
+                (counts - counts.round()).abs() < 1e-6,
+                "{file} k={k}: {q:e}"
+            );
+            assert!(x - q >= -1e-15 && x - q < lsb, "{file} k={k}: {x:e} {q:e}");
+            // The loop's error is the reference minus the count, not the true x.
+            assert!((e[k] - (r[k] - q)).abs() < 1e-15, "{file} k={k}");
+        }
+        // The stage moves through many counts in 0.4 s.
+        assert!(x_enc.last().unwrap().abs() > 20.0 * lsb, "{file}");
+    }
+}
+
+#[test]
 fn table_2_2_overlapping_waveforms_cut_the_jogging_error() {
     // Mid and high velocities: the take-over at non-zero leg velocity (overlap
     // q = 1/3) removes most of the error of the sinusoidal waveforms' stops.
