@@ -236,9 +236,16 @@ pub trait Block: Send + Debug {
         Ok(())
     }
     /// Phase 1 of a step: write the outputs `y` of sample `tick`.
+    ///
+    /// **A block with direct feed-through** ([`Block::direct_feedthrough`] true, the
+    /// default) gets no [`Block::update`] call: it must advance its own state here,
+    /// after computing `y` from `u` (e.g. `y = C x + D u; x = A x + B u`). The
+    /// scheduler calls `output` exactly once per sample of the block's rate, so this
+    /// is safe.
     fn output(&mut self, tick: Tick, u: &[f64], y: &mut [f64]);
-    /// Phase 2 of a step (blocks without feed-through only): advance the state
-    /// with the inputs `u` of sample `tick`.
+    /// Phase 2 of a step (blocks **without** feed-through only): advance the state
+    /// with the inputs `u` of sample `tick`. Never called for feed-through blocks
+    /// (see [`Block::output`]).
     fn update(&mut self, tick: Tick, u: &[f64]) {
         let _ = (tick, u);
     }
