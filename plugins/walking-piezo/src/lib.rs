@@ -79,6 +79,7 @@ pub mod leg_model;
 pub mod linear;
 pub mod optimize;
 pub mod stage;
+pub mod thesis_ch3;
 pub mod variation;
 pub mod waveform;
 
