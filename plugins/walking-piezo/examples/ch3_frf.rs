@@ -111,10 +111,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             eprintln!("  (dynamic run at {f} Hz: {:.1} s)", t0.elapsed().as_secs_f64());
         }
     }
-    println!("Linearised prediction of the dynamic deviation |H(j2πf)/H(0) − 1| (x, y):");
-    for f in [1.0, 10.0, 1e3, 5e3, 20e3] {
-        let (px, py) = predicted_dynamic_deviation(f)?;
-        println!("  f = {f:>7} Hz: {px:.2e} / {py:.2e}");
+    println!("Linearised prediction of the dynamic deviation, Σ_k |(H(jkω) − H(0))U_k| (x, y):");
+    for wave in [Ch3Waveform::Sinusoidal, Ch3Waveform::Asymmetric] {
+        for f in [1.0, 10.0, 1e3, 5e3, 20e3] {
+            let (px, py) = predicted_dynamic_deviation(wave, f)?;
+            println!("  {:>18} f = {f:>7} Hz: {px:.2e} / {py:.2e}", wave.as_str());
+        }
     }
 
     let g = coefficient_gap()?;

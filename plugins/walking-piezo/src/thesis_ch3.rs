@@ -439,18 +439,38 @@ pub fn dynamic_tip(
 }
 
 /// The legs' dynamic deviation predicted by the linearised model (3.15) about the
-/// cycle's mean voltages: |H_x,u1(j2πf)/H_x,u1(0) − 1| and the same for y — the
-/// relative error of a static map for a sinusoid at f.
-pub fn predicted_dynamic_deviation(f_hz: f64) -> Result<(f64, f64), ParamError> {
+/// cycle's mean voltages (an independent check of [`dynamic_tip`]): the waveform's
+/// harmonics U_k (k = 1 … 8, by DFT of 64 samples per cycle) through
+/// H(jkω) − H(0), relative to their static image H(0)U_k, rms over the harmonics,
+/// (x, y).
+pub fn predicted_dynamic_deviation(wave: Ch3Waveform, f_hz: f64) -> Result<(f64, f64), ParamError> {
     let l = leg(6)?;
-    let h = 0.5 * AMPLITUDE_V;
-    let ss = l.linearize(h, h);
+    let drive = Ch3Drive::new(wave);
+    const N: usize = 64;
+    let u: Vec<(f64, f64)> = (0..N).map(|j| drive.voltages(TAU * j as f64 / N as f64)).collect();
+    let mean = (
+        u.iter().map(|v| v.0).sum::<f64>() / N as f64,
+        u.iter().map(|v| v.1).sum::<f64>() / N as f64,
+    );
+    let ss = l.linearize(mean.0, mean.1);
     let h0 = ss.evalfr(Complex::new(0.0, 0.0));
-    let hf = ss.evalfr(Complex::new(0.0, TAU * f_hz));
-    Ok((
-        (hf[(0, 0)] / h0[(0, 0)] - 1.0).norm(),
-        (hf[(1, 0)] / h0[(1, 0)] - 1.0).norm(),
-    ))
+    let (mut dev, mut sig) = ([0.0f64; 2], [0.0f64; 2]);
+    for k in 1..=8 {
+        let mut uk = [Complex::new(0.0, 0.0); 2];
+        for (j, v) in u.iter().enumerate() {
+            let e = Complex::from_polar(1.0 / N as f64, -TAU * (k * j) as f64 / N as f64);
+            uk[0] += e * v.0;
+            uk[1] += e * v.1;
+        }
+        let hk = ss.evalfr(Complex::new(0.0, TAU * f_hz * k as f64));
+        for r in 0..2 {
+            let d = (hk[(r, 0)] - h0[(r, 0)]) * uk[0] + (hk[(r, 1)] - h0[(r, 1)]) * uk[1];
+            let s0 = h0[(r, 0)] * uk[0] + h0[(r, 1)] * uk[1];
+            dev[r] += d.norm_sqr();
+            sig[r] += s0.norm_sqr();
+        }
+    }
+    Ok(((dev[0] / sig[0]).sqrt(), (dev[1] / sig[1]).sqrt()))
 }
 
 // ---------------------------------------------------------------------------
