@@ -4,7 +4,7 @@
 //! Lagrange model driven by the waveforms (1 kHz drive, RK4 at 0.1 µs) against the
 //! static map (3.26)–(3.29).
 //!
-//! Run: `cargo run --release --example thesis_ch3_figures [-- OUT_DIR]`
+//! Run: `cargo run --example thesis_ch3_figures [-- OUT_DIR]`
 //! (default `docs/figures/ch3`).
 
 use nanomotion::plot::{Figure, Scale, Series, draw_svg, draw_svg_panels};

@@ -5,7 +5,7 @@
 use super::{Mode, Report, ReproduceError, Row, Verdict};
 use walking_piezo::thesis_ch3::{self as ch3, Ch3Waveform};
 
-const COMMAND: &str = "cargo run --release -p nanomotion-walking-piezo --example ch3_frf";
+const COMMAND: &str = "cargo run -p nanomotion-walking-piezo --example ch3_frf";
 
 fn err(id: &str) -> impl Fn(nanomotion_core::ParamError) -> ReproduceError + '_ {
     move |e| ReproduceError {

@@ -5,7 +5,7 @@
 //! against the full dynamic Lagrange model driven by the waveforms (Figs.
 //! 3.11–3.14), and the gap between (3.28)–(3.29) and Ch. 5's c_x, c_y.
 //!
-//! `cargo run --release -p nanomotion-walking-piezo --example ch3_frf [-- --quick]`
+//! `cargo run -p nanomotion-walking-piezo --example ch3_frf [-- --quick]`
 //! (`--quick`: the dynamic run at one drive frequency only, what `nanomotion
 //! reproduce --quick` runs).
 
