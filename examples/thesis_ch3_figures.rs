@@ -56,7 +56,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         )?;
         let (c, _) = dynamic_tip(wave, 1e3, 1e-7, 500)?;
         let um = |v: &[f64]| v.iter().map(|x| x * 1e6).collect::<Vec<f64>>();
-        let fig = if wave == Ch3Waveform::Sinusoidal { ("3.11", "3.12") } else { ("3.13", "3.14") };
+        let fig = if wave == Ch3Waveform::Sinusoidal {
+            ("3.11", "3.12")
+        } else {
+            ("3.13", "3.14")
+        };
         draw_svg(
             &Figure {
                 title: format!("Fig. {}: tip trajectory, {name} waveform", fig.0),

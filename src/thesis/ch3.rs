@@ -30,7 +30,9 @@ pub fn table_3_2(mode: Mode) -> Result<Report, ReproduceError> {
     let at = |n: usize| rows.iter().find(|r| r.n_m == n).expect("n_m in the table");
     let (r2, r6, r10) = (at(2), at(6), at(10));
     let f6 = r6.f_res_khz;
-    let gains_rise = rows.windows(2).all(|w| w[1].gain_x_u1_db > w[0].gain_x_u1_db);
+    let gains_rise = rows
+        .windows(2)
+        .all(|w| w[1].gain_x_u1_db > w[0].gain_x_u1_db);
     let f_rises = rows.windows(2).all(|w| w[1].f_res_khz > w[0].f_res_khz);
     let f_falls = rows.windows(2).all(|w| w[1].f_res_khz < w[0].f_res_khz);
     let df_6_10 = (r10.f_res_khz - f6) / f6;
@@ -78,7 +80,7 @@ pub fn table_3_2(mode: Mode) -> Result<Report, ReproduceError> {
                  (+{:.1} %), and +{:.2} dB to the one-layer-per-element limit n_m = n_t = 96 \
                  — the lumping's share of the gap to Ch. 5's c_x",
                 100.0 * (r10.gain_x_u1_nm_v / r6.gain_x_u1_nm_v - 1.0),
-                20.0 * ((95.0 / 96.0) / (5.0 / 6.0) as f64).log10()
+                20.0 * ((95.0f64 / 96.0) / (5.0 / 6.0)).log10()
             ),
         },
         Row {
@@ -102,7 +104,10 @@ pub fn table_3_2(mode: Mode) -> Result<Report, ReproduceError> {
                     100.0 * df_6_10.abs()
                 )
             } else {
-                format!("not monotone over n_m ({:.2} % from 6 to 10)", 100.0 * df_6_10)
+                format!(
+                    "not monotone over n_m ({:.2} % from 6 to 10)",
+                    100.0 * df_6_10
+                )
             },
         },
         Row {
@@ -352,8 +357,9 @@ pub fn fig_3_11_3_14(mode: Mode) -> Result<Report, ReproduceError> {
     );
     Ok(Report {
         id: id.into(),
-        title: "Figs. 3.11–3.14 and (3.28)–(3.29) — static map vs tip trajectory; c_x, c_y vs Ch. 5"
-            .into(),
+        title:
+            "Figs. 3.11–3.14 and (3.28)–(3.29) — static map vs tip trajectory; c_x, c_y vs Ch. 5"
+                .into(),
         section: "Sec. 3.3.3, 3.5.2".into(),
         command: COMMAND.into(),
         mode,
@@ -411,7 +417,11 @@ mod tests {
                 .all(|w| w.verdict == Verdict::Matches)
         );
         // The coefficients are ≈ 0.7 of Ch. 5's: shape, not match.
-        let c: Vec<&Row> = r.rows.iter().filter(|w| w.quantity.contains("coefficient")).collect();
+        let c: Vec<&Row> = r
+            .rows
+            .iter()
+            .filter(|w| w.quantity.contains("coefficient"))
+            .collect();
         assert_eq!(c.len(), 2);
         assert!(c.iter().all(|w| w.verdict == Verdict::Shape));
     }

@@ -163,6 +163,9 @@ mod tests {
         assert_eq!(Verdict::by_ratio(2.77, 3.89, 0.1, 3.0), Verdict::Shape);
         assert_eq!(Verdict::by_ratio(2.77, 9.0, 0.1, 3.0), Verdict::Deviates);
         assert_eq!(Verdict::by_ratio(-33.0, 19.0, 0.1, 3.0), Verdict::Deviates);
-        assert_eq!(Verdict::by_ratio(1.0, f64::NAN, 0.1, 3.0), Verdict::Deviates);
+        assert_eq!(
+            Verdict::by_ratio(1.0, f64::NAN, 0.1, 3.0),
+            Verdict::Deviates
+        );
     }
 }

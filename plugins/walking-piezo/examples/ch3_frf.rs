@@ -30,7 +30,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let leg = LegModel::new(LegModelParams::default())?;
     let freqs = log_grid(1e3, 1e6, 25);
     let frf = &fig_3_8(&freqs)?[2];
-    println!("\nFRF H_ru(jω) (3.15), {}, magnitudes in dB re 1 nm/V", frf.label);
+    println!(
+        "\nFRF H_ru(jω) (3.15), {}, magnitudes in dB re 1 nm/V",
+        frf.label
+    );
     println!(
         "{:>10} {:>10} {:>10} {:>10} {:>10}",
         "f (kHz)", "x<-u1", "x<-u2", "y<-u1", "y<-u2"
@@ -108,7 +111,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             let t0 = std::time::Instant::now();
             let (c, dev) = dynamic_tip(wave, f, 1e-7, 400)?;
             line(&c, format!("{:.2e}/{:.2e}", dev.0, dev.1));
-            eprintln!("  (dynamic run at {f} Hz: {:.1} s)", t0.elapsed().as_secs_f64());
+            eprintln!(
+                "  (dynamic run at {f} Hz: {:.1} s)",
+                t0.elapsed().as_secs_f64()
+            );
         }
     }
     println!("Linearised prediction of the dynamic deviation, Σ_k |(H(jkω) − H(0))U_k| (x, y):");

@@ -401,23 +401,15 @@ pub fn dynamic_tip(
     let every = (per_cycle / samples.max(2)).max(1);
     let (mut t, mut xm, mut ym) = (vec![], vec![], vec![]);
     let mut k = 0usize;
-    l.simulate_driven(
-        &q0,
-        &qd0,
-        0.0,
-        dt,
-        2 * per_cycle,
-        u,
-        |tk, q| {
-            if k >= per_cycle && k < 2 * per_cycle && (k - per_cycle) % every == 0 {
-                let tip = l.tip(q);
-                t.push(tk - period);
-                xm.push(tip[0]);
-                ym.push(tip[1]);
-            }
-            k += 1;
-        },
-    );
+    l.simulate_driven(&q0, &qd0, 0.0, dt, 2 * per_cycle, u, |tk, q| {
+        if k >= per_cycle && k < 2 * per_cycle && (k - per_cycle).is_multiple_of(every) {
+            let tip = l.tip(q);
+            t.push(tk - period);
+            xm.push(tip[0]);
+            ym.push(tip[1]);
+        }
+        k += 1;
+    });
     let (cx, cy) = l.static_coefficients();
     let (mut xs, mut ys, mut xq, mut yq) = (vec![], vec![], vec![], vec![]);
     for &tk in &t {
@@ -447,7 +439,9 @@ pub fn predicted_dynamic_deviation(wave: Ch3Waveform, f_hz: f64) -> Result<(f64,
     let l = leg(6)?;
     let drive = Ch3Drive::new(wave);
     const N: usize = 64;
-    let u: Vec<(f64, f64)> = (0..N).map(|j| drive.voltages(TAU * j as f64 / N as f64)).collect();
+    let u: Vec<(f64, f64)> = (0..N)
+        .map(|j| drive.voltages(TAU * j as f64 / N as f64))
+        .collect();
     let mean = (
         u.iter().map(|v| v.0).sum::<f64>() / N as f64,
         u.iter().map(|v| v.1).sum::<f64>() / N as f64,
@@ -547,7 +541,11 @@ mod tests {
         }
         // (3.24) spans [0, 46] V.
         let (lo, hi) = (0..360)
-            .map(|k| Ch3Drive::new(Ch3Waveform::Sinusoidal).voltages(k as f64 * PI / 180.0).0)
+            .map(|k| {
+                Ch3Drive::new(Ch3Waveform::Sinusoidal)
+                    .voltages(k as f64 * PI / 180.0)
+                    .0
+            })
             .fold((f64::MAX, f64::MIN), |(a, b), x| (a.min(x), b.max(x)));
         assert!(lo.abs() < 1e-9 && (hi - 46.0).abs() < 1e-9);
     }
