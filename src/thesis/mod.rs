@@ -150,6 +150,12 @@ pub fn experiments() -> Vec<Experiment> {
             in_quick: true,
             run: ch3::fig_3_11_3_14,
         },
+        Experiment {
+            id: "table_4_2",
+            title: "Table 4.2 — strokes and model errors per waveform at 10 Hz",
+            in_quick: true,
+            run: ch3::table_4_2,
+        },
     ]
 }
 
