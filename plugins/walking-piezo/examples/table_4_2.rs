@@ -36,14 +36,14 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         "type",
         "use",
         "stroke x um",
-        "rms e_x um",
+        "rms e_x nm",
         "stroke y um",
-        "rms e_y um",
-        "nominal e_x um"
+        "rms e_y nm",
+        "nominal e_x nm"
     );
     for r in &t.rows {
         println!(
-            "{:>2} {:<22} {:>6} {:>11.3} {:>11.4} {:>11.3} {:>11.4} {:>13.4}",
+            "{:>2} {:<22} {:>6} {:>11.3} {:>11.2} {:>11.3} {:>11.2} {:>13.1}",
             r.waveform.w,
             r.waveform.name,
             if r.waveform.identification {
@@ -52,14 +52,14 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 "valid"
             },
             r.stroke.0 * 1e6,
-            r.rms_error.0 * 1e6,
+            r.rms_error.0 * 1e9,
             r.stroke.1 * 1e6,
-            r.rms_error.1 * 1e6,
-            r.rms_error_nominal.0 * 1e6
+            r.rms_error.1 * 1e9,
+            r.rms_error_nominal.0 * 1e9
         );
     }
     println!(
-        "\naccuracy 1 - mean rms(e)/mean rms(signal): x {:.1} %, y {:.1} % (thesis: 93 % / 80 %)",
+        "\naccuracy 1 - mean rms(e)/mean rms(signal): x {:.2} %, y {:.2} % (thesis: 93 % / 80 %)",
         100.0 * t.accuracy.0,
         100.0 * t.accuracy.1
     );
