@@ -19,7 +19,7 @@ use std::f64::consts::{FRAC_PI_2, PI, TAU};
 pub const TABLE_3_2_EQUILIBRIUM_V: (f64, f64) = (2.2, 44.2);
 /// The layer counts of Table 3.2.
 pub const TABLE_3_2_LAYERS: [usize; 5] = [2, 4, 6, 8, 10];
-/// Ch. 5's bending coefficient c_x (5.29) (m/V), from the motor's data [155].
+/// Ch. 5's bending coefficient c_x (5.29) (m/V), from the motor's data (thesis ref. 155).
 pub const CH5_C_X_M_V: f64 = 64.5e-9;
 /// Ch. 5's extension coefficient c_y (5.29) (m/V).
 pub const CH5_C_Y_M_V: f64 = 29.8e-9;

@@ -240,8 +240,8 @@ pub fn table_4_2(quick: bool) -> Result<Table42, ParamError> {
     {
         let to = |z: &[f64]| {
             let mut p = stage.clone();
-            for i in 0..4 {
-                p.c_y_m_v[i] = 20e-9 + 20e-9 * z[i];
+            for (c, zi) in p.c_y_m_v.iter_mut().zip(z) {
+                *c = 20e-9 + 20e-9 * zi;
             }
             p
         };
@@ -255,8 +255,8 @@ pub fn table_4_2(quick: bool) -> Result<Table42, ParamError> {
     {
         let to = |z: &[f64]| {
             let mut p = stage.clone();
-            for i in 0..4 {
-                p.c_x_m_v[i] = 45e-9 + 40e-9 * z[i];
+            for (c, zi) in p.c_x_m_v.iter_mut().zip(z) {
+                *c = 45e-9 + 40e-9 * zi;
             }
             p.mu = 0.05 + 0.55 * z[4];
             p
