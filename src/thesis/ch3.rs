@@ -397,7 +397,7 @@ pub fn table_4_2(mode: Mode) -> Result<Report, ReproduceError> {
             ours: format!("{:.1} %", 100.0 * t.accuracy.0),
             verdict: Verdict::by_ratio(93.0, 100.0 * t.accuracy.0, 0.05, 3.0),
             reason: format!(
-                "tolerance ±5 % of the figure, shape within ×3; accuracy = 1 − mean rms(ē_x)/mean                  rms(x̄) (our reading). Our \"measurement\" is the model family itself (hidden                  unequal c_x, c_y, seeded μ variation), so only the μ variation and the                  identification error remain (mean rms(ē_x) {:.1} nm; the un-identified nominal                  model {:.0} nm); the thesis's 7 % includes the take-over mismatch of the real                  contact and friction it names",
+                "tolerance ±5 % of the figure, shape within ×3; accuracy = 1 − mean rms(ē_x)/mean rms(x̄) (our reading). Our \"measurement\" is the model family itself (hidden unequal c_x, c_y, seeded μ variation), so only the μ variation and the identification error remain (mean rms(ē_x) {:.1} nm; the un-identified nominal model {:.0} nm); the thesis's 7 % includes the take-over mismatch of the real contact and friction it names",
                 1e9 * (ex_id + ex_val) / 2.0,
                 1e9 * ex_nom
             ),
@@ -408,7 +408,7 @@ pub fn table_4_2(mode: Mode) -> Result<Report, ReproduceError> {
             ours: format!("{:.1} %", 100.0 * t.accuracy.1),
             verdict: Verdict::by_ratio(80.0, 100.0 * t.accuracy.1, 0.05, 3.0),
             reason: format!(
-                "tolerance ±5 % of the figure, shape within ×3: lower than in x as in the                  thesis ({:.1} % vs {:.1} %); we add the 1.6 nm rms capacitive-sensor noise                  (averaged over {} periods); the thesis's y data also carry the sensor's                  tilt and orientation errors, which we do not model",
+                "tolerance ±5 % of the figure, shape within ×3: lower than in x as in the thesis ({:.1} % vs {:.1} %); we add the 1.6 nm rms capacitive-sensor noise (averaged over {} periods); the thesis's y data also carry the sensor's tilt and orientation errors, which we do not model",
                 100.0 * t.accuracy.1,
                 100.0 * t.accuracy.0,
                 t.periods
@@ -428,7 +428,7 @@ pub fn table_4_2(mode: Mode) -> Result<Report, ReproduceError> {
             } else {
                 Verdict::Deviates
             },
-            reason: "rule: within a factor 1.5; as the thesis notes, the validation waveforms                      resemble identification ones (asymmetric variants, rhombic with another                      phase)"
+            reason: "rule: within a factor 1.5; as the thesis notes, the validation waveforms resemble identification ones (asymmetric variants, rhombic with another phase)"
                 .into(),
         },
     ];
@@ -467,9 +467,9 @@ pub fn table_4_2(mode: Mode) -> Result<Report, ReproduceError> {
                 "identified c_x {:?} nm/V (truth {:?}), c_y {:?} (truth {:?}), μ {:.3} (truth \
                  {:.3}: μ is weakly identifiable when the legs hardly slip); {} evaluations",
                 t.identified.0.map(|v| (v * 100.0).round() / 100.0),
-                t.truth.0,
+                t.truth.0.map(|v| (v * 100.0).round() / 100.0),
                 t.identified.1.map(|v| (v * 100.0).round() / 100.0),
-                t.truth.1,
+                t.truth.1.map(|v| (v * 100.0).round() / 100.0),
                 t.identified.2,
                 t.truth.2,
                 t.evaluations
