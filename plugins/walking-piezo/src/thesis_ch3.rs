@@ -565,6 +565,40 @@ mod tests {
     }
 
     #[test]
+    fn driven_lagrange_model_follows_the_linearised_prediction() {
+        // Two independent computations of the legs' dynamic deviation from the
+        // static map: RK4 on the nonlinear (3.11) and the harmonics through the
+        // linearised (3.15).
+        for wave in [Ch3Waveform::Sinusoidal, Ch3Waveform::Asymmetric] {
+            let (c, dev) = dynamic_tip(wave, 5e3, 1e-7, 200).unwrap();
+            let p = predicted_dynamic_deviation(wave, 5e3).unwrap();
+            assert!(
+                (dev.0 - p.0).abs() < 0.15 * p.0,
+                "{wave:?}: {dev:?} vs {p:?}"
+            );
+            assert!(
+                (dev.1 - p.1).abs() < 0.15 * p.1,
+                "{wave:?}: {dev:?} vs {p:?}"
+            );
+            assert!(c.accuracy.0 > 0.99);
+            // Quadratic in f far below the resonance: 10 Hz is 2.5e5× smaller.
+            let p10 = predicted_dynamic_deviation(wave, 10.0).unwrap();
+            assert!(p10.0 < 1e-6, "{p10:?}");
+        }
+        assert!(dynamic_tip(Ch3Waveform::Sinusoidal, 5e3, 1e-6, 10).is_err());
+    }
+
+    #[test]
+    fn fig_3_9_x_gains_of_both_stacks_vary_alike() {
+        let v = fig_3_9(Ch3Waveform::Sinusoidal).unwrap();
+        assert_eq!(v.alpha_rad.len(), 73);
+        let [xu1, xu2, yu1, yu2] = v.gain_spread;
+        assert!(xu1 > 0.0 && (xu1 - xu2).abs() < 0.05 * xu1);
+        assert!(yu1 > 0.0 && (yu1 - yu2).abs() < 0.05 * yu1);
+        assert!(v.f_res_range_khz.1 / v.f_res_range_khz.0 < 1.01);
+    }
+
+    #[test]
     fn coefficient_gap_is_lumping_and_material() {
         let g = coefficient_gap().unwrap();
         // Lumping: c_x(n_m)/c_x(n_t) = ((n_m − 1)/n_m)/((n_t − 1)/n_t).
