@@ -16,6 +16,8 @@
 
 use serde::{Deserialize, Serialize};
 
+pub mod ch3;
+
 /// How big a run: `Quick` is what `reproduce --quick` and the freshness test run
 /// (the whole quick set in under two minutes), `Full` the documented figure.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -129,7 +131,32 @@ pub struct Experiment {
 
 /// Every registered experiment, in thesis order.
 pub fn experiments() -> Vec<Experiment> {
-    vec![]
+    vec![
+        Experiment {
+            id: "table_3_2",
+            title: "Table 3.2 — leg model gain and first resonance against n_m",
+            in_quick: true,
+            run: ch3::table_3_2,
+        },
+        Experiment {
+            id: "fig_3_9",
+            title: "Fig. 3.9 — leg model FRF over a drive cycle",
+            in_quick: true,
+            run: ch3::fig_3_9,
+        },
+        Experiment {
+            id: "fig_3_11_3_14",
+            title: "Figs. 3.11–3.14, (3.28)–(3.29) — static map vs tip trajectory; c_x, c_y",
+            in_quick: true,
+            run: ch3::fig_3_11_3_14,
+        },
+        Experiment {
+            id: "table_4_2",
+            title: "Table 4.2 — strokes and model errors per waveform at 10 Hz",
+            in_quick: true,
+            run: ch3::table_4_2,
+        },
+    ]
 }
 
 #[cfg(test)]
@@ -142,6 +169,9 @@ mod tests {
         assert_eq!(Verdict::by_ratio(2.77, 3.89, 0.1, 3.0), Verdict::Shape);
         assert_eq!(Verdict::by_ratio(2.77, 9.0, 0.1, 3.0), Verdict::Deviates);
         assert_eq!(Verdict::by_ratio(-33.0, 19.0, 0.1, 3.0), Verdict::Deviates);
-        assert_eq!(Verdict::by_ratio(1.0, f64::NAN, 0.1, 3.0), Verdict::Deviates);
+        assert_eq!(
+            Verdict::by_ratio(1.0, f64::NAN, 0.1, 3.0),
+            Verdict::Deviates
+        );
     }
 }

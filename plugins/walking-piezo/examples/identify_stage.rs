@@ -1,4 +1,6 @@
-//! Identification of the Ch. 4 model from simulated stage data, Table 4.2 style:
+//! Identification of the Ch. 4 model from simulated stage data (sinusoidal
+//! waveforms at 20 Hz; Table 4.2 itself, nine waveforms at 10 Hz, is
+//! `--example table_4_2`):
 //! "measured" records come from a stage with hidden, unequal per-stack
 //! coefficients and a seeded, varying friction; the y-parameters are identified
 //! first from the housing signal, then the x-parameters from the stage position

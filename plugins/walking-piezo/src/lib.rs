@@ -79,6 +79,8 @@ pub mod leg_model;
 pub mod linear;
 pub mod optimize;
 pub mod stage;
+pub mod thesis_ch3;
+pub mod thesis_table_4_2;
 pub mod variation;
 pub mod waveform;
 
