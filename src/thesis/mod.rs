@@ -14,6 +14,10 @@
 //! `Deviates` otherwise. The reason says which, with numbers. Never tune a model
 //! toward a thesis figure.
 
+pub mod ch2;
+pub mod ch4;
+pub mod ch5;
+
 use serde::{Deserialize, Serialize};
 
 /// How big a run: `Quick` is what `reproduce --quick` and the freshness test run
@@ -129,7 +133,38 @@ pub struct Experiment {
 
 /// Every registered experiment, in thesis order.
 pub fn experiments() -> Vec<Experiment> {
-    vec![]
+    vec![
+        Experiment {
+            id: "table_2_2",
+            title: "Table 2.2 — jogging with non-overlapping vs overlapping tip trajectories",
+            in_quick: true,
+            run: ch2::table_2_2,
+        },
+        Experiment {
+            id: "table_2_3",
+            title: "Table 2.3 — point-to-point moves with and without FF + GS",
+            in_quick: true,
+            run: ch2::table_2_3,
+        },
+        Experiment {
+            id: "sec_4_5",
+            title: "Sec. 4.5 — waveform optimisation (model- and data-based)",
+            in_quick: true,
+            run: ch4::sec_4_5,
+        },
+        Experiment {
+            id: "table_5_1",
+            title: "Table 5.1 — repetitive control on the linear fitted stage",
+            in_quick: true,
+            run: ch5::table_5_1,
+        },
+        Experiment {
+            id: "table_5_1_nonlinear",
+            title: "Table 5.1 — repetitive control of the nonlinear walking piezo stage",
+            in_quick: true,
+            run: ch5::table_5_1_nonlinear,
+        },
+    ]
 }
 
 #[cfg(test)]

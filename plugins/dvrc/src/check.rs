@@ -15,7 +15,9 @@
 //!   stable and a lifted check proves stability for every N_k ∈ \[m, M\] ((5.9)
 //!   is only sufficient);
 //! - `high_order_rc`: the small-gain condition ‖H‖∞·Σ|w_i| < 1 (sufficient; W(z)
-//!   has ‖W‖∞ = Σ|w_i|).
+//!   has ‖W‖∞ = Σ|w_i|) for a disturbance that does not depend on the loop; the
+//!   report adds [`HIGH_ORDER_NOTE`]: when the disturbance is periodic in a variable
+//!   the loop itself moves (α of the walking piezo), the condition is no guarantee.
 //!
 //! ```
 //! let yaml = r#"
@@ -167,6 +169,7 @@ impl fmt::Display for RcCheckReport {
                                 "NOT guaranteed"
                             }
                         )?;
+                        writeln!(f, "    {HIGH_ORDER_NOTE}")?;
                     }
                     if let Some(l) = &b.lifted {
                         writeln!(f, "    {l}")?;
@@ -198,6 +201,10 @@ impl fmt::Display for RcCheckReport {
         )
     }
 }
+
+/// Printed under every `high_order_rc` block: what the small-gain condition does
+/// not cover (docs/repetitive-control.md, "High-order RC and the α-feedback path").
+pub const HIGH_ORDER_NOTE: &str = "note: ‖H‖∞·Σ|w_i| < 1 covers a disturbance that does not depend on the loop; when it is periodic in a variable the loop moves (the walking piezo's leg angle α = 2π∫f_α dt, f_α from u) the loop is not LTI and this is no guarantee: on the walking-piezo Table 5.1 loops high-order RC ends above no RC although it holds (docs/repetitive-control.md)";
 
 fn t_of(t: Option<TfModel>, dt: f64) -> Result<StateSpace, String> {
     let t = t.ok_or_else(|| {
