@@ -64,4 +64,11 @@ fn main() {
         t.ripple_10um[3] * 1e9
     );
     println!("{}", t.criterion);
+    for ((d, ho), (_, none)) in t.high_order_growth.iter().zip(&t.none_growth) {
+        println!(
+            "sinusoidal velocity, {d:.0} s run, rms over its last 10 s: high-order RC {:.3} nm, none {:.3} nm",
+            ho * 1e9,
+            none * 1e9
+        );
+    }
 }

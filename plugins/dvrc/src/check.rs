@@ -333,3 +333,37 @@ pub fn rc_check_file(
         &GraphSpec::from_file(path).map_err(Box::new)?,
     ))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const GRAPH: &str = r#"
+base_rate_hz: 1000
+duration_s: 0.1
+blocks:
+  - name: ho
+    type: high_order_rc
+    n: 40
+    learning: {kind: zpetc, num: [0.5], den: [1.0, -0.5]}
+    robustness: {kind: fir_lowpass, taps: 5, cutoff_hz: 50}
+  - name: rc
+    type: repetitive_control
+    n: 40
+    learning: {kind: zpetc, num: [0.5], den: [1.0, -0.5]}
+    robustness: {kind: fir_lowpass, taps: 5, cutoff_hz: 50}
+connections: []
+"#;
+
+    /// The α-feedback note is printed once per high-order RC block, not for others.
+    #[test]
+    fn high_order_blocks_carry_the_alpha_feedback_note() {
+        let spec = GraphSpec::from_yaml(GRAPH, "test").unwrap();
+        let report = rc_check_graph(&spec);
+        assert_eq!(report.blocks.len(), 2);
+        let text = report.to_string();
+        assert_eq!(text.matches(HIGH_ORDER_NOTE).count(), 1, "{text}");
+        let ho_part = text.split("rc (repetitive_control)").next().unwrap();
+        assert!(ho_part.contains(HIGH_ORDER_NOTE), "{text}");
+    }
+}

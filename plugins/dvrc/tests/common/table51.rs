@@ -435,6 +435,12 @@ pub struct LinearTable {
     pub ripple_10um: [f64; 4],
     /// (5.9) on the worst spread, as text.
     pub criterion: String,
+    /// High-order RC on the sinusoidal velocity for growing run lengths:
+    /// (run length (s), rms over its last 10 s = one velocity period (m)) —
+    /// whether its error grows without bound (full mode only).
+    pub high_order_growth: Vec<(f64, f64)>,
+    /// The same for no RC (the reference).
+    pub none_growth: Vec<(f64, f64)>,
 }
 
 /// The references of the table and their run lengths (s); `quick` quarters them.
@@ -509,11 +515,31 @@ pub fn linear_table(quick: bool) -> LinearTable {
         )
         .rms()
     });
+    let sinus = Velocity::Sinusoidal {
+        v0: 1e-5,
+        a: 0.5,
+        f_hz: 0.1,
+    };
+    let growth = |w: Rc| -> Vec<(f64, f64)> {
+        if quick {
+            return Vec::new();
+        }
+        [40.0, 80.0, 160.0, 320.0]
+            .map(|dur| {
+                let r = run_record(&s, &q, sinus, w, dur, 1.0, Disturbance::VelocityDip);
+                let last = &r.e[r.e.len() - (10.0 / DT) as usize..];
+                let rms = (last.iter().map(|e| e * e).sum::<f64>() / last.len() as f64).sqrt();
+                (dur, rms)
+            })
+            .to_vec()
+    };
     LinearTable {
         q_cutoff_hz: fc,
         spread,
         rows,
         ripple_10um,
         criterion: criterion_text(&s, &q, comp, comp + spread),
+        high_order_growth: growth(Rc::HighOrder),
+        none_growth: growth(Rc::None),
     }
 }
