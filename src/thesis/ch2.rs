@@ -123,7 +123,7 @@ pub fn table_2_2(mode: Mode) -> Result<Report, ReproduceError> {
         rows,
         notes: vec![
             "PI at 10 Hz (2.10), A = 46 V, φ = 0, 5 nm encoder in the loop (measured e = r − x_enc); max |e| over the second half of a 2 s run. Quick and full are the same runs.".into(),
-            "The simulated stage walks 8.08 µm per cycle with the sinusoidal and 7.02 µm with the asymmetric waveforms at A = 46 V; the thesis's \"maximum step size of 4 µm\" is one pair's stroke √2·c_x·A = 4.20 µm, two per cycle (docs/walking-piezo.md, \"Step per drive cycle\").".into(),
+            "The simulated stage walks 8.08 µm per cycle with the sinusoidal and 7.00 µm with the asymmetric waveforms at A = 46 V and 10 Hz; the thesis's \"maximum step size of 4 µm\" is one pair's stroke √2·c_x·A = 4.20 µm, two per cycle (docs/walking-piezo.md, \"Step per drive cycle\").".into(),
         ],
     })
 }

@@ -25,7 +25,9 @@ fn uniform_alpha_rc_equals_dvrc_varying_rate_dvrc_adapts() {
     let (rc, n_rc) = run(&s, &q, constant, Rc::Standard, 6.0);
     let (dv, n_dv) = run(&s, &q, constant, Rc::Dvrc, 6.0);
     assert!(none > 1e-9, "{none}");
-    assert!(rc < 0.05 * none && dv < 0.05 * none, "{none} {rc} {dv}");
+    // The dip's harmonics above Q's cut-off (≈ 210 Hz; 2f_α = 27 Hz here) are not
+    // learned: RC removes most, not all of it.
+    assert!(rc < 0.2 * none && dv < 0.2 * none, "{none} {rc} {dv}");
     assert_eq!(n_rc, (n, n));
     assert!(
         n_dv.0 + 1 >= n && n_dv.1 <= n + 1,

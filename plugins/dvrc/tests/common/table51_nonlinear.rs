@@ -559,7 +559,7 @@ pub fn nonlinear_profiles(quick: bool) -> Vec<(&'static str, Velocity, f64)> {
     };
     if quick {
         return vec![
-            ("10 µm/s", Velocity::Constant(1e-5), 12.0),
+            ("10 µm/s", Velocity::Constant(1e-5), 30.0),
             ("10 µm/s·(1 + 0.5 sin 0.2πt)", sinus, 20.0),
         ];
     }
