@@ -227,8 +227,14 @@ mod tests {
     fn check(r: &Report, min_rows: usize) {
         assert!(r.rows.len() >= min_rows, "{r:?}");
         for row in &r.rows {
-            assert!(!row.ours.contains("NaN") && !row.ours.contains("inf"), "{row:?}");
-            assert!(!row.reason.is_empty() && row.reason.contains("rule"), "{row:?}");
+            assert!(
+                !row.ours.contains("NaN") && !row.ours.contains("inf"),
+                "{row:?}"
+            );
+            assert!(
+                !row.reason.is_empty() && row.reason.contains("rule"),
+                "{row:?}"
+            );
         }
         assert!(r.command.contains("tables_2_2_2_3"));
     }
@@ -249,7 +255,11 @@ mod tests {
             let o = ours.iter().find(|o| o.v == v).unwrap();
             let red = 100.0 * (1.0 - o.measured_asymmetric / o.measured_sinusoidal);
             assert!(red.is_finite());
-            let row = r.rows.iter().find(|x| x.quantity.starts_with(&format!("{v:e} m/s: reduction"))).unwrap();
+            let row = r
+                .rows
+                .iter()
+                .find(|x| x.quantity.starts_with(&format!("{v:e} m/s: reduction")))
+                .unwrap();
             assert_eq!(row.verdict, Verdict::by_ratio(t_red, red, 0.25, 3.0));
         }
     }

@@ -23,12 +23,11 @@ fn plan(mode: Mode) -> (f64, Vec<u64>, Vec<f64>) {
 /// Sec. 4.5: optimised waveforms against the asymmetric one at 50 µm/s.
 pub fn sec_4_5(mode: Mode) -> Result<Report, ReproduceError> {
     let (factor, seeds, freqs) = plan(mode);
-    let r = sec45::sec_4_5(factor, &seeds, &freqs, &mut |_| {}).map_err(|message| {
-        ReproduceError {
+    let r =
+        sec45::sec_4_5(factor, &seeds, &freqs, &mut |_| {}).map_err(|message| ReproduceError {
             id: "sec_4_5".into(),
             message,
-        }
-    })?;
+        })?;
     let at14 = r
         .validation
         .iter()
@@ -67,7 +66,8 @@ pub fn sec_4_5(mode: Mode) -> Result<Report, ReproduceError> {
         id: "sec_4_5".into(),
         title: "Sec. 4.5 — waveform optimisation (model- and data-based)".into(),
         section: "Sec. 4.5, Fig. 4.14".into(),
-        command: "cargo run --release -p nanomotion-walking-piezo --example waveform_optimisation".into(),
+        command: "cargo run --release -p nanomotion-walking-piezo --example waveform_optimisation"
+            .into(),
         mode,
         rows,
         notes: vec![
@@ -77,15 +77,25 @@ pub fn sec_4_5(mode: Mode) -> Result<Report, ReproduceError> {
             ),
             format!(
                 "Own objectives (µm/s): model δy −0.5 µm {:.2} → {:.2}; model δy −0.05 µm {:.2} → {:.2}; data {:.3} → {:.3} ({}, {}, {} evaluations).",
-                o[0].asymmetric, o[0].optimised, o[1].asymmetric, o[1].optimised, o[2].asymmetric, o[2].optimised,
-                o[0].evaluations, o[1].evaluations, o[2].evaluations
+                o[0].asymmetric,
+                o[0].optimised,
+                o[1].asymmetric,
+                o[1].optimised,
+                o[2].asymmetric,
+                o[2].optimised,
+                o[0].evaluations,
+                o[1].evaluations,
+                o[2].evaluations
             ),
             if mode == Mode::Quick {
                 "Quick: 3 % of the documented search budget, one validation experiment at 14 Hz; the documented figures use the full budget, three experiments and 10–20 Hz.".into()
             } else {
                 format!(
                     "Full: mean over 10–20 Hz: asymmetric {:.3}, model δy −0.5 µm {:.3}, model δy −0.05 µm {:.3}, data {:.3} µm/s.",
-                    r.validation_mean[0], r.validation_mean[1], r.validation_mean[2], r.validation_mean[3]
+                    r.validation_mean[0],
+                    r.validation_mean[1],
+                    r.validation_mean[2],
+                    r.validation_mean[3]
                 )
             },
         ],

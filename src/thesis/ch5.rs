@@ -78,7 +78,9 @@ pub fn table_5_1(mode: Mode) -> Result<Report, ReproduceError> {
     let (_, p, q) = r10.split[0];
     Ok(Report {
         id: "table_5_1".into(),
-        title: "Table 5.1 — repetitive control on the linear fitted stage (α-periodic velocity dip)".into(),
+        title:
+            "Table 5.1 — repetitive control on the linear fitted stage (α-periodic velocity dip)"
+                .into(),
         section: "Sec. 5.5".into(),
         command: "cargo run --release -p nanomotion-dvrc --example table_5_1".into(),
         mode,
@@ -86,7 +88,9 @@ pub fn table_5_1(mode: Mode) -> Result<Report, ReproduceError> {
         notes: vec![
             format!(
                 "Plant (5.31) at 4 kHz, PI 50 Hz, L = ZPETC of T, one 101-tap Q (cut-off {:.1} Hz for M − m = {}); the stage sees f_α(1 − δ(α)), δ a raised-cosine dip of depth {} and half-width π/8 at each take-over (our choice: the thesis gives no g_nlin).",
-                t.q_cutoff_hz, t.spread, table51::DIP_DEPTH
+                t.q_cutoff_hz,
+                t.spread,
+                table51::DIP_DEPTH
             ),
             format!(
                 "10 µm/s without RC: α-periodic part {:.3} nm, rest {:.3} nm (α-synchronous average, 256 bins). With the former output ripple the PI alone leaves {:.3} nm.",
@@ -146,18 +150,16 @@ pub fn table_5_1_nonlinear(mode: Mode) -> Result<Report, ReproduceError> {
             t.c_x_scale
         ),
     });
-    let mut notes = vec![
-        format!(
-            "Stage: defaults with c_x × {:.4} (the thesis's Ch. 5 step), rough strip σ_h = 100 nm, seed 7; open-loop step at 1.98 Hz {:.3} µm (sd {:.3} µm); identified c = {:.3} µm/cycle, delay {} samples; Q cut-off {:.1} Hz for M − m = {}.",
-            t.c_x_scale,
-            t.steps_rough.0 * 1e6,
-            t.steps_rough.1 * 1e6,
-            t.fit.c * 1e6,
-            t.fit.delay,
-            t.q_cutoff_hz,
-            t.spread
-        ),
-    ];
+    let mut notes = vec![format!(
+        "Stage: defaults with c_x × {:.4} (the thesis's Ch. 5 step), rough strip σ_h = 100 nm, seed 7; open-loop step at 1.98 Hz {:.3} µm (sd {:.3} µm); identified c = {:.3} µm/cycle, delay {} samples; Q cut-off {:.1} Hz for M − m = {}.",
+        t.c_x_scale,
+        t.steps_rough.0 * 1e6,
+        t.steps_rough.1 * 1e6,
+        t.fit.c * 1e6,
+        t.fit.delay,
+        t.q_cutoff_hz,
+        t.spread
+    )];
     if let Some(split) = r10.split {
         notes.push(format!(
             "10 µm/s, α-periodic part / rest (nm): none {:.3} / {:.3}, RC {:.3} / {:.3}, high-order RC {:.3} / {:.3}, DVRC {:.3} / {:.3}.",
@@ -206,7 +208,10 @@ mod tests {
     fn check(r: &Report) {
         assert!(!r.rows.is_empty());
         for row in &r.rows {
-            assert!(!row.ours.contains("NaN") && !row.ours.contains("inf"), "{row:?}");
+            assert!(
+                !row.ours.contains("NaN") && !row.ours.contains("inf"),
+                "{row:?}"
+            );
             assert!(row.reason.contains("rule"), "{row:?}");
         }
     }
@@ -222,7 +227,10 @@ mod tests {
             assert!(ratio.is_finite() && ratio >= 0.0);
             let thesis = THESIS_10UM[i + 1] / THESIS_10UM[0];
             let v = |x: f64| Verdict::by_ratio(thesis, x, 0.25, 3.0);
-            assert!(row.verdict == v(ratio * 0.999) || row.verdict == v(ratio * 1.001), "{row:?}");
+            assert!(
+                row.verdict == v(ratio * 0.999) || row.verdict == v(ratio * 1.001),
+                "{row:?}"
+            );
         }
     }
 
@@ -235,7 +243,10 @@ mod tests {
             let ours: f64 = row.ours.split(' ').next().unwrap().parse().unwrap();
             assert!(ours > 0.0 && ours.is_finite());
             let v = |x: f64| Verdict::by_ratio(THESIS_10UM[i] * 1e-9, x * 1e-9, 0.25, 3.0);
-            assert!(row.verdict == v(ours * 0.999) || row.verdict == v(ours * 1.001), "{row:?}");
+            assert!(
+                row.verdict == v(ours * 0.999) || row.verdict == v(ours * 1.001),
+                "{row:?}"
+            );
         }
     }
 }

@@ -177,21 +177,9 @@ mod tests {
         assert_eq!(Verdict::by_ratio(2.77, 3.89, 0.1, 3.0), Verdict::Shape);
         assert_eq!(Verdict::by_ratio(2.77, 9.0, 0.1, 3.0), Verdict::Deviates);
         assert_eq!(Verdict::by_ratio(-33.0, 19.0, 0.1, 3.0), Verdict::Deviates);
-        assert_eq!(Verdict::by_ratio(1.0, f64::NAN, 0.1, 3.0), Verdict::Deviates);
-    }
-}
-#[cfg(test)]
-mod scratch_print {
-    #[test]
-    #[ignore]
-    fn print_quick_reports() {
-        for e in super::experiments() {
-            let r = (e.run)(super::Mode::Quick).unwrap();
-            println!("== {} [{}] {}", r.id, r.section, r.title);
-            for row in &r.rows {
-                println!("  {} | thesis {} | ours {} | {} | {}", row.quantity, row.thesis, row.ours, row.verdict.as_str(), row.reason);
-            }
-            for n in &r.notes { println!("  note: {n}"); }
-        }
+        assert_eq!(
+            Verdict::by_ratio(1.0, f64::NAN, 0.1, 3.0),
+            Verdict::Deviates
+        );
     }
 }

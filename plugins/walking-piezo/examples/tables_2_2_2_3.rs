@@ -104,7 +104,10 @@ fn main() -> Result<(), String> {
             f(r.ideal[1].tail)
         );
     }
-    for (name, mp) in ["encoder", "ideal sensor"].iter().zip(t.output_placement_mp) {
+    for (name, mp) in ["encoder", "ideal sensor"]
+        .iter()
+        .zip(t.output_placement_mp)
+    {
         println!(
             "0.1 mm, T = 1 s, FF + GS with the gain at the PI's output ({name}): Mp {:.1} nm",
             mp * 1e9

@@ -248,12 +248,18 @@ fn step_per_cycle_from_the_thesis_quantities() {
     // The thesis's "maximum step size of 4 µm" is one pair's stroke.
     assert!((stroke / 4e-6 - 1.0).abs() < 0.1, "{stroke:e}");
     // Sinusoidal: the two pairs each use their whole stroke once per cycle.
-    assert!((sin_rigid / (2.0 * stroke) - 1.0).abs() < 1e-3, "{sin_rigid:e}");
+    assert!(
+        (sin_rigid / (2.0 * stroke) - 1.0).abs() < 1e-3,
+        "{sin_rigid:e}"
+    );
     // (2.8)'s measured motor constant is that travel within 10 %, and so is the stage's.
     assert!((c_2_8 / sin_rigid - 1.0).abs() < 0.1, "{c_2_8:e}");
     assert!((sin_stage / c_2_8 - 1.0).abs() < 0.05, "{sin_stage:e}");
     // Asymmetric: the overlap uses less of each stroke; the stage loses a few
     // percent to the legs' compliance.
     assert!(asym_rigid < 0.9 * sin_rigid && asym_rigid > 2.0 * 0.75 * stroke);
-    assert!((asym_stage / asym_rigid - 1.0).abs() < 0.05, "{asym_stage:e}");
+    assert!(
+        (asym_stage / asym_rigid - 1.0).abs() < 0.05,
+        "{asym_stage:e}"
+    );
 }

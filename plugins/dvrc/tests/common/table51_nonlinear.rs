@@ -15,7 +15,7 @@
 use super::table51::{Rc, RcUnderTest, Setup, Velocity};
 use dvrc::filters::Filter;
 use dvrc::stability::design_q_cutoff;
-use nalgebra::DMatrix;
+use nanomotion_core::nalgebra::DMatrix;
 use nanomotion_core::analysis::{WelchOptions, frf_closed_loop};
 use nanomotion_core::blocks::control::Pi;
 use nanomotion_core::lti::{

@@ -66,7 +66,11 @@ pub struct Sec45 {
 
 /// An example configuration with its budget scaled by `factor`.
 pub fn config(objective: &str, factor: f64) -> Result<OptimizeConfig, String> {
-    let text = if objective == "model" { MODEL_YAML } else { DATA_YAML };
+    let text = if objective == "model" {
+        MODEL_YAML
+    } else {
+        DATA_YAML
+    };
     let mut c = OptimizeConfig::from_yaml(text, &format!("optimize_waveform/{objective}.yaml"))
         .map_err(|e| e.to_string())?;
     c.budget = c.budget.scaled(factor);

@@ -25,7 +25,12 @@ const NO_FF: &str =
 type Logs = Vec<(String, Vec<f64>)>;
 
 /// Run a graph text (after `edit`) for `duration_s`; the logs by name.
-fn run(name: &str, yaml: &str, duration_s: f64, edit: impl Fn(String) -> String) -> Result<Logs, String> {
+fn run(
+    name: &str,
+    yaml: &str,
+    duration_s: f64,
+    edit: impl Fn(String) -> String,
+) -> Result<Logs, String> {
     let text = edit(yaml.to_string());
     let mut spec: GraphSpec =
         nanomotion_core::yaml::from_str(&text, name).map_err(|e| format!("{name}: {e}"))?;
