@@ -27,7 +27,7 @@ fn main() -> Result<(), String> {
     let r = sec45::sec_4_5(factor, &seeds, &freqs, &mut |line| eprintln!("{line}"))?;
     for o in &r.optimisations {
         println!(
-            "{}: A = {:.3} V; start (8-point asymmetric) {:.4}, asymmetric {:.4} -> optimised {:.4} um/s ({:+.1} %); SA best {:.4}, PSO best {:.4} ({} wins), {} evaluations",
+            "{}: A = {:.3} V; start (8-point asymmetric) {:.4}, asymmetric {:.4} -> optimised {:.4} um/s ({:+.1} %); SA best {:.4}, PSO best {:.4} ({} wins), {} evaluations in {:.1} s",
             o.label,
             o.amplitude_v,
             o.start,
@@ -37,7 +37,8 @@ fn main() -> Result<(), String> {
             o.sa_best,
             o.pso_best,
             if o.pso_wins { "PSO" } else { "SA" },
-            o.evaluations
+            o.evaluations,
+            o.seconds
         );
     }
     println!();

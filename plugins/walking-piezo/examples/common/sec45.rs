@@ -32,6 +32,8 @@ pub struct OptimisationResult {
     pub pso_wins: bool,
     /// Objective evaluations.
     pub evaluations: u64,
+    /// Wall time of the optimisation (s).
+    pub seconds: f64,
     /// The optimised points.
     pub outcome: Outcome,
 }
@@ -82,6 +84,7 @@ fn run(
     label: &'static str,
     progress: &mut dyn FnMut(&str),
 ) -> Result<(Prepared, OptimisationResult), String> {
+    let started = std::time::Instant::now();
     let p = Prepared::new(c).map_err(|e| e.to_string())?;
     let o = optimize(&p, None, &mut |pr| {
         progress(&format!(
@@ -106,6 +109,7 @@ fn run(
         optimised: o.cost,
         pso_wins: matches!(s.global_winner(), Phase::ParticleSwarm),
         evaluations: s.evaluations(),
+        seconds: started.elapsed().as_secs_f64(),
         outcome: o,
     };
     Ok((p, r))
