@@ -273,4 +273,44 @@ fn main() {
             c.margin_db()
         );
     }
+    // 6. Unequal leg pairs (the other source of irregularity the thesis names):
+    //    pair 2's c_x, c_y scaled, same strip, L and Q.
+    println!(
+        "\n| pair 2 coefficients (σ_h = 100 nm, 10 µm/s) | N(α) without RC | none (nm) | RC (nm) | high-order RC (nm) | DVRC (nm) | α-periodic part none / RC / DVRC (nm) |"
+    );
+    println!("|---|---|---|---|---|---|---|");
+    for factor in [1.0, 0.97, 0.9] {
+        let pp = stage_params_unequal(STRIP_RMS_M, factor);
+        let r = period_range(&pp, &s, v10, 60.0);
+        let pl = plan_from_periods(r, comp, PAD);
+        let steps = (60.0 / DT) as usize;
+        let mut per = [0.0; 4];
+        let out: Vec<Outcome> = [Rc::None, Rc::Standard, Rc::HighOrder, Rc::Dvrc]
+            .iter()
+            .enumerate()
+            .map(|(i, &w)| {
+                let (mut es, mut als) = (Vec::new(), Vec::new());
+                let o = run_plan_traced(&pp, &s, &q, pl, v10, w, 60.0, |k, e, a| {
+                    if k >= steps * 3 / 4 {
+                        es.push(e);
+                        als.push(a);
+                    }
+                });
+                per[i] = alpha_periodic_split(&es, &als, 256).1;
+                o
+            })
+            .collect();
+        println!(
+            "| × {factor} | {:.0} … {:.0} | {:.3} | {:.3} | {:.3} | {:.3} | {:.3} / {:.3} / {:.3} |",
+            r.1,
+            r.2,
+            out[0].rms * 1e9,
+            out[1].rms * 1e9,
+            out[2].rms * 1e9,
+            out[3].rms * 1e9,
+            per[0] * 1e9,
+            per[1] * 1e9,
+            per[3] * 1e9
+        );
+    }
 }

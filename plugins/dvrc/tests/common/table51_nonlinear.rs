@@ -647,3 +647,16 @@ pub fn nonlinear_table(quick: bool) -> NonlinearTable {
         rows,
     }
 }
+
+/// The Table 5.1 stage ([`stage_params_with`]) with unequal leg pairs: the second
+/// pair's stacks (B, C: u3, u4) get `factor` × the first pair's c_x and c_y (the
+/// thesis, Sec. 4.4.1: "the coefficients for the second pair are smaller than for
+/// the first pair"; Table 4.1's values are lost, so the factor is a parameter).
+pub fn stage_params_unequal(strip_rms_m: f64, factor: f64) -> StageParams {
+    let mut p = stage_params_with(strip_rms_m);
+    for i in 2..4 {
+        p.c_x_m_v[i] *= factor;
+        p.c_y_m_v[i] *= factor;
+    }
+    p
+}
