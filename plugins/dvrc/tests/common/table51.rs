@@ -75,7 +75,10 @@ pub fn setup() -> Setup {
     let g = p.discrete(DT).unwrap();
     let kp = TAU * 50.0 / p.gain_m_per_cycle;
     let k = Pi::new(kp, 5.0, DT).unwrap().as_pid().state_space();
-    let one = StateSpace::gain(nanomotion_core::nalgebra::DMatrix::from_element(1, 1, 1.0), Some(DT));
+    let one = StateSpace::gain(
+        nanomotion_core::nalgebra::DMatrix::from_element(1, 1, 1.0),
+        Some(DT),
+    );
     let t = feedback(&series(&k, &g).unwrap(), &one, -1.0).unwrap();
     let z = zpetc_ss(&t).unwrap();
     let l = Filter::from_ss(z.to_ss().unwrap(), z.preview).unwrap();

@@ -15,12 +15,12 @@
 use super::table51::{Rc, RcUnderTest, Setup, Velocity};
 use dvrc::filters::Filter;
 use dvrc::stability::design_q_cutoff;
-use nanomotion_core::nalgebra::DMatrix;
 use nanomotion_core::analysis::{WelchOptions, frf_closed_loop};
 use nanomotion_core::blocks::control::Pi;
 use nanomotion_core::lti::{
     Complex, Margins, StateSpace, feedback, series, stability_margins, zpetc_ss,
 };
+use nanomotion_core::nalgebra::DMatrix;
 use nanomotion_core::rng::Rng;
 use nanomotion_core::{Controller, LearningFilter};
 use std::f64::consts::TAU;
