@@ -87,7 +87,7 @@ pub fn table_5_1(mode: Mode) -> Result<Report, ReproduceError> {
         rows,
         notes: vec![
             format!(
-                "Plant (5.31) at 4 kHz, PI 50 Hz, L = ZPETC of T, one 101-tap Q (cut-off {:.1} Hz for M − m = {}); the stage sees f_α(1 − δ(α)), δ a raised-cosine dip of depth {} and half-width π/8 at each take-over (our choice: the thesis gives no g_nlin).",
+                "Plant (5.31) at 4 kHz with the thesis's Ch. 5 step c = 10 µm/s / 1.98 Hz = 5.05 µm per cycle, PI 50 Hz, L = ZPETC of T, one 101-tap Q (cut-off {:.1} Hz for M − m = {}); the stage sees f_α(1 − δ(α)), δ a raised-cosine dip of depth {} and half-width π/8 at each take-over (our choice: the thesis gives no g_nlin).",
                 t.q_cutoff_hz,
                 t.spread,
                 table51::DIP_DEPTH

@@ -70,8 +70,24 @@ pub struct Setup {
     pub c_m_per_cycle: f64,
 }
 
+/// The real stage's step per α cycle in Ch. 5 (m): Sec. 5.5.2 finds the error's
+/// base frequency at 10 µm/s to be 1.98 Hz, so the stage walked
+/// 10 µm/s / 1.98 Hz = 5.05 µm per cycle (issue 18 item 2; docs/walking-piezo.md,
+/// "Step per drive cycle").
+pub const CH5_STEP_M: f64 = 1e-5 / 1.98;
+
+/// The nominal design: (5.31) with its default gain (Ch. 2's c = 7.91 µm per
+/// cycle, (5.31)'s own c is lost) and 3 samples of delay.
 pub fn setup() -> Setup {
-    let p = FittedStageParams::default();
+    setup_with_c(FittedStageParams::default().gain_m_per_cycle)
+}
+
+/// (5.31) with the step per cycle `c` (m), its PI (50 Hz), T and L = ZPETC of T.
+pub fn setup_with_c(c: f64) -> Setup {
+    let p = FittedStageParams {
+        gain_m_per_cycle: c,
+        ..FittedStageParams::default()
+    };
     let g = p.discrete(DT).unwrap();
     let kp = TAU * 50.0 / p.gain_m_per_cycle;
     let k = Pi::new(kp, 5.0, DT).unwrap().as_pid().state_space();
@@ -469,7 +485,8 @@ pub fn linear_profiles(quick: bool) -> Vec<(&'static str, Velocity, f64)> {
 /// The linear Table 5.1: every reference of [`linear_profiles`] with the velocity
 /// dip, none / RC / high-order RC / DVRC, one Q designed for the largest spread.
 pub fn linear_table(quick: bool) -> LinearTable {
-    let s = setup();
+    // The plant walks the thesis's Ch. 5 step per cycle.
+    let s = setup_with_c(CH5_STEP_M);
     let profiles = linear_profiles(quick);
     // q + l + 1 = 56 samples minimum delay.
     let comp = 56;

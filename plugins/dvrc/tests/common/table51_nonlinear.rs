@@ -46,11 +46,7 @@ pub fn margins(s: &Setup) -> Margins {
     margins_on(&s.g, s.kp)
 }
 
-/// The real stage's step per α cycle in Ch. 5 (m): Sec. 5.5.2 finds the error's
-/// base frequency at 10 µm/s to be 1.98 Hz, so the stage walked
-/// 10 µm/s / 1.98 Hz = 5.05 µm per cycle with the asymmetric waveforms at
-/// A = 46 V (issue 18 item 2; docs/walking-piezo.md, "Step per drive cycle").
-pub const CH5_STEP_M: f64 = 1e-5 / 1.98;
+pub use super::table51::CH5_STEP_M;
 
 /// Factor on the bending coefficients c_x (all four stacks) that makes the
 /// flat-strip stage walk [`CH5_STEP_M`] per α cycle at 1.98 Hz: the printed
