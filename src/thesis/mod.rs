@@ -14,6 +14,10 @@
 //! `Deviates` otherwise. The reason says which, with numbers. Never tune a model
 //! toward a thesis figure.
 
+pub mod ch2;
+pub mod ch4;
+pub mod ch5;
+
 use serde::{Deserialize, Serialize};
 
 pub mod ch3;
@@ -133,6 +137,18 @@ pub struct Experiment {
 pub fn experiments() -> Vec<Experiment> {
     vec![
         Experiment {
+            id: "table_2_2",
+            title: "Table 2.2 — jogging with non-overlapping vs overlapping tip trajectories",
+            in_quick: true,
+            run: ch2::table_2_2,
+        },
+        Experiment {
+            id: "table_2_3",
+            title: "Table 2.3 — point-to-point moves with and without FF + GS",
+            in_quick: true,
+            run: ch2::table_2_3,
+        },
+        Experiment {
             id: "table_3_2",
             title: "Table 3.2 — leg model gain and first resonance against n_m",
             in_quick: true,
@@ -155,6 +171,24 @@ pub fn experiments() -> Vec<Experiment> {
             title: "Table 4.2 — strokes and model errors per waveform at 10 Hz",
             in_quick: true,
             run: ch3::table_4_2,
+        },
+        Experiment {
+            id: "sec_4_5",
+            title: "Sec. 4.5 — waveform optimisation (model- and data-based)",
+            in_quick: true,
+            run: ch4::sec_4_5,
+        },
+        Experiment {
+            id: "table_5_1",
+            title: "Table 5.1 — repetitive control on the linear fitted stage",
+            in_quick: true,
+            run: ch5::table_5_1,
+        },
+        Experiment {
+            id: "table_5_1_nonlinear",
+            title: "Table 5.1 — repetitive control of the nonlinear walking piezo stage",
+            in_quick: true,
+            run: ch5::table_5_1_nonlinear,
         },
     ]
 }

@@ -1,7 +1,9 @@
-//! Table 5.1-style comparison (issue 7 item 5) on the linear fitted stage (5.31)
-//! with a ripple periodic in the leg angle α (Fig. 5.6(b)), PI 50 Hz bandwidth at
-//! 4 kHz, L = ZPETC of T, one 101-tap Q for all RC variants designed for the
-//! largest delay spread of the experiments. See docs/repetitive-control.md.
+//! Table 5.1-style comparison (issue 7 item 5, issue 18 item 3) on the linear
+//! fitted stage (5.31) with a take-over velocity dip periodic in the leg angle α
+//! (the stage sees f_α(1 − δ(α))), PI 50 Hz bandwidth at 4 kHz, L = ZPETC of T,
+//! one 101-tap Q for all RC variants designed for the largest delay spread of the
+//! experiments. The computation is `table51::linear_table` (shared with the test
+//! and with `nanomotion reproduce table_5_1`). See docs/repetitive-control.md.
 //!
 //! Run: `cargo run --release -p nanomotion-dvrc --example table_5_1`
 
@@ -10,53 +12,63 @@ mod table51;
 use table51::*;
 
 fn main() {
-    let s = setup();
-    let profiles = [
-        ("1 µm/s", Velocity::Constant(1e-6), 120.0),
-        ("10 µm/s", Velocity::Constant(1e-5), 40.0),
-        ("0.1 mm/s", Velocity::Constant(1e-4), 20.0),
-        ("1 mm/s", Velocity::Constant(1e-3), 20.0),
-        (
-            "10 µm/s·(1 + 0.5 sin 0.2πt)",
-            Velocity::Sinusoidal {
-                v0: 1e-5,
-                a: 0.5,
-                f_hz: 0.1,
-            },
-            80.0,
-        ),
-    ];
-    // Worst-case spread over the experiments (q + l + 1 = 56 samples minimum delay).
-    let comp = 56;
-    let spread = profiles
-        .iter()
-        .map(|(_, v, _)| {
-            let (_, _, m, mm) = delay_range(&s, *v, comp);
-            mm - m
-        })
-        .max()
-        .unwrap();
-    let (q, fc) = q_for(&s, spread);
-    println!("Q: 101 taps, cut-off {fc:.1} Hz, designed for M − m = {spread}");
+    let quick = std::env::args().any(|a| a == "--quick");
+    let t = linear_table(quick);
     println!(
-        "| reference | [m, M] (samples) | none, no ripple (nm) | none (nm) | RC (nm) | high-order RC (nm) | DVRC (nm) | N_k seen by DVRC |"
+        "velocity dip δ(α): depth {DIP_DEPTH}, half-width {:.4} rad at each take-over (α ≡ 0, π), mean {:.4}",
+        DIP_HALF_WIDTH_RAD,
+        dip_mean()
     );
-    println!("|---|---|---|---|---|---|---|---|");
-    for (name, v, dur) in profiles {
-        let (_, _, m, mm) = delay_range(&s, v, comp);
-        let floor = run_with(&s, &q, v, Rc::None, dur, 0.0).0 * 1e9;
-        let r: Vec<(f64, (usize, usize))> = [Rc::None, Rc::Standard, Rc::HighOrder, Rc::Dvrc]
-            .iter()
-            .map(|&w| run(&s, &q, v, w, dur))
-            .collect();
+    println!(
+        "Q: 101 taps, cut-off {:.1} Hz, designed for M − m = {}",
+        t.q_cutoff_hz, t.spread
+    );
+    println!(
+        "| reference | run (s) | [m, M] (samples) | none, no dip (nm) | none (nm) | RC (nm) | high-order RC (nm) | DVRC (nm) | N_k seen by DVRC |"
+    );
+    println!("|---|---|---|---|---|---|---|---|---|");
+    for r in &t.rows {
         println!(
-            "| {name} | [{m}, {mm}] | {floor:.3} | {:.3} | {:.3} | {:.3} | {:.3} | {:?} |",
-            r[0].0 * 1e9,
-            r[1].0 * 1e9,
-            r[2].0 * 1e9,
-            r[3].0 * 1e9,
-            r[3].1
+            "| {} | {:.0} | [{}, {}] | {:.3} | {:.3} | {:.3} | {:.3} | {:.3} | {} … {} |",
+            r.name,
+            r.duration_s,
+            r.m,
+            r.mm,
+            r.floor * 1e9,
+            r.rms[0] * 1e9,
+            r.rms[1] * 1e9,
+            r.rms[2] * 1e9,
+            r.rms[3] * 1e9,
+            r.dvrc_n.0,
+            r.dvrc_n.1
         );
     }
-    println!("{}", criterion_text(&s, &q, 56, 56 + spread));
+    println!("\nα-periodic part (α-synchronous average, 256 bins) and the rest, nm:");
+    println!("| reference | none | RC | high-order RC | DVRC |\n|---|---|---|---|---|");
+    for r in &t.rows {
+        let f = |(_, p, q): (f64, f64, f64)| format!("{:.3} / {:.3}", p * 1e9, q * 1e9);
+        println!(
+            "| {} | {} | {} | {} | {} |",
+            r.name,
+            f(r.split[0]),
+            f(r.split[1]),
+            f(r.split[2]),
+            f(r.split[3])
+        );
+    }
+    println!(
+        "\n10 µm/s with the former output ripple instead of the dip: none {:.3}, RC {:.3}, high-order RC {:.3}, DVRC {:.3} nm",
+        t.ripple_10um[0] * 1e9,
+        t.ripple_10um[1] * 1e9,
+        t.ripple_10um[2] * 1e9,
+        t.ripple_10um[3] * 1e9
+    );
+    println!("{}", t.criterion);
+    for ((d, ho), (_, none)) in t.high_order_growth.iter().zip(&t.none_growth) {
+        println!(
+            "sinusoidal velocity, {d:.0} s run, rms over its last 10 s: high-order RC {:.3} nm, none {:.3} nm",
+            ho * 1e9,
+            none * 1e9
+        );
+    }
 }

@@ -23,35 +23,25 @@ use std::f64::consts::TAU;
 use table51::{Rc, Setup, Velocity, setup};
 use table51_nonlinear::*;
 
-/// Relative pad on the measured N(α) range for DVRC's window [m, M].
-const PAD: f64 = 0.02;
-
-fn stats(v: &[f64]) -> (f64, f64, f64, f64) {
-    let n = v.len() as f64;
-    let m = v.iter().sum::<f64>() / n;
-    let sd = (v.iter().map(|x| (x - m) * (x - m)).sum::<f64>() / n).sqrt();
-    let mn = v.iter().copied().fold(f64::INFINITY, f64::min);
-    let mx = v.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-    (m, sd, mn, mx)
-}
-
 fn main() {
+    let quick = std::env::args().any(|a| a == "--quick");
     let nominal = setup();
+    let t = nonlinear_table(quick);
     let p = stage_params_with(STRIP_RMS_M);
     println!(
-        "Stage: defaults, strip profile σ_h = {:.0} nm, correlation {:.1} µm, leg pitch {:.1} mm, seed {SEED}",
+        "Stage: defaults with c_x × {:.4} = {:.2} nm/V (the thesis's Ch. 5 step {:.3} µm per cycle: 10 µm/s at 1.98 Hz), \
+         strip profile σ_h = {:.0} nm, correlation {:.1} µm, leg pitch {:.1} mm, seed {SEED}",
+        t.c_x_scale,
+        p.c_x_m_v[0] * 1e9,
+        CH5_STEP_M * 1e6,
         p.strip_height_rms_m * 1e9,
         p.strip_height_corr_m * 1e6,
         p.strip_leg_pitch_m * 1e3
     );
     // 1. Irregular stepping, open loop, at the 10 µm/s drive frequency.
-    let f10 = 1e-5 / 7.02e-6;
-    for (name, pp) in [("flat strip", stage_params()), ("rough strip", p.clone())] {
-        let (m, sd, mn, mx) = stats(&open_loop_steps(&pp, f10, 40));
-        let (pm, pmin, pmax) = period_range(&pp, &nominal, Velocity::Constant(1e-5), 30.0);
+    for (name, (m, sd, mn, mx)) in [("flat strip", t.steps_flat), ("rough strip", t.steps_rough)] {
         println!(
-            "{name}: open-loop step per cycle at {f10:.3} Hz (40 cycles) {:.4} µm, sd {:.4} µm ({:.2} %), range [{:.3}, {:.3}] µm; \
-             PI-only at 10 µm/s: α period {pm:.1} samples, range [{pmin:.1}, {pmax:.1}]",
+            "{name}: open-loop step per cycle at 1.98 Hz {:.4} µm, sd {:.4} µm ({:.2} %), range [{:.3}, {:.3}] µm",
             m * 1e6,
             sd * 1e6,
             100.0 * sd / m,
@@ -60,8 +50,7 @@ fn main() {
         );
     }
     // 2. Identification (Fig. 2.8) with the nominal PI, 10 µm/s, 30 Hz rms noise.
-    let frf = measure_frf(&p, nominal.kp, 1e-5, 30.0, 40.0);
-    let fit = identify(&frf, (5.0, 300.0));
+    let (fit, frf, s, q, fc, spread) = (t.fit, &t.frf, &t.design, &t.q, t.q_cutoff_hz, t.spread);
     println!(
         "identified (5.31) structure, 5–300 Hz: c = {:.3} µm/cycle, delay {} samples (nominal model: c = {:.3}, 3 samples), rel. fit error {:.1} %",
         fit.c * 1e6,
@@ -69,8 +58,7 @@ fn main() {
         nominal.c_m_per_cycle * 1e6,
         100.0 * fit.rel_err
     );
-    let s = design(fit.model(), fit.c);
-    let mg = margins(&s);
+    let mg = margins(s);
     println!(
         "PI on the identified model: k_p = {:.4e} Hz/m, crossover {:.1} Hz, PM {:.1}°, GM {:.1} dB, modulus margin {:.2}",
         s.kp,
@@ -79,34 +67,7 @@ fn main() {
         20.0 * mg.gain_margin.log10(),
         mg.modulus_margin
     );
-    // 3. N(α) ranges without RC (Fig. 5.7) → plans, one Q for the worst spread.
-    let profiles = [
-        ("1 µm/s", Velocity::Constant(1e-6), 300.0),
-        ("10 µm/s", Velocity::Constant(1e-5), 60.0),
-        ("0.1 mm/s", Velocity::Constant(1e-4), 20.0),
-        ("1 mm/s", Velocity::Constant(1e-3), 20.0),
-        (
-            "10 µm/s·(1 + 0.5 sin 0.2πt)",
-            Velocity::Sinusoidal {
-                v0: 1e-5,
-                a: 0.5,
-                f_hz: 0.1,
-            },
-            100.0,
-        ),
-    ];
-    // Smallest admissible N: l + q + 1 (Q has 101 taps, q = 50).
-    let comp = s.l.preview_samples() + 50 + 1;
-    let ranges: Vec<(f64, f64, f64)> = profiles
-        .iter()
-        .map(|(_, v, d)| period_range(&p, &s, *v, f64::min(*d, 60.0)))
-        .collect();
-    let plans: Vec<Plan> = ranges
-        .iter()
-        .map(|r| plan_from_periods(*r, comp, PAD))
-        .collect();
-    let spread = plans.iter().map(|pl| pl.mm - pl.m).max().unwrap();
-    let (q, fc) = q_for(&s, spread);
+    // 3. The table.
     println!(
         "Q: 101 taps, cut-off {fc:.1} Hz, designed on the identified model for M − m = {spread}"
     );
@@ -114,27 +75,23 @@ fn main() {
         "| reference | N(α) without RC (samples) | N (RC) | [m, M] | (5.9) margin (dB) | none (nm) | RC (nm) | high-order RC (nm) | DVRC (nm) | N_k seen by DVRC |"
     );
     println!("|---|---|---|---|---|---|---|---|---|---|");
-    for (((name, v, dur), r), pl) in profiles.iter().zip(&ranges).zip(&plans) {
-        let c = rc_criterion(&s.t, &s.l, &q, pl.m, pl.mm).unwrap();
-        let out: Vec<Outcome> = [Rc::None, Rc::Standard, Rc::HighOrder, Rc::Dvrc]
-            .iter()
-            .map(|&w| run_plan(&p, &s, &q, *pl, *v, w, *dur))
-            .collect();
-        let nc: u64 = out.iter().map(|o| o.nonconverged).sum();
+    for r in &t.rows {
+        let nc: u64 = r.out.iter().map(|o| o.nonconverged).sum();
         println!(
-            "| {name} | {:.0} … {:.0} | {} | [{}, {}] | {:+.2} | {:.3} | {:.3} | {:.3} | {:.3} | {} … {} |{}",
-            pl.j as f64 * r.1,
-            pl.j as f64 * r.2,
-            pl.n_fixed,
-            pl.m,
-            pl.mm,
-            c.margin_db(),
-            out[0].rms * 1e9,
-            out[1].rms * 1e9,
-            out[2].rms * 1e9,
-            out[3].rms * 1e9,
-            out[3].seen.0,
-            out[3].seen.1,
+            "| {} | {:.0} … {:.0} | {} | [{}, {}] | {:+.2} | {:.3} | {:.3} | {:.3} | {:.3} | {} … {} |{}",
+            r.name,
+            r.periods.1,
+            r.periods.2,
+            r.plan.n_fixed,
+            r.plan.m,
+            r.plan.mm,
+            r.margin_db,
+            r.out[0].rms * 1e9,
+            r.out[1].rms * 1e9,
+            r.out[2].rms * 1e9,
+            r.out[3].rms * 1e9,
+            r.out[3].seen.0,
+            r.out[3].seen.1,
             if nc > 0 {
                 format!(" ({nc} non-converged sub-steps)")
             } else {
@@ -147,31 +104,24 @@ fn main() {
     println!(
         "\n| reference | controller | rms (nm) | α-periodic part (nm) | rest (nm) |\n|---|---|---|---|---|"
     );
-    for i in [1usize, 2] {
-        let (name, v, dur) = profiles[i];
-        for (wname, w) in [
-            ("none", Rc::None),
-            ("RC", Rc::Standard),
-            ("high-order RC", Rc::HighOrder),
-            ("DVRC", Rc::Dvrc),
-        ] {
-            let steps = (dur / DT) as usize;
-            let (mut es, mut als) = (Vec::new(), Vec::new());
-            run_plan_traced(&p, &s, &q, plans[i], v, w, dur, |k, e, a| {
-                if k >= steps * 3 / 4 {
-                    es.push(e);
-                    als.push(a);
-                }
-            });
-            let (t, per, rest) = alpha_periodic_split(&es, &als, 256);
+    for r in &t.rows {
+        let Some(split) = r.split else { continue };
+        for (wname, (tot, per, rest)) in ["none", "RC", "high-order RC", "DVRC"].iter().zip(split) {
             println!(
-                "| {name} | {wname} | {:.3} | {:.3} | {:.3} |",
-                t * 1e9,
+                "| {} | {wname} | {:.3} | {:.3} | {:.3} |",
+                r.name,
+                tot * 1e9,
                 per * 1e9,
                 rest * 1e9
             );
         }
     }
+    if quick {
+        return;
+    }
+    let plans: Vec<Plan> = t.rows.iter().map(|r| r.plan).collect();
+    let comp = s.l.preview_samples() + 50 + 1;
+    let (s, q, frf) = (s.clone(), q.clone(), frf.clone());
     let worst = plans.iter().max_by_key(|pl| pl.mm - pl.m).unwrap();
     println!(
         "criterion on the identified model: {}",
@@ -195,7 +145,7 @@ fn main() {
         3.0 * hm
     );
     let v10 = Velocity::Constant(1e-5);
-    let pl_old = plan_from_step(7.02e-6, v10, 56, 0.25);
+    let pl_old = plan_from_step(t.steps_flat.0, v10, 56, 0.25);
     println!(
         "flat strip, 10 µm/s:\n| run length (s) | high-order RC, nominal design (nm) | high-order RC, identified design (nm) | RC, nominal design (nm) |"
     );
@@ -321,6 +271,46 @@ fn main() {
             out[3].seen.0,
             out[3].seen.1,
             c.margin_db()
+        );
+    }
+    // 6. Unequal leg pairs (the other source of irregularity the thesis names):
+    //    pair 2's c_x, c_y scaled, same strip, L and Q.
+    println!(
+        "\n| pair 2 coefficients (σ_h = 100 nm, 10 µm/s) | N(α) without RC | none (nm) | RC (nm) | high-order RC (nm) | DVRC (nm) | α-periodic part none / RC / DVRC (nm) |"
+    );
+    println!("|---|---|---|---|---|---|---|");
+    for factor in [1.0, 0.97, 0.9] {
+        let pp = stage_params_unequal(STRIP_RMS_M, factor);
+        let r = period_range(&pp, &s, v10, 60.0);
+        let pl = plan_from_periods(r, comp, PAD);
+        let steps = (60.0 / DT) as usize;
+        let mut per = [0.0; 4];
+        let out: Vec<Outcome> = [Rc::None, Rc::Standard, Rc::HighOrder, Rc::Dvrc]
+            .iter()
+            .enumerate()
+            .map(|(i, &w)| {
+                let (mut es, mut als) = (Vec::new(), Vec::new());
+                let o = run_plan_traced(&pp, &s, &q, pl, v10, w, 60.0, |k, e, a| {
+                    if k >= steps * 3 / 4 {
+                        es.push(e);
+                        als.push(a);
+                    }
+                });
+                per[i] = alpha_periodic_split(&es, &als, 256).1;
+                o
+            })
+            .collect();
+        println!(
+            "| × {factor} | {:.0} … {:.0} | {:.3} | {:.3} | {:.3} | {:.3} | {:.3} / {:.3} / {:.3} |",
+            r.1,
+            r.2,
+            out[0].rms * 1e9,
+            out[1].rms * 1e9,
+            out[2].rms * 1e9,
+            out[3].rms * 1e9,
+            per[0] * 1e9,
+            per[1] * 1e9,
+            per[3] * 1e9
         );
     }
 }

@@ -15,7 +15,9 @@
 //!   stable and a lifted check proves stability for every N_k ∈ \[m, M\] ((5.9)
 //!   is only sufficient);
 //! - `high_order_rc`: the small-gain condition ‖H‖∞·Σ|w_i| < 1 (sufficient; W(z)
-//!   has ‖W‖∞ = Σ|w_i|).
+//!   has ‖W‖∞ = Σ|w_i|) for a disturbance that does not depend on the loop; the
+//!   report adds [`HIGH_ORDER_NOTE`]: when the disturbance is periodic in a variable
+//!   the loop itself moves (α of the walking piezo), the condition is no guarantee.
 //!
 //! ```
 //! let yaml = r#"
@@ -167,6 +169,7 @@ impl fmt::Display for RcCheckReport {
                                 "NOT guaranteed"
                             }
                         )?;
+                        writeln!(f, "    {HIGH_ORDER_NOTE}")?;
                     }
                     if let Some(l) = &b.lifted {
                         writeln!(f, "    {l}")?;
@@ -198,6 +201,10 @@ impl fmt::Display for RcCheckReport {
         )
     }
 }
+
+/// Printed under every `high_order_rc` block: what the small-gain condition does
+/// not cover (docs/repetitive-control.md, "High-order RC and the α-feedback path").
+pub const HIGH_ORDER_NOTE: &str = "note: ‖H‖∞·Σ|w_i| < 1 covers a disturbance that does not depend on the loop; when it is periodic in a variable the loop moves (the walking piezo's leg angle α = 2π∫f_α dt, f_α from u) the loop is not LTI and this is no guarantee: on the walking-piezo Table 5.1 loops high-order RC ends above no RC although it holds (docs/repetitive-control.md)";
 
 fn t_of(t: Option<TfModel>, dt: f64) -> Result<StateSpace, String> {
     let t = t.ok_or_else(|| {
@@ -325,4 +332,38 @@ pub fn rc_check_file(
     Ok(rc_check_graph(
         &GraphSpec::from_file(path).map_err(Box::new)?,
     ))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const GRAPH: &str = r#"
+base_rate_hz: 1000
+duration_s: 0.1
+blocks:
+  - name: ho
+    type: high_order_rc
+    n: 40
+    learning: {kind: zpetc, num: [0.5], den: [1.0, -0.5]}
+    robustness: {kind: fir_lowpass, taps: 5, cutoff_hz: 50}
+  - name: rc
+    type: repetitive_control
+    n: 40
+    learning: {kind: zpetc, num: [0.5], den: [1.0, -0.5]}
+    robustness: {kind: fir_lowpass, taps: 5, cutoff_hz: 50}
+connections: []
+"#;
+
+    /// The α-feedback note is printed once per high-order RC block, not for others.
+    #[test]
+    fn high_order_blocks_carry_the_alpha_feedback_note() {
+        let spec = GraphSpec::from_yaml(GRAPH, "test").unwrap();
+        let report = rc_check_graph(&spec);
+        assert_eq!(report.blocks.len(), 2);
+        let text = report.to_string();
+        assert_eq!(text.matches(HIGH_ORDER_NOTE).count(), 1, "{text}");
+        let ho_part = text.split("rc (repetitive_control)").next().unwrap();
+        assert!(ho_part.contains(HIGH_ORDER_NOTE), "{text}");
+    }
 }

@@ -13,94 +13,46 @@
 //!
 //! `cargo run --release -p nanomotion-walking-piezo --example waveform_optimisation`
 //! (optional argument: a budget factor, default 1; e.g. 0.2 for a quick look).
-use std::ops::ControlFlow;
-use std::time::Instant;
-use walking_piezo::WaveformShape;
-use walking_piezo::optimize::OptimizeConfig;
-use walking_piezo::optimize::{
-    Drive, ObjectiveKind, Outcome, Phase, Prepared, optimize, real_stage,
-};
+//! The computation is `common/sec45.rs` (also run by `nanomotion reproduce`).
+#[path = "common/sec45.rs"]
+mod sec45;
 
-fn config(objective: &str, factor: f64) -> OptimizeConfig {
-    let path = format!(
-        "{}/../../examples/optimize_waveform/{objective}.yaml",
-        env!("CARGO_MANIFEST_DIR")
-    );
-    let mut c = OptimizeConfig::from_file(std::path::Path::new(&path)).expect("example config");
-    c.budget = c.budget.scaled(factor);
-    c
-}
-
-fn run(c: &OptimizeConfig, label: &str) -> (Prepared, Outcome) {
-    let t = Instant::now();
-    let p = Prepared::new(c).expect("prepare");
-    let o = optimize(&p, None, &mut |pr| {
-        eprintln!(
-            "  [{label}] {:<20} chunk {:>3}/{:<3} evals {:>6}  best {:.4} um/s",
-            pr.phase.name(),
-            pr.chunks_done,
-            pr.chunks_total,
-            pr.evaluations,
-            pr.best_cost
-        );
-        ControlFlow::Continue(())
-    })
-    .expect("optimise");
-    let s = &o.search;
-    println!(
-        "{label}: A = {:.3} V; start (8-point asymmetric) {:.4}, asymmetric {:.4} -> optimised {:.4} um/s ({:+.1} %); SA best {:.4}, PSO best {:.4} ({} wins), {} evaluations in {:.1} s",
-        o.amplitude_v,
-        s.start.exact_cost(),
-        o.asymmetric_cost,
-        o.cost,
-        100.0 * (o.cost / o.asymmetric_cost - 1.0),
-        s.phase(Phase::SimulatedAnnealing).best.exact_cost(),
-        s.phase(Phase::ParticleSwarm).best.exact_cost(),
-        match s.global_winner() {
-            Phase::ParticleSwarm => "PSO",
-            _ => "SA",
-        },
-        s.evaluations(),
-        t.elapsed().as_secs_f64()
-    );
-    (p, o)
-}
-
-fn main() {
+fn main() -> Result<(), String> {
     let factor: f64 = std::env::args()
         .nth(1)
         .and_then(|a| a.parse().ok())
         .unwrap_or(1.0);
-    // The two readings of the extracted "dy = .5 um": 0.5 um and 0.05 um (default).
-    let mut c1 = config("model", factor);
-    c1.clearance_m = -0.5e-6;
-    let (pm, om) = run(&c1, "model, dy = -0.5 um");
-    let (_p2, om2) = run(&config("model", factor), "model, dy = -0.05 um");
-    let (_pd, od) = run(&config("data", factor), "data");
-    let c = &pm.config;
-    assert_eq!(pm.config.objective, ObjectiveKind::Model);
-    let free = |o: &Outcome| WaveformShape::Free { points_v: o.points };
-    let shapes = [
-        ("asymmetric", pm.asymmetric_shape()),
-        ("model-based (dy -0.5 um)", free(&om)),
-        ("model-based (dy -0.05 um)", free(&om2)),
-        ("data-based", free(&od)),
-    ];
-    println!();
-    println!("On the nominal model at 14 Hz (g of (4.23) with dy = -0.5 um):");
-    for (name, shape) in &shapes {
-        let e = pm.model.evaluate_shape(shape.clone()).expect("model");
+    let seeds = [101u64, 102, 103];
+    let freqs = [10.0, 12.0, 14.0, 16.0, 18.0, 20.0];
+    let r = sec45::sec_4_5(factor, &seeds, &freqs, &mut |line| eprintln!("{line}"))?;
+    for o in &r.optimisations {
         println!(
-            "  {name:<26} mean velocity {:>7.2} um/s, rms(v_r - v_s) {:>7.2} um/s, g {:>7.2} um/s",
-            e.mean_velocity_um_s, e.stage_error_um_s, e.g_um_s
+            "{}: A = {:.3} V; start (8-point asymmetric) {:.4}, asymmetric {:.4} -> optimised {:.4} um/s ({:+.1} %); SA best {:.4}, PSO best {:.4} ({} wins), {} evaluations in {:.1} s",
+            o.label,
+            o.amplitude_v,
+            o.start,
+            o.asymmetric,
+            o.optimised,
+            100.0 * (o.optimised / o.asymmetric - 1.0),
+            o.sa_best,
+            o.pso_best,
+            if o.pso_wins { "PSO" } else { "SA" },
+            o.evaluations,
+            o.seconds
         );
     }
-    let seeds = [101u64, 102, 103];
+    println!();
+    println!("On the nominal model at 14 Hz (g of (4.23) with dy = -0.5 um):");
+    for (name, v, e, g) in &r.nominal {
+        println!(
+            "  {name:<26} mean velocity {v:>7.2} um/s, rms(v_r - v_s) {e:>7.2} um/s, g {g:>7.2} um/s"
+        );
+    }
     println!();
     println!(
         "Fig. 4.14 style: rms(v_r - v_s,e) (um/s) on the perturbed stage, mean of {} validation experiments, A = {:.3} V",
         seeds.len(),
-        om.amplitude_v
+        r.optimisations[0].amplitude_v
     );
     println!(
         "{:>6} {:>9} {:>11} {:>14} {:>15} {:>11} {:>9} {:>9} {:>9}",
@@ -114,36 +66,13 @@ fn main() {
         "model'",
         "data"
     );
-    let freqs = [10.0, 12.0, 14.0, 16.0, 18.0, 20.0];
-    let mut sums = [0.0; 4];
-    for f in freqs {
-        let v = c.velocity_m_s * f / c.f_alpha_hz;
-        let drive = Drive {
-            f_alpha_hz: f,
-            amplitude_v: om.amplitude_v,
-            voltage_max_v: c.voltage_max_v,
-        };
-        let mut e = [0.0; 4];
-        for (k, (_, shape)) in shapes.iter().enumerate() {
-            for &s in &seeds {
-                let real = real_stage(c, s);
-                let m = real
-                    .measure(
-                        shape.clone(),
-                        &drive,
-                        v,
-                        c.simulation.warmup_cycles,
-                        4 * c.simulation.cycles,
-                    )
-                    .expect("measure");
-                e[k] += m.error_um_s / seeds.len() as f64;
-            }
-            sums[k] += e[k] / freqs.len() as f64;
-        }
+    for row in &r.validation {
+        let e = row.error_um_s;
         let pct = |x: f64| 100.0 * (x / e[0] - 1.0);
         println!(
-            "{f:>6.0} {:>9.1} {:>11.3} {:>14.3} {:>15.3} {:>11.3} {:>8.0}% {:>8.0}% {:>8.0}%",
-            v * 1e6,
+            "{:>6.0} {:>9.1} {:>11.3} {:>14.3} {:>15.3} {:>11.3} {:>8.0}% {:>8.0}% {:>8.0}%",
+            row.f_alpha_hz,
+            row.v_m_s * 1e6,
             e[0],
             e[1],
             e[2],
@@ -153,6 +82,7 @@ fn main() {
             pct(e[3])
         );
     }
+    let sums = r.validation_mean;
     let pct = |x: f64| 100.0 * (x / sums[0] - 1.0);
     println!(
         "{:>6} {:>9} {:>11.3} {:>14.3} {:>15.3} {:>11.3} {:>8.0}% {:>8.0}% {:>8.0}%",
@@ -167,4 +97,5 @@ fn main() {
         pct(sums[3])
     );
     println!("(thesis, at 50 um/s: model-based -24 %, data-based -47 % against asymmetric)");
+    Ok(())
 }

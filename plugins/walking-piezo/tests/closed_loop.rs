@@ -187,3 +187,79 @@ fn overlap_costs_velocity_as_in_sec_2_4_1() {
         "{asym:e} vs {sym:e}"
     );
 }
+
+/// Issue 18 item 2: the step per drive cycle from the thesis's stated quantities
+/// (docs/walking-piezo.md, "Step per drive cycle"). Rigid kinematics of (2.1)
+/// with the higher pair driving (2.4): for the sinusoidal waveforms (2.2) at
+/// φ = 0 each pair's x stroke is √2·c_x·A (the thesis's "maximum step size of
+/// 4 µm") and each of the two pairs uses all of it once per cycle; (2.8)'s
+/// measured motor constant c = 2π·10 Hz·10^(−138/20) m/Hz is two such steps.
+#[test]
+fn step_per_cycle_from_the_thesis_quantities() {
+    use std::f64::consts::TAU;
+    use walking_piezo::driver::{DriverParams, WaveformDriver};
+    use walking_piezo::gain_id::{GainIdConfig, open_loop_step_per_cycle};
+    use walking_piezo::{StageParams, WaveformShape};
+    let kin = StageParams::default().kinematics();
+    let c_x = kin.c_x_m_v[0];
+    // Rigid kinematics over one cycle at 1 Hz, 10^5 samples.
+    let rigid = |shape: WaveformShape| {
+        let n = 100_000;
+        let dt = 1.0 / n as f64;
+        let mut d = WaveformDriver::new(
+            DriverParams {
+                shape,
+                ..Default::default()
+            },
+            dt,
+        )
+        .unwrap();
+        let mut prev = kin.tips(&d.try_drive(1.0, None, None).unwrap().0);
+        let mut travel = 0.0;
+        for _ in 0..n {
+            let tips = kin.tips(&d.try_drive(1.0, None, None).unwrap().0);
+            let i = if prev.y[0] >= prev.y[1] { 0 } else { 1 };
+            travel += tips.x[i] - prev.x[i];
+            prev = tips;
+        }
+        travel
+    };
+    let stroke = 2f64.sqrt() * c_x * 46.0;
+    let sin_rigid = rigid(WaveformShape::Sinusoidal);
+    let asym_rigid = rigid(WaveformShape::Asymmetric {
+        overlap_q: 1.0 / 3.0,
+    });
+    let stage = |shape: WaveformShape| {
+        let cfg = GainIdConfig {
+            shape,
+            ..Default::default()
+        };
+        open_loop_step_per_cycle(&cfg, 46.0, std::f64::consts::FRAC_PI_2, 10.0, 8).unwrap()
+    };
+    let sin_stage = stage(WaveformShape::Sinusoidal);
+    let asym_stage = stage(WaveformShape::Asymmetric {
+        overlap_q: 1.0 / 3.0,
+    });
+    let c_2_8 = TAU * 10.0 * 10f64.powf(-138.0 / 20.0);
+    println!(
+        "pair stroke √2·c_x·A = {stroke:e} m; rigid per cycle: sinusoidal {sin_rigid:e}, asymmetric {asym_rigid:e} m; \
+         stage at 10 Hz: sinusoidal {sin_stage:e}, asymmetric {asym_stage:e} m; (2.8) c = {c_2_8:e} m"
+    );
+    // The thesis's "maximum step size of 4 µm" is one pair's stroke.
+    assert!((stroke / 4e-6 - 1.0).abs() < 0.1, "{stroke:e}");
+    // Sinusoidal: the two pairs each use their whole stroke once per cycle.
+    assert!(
+        (sin_rigid / (2.0 * stroke) - 1.0).abs() < 1e-3,
+        "{sin_rigid:e}"
+    );
+    // (2.8)'s measured motor constant is that travel within 10 %, and so is the stage's.
+    assert!((c_2_8 / sin_rigid - 1.0).abs() < 0.1, "{c_2_8:e}");
+    assert!((sin_stage / c_2_8 - 1.0).abs() < 0.05, "{sin_stage:e}");
+    // Asymmetric: the overlap uses less of each stroke; the stage loses a few
+    // percent to the legs' compliance.
+    assert!(asym_rigid < 0.9 * sin_rigid && asym_rigid > 2.0 * 0.75 * stroke);
+    assert!(
+        (asym_stage / asym_rigid - 1.0).abs() < 0.05,
+        "{asym_stage:e}"
+    );
+}

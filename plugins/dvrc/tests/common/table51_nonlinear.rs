@@ -15,12 +15,12 @@
 use super::table51::{Rc, RcUnderTest, Setup, Velocity};
 use dvrc::filters::Filter;
 use dvrc::stability::design_q_cutoff;
-use nalgebra::DMatrix;
 use nanomotion_core::analysis::{WelchOptions, frf_closed_loop};
 use nanomotion_core::blocks::control::Pi;
 use nanomotion_core::lti::{
     Complex, Margins, StateSpace, feedback, series, stability_margins, zpetc_ss,
 };
+use nanomotion_core::nalgebra::DMatrix;
 use nanomotion_core::rng::Rng;
 use nanomotion_core::{Controller, LearningFilter};
 use std::f64::consts::TAU;
@@ -46,13 +46,42 @@ pub fn margins(s: &Setup) -> Margins {
     margins_on(&s.g, s.kp)
 }
 
-/// The stage of the table: default parameters, 10 sub-steps, a strip of rms
-/// height `strip_rms_m` (0: flat, the default model).
+pub use super::table51::CH5_STEP_M;
+
+/// Factor on the bending coefficients c_x (all four stacks) that makes the
+/// flat-strip stage walk [`CH5_STEP_M`] per α cycle at 1.98 Hz: the printed
+/// c_x = 64.5 nm/V of (5.29) gives 7.02 µm (rigid kinematics of (5.29)–(5.30):
+/// 7.21 µm), 1.39× the step the thesis measured. c_y (the take-over geometry)
+/// is kept. Computed once (two open-loop runs of 10 cycles; the step is linear
+/// in c_x up to the legs' compliance, so one refinement suffices).
+pub fn ch5_c_x_scale() -> f64 {
+    static SCALE: std::sync::OnceLock<f64> = std::sync::OnceLock::new();
+    *SCALE.get_or_init(|| {
+        let base = StageParams {
+            substeps: 10,
+            ..StageParams::default()
+        };
+        let f = 1e-5 / CH5_STEP_M;
+        let k1 = CH5_STEP_M / step_per_cycle_on(&base, f, 10);
+        let p1 = StageParams {
+            c_x_m_v: base.c_x_m_v.map(|c| c * k1),
+            ..base
+        };
+        k1 * CH5_STEP_M / step_per_cycle_on(&p1, f, 10)
+    })
+}
+
+/// The stage of the table: default parameters with c_x scaled by
+/// [`ch5_c_x_scale`] (the thesis's Ch. 5 step), 10 sub-steps, a strip of rms
+/// height `strip_rms_m` (0: flat).
 pub fn stage_params_with(strip_rms_m: f64) -> StageParams {
+    let d = StageParams::default();
+    let k = ch5_c_x_scale();
     StageParams {
         substeps: 10,
         strip_height_rms_m: strip_rms_m,
-        ..StageParams::default()
+        c_x_m_v: d.c_x_m_v.map(|c| c * k),
+        ..d
     }
 }
 
@@ -449,30 +478,181 @@ pub fn t_with_gain(s: &Setup, c_m_per_cycle: f64) -> StateSpace {
     feedback(&series(&k, &g).unwrap(), &one, -1.0).unwrap()
 }
 
-/// Split the rms of `e` into the part periodic in α (the α-synchronous average:
-/// mean of e over `bins` bins of α mod 2π, the content any RC in α could remove)
-/// and the rest. Returns (total, periodic, rest) rms.
-pub fn alpha_periodic_split(e: &[f64], alpha: &[f64], bins: usize) -> (f64, f64, f64) {
-    let mut sum = vec![0.0; bins];
-    let mut cnt = vec![0usize; bins];
-    let bin = |a: f64| (((a.rem_euclid(TAU)) / TAU * bins as f64) as usize).min(bins - 1);
-    for (&x, &a) in e.iter().zip(alpha) {
-        let b = bin(a);
-        sum[b] += x;
-        cnt[b] += 1;
+pub use super::table51::alpha_periodic_split;
+
+// ---------------------------------------------------------------------------
+// The table (shared by the example, the test and `nanomotion reproduce`)
+// ---------------------------------------------------------------------------
+
+/// Relative pad on the measured N(α) range for DVRC's window [m, M].
+pub const PAD: f64 = 0.02;
+
+/// One reference of the nonlinear Table 5.1.
+#[derive(Debug, Clone)]
+pub struct NonlinearRow {
+    /// e.g. "10 µm/s".
+    pub name: &'static str,
+    /// The reference.
+    pub velocity: Velocity,
+    /// Run length (s).
+    pub duration_s: f64,
+    /// N(α) without RC: (mean, min, max) samples per α period.
+    pub periods: (f64, f64, f64),
+    /// The memory-loop plan.
+    pub plan: Plan,
+    /// (5.9) margin (dB) on the identified model for [m, M].
+    pub margin_db: f64,
+    /// Outcomes for none, RC, high-order RC, DVRC.
+    pub out: [Outcome; 4],
+    /// (total, α-periodic, rest) rms (m) for none, RC, high-order RC, DVRC, when
+    /// computed (`split` rows).
+    pub split: Option<[(f64, f64, f64); 4]>,
+}
+
+/// The nonlinear Table 5.1.
+#[derive(Debug, Clone)]
+pub struct NonlinearTable {
+    /// Open-loop step per cycle of the flat and the rough strip at 1.98 Hz:
+    /// (mean, sd, min, max) m.
+    pub steps_flat: (f64, f64, f64, f64),
+    /// Same, rough strip.
+    pub steps_rough: (f64, f64, f64, f64),
+    /// The c_x factor of [`ch5_c_x_scale`].
+    pub c_x_scale: f64,
+    /// The identified plant.
+    pub fit: PlantFit,
+    /// The measured FRF it was fitted to.
+    pub frf: MeasuredFrf,
+    /// The design on the identified model.
+    pub design: Setup,
+    /// Q and its cut-off (Hz), designed for `spread`.
+    pub q: Filter,
+    /// Q cut-off (Hz).
+    pub q_cutoff_hz: f64,
+    /// Largest M − m.
+    pub spread: usize,
+    /// One row per reference.
+    pub rows: Vec<NonlinearRow>,
+}
+
+/// (mean, sd, min, max) of `v`.
+pub fn stats(v: &[f64]) -> (f64, f64, f64, f64) {
+    let n = v.len() as f64;
+    let m = v.iter().sum::<f64>() / n;
+    let sd = (v.iter().map(|x| (x - m) * (x - m)).sum::<f64>() / n).sqrt();
+    let mn = v.iter().copied().fold(f64::INFINITY, f64::min);
+    let mx = v.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    (m, sd, mn, mx)
+}
+
+/// The references and run lengths (s) of the table; `quick`: 10 µm/s and the
+/// sinusoidal velocity only, short runs.
+pub fn nonlinear_profiles(quick: bool) -> Vec<(&'static str, Velocity, f64)> {
+    let sinus = Velocity::Sinusoidal {
+        v0: 1e-5,
+        a: 0.5,
+        f_hz: 0.1,
+    };
+    if quick {
+        return vec![
+            ("10 µm/s", Velocity::Constant(1e-5), 30.0),
+            ("10 µm/s·(1 + 0.5 sin 0.2πt)", sinus, 20.0),
+        ];
     }
-    let n = e.len() as f64;
-    let total = (e.iter().map(|x| x * x).sum::<f64>() / n).sqrt();
-    let periodic = (alpha
+    vec![
+        ("1 µm/s", Velocity::Constant(1e-6), 300.0),
+        ("10 µm/s", Velocity::Constant(1e-5), 60.0),
+        ("0.1 mm/s", Velocity::Constant(1e-4), 20.0),
+        ("1 mm/s", Velocity::Constant(1e-3), 20.0),
+        ("10 µm/s·(1 + 0.5 sin 0.2πt)", sinus, 100.0),
+    ]
+}
+
+/// The nonlinear Table 5.1 on the rough-strip stage ([`STRIP_RMS_M`]): open-loop
+/// step statistics, FRF identification (Fig. 2.8), design on the identified model,
+/// N(α) ranges without RC, one Q, then none / RC / high-order RC / DVRC per
+/// reference, with the α-periodic split at 10 µm/s (and 0.1 mm/s in full).
+pub fn nonlinear_table(quick: bool) -> NonlinearTable {
+    let nominal = super::table51::setup();
+    let p = stage_params_with(STRIP_RMS_M);
+    let f = 1e-5 / CH5_STEP_M;
+    let cycles = if quick { 10 } else { 40 };
+    let steps_flat = stats(&open_loop_steps(&stage_params(), f, cycles));
+    let steps_rough = stats(&open_loop_steps(&p, f, cycles));
+    let frf = measure_frf(&p, nominal.kp, 1e-5, 30.0, if quick { 10.0 } else { 40.0 });
+    let fit = identify(&frf, (5.0, 300.0));
+    let s = design(fit.model(), fit.c);
+    let profiles = nonlinear_profiles(quick);
+    // Smallest admissible N: l + q + 1 (Q has 101 taps, q = 50).
+    let comp = s.l.preview_samples() + 50 + 1;
+    let ranges: Vec<(f64, f64, f64)> = profiles
         .iter()
-        .map(|&a| {
-            let b = bin(a);
-            let m = sum[b] / cnt[b] as f64;
-            m * m
+        .map(|(_, v, d)| period_range(&p, &s, *v, f64::min(*d, 60.0)))
+        .collect();
+    let plans: Vec<Plan> = ranges
+        .iter()
+        .map(|r| plan_from_periods(*r, comp, PAD))
+        .collect();
+    let spread = plans.iter().map(|pl| pl.mm - pl.m).max().unwrap_or(0);
+    let (q, fc) = q_for(&s, spread);
+    let which = [Rc::None, Rc::Standard, Rc::HighOrder, Rc::Dvrc];
+    let rows = profiles
+        .iter()
+        .zip(&ranges)
+        .zip(&plans)
+        .map(|(((name, v, dur), r), pl)| {
+            let c = dvrc::stability::rc_criterion(&s.t, &s.l, &q, pl.m, pl.mm).unwrap();
+            let with_split = *name == "10 µm/s" || *name == "0.1 mm/s";
+            let mut split = [(0.0, 0.0, 0.0); 4];
+            let out = [0usize, 1, 2, 3].map(|i| {
+                let steps = (dur / DT) as usize;
+                let (mut es, mut als) = (Vec::new(), Vec::new());
+                let o = run_plan_traced(&p, &s, &q, *pl, *v, which[i], *dur, |k, e, a| {
+                    if with_split && k >= steps * 3 / 4 {
+                        es.push(e);
+                        als.push(a);
+                    }
+                });
+                if with_split {
+                    split[i] = alpha_periodic_split(&es, &als, 256);
+                }
+                o
+            });
+            NonlinearRow {
+                name,
+                velocity: *v,
+                duration_s: *dur,
+                periods: (pl.j as f64 * r.0, pl.j as f64 * r.1, pl.j as f64 * r.2),
+                plan: *pl,
+                margin_db: c.margin_db(),
+                out,
+                split: with_split.then_some(split),
+            }
         })
-        .sum::<f64>()
-        / n)
-        .sqrt();
-    let rest = (total * total - periodic * periodic).max(0.0).sqrt();
-    (total, periodic, rest)
+        .collect();
+    NonlinearTable {
+        steps_flat,
+        steps_rough,
+        c_x_scale: ch5_c_x_scale(),
+        fit,
+        frf,
+        design: s,
+        q,
+        q_cutoff_hz: fc,
+        spread,
+        rows,
+    }
+}
+
+/// The Table 5.1 stage ([`stage_params_with`]) with unequal leg pairs: the second
+/// pair's stacks (B, C: u3, u4) get `factor` × the first pair's c_x and c_y (the
+/// thesis, Sec. 4.4.1: "the coefficients for the second pair are smaller than for
+/// the first pair"; Table 4.1's values are lost, so the factor is a parameter).
+pub fn stage_params_unequal(strip_rms_m: f64, factor: f64) -> StageParams {
+    let mut p = stage_params_with(strip_rms_m);
+    for i in 2..4 {
+        p.c_x_m_v[i] *= factor;
+        p.c_y_m_v[i] *= factor;
+    }
+    p
 }
