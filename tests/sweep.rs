@@ -370,3 +370,45 @@ fn every_example_graph_survives_an_identity_override() {
     }
     assert!(n >= 10, "{n} graphs checked");
 }
+
+/// The command line: `run --set` changes the run, a wrong path is refused with
+/// the nearest key, and `sweep` writes its table.
+#[test]
+fn cli_set_and_sweep() {
+    let bin = env!("CARGO_BIN_EXE_nanomotion");
+    let run = |args: &[&str]| std::process::Command::new(bin).args(args).output().unwrap();
+    let base = ["run", QUICKSTART, "--no-files", "--set", "duration_s=0.6"];
+    let plain = run(&base);
+    assert!(plain.status.success());
+    let mut slower = base.to_vec();
+    slower.extend(["--set", "blocks.pi.kp=1e7"]);
+    let slower = run(&slower);
+    assert!(slower.status.success());
+    let true_rms = |o: &std::process::Output| -> f64 {
+        let text = String::from_utf8_lossy(&o.stdout).to_string();
+        let line = text
+            .lines()
+            .find(|l| l.starts_with("true_err.y"))
+            .unwrap()
+            .to_string();
+        line.split_whitespace().nth(1).unwrap().parse().unwrap()
+    };
+    assert_ne!(true_rms(&plain), true_rms(&slower));
+    let bad = run(&["run", QUICKSTART, "--no-files", "--set", "blocks.pi.kpp=1"]);
+    assert!(!bad.status.success());
+    let err = String::from_utf8_lossy(&bad.stderr);
+    assert!(err.contains("did you mean `blocks.pi.kp`?"), "{err}");
+
+    let d = dir("cli");
+    let grid = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/examples/sweep/pi_gain_grid.yaml"
+    );
+    let out = d.join("grid");
+    let o = run(&["sweep", grid, "--out", out.to_str().unwrap(), "--jobs", "2"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let (h, rows) = read_csv(&out.join("results.csv"));
+    assert_eq!(rows.len(), 12);
+    assert_eq!(&h[2..4], ["blocks.pi.kp", "blocks.pi.zero_hz"]);
+    std::fs::remove_dir_all(d).ok();
+}
