@@ -140,6 +140,17 @@ pub enum GateMode {
     Off,
 }
 
+impl GateMode {
+    /// The name written in study files.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            GateMode::Record => "record",
+            GateMode::Refuse => "refuse",
+            GateMode::Off => "off",
+        }
+    }
+}
+
 /// A normal distribution.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -828,7 +839,7 @@ impl Study {
                 .unwrap_or_default()
                 .as_bytes(),
         );
-        h.write(self.file.gate.to_owned_str().as_bytes());
+        h.write(self.file.gate.as_str().as_bytes());
         plan.study_hash = format!("{:016x}", h.0);
         plan
     }
@@ -952,20 +963,6 @@ impl Study {
         match rayon::ThreadPoolBuilder::new().num_threads(jobs).build() {
             Ok(pool) => pool.install(work),
             Err(_) => work(),
-        }
-    }
-}
-
-trait GateName {
-    fn to_owned_str(&self) -> &'static str;
-}
-
-impl GateName for GateMode {
-    fn to_owned_str(&self) -> &'static str {
-        match self {
-            GateMode::Record => "record",
-            GateMode::Refuse => "refuse",
-            GateMode::Off => "off",
         }
     }
 }
