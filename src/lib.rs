@@ -65,6 +65,7 @@ pub use typetag;
 pub mod image_plot;
 pub mod output;
 pub mod plot;
+pub mod sweep;
 pub mod thesis;
 
 /// Make sure every plugin crate is linked (typetag registers blocks through the
