@@ -1,8 +1,9 @@
 //! Ch. 6 (Sec. 6.5): the metrological AFM's x scan, ±18 µm at 7.2 µm/s — open-loop
-//! hysteresis feed-forward (Fig. 6.10) and the closed-loop comparison feedback only /
-//! + position FF / + hysteresis FF (Fig. 6.11), against the absolute figures of the
-//! thesis that survived the text extraction. Computation: `afm_stage::experiments`
-//! (`Sec65`) and the shipped graph `examples/afm_hysteresis_ff_open_loop.yaml`.
+//! hysteresis feed-forward (Fig. 6.10) and the closed-loop comparison of feedback
+//! only, with position FF and with hysteresis FF (Fig. 6.11), against the absolute
+//! figures of the thesis that survived the text extraction. Computation:
+//! `afm_stage::experiments` (`Sec65`) and the shipped graph
+//! `examples/afm_hysteresis_ff_open_loop.yaml`.
 
 use super::{Mode, Report, ReproduceError, Row, Verdict, fail, sig};
 use afm_stage::experiments::Sec65;
