@@ -118,3 +118,55 @@ fn ch6_hysteresis_ff_beats_feedback_only() {
         assert!(row.ours.starts_with('−'), "{row:?}");
     }
 }
+
+/// The CLI: `--list`, an unknown id (exit status 1, nearest id named), and a run of
+/// one experiment written twice to the same bytes, equal to the in-process output.
+#[test]
+fn cli_lists_refuses_unknown_ids_and_writes_the_same_bytes_twice() {
+    use std::process::Command;
+    let exe = env!("CARGO_BIN_EXE_nanomotion");
+    let list = Command::new(exe)
+        .args(["reproduce", "--list"])
+        .output()
+        .unwrap();
+    assert!(list.status.success());
+    let text = String::from_utf8_lossy(&list.stdout);
+    for e in thesis::experiments() {
+        assert!(text.contains(e.id), "{text}");
+    }
+    let bad = Command::new(exe)
+        .args(["reproduce", "sec_8_6"])
+        .output()
+        .unwrap();
+    assert!(!bad.status.success());
+    let err = String::from_utf8_lossy(&bad.stderr);
+    assert!(err.contains("nearest: `sec_8_5`"), "{err}");
+    let dir = std::env::temp_dir().join(format!("nanomotion-reproduce-{}", std::process::id()));
+    let run = || {
+        let out = Command::new(exe)
+            .args(["reproduce", "sec_8_5", "--quick", "--out"])
+            .arg(&dir)
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        (
+            std::fs::read(dir.join("fidelity.md")).unwrap(),
+            std::fs::read(dir.join("fidelity.json")).unwrap(),
+        )
+    };
+    let first = run();
+    assert_eq!(first, run(), "a re-run gives the same bytes");
+    assert!(dir.join("timings.json").exists());
+    let ours = outcomes().iter().find(|o| o.id == "sec_8_5").unwrap();
+    let md = thesis::fidelity_markdown(
+        std::slice::from_ref(ours),
+        Mode::Quick,
+        "nanomotion reproduce sec_8_5 --quick",
+    );
+    assert_eq!(String::from_utf8(first.0).unwrap(), md);
+    let _ = std::fs::remove_dir_all(&dir);
+}

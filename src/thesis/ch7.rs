@@ -9,6 +9,8 @@ use super::{Mode, Report, ReproduceError, Row, Verdict, fail, sig};
 /// The Sec. 7.5 simulation shared with `cargo run --example directional_rc` and
 /// `tests/directional_rc_example.rs`.
 #[doc(hidden)]
+// Its docs are written for the example (links resolve against the example's imports).
+#[allow(rustdoc::broken_intra_doc_links)]
 #[path = "../../examples/directional_rc/sim.rs"]
 pub mod drc_sim;
 
