@@ -101,3 +101,24 @@ fn pseudo_event_is_a_named_option_and_a_typo_is_an_error() {
     let e = bad.unwrap_err().to_string();
     assert!(e.contains("pseudo_event"), "{e}");
 }
+
+/// The pseudo-event is built on the stack: no heap allocation in the tick.
+#[test]
+fn pseudo_event_tick_does_not_allocate() {
+    let reg = [4.0, 3.0, 4e-3, 4.0, 3e-3, 3.0, 2e-3, 2.0];
+    let mut h = estimator("pseudo_event", 0.01);
+    let mut out = [0.0; 4];
+    let tick = nanomotion_core::Tick {
+        k: 24,
+        t: 24e-3,
+        dt: 1e-3,
+    };
+    h.output(tick, &reg, &mut out);
+    let info = allocation_counter::measure(|| {
+        for _ in 0..100 {
+            h.output(tick, &reg, &mut out);
+        }
+    });
+    assert_eq!(info.count_total, 0, "{info:?}");
+    assert_eq!(out[3], Status::PseudoEvent as u8 as f64);
+}
