@@ -3,6 +3,7 @@
 mod diagnose_cmd;
 mod gate_cmd;
 mod optimize_cmd;
+mod reproduce_cmd;
 mod scan_image_cmd;
 mod sweep_cmd;
 mod synth_cmd;
@@ -247,6 +248,24 @@ enum Command {
         #[arg(long)]
         limit: Option<usize>,
     },
+    /// Reproduce the thesis's tables and figures (`--list` lists them): run the
+    /// experiments, print thesis vs ours with a verdict (matches / shape / deviates)
+    /// and write `fidelity.md`, `fidelity.json` (deterministic: a re-run gives the
+    /// same bytes) and `timings.json` into the output folder. docs/thesis-fidelity.md
+    /// is the `--quick` output. Exits with status 1 if an experiment could not run.
+    Reproduce {
+        /// Experiment ids (default: all).
+        names: Vec<String>,
+        /// The quick set in quick mode (shorter records; under two minutes).
+        #[arg(long)]
+        quick: bool,
+        /// Output folder (created if missing).
+        #[arg(long, short, default_value = "out/fidelity")]
+        out: PathBuf,
+        /// List the experiments and exit.
+        #[arg(long)]
+        list: bool,
+    },
     /// List the registered block types, with their ports and parameters.
     Blocks {
         /// Show only types whose name contains this text.
@@ -336,6 +355,21 @@ fn main() -> ExitCode {
             limit,
         } => sweep_cmd::sweep(&study, out, jobs, restart, limit),
         Command::Blocks { filter } => blocks(filter.as_deref()),
+        Command::Reproduce {
+            names,
+            quick,
+            out,
+            list,
+        } => match reproduce_cmd::run(reproduce_cmd::Args {
+            names: &names,
+            quick,
+            out: &out,
+            list,
+        }) {
+            Ok(true) => Ok(()),
+            Ok(false) => return ExitCode::FAILURE,
+            Err(e) => Err(e),
+        },
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -40,11 +40,7 @@ fn profile() -> Option<Vec<f64>> {
         )
         .to_string()
     });
-    let text = std::fs::read_to_string(path).ok()?;
-    text.lines()
-        .skip(1)
-        .map(|l| Some(l.split(',').nth(2)?.trim().parse::<f64>().ok()? * 400.0))
-        .collect()
+    hots::sim::read_slit_profile(std::path::Path::new(&path)).ok()
 }
 
 fn cells(e: Option<Errors>) -> String {
@@ -85,16 +81,9 @@ fn table(rows: &[Sec85Row], window: &str, vs_truth: Pick, vs_ref: Pick) {
 /// The skip with the smallest error `f` (judged by `get`) and its change against
 /// σ = 0 in percent.
 fn best_skip(rows: &[Sec85Row], get: Pick, f: fn(&Errors) -> f64) -> (String, f64) {
-    let skips: Vec<&Sec85Row> = rows
-        .iter()
-        .filter(|r| r.method.starts_with("time-stamping"))
-        .collect();
-    let e = |r: &Sec85Row| f(&get(r).unwrap());
-    let best = skips.iter().min_by(|a, b| e(a).total_cmp(&e(b))).unwrap();
-    (
-        best.method.rsplit(' ').next().unwrap().to_string(),
-        100.0 * (e(best) / e(skips[0]) - 1.0),
-    )
+    let (sigma, pct) =
+        hots::sim::best_skip(rows, |r| f(&get(r).expect("scored row"))).expect("rows with σ = 0");
+    (format!("σ={sigma}"), pct)
 }
 
 /// The amplitude variation: per A and rule, all reads, σ=0's rms and the best

@@ -261,6 +261,8 @@ pub fn simulate_with_fallback(
 pub struct Sec85Row {
     /// What was run.
     pub method: String,
+    /// The skip σ of a time-stamping row (`None` for the other rows).
+    pub skip: Option<i64>,
     /// Errors against the true trajectory.
     pub errors: Errors,
     /// Errors against the 5000-line reference encoder ([`reference_encoder`]);
@@ -384,6 +386,7 @@ pub fn sec8_5_amplitude(
         let moving = |i: usize| truth[i][1].abs() >= speed;
         rows.push(Sec85Row {
             method: format!("time-stamping m=2 n=5 σ={sigma}"),
+            skip: Some(sigma),
             errors: rms_errors(t, est, truth, settle, 0),
             vs_reference: Some(rms_errors(t, est, reference, settle, 0)),
             moving: rms_errors_where(t, est, truth, settle, 0, moving),
@@ -441,6 +444,7 @@ pub fn sec8_5_with_fallback(
     let moving = |i: usize| truth[i][1].abs() >= SEC85_MOVING_SPEED;
     let row_of = |method: String, est: &[[f64; 3]], first: usize| Sec85Row {
         method,
+        skip: None,
         errors: rms_errors(t, est, truth, settle, first),
         vs_reference: Some(rms_errors(t, est, reference, settle, first)),
         moving: rms_errors_where(t, est, truth, settle, first, moving),
@@ -451,6 +455,7 @@ pub fn sec8_5_with_fallback(
         method: format!(
             "reference: {SEC85_REFERENCE_LINES} lines, filtfilt 5th-order {SEC85_REFERENCE_CUTOFF_HZ} Hz"
         ),
+        skip: None,
         errors: rms_errors(t, reference, truth, settle, 0),
         vs_reference: None,
         moving: rms_errors_where(t, reference, truth, settle, 0, moving),
@@ -513,6 +518,60 @@ pub fn sec8_5_with_fallback(
         &run,
     ));
     Ok(rows)
+}
+
+/// The best skip of the time-stamping rows of `rows` (those with a `skip`) by
+/// `score` (smaller is better; e.g. `|r| r.errors.v`, all reads against the truth),
+/// and its change against σ = 0 in percent (negative: better than no skip).
+/// `None` if `rows` has no σ = 0 row.
+pub fn best_skip(rows: &[Sec85Row], score: impl Fn(&Sec85Row) -> f64) -> Option<(i64, f64)> {
+    let zero = score(rows.iter().find(|r| r.skip == Some(0))?);
+    let (sigma, best) = rows
+        .iter()
+        .filter_map(|r| Some((r.skip?, score(r))))
+        .min_by(|a, b| a.1.total_cmp(&b.1))?;
+    Some((sigma, 100.0 * (best / zero - 1.0)))
+}
+
+/// Where the US Digital E2 slit-error profile is, relative to the workspace root
+/// (the project's shared data, read in place, not copied into the repository).
+pub const E2_PROFILE_FROM_WORKSPACE: &str =
+    "../shared/data/usdigital_e2_slit_errors/us_digital_e2_100cpr_tick_errors.csv";
+
+/// Per-slit errors (counts) of a slit-error profile CSV such as the US Digital E2
+/// one: a header line, then one line per slit whose third column is the angle
+/// error in revolutions (× 400 counts per revolution for the 100-line disc).
+pub fn read_slit_profile(path: &std::path::Path) -> Result<Vec<f64>, ParamError> {
+    let text = std::fs::read_to_string(path).map_err(|e| {
+        ParamError::new(
+            "slit_errors_counts",
+            format!("cannot read `{}`: {e}", path.display()),
+            "give the path of the slit-error CSV (shared data: ../shared/data/usdigital_e2_slit_errors/)",
+        )
+    })?;
+    text.lines()
+        .skip(1)
+        .enumerate()
+        .filter(|(_, l)| !l.trim().is_empty())
+        .map(|(i, l)| {
+            l.split(',')
+                .nth(2)
+                .and_then(|v| v.trim().parse::<f64>().ok())
+                .filter(|v| v.is_finite())
+                .map(|v| v * 400.0)
+                .ok_or_else(|| {
+                    ParamError::new(
+                        "slit_errors_counts",
+                        format!(
+                            "`{}` line {}: no finite third column",
+                            path.display(),
+                            i + 2
+                        ),
+                        "give lines `slit,angle,error_rev` with a numeric error",
+                    )
+                })
+        })
+        .collect()
 }
 
 /// [`sec8_5_with_reference`] with the reference computed here

@@ -24,7 +24,17 @@
 //! a slow but steady motion (events further apart than the timeout) from being
 //! declared standstill. `standstill_timeout_s` is only used by this rule.
 //!
-//! With no event at all, under either rule: the cell centre, zero derivatives
+//! **`fallback: pseudo_event`** (the public phobos `encoderhots` rule, SPEC §5). Out
+//! of band as `thesis`. No standstill rule; instead, if the newest event is older than
+//! `standstill_timeout_s` (default 10 ms; 0 disables), the fit is made through a
+//! pseudo-event (t_c, x_1) — "now, at the newest event's position": no edge has been
+//! crossed since, so the position is still that edge's — put in front of the
+//! register, whose oldest event drops out (the register keeps n events; fewer if it
+//! is not yet full). The pseudo-event is not stored: the next read builds it again
+//! from the register it gets. A motion that has stopped thus drives v̂ and â toward 0
+//! through the fit rather than by a switch (status 4 when the fit stays in band).
+//!
+//! With no event at all, under any rule: the cell centre, zero derivatives
 //! (status 2).
 //!
 //! **Reversals.** Events keep their edge level whichever the direction, so a window
@@ -67,6 +77,10 @@ pub enum Fallback {
     /// Position → cell centre and v̂ = â = 0 out of band, plus the standstill rule
     /// (no event for `standstill_timeout_s` and twice the window's time per count).
     ZeroStandstill,
+    /// As `Thesis` out of band; after `standstill_timeout_s` without an event the
+    /// fit includes a pseudo-event (now, newest event's position) in place of the
+    /// oldest event (the public phobos `encoderhots` rule).
+    PseudoEvent,
 }
 
 /// Why an estimate is what it is (the `status` output).
@@ -82,6 +96,9 @@ pub enum Status {
     /// No event for longer than the standstill timeout: cell centre, zeros
     /// ([`Fallback::ZeroStandstill`] only).
     Standstill = 3,
+    /// Fitted through a pseudo-event (no event for the timeout), within the band
+    /// ([`Fallback::PseudoEvent`] only).
+    PseudoEvent = 4,
 }
 
 /// The time-stamping estimator (8.1)–(8.4). Plain Rust:
@@ -115,12 +132,13 @@ pub struct TimestampEstimator {
     /// Fallback band around the cell centre (counts), default 1 (Sec. 8.3).
     #[serde(default = "d_band")]
     pub band_counts: f64,
-    /// What happens out of band: `thesis` (default) or `zero_standstill`.
+    /// What happens out of band: `thesis` (default), `zero_standstill` or
+    /// `pseudo_event`.
     #[serde(default)]
     pub fallback: Fallback,
     /// Minimum age of the newest event for standstill (s), default 0.01; 0
-    /// disables. Used by `fallback: zero_standstill` only (see the module
-    /// documentation for the full rule).
+    /// disables. Used by `fallback: zero_standstill` and `pseudo_event` only (see
+    /// the module documentation for the full rules).
     #[serde(default = "d_timeout")]
     pub standstill_timeout_s: f64,
     /// Slit calibration ê (counts) per edge, indexed by level mod its length
@@ -215,6 +233,19 @@ impl TimestampEstimator {
         }
         let d = self.resolution;
         let zero = self.fallback == Fallback::ZeroStandstill;
+        // Pseudo-event (t_c, x_1) in front of the register, the oldest dropped.
+        let mut n_valid = n_valid;
+        let pseudo = self.fallback == Fallback::PseudoEvent
+            && n_valid > 0
+            && self.standstill_timeout_s > 0.0
+            && t_c - ts[0] > self.standstill_timeout_s;
+        if pseudo {
+            let kept = n_valid.min(self.register_len - 1);
+            ts.copy_within(0..kept, 1);
+            xs.copy_within(0..kept, 1);
+            ts[0] = t_c;
+            n_valid = kept + 1;
+        }
         let status = if n_valid == 0 {
             Status::NoEvents
         } else if zero
@@ -236,7 +267,9 @@ impl TimestampEstimator {
                     if in_band || !zero {
                         out[1] = f.v * d;
                         out[2] = f.a * d;
-                        if in_band {
+                        if in_band && pseudo {
+                            Status::PseudoEvent
+                        } else if in_band {
                             Status::Fitted
                         } else {
                             Status::OutOfBand
@@ -296,16 +329,16 @@ nanomotion_core::submit_block_doc! {
     BlockDoc {
         type_name: "timestamp_estimator",
         role: Role::Estimator,
-        summary: "time-stamping estimator (8.1)-(8.4): LS polynomial of order m through the register's events, scaled time, extrapolated to the sample for x, v, a; fallback outside ±band: thesis (x → count, v/a kept) or zero_standstill (x → count, v = a = 0, 10 ms standstill)",
+        summary: "time-stamping estimator (8.1)-(8.4): LS polynomial of order m through the register's events, scaled time, extrapolated to the sample for x, v, a; fallback outside ±band: thesis (x → count, v/a kept), zero_standstill (x → count, v = a = 0, 10 ms standstill) or pseudo_event (thesis, plus a pseudo-event (now, newest position) in the fit after 10 ms without an event)",
         params: &[
             ParamDoc { name: "order", doc: "polynomial order m (8.1), ≤ 4", default: Some("2") },
             ParamDoc { name: "register_len", doc: "register length n of the encoder, n > m", default: Some("5") },
             ParamDoc { name: "resolution", doc: "units per count Δ (2π/400 rad for 100 lines)", default: None },
             ParamDoc { name: "band_counts", doc: "fallback band around the cell centre (counts)", default: Some("1") },
-            ParamDoc { name: "fallback", doc: "out-of-band rule: thesis (Sec. 8.3: position → count, v/a from the fit) or zero_standstill (also v = a = 0, plus standstill)", default: Some("thesis") },
-            ParamDoc { name: "standstill_timeout_s", doc: "zero_standstill only: newest event older than this → standstill (s); 0 disables", default: Some("0.01") },
+            ParamDoc { name: "fallback", doc: "out-of-band rule: thesis (Sec. 8.3: position → count, v/a from the fit), zero_standstill (also v = a = 0, plus standstill) or pseudo_event (thesis, plus phobos's pseudo-event after the timeout)", default: Some("thesis") },
+            ParamDoc { name: "standstill_timeout_s", doc: "zero_standstill / pseudo_event: newest event older than this → standstill / pseudo-event (s); 0 disables", default: Some("0.01") },
             ParamDoc { name: "edge_offsets_counts", doc: "slit calibration ê per edge (counts), added to events (hots crate)", default: Some("[]") },
         ],
-        ports: "register[2+2n] -> y[3] = [x, v, a] (units, /s, /s²), status (0 fit, 1 out of band, 2 no events, 3 standstill)",
+        ports: "register[2+2n] -> y[3] = [x, v, a] (units, /s, /s²), status (0 fit, 1 out of band, 2 no events, 3 standstill, 4 fit through a pseudo-event)",
     }
 }

@@ -316,6 +316,7 @@ fn fallback_rules_on_a_constructed_register() {
                 assert!(close(y[2], a0 * d), "{y:?}");
             }
             Fallback::ZeroStandstill => assert_eq!([y[1], y[2]], [0.0, 0.0]),
+            Fallback::PseudoEvent => unreachable!("tested in the hots crate"),
         }
         // 20 ms after the newest event (window span 3.4 ms): standstill only under
         // the zero_standstill rule; the thesis rule still extrapolates (far out of
@@ -333,6 +334,7 @@ fn fallback_rules_on_a_constructed_register() {
                 assert_eq!(s, Status::Standstill);
                 assert_eq!([y[1], y[2]], [0.0, 0.0]);
             }
+            Fallback::PseudoEvent => unreachable!("tested in the hots crate"),
         }
     }
     // YAML: the default is the thesis's rule; the other is named; a typo is an error.
