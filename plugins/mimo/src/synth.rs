@@ -374,3 +374,180 @@ pub fn offdiag_sensitivity(
     }
     Ok(worst)
 }
+
+/// Inverse of a square system with an invertible feed-through:
+/// (A − BD⁻¹C, BD⁻¹, −D⁻¹C, D⁻¹).
+fn ss_inverse(sys: &StateSpace, what: &str) -> Result<StateSpace, MimoError> {
+    let di = sys.d.clone().try_inverse().ok_or_else(|| {
+        MimoError::param(
+            what,
+            "has a singular feed-through and cannot be inverted",
+            "give biproper weights (k_S > 0)",
+        )
+    })?;
+    Ok(StateSpace {
+        a: &sys.a - &sys.b * &di * &sys.c,
+        b: &sys.b * &di,
+        c: -(&di * &sys.c),
+        d: di,
+        dt: sys.dt,
+    })
+}
+
+/// The weights with every W_S pole below `safe_hz` (the near-integrator and
+/// any f_S3 below it) moved to `safe_hz`.
+pub fn relocated_weights(w: &MixedSensitivityWeights, safe_hz: f64) -> MixedSensitivityWeights {
+    let mut w2 = w.clone();
+    if w2.near_integrator_hz < safe_hz {
+        w2.near_integrator_hz = safe_hz;
+    }
+    for a in w2.axes.iter_mut() {
+        if a.f_s3_hz > 0.0 && a.f_s3_hz < safe_hz {
+            a.f_s3_hz = safe_hz;
+        }
+    }
+    w2
+}
+
+/// H∞ design for weights whose W_S has poles so close to the axis (the
+/// thesis's 2π·10⁻⁶ rad/s) that the central controller cannot be formed in
+/// double precision: the round-off of A_K (≈ ε_mach‖A_K‖) splits the
+/// controller's double near-integrator pole by ≈ √(ε_mach‖A_K‖·50 rad/s) ≈
+/// 10⁻⁶ rad/s, 20 % of the pole itself, and N(0) = W_S(0)S_o(0) — a ratio of
+/// two ~1/ε² numbers — moves by percent (docs/mimo.md, "γ at the thesis's
+/// near-integrator").
+///
+/// Instead the problem is solved with the near-axis poles at `safe_hz` (weights
+/// W'), giving K′, and the near-integrators are moved back exactly in the
+/// controller's error channels: K = K′·D with D = W′_S⁻¹W_S (diagonal, exact
+/// poles at the thesis's ε). Where |GK| ≫ 1 (every frequency below the
+/// bandwidth, so all of D's range) W_S S_o ≈ W_S K⁻¹G⁻¹ = W′_S K′⁻¹G⁻¹, so ‖N‖∞
+/// is that of K′ on W′ up to the tiny S_o there.
+///
+/// **Verification** of K on the *original* weights, with every near-axis mode
+/// cancelled structurally rather than by round-off: W_S S_o = (W_S⁻¹ +
+/// G K′ W′_S⁻¹)⁻¹, K S_o = K′W′_S⁻¹·(W_S S_o), T_o = I − W_S⁻¹(W_S S_o) (W_S⁻¹
+/// and W′_S⁻¹ have only W_S's zeros as poles), so no pole sits near the axis
+/// and the Hamiltonian [`hinfnorm`] is well conditioned; the closed loop
+/// F_l(P, K) must be stable (its poles), and N(jω) rebuilt from the factored
+/// frequency responses G, K′, D and the weights on a grid must not exceed the
+/// norm. γ returned is max(γ′, ‖N‖∞). The controller has order
+/// n(K′) + (number of relocated poles).
+pub fn synthesise_near_axis(
+    g: &StateSpace,
+    w: &MixedSensitivityWeights,
+    safe_hz: f64,
+) -> Result<Synthesis, MimoError> {
+    crate::error::positive("safe_hz", safe_hz)?;
+    let w2 = relocated_weights(w, safe_hz);
+    let s2 = synthesise(g, &w2)?;
+    let p = g.noutputs();
+    // D = diag(W′_S,i⁻¹ W_S,i) = diag(den′_i / den_i) (same numerators).
+    let mut dblocks = Vec::with_capacity(p);
+    for i in 0..p {
+        let (_, den) = w.w_s_tf(i);
+        let (_, den2) = w2.w_s_tf(i);
+        let di = nanomotion_core::lti::TransferFunction::new(den2, den, None)
+            .and_then(|t| t.to_ss())
+            .map_err(MimoError::lti(format!("near-integrator shift of axis {i}")))?;
+        dblocks.push(di);
+    }
+    let d = nanomotion_core::lti::append(&dblocks).map_err(MimoError::lti("D"))?;
+    let k = series(&d, &s2.controller).map_err(MimoError::lti("K = K′D"))?;
+    let ws = w.w_s()?;
+    let wt = w.w_t()?;
+    let wks = w.w_ks(g.ninputs());
+    let pg = augw(g, Some(&ws), Some(&wks), Some(&wt))
+        .map_err(MimoError::lti("generalised plant (7.8)"))?;
+    let cl = lft(&pg, &k, p, g.ninputs()).map_err(MimoError::lti("F_l(P, K)"))?;
+    if !cl.is_stable() {
+        return Err(MimoError::param(
+            "controller",
+            "the relocated controller does not stabilise the loop",
+            "raise safe_hz is not the fix: lower it towards the weight's poles, or report a bug",
+        ));
+    }
+    let n = structured_n(g, &s2.controller, w, &w2)?;
+    let norm = hinfnorm(&n).map_err(MimoError::lti("‖N‖∞ (structured)"))?;
+    let grid = log_grid(1e-9, 1e5, 400);
+    let mut grid_max: f64 = 0.0;
+    for &f in &grid {
+        let sj = Complex::new(0.0, TAU * f);
+        let kk = s2.controller.evalfr(sj) * d.evalfr(sj);
+        let v = sigma_max(&direct_n(
+            &g.evalfr(sj),
+            &kk,
+            &ws.evalfr(sj),
+            &wks.evalfr(sj),
+            &wt.evalfr(sj),
+        )?);
+        grid_max = grid_max.max(v);
+    }
+    if grid_max > norm.norm * (1.0 + 1e-6) {
+        return Err(MimoError::param(
+            "controller",
+            format!(
+                "the structured ‖N‖∞ = {} is below the factored grid's {grid_max}",
+                norm.norm
+            ),
+            "report this as a bug",
+        ));
+    }
+    let wpk = if norm.peak_rad_s.is_finite() {
+        norm.peak_rad_s
+    } else {
+        1e9
+    };
+    let sj = Complex::new(0.0, wpk);
+    let direct = sigma_max(&direct_n(
+        &g.evalfr(sj),
+        &(s2.controller.evalfr(sj) * d.evalfr(sj)),
+        &ws.evalfr(sj),
+        &wks.evalfr(sj),
+        &wt.evalfr(sj),
+    )?);
+    Ok(Synthesis {
+        controller: k,
+        gamma: s2.gamma.max(norm.norm),
+        gamma_infeasible: s2.gamma_infeasible,
+        closed_loop_norm: norm.norm,
+        peak_hz: wpk / TAU,
+        direct_norm_at_peak: direct,
+        generalized_plant: pg,
+        nmeas: p,
+        ncon: g.ninputs(),
+    })
+}
+
+/// N = [W_S S_o; W_KS K S_o; W_T T_o] of K = K′·W′_S⁻¹W_S without near-axis
+/// poles (see [`synthesise_near_axis`]).
+fn structured_n(
+    g: &StateSpace,
+    k2: &StateSpace,
+    w: &MixedSensitivityWeights,
+    w2: &MixedSensitivityWeights,
+) -> Result<StateSpace, MimoError> {
+    let p = g.noutputs();
+    let e = MimoError::lti;
+    let wsi = ss_inverse(&w.w_s()?, "W_S")?;
+    let ws2i = ss_inverse(&w2.w_s()?, "W′_S")?;
+    // M = W_S⁻¹ + G K′ W′_S⁻¹; W_S S_o = M⁻¹.
+    let gk = series(&series(&ws2i, k2).map_err(e("K′W′_S⁻¹"))?, g).map_err(e("GK′W′_S⁻¹"))?;
+    let m = nanomotion_core::lti::parallel(&wsi, &gk).map_err(e("M"))?;
+    let n1 = ss_inverse(&m, "W_S⁻¹ + GK′W′_S⁻¹")?;
+    let ks = series(&series(&n1, &ws2i).map_err(e("KS_o"))?, k2).map_err(e("KS_o"))?;
+    let n2 = series(&ks, &w.w_ks(g.ninputs())).map_err(e("W_KS K S_o"))?;
+    let eye = StateSpace::gain(DMatrix::identity(p, p), None);
+    let s_o = series(&n1, &wsi).map_err(e("S_o"))?;
+    let t_o = nanomotion_core::lti::parallel(&eye, &s_o.scaled(-1.0)).map_err(e("T_o"))?;
+    let n3 = series(&t_o, &w.w_t()?).map_err(e("W_T T_o"))?;
+    let stacked = nanomotion_core::lti::append(&[n1, n2, n3]).map_err(e("N"))?;
+    let nin = stacked.ninputs();
+    let mut split = DMatrix::zeros(nin, p);
+    for b in 0..(nin / p) {
+        split
+            .view_mut((b * p, 0), (p, p))
+            .copy_from(&DMatrix::identity(p, p));
+    }
+    series(&StateSpace::gain(split, None), &stacked).map_err(e("N"))
+}
