@@ -351,11 +351,46 @@ pub fn offdiag_sensitivity(
     f_hz: &[f64],
     band_hz: [f64; 2],
 ) -> Result<f64, MimoError> {
-    let p = g.noutputs();
+    let f: Vec<f64> = f_hz
+        .iter()
+        .copied()
+        .filter(|&f| f >= band_hz[0] && f <= band_hz[1])
+        .collect();
+    let resp = |sys: &StateSpace| -> Vec<CMatrix> {
+        f.iter()
+            .map(|&ff| sys.evalfr(Complex::new(0.0, TAU * ff)))
+            .collect()
+    };
+    offdiag_sensitivity_frf(&f, &resp(g), &resp(k), band_hz)
+}
+
+/// [`offdiag_sensitivity`] from frequency responses: G(j2πf) (e.g. a measured
+/// FRF) and K(j2πf) at the frequencies `f_hz`; S_o = (I + GK)⁻¹ per frequency.
+pub fn offdiag_sensitivity_frf(
+    f_hz: &[f64],
+    g: &[CMatrix],
+    k: &[CMatrix],
+    band_hz: [f64; 2],
+) -> Result<f64, MimoError> {
+    if g.len() != f_hz.len() || k.len() != f_hz.len() {
+        return Err(MimoError::param(
+            "frf",
+            format!(
+                "{} frequencies, {} plant and {} controller responses",
+                f_hz.len(),
+                g.len(),
+                k.len()
+            ),
+            "give one response of each per frequency",
+        ));
+    }
     let mut worst: f64 = 0.0;
-    for &f in f_hz.iter().filter(|&&f| f >= band_hz[0] && f <= band_hz[1]) {
-        let sj = Complex::new(0.0, TAU * f);
-        let s = (CMatrix::identity(p, p) + g.evalfr(sj) * k.evalfr(sj))
+    for ((&f, gf), kf) in f_hz.iter().zip(g).zip(k) {
+        if f < band_hz[0] || f > band_hz[1] {
+            continue;
+        }
+        let p = gf.nrows();
+        let s = (CMatrix::identity(p, p) + gf * kf)
             .try_inverse()
             .ok_or_else(|| {
                 MimoError::param(

@@ -165,3 +165,23 @@ fn near_axis_weights_reach_the_optimum_verified() {
     let rep = nanomotion_mimo::synth::loop_report(&g, &s.controller, &[1.0, 10.0, 100.0]).unwrap();
     assert!(rep.stable);
 }
+
+/// The plain-data Sec. 7.3 comparison agrees with the design run directly.
+#[test]
+fn sec_7_3_figures_are_the_designs() {
+    let cfg = config();
+    let t = nanomotion_mimo::thesis::sec_7_3(&cfg, None).unwrap();
+    let r = run(&cfg).unwrap();
+    println!("{}", serde_json::to_string(&t).unwrap());
+    assert_eq!(t.gamma.ours, r.synthesis.gamma);
+    assert_eq!(t.order.ours, r.synthesis.controller.nstates());
+    assert_eq!(t.order.thesis, 17);
+    for i in 0..3 {
+        assert_eq!(
+            Some(t.mimo_crossovers_hz.ours[i]),
+            r.loop_report.crossovers_hz[i]
+        );
+    }
+    assert!((t.decentralised_crossovers_hz.ours[0] - 16.7).abs() < 0.2);
+    assert!(t.gamma_near_axis.is_none());
+}
