@@ -570,19 +570,40 @@ fn structured_n(
     let gk = series(&series(&ws2i, k2).map_err(e("K′W′_S⁻¹"))?, g).map_err(e("GK′W′_S⁻¹"))?;
     let m = nanomotion_core::lti::parallel(&wsi, &gk).map_err(e("M"))?;
     let n1 = ss_inverse(&m, "W_S⁻¹ + GK′W′_S⁻¹")?;
-    let ks = series(&series(&n1, &ws2i).map_err(e("KS_o"))?, k2).map_err(e("KS_o"))?;
-    let n2 = series(&ks, &w.w_ks(g.ninputs())).map_err(e("W_KS K S_o"))?;
-    let eye = StateSpace::gain(DMatrix::identity(p, p), None);
-    let s_o = series(&n1, &wsi).map_err(e("S_o"))?;
-    let t_o = nanomotion_core::lti::parallel(&eye, &s_o.scaled(-1.0)).map_err(e("T_o"))?;
-    let n3 = series(&t_o, &w.w_t()?).map_err(e("W_T T_o"))?;
-    let stacked = nanomotion_core::lti::append(&[n1, n2, n3]).map_err(e("N"))?;
-    let nin = stacked.ninputs();
-    let mut split = DMatrix::zeros(nin, p);
-    for b in 0..(nin / p) {
+    // One copy of W_S S_o's states: v = [a; w] with a = (W_S S_o)w, then
+    // N = [a; W_KS K′W′_S⁻¹ a; W_T(w − W_S⁻¹a)].
+    let ip = DMatrix::<f64>::identity(p, p);
+    let gain = |m: DMatrix<f64>| StateSpace::gain(m, None);
+    let mut dup = DMatrix::zeros(2 * p, p);
+    dup.view_mut((0, 0), (p, p)).copy_from(&ip);
+    dup.view_mut((p, 0), (p, p)).copy_from(&ip);
+    let v = series(
+        &gain(dup.clone()),
+        &nanomotion_core::lti::append(&[n1, gain(ip.clone())]).map_err(e("[a; w]"))?,
+    )
+    .map_err(e("[a; w]"))?;
+    let mut first = DMatrix::zeros(p, 2 * p);
+    first.view_mut((0, 0), (p, p)).copy_from(&ip);
+    let r1 = gain(first.clone());
+    let ks = series(
+        &series(&ws2i, k2).map_err(e("K′W′_S⁻¹"))?,
+        &w.w_ks(g.ninputs()),
+    )
+    .map_err(e("W_KS K′W′_S⁻¹"))?;
+    let r2 = series(&gain(first), &ks).map_err(e("W_KS K S_o"))?;
+    let diff = series(
+        &nanomotion_core::lti::append(&[wsi.scaled(-1.0), gain(ip.clone())]).map_err(e("T_o"))?,
+        &gain(dup.transpose()),
+    )
+    .map_err(e("T_o"))?;
+    let r3 = series(&diff, &w.w_t()?).map_err(e("W_T T_o"))?;
+    let rows = nanomotion_core::lti::append(&[r1, r2, r3]).map_err(e("N"))?;
+    let mut split = DMatrix::zeros(6 * p, 2 * p);
+    for b in 0..3 {
         split
-            .view_mut((b * p, 0), (p, p))
-            .copy_from(&DMatrix::identity(p, p));
+            .view_mut((2 * p * b, 0), (2 * p, 2 * p))
+            .copy_from(&DMatrix::identity(2 * p, 2 * p));
     }
-    series(&StateSpace::gain(split, None), &stacked).map_err(e("N"))
+    let post = series(&gain(split), &rows).map_err(e("N"))?;
+    series(&v, &post).map_err(e("N"))
 }
