@@ -73,7 +73,7 @@ pub fn synth(config: &Path, out: &Path) -> Result<(), String> {
     write(
         "controller.yaml",
         format!(
-            "# H∞ controller from `nanomotion synth {}`: γ = {:.4}, order {}, discretised (Tustin) at {} Hz.\n# Paste under a graph's `blocks:`; ports r[{}], y[{}] -> u[{}].\n{yaml}",
+            "# H∞ controller from `nanomotion synth {}`: γ = {:.4}, order {}, discretised (Tustin) at {} Hz.\n# Include it in a graph's `blocks:` as `- include: controller.yaml` (path relative to the graph) or paste it; ports r[{}], y[{}] -> u[{}].\n{yaml}",
             config.display(),
             r.synthesis.gamma,
             r.discrete.nstates(),

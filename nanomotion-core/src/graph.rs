@@ -240,7 +240,29 @@ impl GraphSpec {
     }
 
     /// Parse a graph from YAML text; `origin` (file name) prefixes errors.
+    /// `- include: FILE` entries ([`crate::include`]) resolve against the
+    /// working directory here, against the file's folder in [`GraphSpec::from_file`].
     pub fn from_yaml(text: &str, origin: &str) -> Result<Self, GraphError> {
+        Self::from_yaml_in(text, origin, std::path::Path::new("."), Vec::new())
+    }
+
+    /// [`GraphSpec::from_yaml`] with includes resolved against `base`.
+    /// `stack`: the file itself (for the include-cycle check), when known.
+    fn from_yaml_in(
+        text: &str,
+        origin: &str,
+        base: &std::path::Path,
+        mut stack: Vec<std::path::PathBuf>,
+    ) -> Result<Self, GraphError> {
+        if crate::include::has_includes(text) {
+            let expanded = crate::include::expand(text, origin, base, &mut stack)?;
+            let mut spec = Self::from_yaml_in(&expanded, origin, base, Vec::new())?;
+            // Connection lines from the file as written (not the expanded text).
+            let lines = connection_lines(text);
+            spec.connection_lines =
+                (lines.len() == spec.connections.len()).then(|| (origin.to_string(), lines));
+            return Ok(spec);
+        }
         let mut spec = crate::yaml::from_str::<GraphSpec>(text, origin)
             .map_err(add_type_suggestion)
             .map_err(|e| locate_unknown_field(e, text))?;
@@ -260,15 +282,16 @@ impl GraphSpec {
                 path: path.display().to_string(),
                 source,
             })?;
-        let mut spec = Self::from_yaml(&text, &path.display().to_string())?;
-        spec.base_dir = Some(
-            path.parent()
-                .filter(|p| !p.as_os_str().is_empty())
-                .map_or_else(
-                    || std::path::PathBuf::from("."),
-                    std::path::Path::to_path_buf,
-                ),
-        );
+        let base = path
+            .parent()
+            .filter(|p| !p.as_os_str().is_empty())
+            .map_or_else(
+                || std::path::PathBuf::from("."),
+                std::path::Path::to_path_buf,
+            );
+        let root = path.canonicalize().unwrap_or_else(|_| path.to_path_buf());
+        let mut spec = Self::from_yaml_in(&text, &path.display().to_string(), &base, vec![root])?;
+        spec.base_dir = Some(base);
         Ok(spec)
     }
 

@@ -34,6 +34,7 @@ pub mod data;
 pub mod error;
 pub mod gate;
 pub mod graph;
+pub mod include;
 pub mod lti;
 pub mod models;
 pub mod overrides;

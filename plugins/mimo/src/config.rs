@@ -13,6 +13,7 @@
 //! weights: {k_s: 0.5, c: 0.5, k_t: 0.5, alpha_t: 10, beta_t: 0.7,
 //!           axes: [{f_s1_hz: 8, f_s2_hz: 8, f_s3_hz: 1.0e-6, f_t_hz: 45}, ...]}
 //! rate_hz: 20000
+//! near_axis_safe_hz: 1.0e-3   # optional: synth::synthesise_near_axis
 //! reduce_to: 12               # optional: balanced truncation of K
 //! decentralised:              # optional: (7.2) for comparison
 //!   axes: [{integrators: 2, lead_zero_hz: 5, lead_pole_hz: 45, lowpass_hz: 120, lowpass_damping: 0.5}, ...]
@@ -105,6 +106,12 @@ pub struct SynthConfig {
     /// Tustin pre-warp frequency (Hz), optional.
     #[serde(default)]
     pub prewarp_hz: Option<f64>,
+    /// Optional: solve with the W_S poles below this frequency (Hz) moved up
+    /// to it and move the controller's near-integrators back exactly
+    /// ([`synth::synthesise_near_axis`]); reaches the optimal γ for the
+    /// thesis's 2π·10⁻⁶ rad/s near-integrator (order + the moved poles).
+    #[serde(default)]
+    pub near_axis_safe_hz: Option<f64>,
     /// Order of the balanced truncation of K, optional.
     #[serde(default)]
     pub reduce_to: Option<usize>,
@@ -246,7 +253,10 @@ pub fn run(cfg: &SynthConfig) -> Result<SynthResult, MimoError> {
     let g = cfg.plant_ss()?;
     let grid = synth::log_grid(f0, f1, cfg.grid_points);
     let t0 = Instant::now();
-    let syn = synth::synthesise(&g, &cfg.weights)?;
+    let syn = match cfg.near_axis_safe_hz {
+        None => synth::synthesise(&g, &cfg.weights)?,
+        Some(f) => synth::synthesise_near_axis(&g, &cfg.weights, f)?,
+    };
     let synthesis_time_s = t0.elapsed().as_secs_f64();
     let loop_report = synth::loop_report(&g, &syn.controller, &grid)?;
     let (discrete, rho) = synth::discretise(&g, &syn.controller, cfg.rate_hz, cfg.prewarp_hz)?;

@@ -14,6 +14,8 @@
 //! | [`robust`] | E = (G − G_d)G_d⁻¹, μ bounds, the (7.4) test, generalised Nyquist | (7.3), (7.4), Fig. 7.6, 7.9 |
 //! | [`block`] | `mimo_controller`: a MIMO state-space controller block | Sec. 7.5 |
 //! | [`config`] | the `nanomotion synth CONFIG.yaml` design | — |
+//! | [`stage3`] | the fixed x, y, z view of a 3-axis stage (glam `DVec3`) | Ch. 7 |
+//! | [`thesis`] | the thesis-vs-ours figures of Sec. 7.3 as plain data | Sec. 7.3.2 |
 //!
 //! ```
 //! use nanomotion_mimo::plant::{CoupledPlant, SecondOrderTerm};
@@ -39,7 +41,9 @@ pub mod error;
 pub mod optim;
 pub mod plant;
 pub mod robust;
+pub mod stage3;
 pub mod synth;
+pub mod thesis;
 pub mod weights;
 
 pub use block::MimoController;

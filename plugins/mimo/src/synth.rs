@@ -351,11 +351,46 @@ pub fn offdiag_sensitivity(
     f_hz: &[f64],
     band_hz: [f64; 2],
 ) -> Result<f64, MimoError> {
-    let p = g.noutputs();
+    let f: Vec<f64> = f_hz
+        .iter()
+        .copied()
+        .filter(|&f| f >= band_hz[0] && f <= band_hz[1])
+        .collect();
+    let resp = |sys: &StateSpace| -> Vec<CMatrix> {
+        f.iter()
+            .map(|&ff| sys.evalfr(Complex::new(0.0, TAU * ff)))
+            .collect()
+    };
+    offdiag_sensitivity_frf(&f, &resp(g), &resp(k), band_hz)
+}
+
+/// [`offdiag_sensitivity`] from frequency responses: G(j2πf) (e.g. a measured
+/// FRF) and K(j2πf) at the frequencies `f_hz`; S_o = (I + GK)⁻¹ per frequency.
+pub fn offdiag_sensitivity_frf(
+    f_hz: &[f64],
+    g: &[CMatrix],
+    k: &[CMatrix],
+    band_hz: [f64; 2],
+) -> Result<f64, MimoError> {
+    if g.len() != f_hz.len() || k.len() != f_hz.len() {
+        return Err(MimoError::param(
+            "frf",
+            format!(
+                "{} frequencies, {} plant and {} controller responses",
+                f_hz.len(),
+                g.len(),
+                k.len()
+            ),
+            "give one response of each per frequency",
+        ));
+    }
     let mut worst: f64 = 0.0;
-    for &f in f_hz.iter().filter(|&&f| f >= band_hz[0] && f <= band_hz[1]) {
-        let sj = Complex::new(0.0, TAU * f);
-        let s = (CMatrix::identity(p, p) + g.evalfr(sj) * k.evalfr(sj))
+    for ((&f, gf), kf) in f_hz.iter().zip(g).zip(k) {
+        if f < band_hz[0] || f > band_hz[1] {
+            continue;
+        }
+        let p = gf.nrows();
+        let s = (CMatrix::identity(p, p) + gf * kf)
             .try_inverse()
             .ok_or_else(|| {
                 MimoError::param(
@@ -373,4 +408,202 @@ pub fn offdiag_sensitivity(
         }
     }
     Ok(worst)
+}
+
+/// Inverse of a square system with an invertible feed-through:
+/// (A − BD⁻¹C, BD⁻¹, −D⁻¹C, D⁻¹).
+fn ss_inverse(sys: &StateSpace, what: &str) -> Result<StateSpace, MimoError> {
+    let di = sys.d.clone().try_inverse().ok_or_else(|| {
+        MimoError::param(
+            what,
+            "has a singular feed-through and cannot be inverted",
+            "give biproper weights (k_S > 0)",
+        )
+    })?;
+    Ok(StateSpace {
+        a: &sys.a - &sys.b * &di * &sys.c,
+        b: &sys.b * &di,
+        c: -(&di * &sys.c),
+        d: di,
+        dt: sys.dt,
+    })
+}
+
+/// The weights with every W_S pole below `safe_hz` (the near-integrator and
+/// any f_S3 below it) moved to `safe_hz`.
+pub fn relocated_weights(w: &MixedSensitivityWeights, safe_hz: f64) -> MixedSensitivityWeights {
+    let mut w2 = w.clone();
+    if w2.near_integrator_hz < safe_hz {
+        w2.near_integrator_hz = safe_hz;
+    }
+    for a in w2.axes.iter_mut() {
+        if a.f_s3_hz > 0.0 && a.f_s3_hz < safe_hz {
+            a.f_s3_hz = safe_hz;
+        }
+    }
+    w2
+}
+
+/// H∞ design for weights whose W_S has poles so close to the axis (the
+/// thesis's 2π·10⁻⁶ rad/s) that the central controller cannot be formed in
+/// double precision: the round-off of A_K (≈ ε_mach‖A_K‖) splits the
+/// controller's double near-integrator pole by ≈ √(ε_mach‖A_K‖·50 rad/s) ≈
+/// 10⁻⁶ rad/s, 20 % of the pole itself, and N(0) = W_S(0)S_o(0) — a ratio of
+/// two ~1/ε² numbers — moves by percent (docs/mimo.md, "γ at the thesis's
+/// near-integrator").
+///
+/// Instead the problem is solved with the near-axis poles at `safe_hz` (weights
+/// W'), giving K′, and the near-integrators are moved back exactly in the
+/// controller's error channels: K = K′·D with D = W′_S⁻¹W_S (diagonal, exact
+/// poles at the thesis's ε). Where |GK| ≫ 1 (every frequency below the
+/// bandwidth, so all of D's range) W_S S_o ≈ W_S K⁻¹G⁻¹ = W′_S K′⁻¹G⁻¹, so ‖N‖∞
+/// is that of K′ on W′ up to the tiny S_o there.
+///
+/// **Verification** of K on the *original* weights, with every near-axis mode
+/// cancelled structurally rather than by round-off: W_S S_o = (W_S⁻¹ +
+/// G K′ W′_S⁻¹)⁻¹, K S_o = K′W′_S⁻¹·(W_S S_o), T_o = I − W_S⁻¹(W_S S_o) (W_S⁻¹
+/// and W′_S⁻¹ have only W_S's zeros as poles), so no pole sits near the axis
+/// and the Hamiltonian [`hinfnorm`] is well conditioned; the closed loop
+/// F_l(P, K) must be stable (its poles), and N(jω) rebuilt from the factored
+/// frequency responses G, K′, D and the weights on a grid must not exceed the
+/// norm. γ returned is max(γ′, ‖N‖∞). The controller has order
+/// n(K′) + (number of relocated poles).
+pub fn synthesise_near_axis(
+    g: &StateSpace,
+    w: &MixedSensitivityWeights,
+    safe_hz: f64,
+) -> Result<Synthesis, MimoError> {
+    crate::error::positive("safe_hz", safe_hz)?;
+    let w2 = relocated_weights(w, safe_hz);
+    let s2 = synthesise(g, &w2)?;
+    let p = g.noutputs();
+    // D = diag(W′_S,i⁻¹ W_S,i) = diag(den′_i / den_i) (same numerators).
+    let mut dblocks = Vec::with_capacity(p);
+    for i in 0..p {
+        let (_, den) = w.w_s_tf(i);
+        let (_, den2) = w2.w_s_tf(i);
+        let di = nanomotion_core::lti::TransferFunction::new(den2, den, None)
+            .and_then(|t| t.to_ss())
+            .map_err(MimoError::lti(format!("near-integrator shift of axis {i}")))?;
+        dblocks.push(di);
+    }
+    let d = nanomotion_core::lti::append(&dblocks).map_err(MimoError::lti("D"))?;
+    let k = series(&d, &s2.controller).map_err(MimoError::lti("K = K′D"))?;
+    let ws = w.w_s()?;
+    let wt = w.w_t()?;
+    let wks = w.w_ks(g.ninputs());
+    let pg = augw(g, Some(&ws), Some(&wks), Some(&wt))
+        .map_err(MimoError::lti("generalised plant (7.8)"))?;
+    let cl = lft(&pg, &k, p, g.ninputs()).map_err(MimoError::lti("F_l(P, K)"))?;
+    if !cl.is_stable() {
+        return Err(MimoError::param(
+            "controller",
+            "the relocated controller does not stabilise the loop",
+            "raise safe_hz is not the fix: lower it towards the weight's poles, or report a bug",
+        ));
+    }
+    let n = structured_n(g, &s2.controller, w, &w2)?;
+    let norm = hinfnorm(&n).map_err(MimoError::lti("‖N‖∞ (structured)"))?;
+    let grid = log_grid(1e-9, 1e5, 400);
+    let mut grid_max: f64 = 0.0;
+    for &f in &grid {
+        let sj = Complex::new(0.0, TAU * f);
+        let kk = s2.controller.evalfr(sj) * d.evalfr(sj);
+        let v = sigma_max(&direct_n(
+            &g.evalfr(sj),
+            &kk,
+            &ws.evalfr(sj),
+            &wks.evalfr(sj),
+            &wt.evalfr(sj),
+        )?);
+        grid_max = grid_max.max(v);
+    }
+    if grid_max > norm.norm * (1.0 + 1e-6) {
+        return Err(MimoError::param(
+            "controller",
+            format!(
+                "the structured ‖N‖∞ = {} is below the factored grid's {grid_max}",
+                norm.norm
+            ),
+            "report this as a bug",
+        ));
+    }
+    let wpk = if norm.peak_rad_s.is_finite() {
+        norm.peak_rad_s
+    } else {
+        1e9
+    };
+    let sj = Complex::new(0.0, wpk);
+    let direct = sigma_max(&direct_n(
+        &g.evalfr(sj),
+        &(s2.controller.evalfr(sj) * d.evalfr(sj)),
+        &ws.evalfr(sj),
+        &wks.evalfr(sj),
+        &wt.evalfr(sj),
+    )?);
+    Ok(Synthesis {
+        controller: k,
+        gamma: s2.gamma.max(norm.norm),
+        gamma_infeasible: s2.gamma_infeasible,
+        closed_loop_norm: norm.norm,
+        peak_hz: wpk / TAU,
+        direct_norm_at_peak: direct,
+        generalized_plant: pg,
+        nmeas: p,
+        ncon: g.ninputs(),
+    })
+}
+
+/// N = [W_S S_o; W_KS K S_o; W_T T_o] of K = K′·W′_S⁻¹W_S without near-axis
+/// poles (see [`synthesise_near_axis`]).
+fn structured_n(
+    g: &StateSpace,
+    k2: &StateSpace,
+    w: &MixedSensitivityWeights,
+    w2: &MixedSensitivityWeights,
+) -> Result<StateSpace, MimoError> {
+    let p = g.noutputs();
+    let e = MimoError::lti;
+    let wsi = ss_inverse(&w.w_s()?, "W_S")?;
+    let ws2i = ss_inverse(&w2.w_s()?, "W′_S")?;
+    // M = W_S⁻¹ + G K′ W′_S⁻¹; W_S S_o = M⁻¹.
+    let gk = series(&series(&ws2i, k2).map_err(e("K′W′_S⁻¹"))?, g).map_err(e("GK′W′_S⁻¹"))?;
+    let m = nanomotion_core::lti::parallel(&wsi, &gk).map_err(e("M"))?;
+    let n1 = ss_inverse(&m, "W_S⁻¹ + GK′W′_S⁻¹")?;
+    // One copy of W_S S_o's states: v = [a; w] with a = (W_S S_o)w, then
+    // N = [a; W_KS K′W′_S⁻¹ a; W_T(w − W_S⁻¹a)].
+    let ip = DMatrix::<f64>::identity(p, p);
+    let gain = |m: DMatrix<f64>| StateSpace::gain(m, None);
+    let mut dup = DMatrix::zeros(2 * p, p);
+    dup.view_mut((0, 0), (p, p)).copy_from(&ip);
+    dup.view_mut((p, 0), (p, p)).copy_from(&ip);
+    let v = series(
+        &gain(dup.clone()),
+        &nanomotion_core::lti::append(&[n1, gain(ip.clone())]).map_err(e("[a; w]"))?,
+    )
+    .map_err(e("[a; w]"))?;
+    let mut first = DMatrix::zeros(p, 2 * p);
+    first.view_mut((0, 0), (p, p)).copy_from(&ip);
+    let r1 = gain(first.clone());
+    let ks = series(
+        &series(&ws2i, k2).map_err(e("K′W′_S⁻¹"))?,
+        &w.w_ks(g.ninputs()),
+    )
+    .map_err(e("W_KS K′W′_S⁻¹"))?;
+    let r2 = series(&gain(first), &ks).map_err(e("W_KS K S_o"))?;
+    let diff = series(
+        &nanomotion_core::lti::append(&[wsi.scaled(-1.0), gain(ip.clone())]).map_err(e("T_o"))?,
+        &gain(dup.transpose()),
+    )
+    .map_err(e("T_o"))?;
+    let r3 = series(&diff, &w.w_t()?).map_err(e("W_T T_o"))?;
+    let rows = nanomotion_core::lti::append(&[r1, r2, r3]).map_err(e("N"))?;
+    let mut split = DMatrix::zeros(6 * p, 2 * p);
+    for b in 0..3 {
+        split
+            .view_mut((2 * p * b, 0), (2 * p, 2 * p))
+            .copy_from(&DMatrix::identity(2 * p, 2 * p));
+    }
+    let post = series(&gain(split), &rows).map_err(e("N"))?;
+    series(&v, &post).map_err(e("N"))
 }
