@@ -23,6 +23,7 @@ use serde::{Deserialize, Serialize};
 pub mod ch3;
 pub mod ch6;
 pub mod ch7;
+pub mod ch7_3;
 pub mod ch8;
 
 /// How big a run: `Quick` is what `reproduce --quick` and the freshness test run
@@ -199,6 +200,12 @@ pub fn experiments() -> Vec<Experiment> {
             title: ch6::TITLE,
             in_quick: true,
             run: ch6::run,
+        },
+        Experiment {
+            id: "sec_7_3",
+            title: ch7_3::TITLE,
+            in_quick: true,
+            run: ch7_3::run,
         },
         Experiment {
             id: "sec_7_5",
