@@ -127,6 +127,11 @@ enum Command {
         /// unproven or out-of-bounds loop); the run's report says so.
         #[arg(long)]
         allow_unproven: bool,
+        /// Override a graph parameter by dotted path before building, e.g.
+        /// `--set blocks.pi.kp=2.0 --set duration_s=0.5` (repeatable; the value is
+        /// YAML; list entries by index, `blocks.stage.den.0`). See docs/sweep.md.
+        #[arg(long = "set", value_name = "PATH=VALUE")]
+        set: Vec<nanomotion::core::Override>,
     },
     /// Validate a graph without running it: parse, build every block, resolve ports,
     /// rates and execution order, report inserted rate transitions, and analyse every
@@ -242,7 +247,9 @@ fn main() -> ExitCode {
             data,
             data_rate,
             allow_unproven,
+            set,
         } => run(RunArgs {
+            set,
             graph,
             out,
             force,
@@ -352,6 +359,7 @@ struct RunArgs {
     data: Vec<PathBuf>,
     data_rate: Option<f64>,
     allow_unproven: bool,
+    set: Vec<nanomotion::core::Override>,
 }
 
 fn run(args: RunArgs) -> Result<(), String> {
@@ -365,8 +373,9 @@ fn run(args: RunArgs) -> Result<(), String> {
         data,
         data_rate,
         allow_unproven,
+        set,
     } = args;
-    let mut spec = load(&graph)?;
+    let mut spec = GraphSpec::from_file_with_overrides(&graph, &set).map_err(|e| e.to_string())?;
     if let Some(s) = seed {
         spec.seed = s;
     }

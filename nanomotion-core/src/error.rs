@@ -178,6 +178,18 @@ pub enum GraphError {
         #[source]
         source: std::io::Error,
     },
+    /// A parameter override (`--set PATH=VALUE`, a sweep parameter) names a path
+    /// that does not exist, gives a value of the wrong type, or a value the graph
+    /// rejects (see [`crate::overrides`]).
+    #[error("override `{path}`: {problem} (fix: {fix})")]
+    Override {
+        /// The dotted path as written.
+        path: String,
+        /// What is wrong.
+        problem: String,
+        /// How to fix it.
+        fix: String,
+    },
 }
 
 impl GraphError {

@@ -21,6 +21,8 @@
 //!   hysteresis);
 //! - [`blocks`]: the standard block library (gains, sums, filters, PID, noise,
 //!   references, ...);
+//! - [`overrides`]: parameter overrides by dotted path (`blocks.pi.kp=2.0`)
+//!   applied to a graph before it is built;
 //! - [`rng`]: the seeded, version-stable random number generator behind all noise.
 //!
 //! The thesis's equation numbers are given as (n.m) in the documentation.
@@ -34,6 +36,7 @@ pub mod gate;
 pub mod graph;
 pub mod lti;
 pub mod models;
+pub mod overrides;
 pub mod rng;
 pub mod roles;
 pub mod scheduler;
@@ -50,6 +53,7 @@ pub use block::{
 };
 pub use error::{GraphError, ParamError};
 pub use graph::{Graph, GraphSpec};
+pub use overrides::Override;
 pub use roles::{Actuator, Controller, Estimator, LearningFilter, Plant, Sensor, Source};
 pub use scheduler::Scheduler;
 
