@@ -158,13 +158,14 @@ class Graph:
     """
 
     def __init__(self, path: PathLike | None = None, *, yaml: str | None = None,
-                 origin: str = "<string>") -> None:
+                 origin: str = "<string>", overrides: Mapping[str, Any] | None = None) -> None:
         if (path is None) == (yaml is None):
             raise GraphError("give a graph either as a file path or as YAML text, not both or neither")
         self.path: str | None = None if path is None else os.fspath(path)
         self.yaml: str | None = yaml
         self.origin: str = origin if path is None else self.path  # type: ignore[assignment]
-        info = _nm.load_graph(path=self.path, text=self.yaml, origin=self.origin)
+        self.overrides: dict[str, Any] = dict(overrides or {})
+        info = _nm.load_graph(**self._source())
         self.title: str | None = info["title"]
         self.base_rate_hz: float = info["base_rate_hz"]
         self.duration_s: float = info["duration_s"]
@@ -173,16 +174,23 @@ class Graph:
         self.log: list[str] = info["log"]
         self.score: list[str] = info["score"]
 
-    def _source(self) -> dict[str, Any]:
-        return {"path": self.path, "text": self.yaml, "origin": self.origin}
+    def _source(self, extra: Mapping[str, Any] | None = None) -> dict[str, Any]:
+        merged = {**self.overrides, **dict(extra or {})}
+        return {"path": self.path, "text": self.yaml, "origin": self.origin,
+                "overrides": _override_pairs(merged)}
+
+    def with_overrides(self, overrides: Mapping[str, Any]) -> "Graph":
+        """The same graph with more dotted-path overrides (later ones win)."""
+        return Graph(self.path, yaml=self.yaml, origin=self.origin,
+                     overrides={**self.overrides, **dict(overrides)})
 
     def check(self) -> CheckResult:
         """Build the graph and analyse every feedback loop (the stability gate)."""
         return CheckResult(**_nm.check_graph(**self._source()))
 
-    def run(self, *, seed: int | None = None, duration: float | None = None,
-            data: PathLike | Sequence[PathLike] | None = None, data_rate: float | None = None,
-            allow_unproven: bool = False) -> RunResult:
+    def run(self, overrides: Mapping[str, Any] | None = None, *, seed: int | None = None,
+            duration: float | None = None, data: PathLike | Sequence[PathLike] | None = None,
+            data_rate: float | None = None, allow_unproven: bool = False) -> RunResult:
         """Run the graph (``nanomotion run`` without files). See :func:`run`."""
         if data is None:
             files: list[str] = []
@@ -190,13 +198,25 @@ class Graph:
             files = [os.fspath(data)]
         else:
             files = [os.fspath(d) for d in data]
-        r = _nm.run_graph(**self._source(), seed=seed, duration=duration,
+        r = _nm.run_graph(**self._source(overrides), seed=seed, duration=duration,
                           data=files, data_rate=data_rate, allow_unproven=allow_unproven)
         r["scores"] = {k: Score(**v) for k, v in r["scores"].items()}
         return RunResult(**r)
 
     def __repr__(self) -> str:
         return f"Graph({self.origin!r}, {len(self.blocks)} blocks, {self.duration_s} s at {self.base_rate_hz} Hz)"
+
+
+def _override_pairs(overrides: Mapping[str, Any]) -> list[tuple[str, str]]:
+    """(dotted path, value as YAML text): JSON is YAML, so json.dumps writes it."""
+    out = []
+    for path, value in overrides.items():
+        if isinstance(value, np.generic):
+            value = value.item()
+        elif isinstance(value, np.ndarray):
+            value = value.tolist()
+        out.append((str(path), json.dumps(value)))
+    return out
 
 
 def _graph(graph: PathLike | Graph) -> Graph:
@@ -209,25 +229,30 @@ def load(path: PathLike) -> Graph:
     return Graph(path)
 
 
-def check(graph: PathLike | Graph) -> CheckResult:
+def check(graph: PathLike | Graph, overrides: Mapping[str, Any] | None = None) -> CheckResult:
     """The stability gate's verdict on a graph (``nanomotion check``): closed-loop
     poles, margins, ‖S‖∞, ‖T‖∞ of every loop; ``passes`` is False when a loop is
     unstable, unproven without a stated reason, or misses a ``require:`` bound."""
-    return _graph(graph).check()
+    g = _graph(graph)
+    return (g.with_overrides(overrides) if overrides else g).check()
 
 
-def run(graph: PathLike | Graph, *, seed: int | None = None, duration: float | None = None,
+def run(graph: PathLike | Graph, overrides: Mapping[str, Any] | None = None, *,
+        seed: int | None = None, duration: float | None = None,
         data: PathLike | Sequence[PathLike] | None = None, data_rate: float | None = None,
         allow_unproven: bool = False) -> RunResult:
     """Run a graph as ``nanomotion run`` does, keeping the logs in memory.
 
+    ``overrides`` sets parameters by dotted path before the graph is built
+    (``{"blocks.pi.kp": 2e7, "blocks.stage.den.0": 0.3}``, as ``nanomotion run
+    --set``); a wrong path raises :class:`GraphError` naming the nearest key.
     ``seed`` and ``duration`` (s) override the graph's; ``data`` is a measured
     record (CSV with ``t_s``, or MATLAB v5 ``.mat``; a list merges files) played
     by ``data_column`` blocks and compared with ``compare:`` signals (the duration
     becomes the data's unless given). Raises :class:`GateError` when the stability
     gate refuses the graph, unless ``allow_unproven``.
     """
-    return _graph(graph).run(seed=seed, duration=duration, data=data,
+    return _graph(graph).run(overrides, seed=seed, duration=duration, data=data,
                              data_rate=data_rate, allow_unproven=allow_unproven)
 
 

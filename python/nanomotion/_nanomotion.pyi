@@ -21,12 +21,17 @@ _Path = str | PathLike[str]
 _F64 = npt.NDArray[np.float64]
 _C128 = npt.NDArray[np.complex128]
 
-def load_graph(path: _Path | None = None, text: str | None = None, origin: str = "<string>") -> dict[str, Any]: ...
-def check_graph(path: _Path | None = None, text: str | None = None, origin: str = "<string>") -> dict[str, Any]: ...
+def load_graph(
+    path: _Path | None = None, text: str | None = None, origin: str = "<string>", overrides: list[tuple[str, str]] = ...
+) -> dict[str, Any]: ...
+def check_graph(
+    path: _Path | None = None, text: str | None = None, origin: str = "<string>", overrides: list[tuple[str, str]] = ...
+) -> dict[str, Any]: ...
 def run_graph(
     path: _Path | None = None,
     text: str | None = None,
     origin: str = "<string>",
+    overrides: list[tuple[str, str]] = ...,
     seed: int | None = None,
     duration: float | None = None,
     data: list[_Path] = ...,

@@ -11,6 +11,7 @@ use crate::errors::{data_err, diagnose_err, gate_err, graph_err};
 use nanomotion::core::data::Dataset;
 use nanomotion::core::gate::{self, GateReport, Require};
 use nanomotion::core::graph::GraphSpec;
+use nanomotion::core::overrides::Override;
 use numpy::ndarray::Array2;
 use numpy::{PyArray1, PyArray2};
 use pyo3::prelude::*;
@@ -18,11 +19,23 @@ use pyo3::types::{PyDict, PyList};
 use std::path::PathBuf;
 use std::sync::Arc;
 
-/// The graph from a file or from text.
-pub fn load_spec(path: Option<PathBuf>, text: Option<&str>, origin: &str) -> PyResult<GraphSpec> {
+/// The graph from a file or from text, with dotted-path overrides applied
+/// (`(path, value as YAML/JSON text)`, e.g. `("blocks.pi.kp", "2.0")`; see
+/// `nanomotion_core::overrides`).
+pub fn load_spec(
+    path: Option<PathBuf>,
+    text: Option<&str>,
+    origin: &str,
+    overrides: &[(String, String)],
+) -> PyResult<GraphSpec> {
+    let set = overrides
+        .iter()
+        .map(|(p, v)| Override::parse_value(p, v))
+        .collect::<Result<Vec<_>, _>>()
+        .map_err(graph_err)?;
     match (path, text) {
-        (Some(p), None) => GraphSpec::from_file(&p).map_err(graph_err),
-        (None, Some(t)) => GraphSpec::from_yaml(t, origin).map_err(graph_err),
+        (Some(p), None) => GraphSpec::from_file_with_overrides(&p, &set).map_err(graph_err),
+        (None, Some(t)) => GraphSpec::from_yaml_with_overrides(t, origin, &set).map_err(graph_err),
         _ => Err(graph_err(
             "give a graph either as a file path or as YAML text, not both or neither",
         )),
@@ -51,14 +64,15 @@ fn analyse(sched: &nanomotion::Scheduler, require: Option<&Require>) -> GateRepo
 /// Returns `{passes, report, failures, allowed, order, rate_transitions,
 /// base_rate_hz, ticks}`; `report` is the table `nanomotion check` prints.
 #[pyfunction]
-#[pyo3(signature = (path=None, text=None, origin="<string>"))]
+#[pyo3(signature = (path=None, text=None, origin="<string>", overrides=Vec::new()))]
 fn check_graph<'py>(
     py: Python<'py>,
     path: Option<PathBuf>,
     text: Option<&str>,
     origin: &str,
+    overrides: Vec<(String, String)>,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let spec = load_spec(path, text, origin)?;
+    let spec = load_spec(path, text, origin, &overrides)?;
     let require = spec.require.clone();
     let (sched, report) = spec.build().map_err(graph_err)?;
     let gate = analyse(&sched, require.as_ref());
@@ -215,20 +229,21 @@ pub fn finished_to_py<'py>(py: Python<'py>, f: Finished) -> PyResult<Bound<'py, 
 
 /// `nanomotion run` without files: see [`run_spec`] and [`finished_to_py`].
 #[pyfunction]
-#[pyo3(signature = (path=None, text=None, origin="<string>", seed=None, duration=None, data=Vec::new(), data_rate=None, allow_unproven=false))]
+#[pyo3(signature = (path=None, text=None, origin="<string>", overrides=Vec::new(), seed=None, duration=None, data=Vec::new(), data_rate=None, allow_unproven=false))]
 #[allow(clippy::too_many_arguments)]
 fn run_graph<'py>(
     py: Python<'py>,
     path: Option<PathBuf>,
     text: Option<&str>,
     origin: &str,
+    overrides: Vec<(String, String)>,
     seed: Option<u64>,
     duration: Option<f64>,
     data: Vec<PathBuf>,
     data_rate: Option<f64>,
     allow_unproven: bool,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let spec = load_spec(path, text, origin)?;
+    let spec = load_spec(path, text, origin, &overrides)?;
     let f = run_spec(
         py,
         spec,
@@ -247,14 +262,15 @@ fn run_graph<'py>(
 /// as a list of (name, type), log, score signals): a cheap validity check of the
 /// YAML schema without building.
 #[pyfunction]
-#[pyo3(signature = (path=None, text=None, origin="<string>"))]
+#[pyo3(signature = (path=None, text=None, origin="<string>", overrides=Vec::new()))]
 fn load_graph<'py>(
     py: Python<'py>,
     path: Option<PathBuf>,
     text: Option<&str>,
     origin: &str,
+    overrides: Vec<(String, String)>,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let spec = load_spec(path, text, origin)?;
+    let spec = load_spec(path, text, origin, &overrides)?;
     let d = PyDict::new(py);
     d.set_item("title", spec.title.clone())?;
     d.set_item("base_rate_hz", spec.base_rate_hz)?;

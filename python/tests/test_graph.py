@@ -138,3 +138,23 @@ def test_diagnose_names_the_hidden_hysteresis(root):
     assert d.report["final"]["holdout_rms"] < d.report["nominal"]["holdout_rms"]
     with pytest.raises(nm.DiagnoseError, match="holdout"):
         nm.diagnose(root / "examples/diagnose/model.yaml", root / "examples/diagnose/record.csv", holdout=0.95)
+
+
+def test_dotted_path_overrides_change_the_result_as_predicted(root):
+    g = nm.Graph(yaml=GAIN_GRAPH.format(gain=3.0))
+    r = nm.run(g, {"blocks.k.k": 5.0, "blocks.c.value": -0.25, "duration_s": 0.005})
+    np.testing.assert_array_equal(r.signals["k.y"], np.full(5, -1.25))
+    # The quickstart stage integrates the drive frequency f_α with c = 4 µm per
+    # cycle at low frequency (DC gain of (b s + k) c / (M s² + b s + k) is c):
+    # tracking a ramp of velocity v needs a mean f_α = v / c, whatever the
+    # controller. Doubling the reference velocity doubles it.
+    c = 13.3135 / 3.32837e6
+    for v in (1e-5, 2e-5):
+        r = nm.run(root / "examples/quickstart.yaml", {"blocks.ref.velocity_m_s": v}, duration=1.0)
+        u = r.signals["pi.u"][int(0.5 * r.rates_hz["pi.u"]):]
+        assert np.mean(u) == pytest.approx(v / c, rel=0.02)
+    # Overrides compose with Graph.with_overrides, later ones win.
+    g2 = nm.load(root / "examples/quickstart.yaml").with_overrides({"seed": 7, "duration_s": 0.6})
+    assert g2.seed == 7 and g2.duration_s == 0.6
+    with pytest.raises(nm.GraphError, match="did you mean `blocks.pi.kp`"):
+        nm.run(root / "examples/quickstart.yaml", {"blocks.pi.kpp": 1.0})
