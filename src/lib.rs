@@ -65,6 +65,7 @@ pub use typetag;
 pub mod image_plot;
 pub mod output;
 pub mod plot;
+pub mod sweep;
 
 /// Make sure every plugin crate is linked (typetag registers blocks through the
 /// linker: a plugin that is never referenced would silently miss from YAML). The

@@ -4,6 +4,7 @@ mod diagnose_cmd;
 mod gate_cmd;
 mod optimize_cmd;
 mod scan_image_cmd;
+mod sweep_cmd;
 mod synth_cmd;
 
 use clap::{Parser, Subcommand};
@@ -225,6 +226,27 @@ enum Command {
         #[arg(long, short, default_value = "out/synth")]
         out: PathBuf,
     },
+    /// Run a parameter study (grid, random, latin-hypercube or monte-carlo over
+    /// graph parameters by dotted path) in parallel: writes `results.csv`,
+    /// `results.parquet` (one row per run: parameters, seed, scores, wall time,
+    /// gate verdict, error), `plan.json` and SVG plots. Resumable: finished runs
+    /// (`rows.jsonl`) are kept when the same command runs again. See docs/sweep.md.
+    Sweep {
+        /// The study file (YAML), e.g. examples/sweep/quickstart_monte_carlo.yaml.
+        study: PathBuf,
+        /// Output folder (default out/sweep_<study stem>).
+        #[arg(long, short)]
+        out: Option<PathBuf>,
+        /// Parallel runs (default: all cores).
+        #[arg(long, short, default_value_t = 0)]
+        jobs: usize,
+        /// Discard the finished rows in the output folder and start again.
+        #[arg(long)]
+        restart: bool,
+        /// Compute at most this many runs now (the rest on a later run).
+        #[arg(long)]
+        limit: Option<usize>,
+    },
     /// List the registered block types, with their ports and parameters.
     Blocks {
         /// Show only types whose name contains this text.
@@ -306,6 +328,13 @@ fn main() -> ExitCode {
             pixels,
         } => scan_image_cmd::run(&run_dir, &images, from_s, (pixels[0], pixels[1])),
         Command::Synth { config, out } => synth_cmd::synth(&config, &out),
+        Command::Sweep {
+            study,
+            out,
+            jobs,
+            restart,
+            limit,
+        } => sweep_cmd::sweep(&study, out, jobs, restart, limit),
         Command::Blocks { filter } => blocks(filter.as_deref()),
     };
     match result {
