@@ -50,6 +50,8 @@ from ._nanomotion import (
     timestamp_track as _timestamp_track,
 )
 
+from ._sweep import SweepSummary, read_results, run_chunk, sweep
+
 __version__: str = _nm.__version__
 
 PathLike = Union[str, "os.PathLike[str]"]
@@ -71,6 +73,7 @@ __all__ = [
     "RunResult",
     "Score",
     "SweepError",
+    "SweepSummary",
     "TimestampEstimator",
     "check",
     "cumulative_psd",
@@ -78,7 +81,10 @@ __all__ = [
     "frf_h1",
     "load",
     "psd_welch",
+    "read_results",
     "run",
+    "run_chunk",
+    "sweep",
     "timestamp_track",
 ]
 

@@ -12,7 +12,9 @@
 //!   frequency response, poles, H∞ norm and stability margins;
 //! - models ([`models`]): Coleman–Hodgdon hysteresis (6.3), its exact inverse
 //!   feed-forward (6.6) on the extended model (6.4), the time-stamping estimator
-//!   (8.1)–(8.4) with the encoder of Ch. 8.
+//!   (8.1)–(8.4) with the encoder of Ch. 8;
+//! - sweeps ([`sweep`]): the pieces of `nanomotion::sweep` a distributed engine
+//!   (Ray) needs, and the local rayon path.
 //!
 //! Rust errors become Python exceptions carrying the same message (the CLI
 //! prints it after `error: `), in a hierarchy rooted at `NanomotionError`
@@ -24,6 +26,7 @@ pub mod analysis;
 pub mod errors;
 pub mod graph;
 pub mod models;
+pub mod sweep;
 
 /// The module `nanomotion._nanomotion`.
 #[pymodule]
@@ -35,5 +38,6 @@ fn _nanomotion(m: &Bound<'_, PyModule>) -> PyResult<()> {
     graph::register(m)?;
     analysis::register(m)?;
     models::register(m)?;
+    sweep::register(m)?;
     Ok(())
 }
