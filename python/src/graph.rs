@@ -30,9 +30,8 @@ pub fn load_spec(
 ) -> PyResult<GraphSpec> {
     let set = overrides
         .iter()
-        .map(|(p, v)| Override::parse_value(p, v))
-        .collect::<Result<Vec<_>, _>>()
-        .map_err(graph_err)?;
+        .map(|(p, v)| Override::parse_value(p, v).map_err(graph_err))
+        .collect::<PyResult<Vec<_>>>()?;
     match (path, text) {
         (Some(p), None) => GraphSpec::from_file_with_overrides(&p, &set).map_err(graph_err),
         (None, Some(t)) => GraphSpec::from_yaml_with_overrides(t, origin, &set).map_err(graph_err),

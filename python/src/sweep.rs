@@ -135,7 +135,7 @@ fn sweep_local<'py>(
         progress: false,
     };
     let summary = py
-        .detach(move || sweep::run_study(&s, &out, &opts))
+        .detach(move || sweep::run_study(&s, &out, &opts).map_err(|e| e.to_string()))
         .map_err(sweep_err)?;
     summary_dict(py, &summary)
 }
