@@ -52,7 +52,7 @@ pub enum SweepError {
         origin: String,
         /// The graph's error.
         #[source]
-        source: GraphError,
+        source: Box<GraphError>,
     },
     /// The output folder holds rows of a different study.
     #[error(
@@ -138,6 +138,17 @@ pub enum GateMode {
     Refuse,
     /// No analysis (faster; the `gate` column is empty).
     Off,
+}
+
+impl GateMode {
+    /// The name written in study files.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            GateMode::Record => "record",
+            GateMode::Refuse => "refuse",
+            GateMode::Off => "off",
+        }
+    }
 }
 
 /// A normal distribution.
@@ -349,10 +360,10 @@ pub fn erfc(x: f64) -> f64 {
     let (p, q): (&[f64], &[f64]) = if x < 4.0 {
         (
             &[
-                5.641_884_969_886_700_9e-1,
+                5.641_884_969_886_701e-1,
                 8.883_149_794_388_376,
                 6.611_919_063_714_163e1,
-                2.986_351_381_974_001_3e2,
+                2.986_351_381_974_001e2,
                 8.819_522_212_417_69e2,
                 1.712_047_612_634_070_7e3,
                 2.051_078_377_826_071_6e3,
@@ -410,7 +421,7 @@ fn erf_small(x: f64) -> f64 {
     const A: [f64; 5] = [
         3.161_123_743_870_565_6,
         1.138_641_541_510_501_6e2,
-        3.774_852_376_853_020_2e2,
+        3.774_852_376_853_02e2,
         3.209_377_589_138_469_5e3,
         1.857_777_061_846_031_5e-1,
     ];
@@ -556,7 +567,7 @@ impl Study {
             fixed.push(
                 Override::new(path, value.clone()).map_err(|source| SweepError::Graph {
                     origin: origin.into(),
-                    source,
+                    source: Box::new(source),
                 })?,
             );
         }
@@ -696,7 +707,7 @@ impl Study {
     fn check_graph(&self) -> Result<(), SweepError> {
         let graph_err = |source| SweepError::Graph {
             origin: self.origin.clone(),
-            source,
+            source: Box::new(source),
         };
         let spec = GraphSpec::from_file_with_overrides(&self.graph_path, &self.fixed)
             .map_err(graph_err)?;
@@ -828,7 +839,7 @@ impl Study {
                 .unwrap_or_default()
                 .as_bytes(),
         );
-        h.write(self.file.gate.to_owned_str().as_bytes());
+        h.write(self.file.gate.as_str().as_bytes());
         plan.study_hash = format!("{:016x}", h.0);
         plan
     }
@@ -952,20 +963,6 @@ impl Study {
         match rayon::ThreadPoolBuilder::new().num_threads(jobs).build() {
             Ok(pool) => pool.install(work),
             Err(_) => work(),
-        }
-    }
-}
-
-trait GateName {
-    fn to_owned_str(&self) -> &'static str;
-}
-
-impl GateName for GateMode {
-    fn to_owned_str(&self) -> &'static str {
-        match self {
-            GateMode::Record => "record",
-            GateMode::Refuse => "refuse",
-            GateMode::Off => "off",
         }
     }
 }
