@@ -1,0 +1,289 @@
+"""nanomotion from Python: performance-driven control of nano-motion systems.
+
+The Rust library behind the ``nanomotion`` command, in-process:
+
+>>> import nanomotion as nm
+>>> r = nm.run("examples/quickstart.yaml", duration=0.5)      # doctest: +SKIP
+>>> r.scores["err.y"].rms, r.signals["stage.y"]                # doctest: +SKIP
+
+- graphs: :func:`load`, :func:`check` (the stability gate), :func:`run`
+  (overrides by dotted path, seed, duration, measured data; signals as numpy
+  arrays, scores), :func:`diagnose` (name what a model misses);
+- studies: :func:`sweep` over a SWEEP.yaml, on local cores or on Ray;
+- analysis: :func:`psd_welch`, :func:`cumulative_psd`, :func:`frf_h1`,
+  :class:`Lti` (frequency response, poles, H∞ norm, margins);
+- models: :class:`ColemanHodgdon` hysteresis and :class:`HysteresisInverse`
+  (thesis (6.3), (6.4), (6.6)); :class:`TimestampEstimator` and
+  :func:`timestamp_track` (thesis Ch. 8).
+
+Every error is a :class:`NanomotionError` (subclasses per area) carrying the
+Rust library's message unchanged.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Mapping, Sequence, Union
+
+import numpy as np
+
+from . import _nanomotion as _nm
+from ._nanomotion import (
+    AnalysisError,
+    ColemanHodgdon,
+    DataError,
+    DiagnoseError,
+    GateError,
+    GraphError,
+    HysteresisInverse,
+    Lti,
+    ModelError,
+    NanomotionError,
+    SweepError,
+    TimestampEstimator,
+    cumulative_psd,
+    frf_h1,
+    psd_welch,
+    timestamp_track as _timestamp_track,
+)
+
+from ._sweep import SweepSummary, read_results, run_chunk, sweep
+
+__version__: str = _nm.__version__
+
+PathLike = Union[str, "os.PathLike[str]"]
+
+__all__ = [
+    "AnalysisError",
+    "CheckResult",
+    "ColemanHodgdon",
+    "DataError",
+    "DiagnoseError",
+    "DiagnoseResult",
+    "GateError",
+    "Graph",
+    "GraphError",
+    "HysteresisInverse",
+    "Lti",
+    "ModelError",
+    "NanomotionError",
+    "RunResult",
+    "Score",
+    "SweepError",
+    "SweepSummary",
+    "TimestampEstimator",
+    "check",
+    "cumulative_psd",
+    "diagnose",
+    "frf_h1",
+    "load",
+    "psd_welch",
+    "read_results",
+    "run",
+    "run_chunk",
+    "sweep",
+    "timestamp_track",
+]
+
+
+@dataclass(frozen=True)
+class Score:
+    """Score of one ``score:`` signal (the CLI's metrics table row)."""
+
+    rms: float
+    max_abs: float
+    mean: float
+    from_s: float
+    samples: int
+    unit: str | None
+
+
+@dataclass
+class RunResult:
+    """What a run produced: logged signals as numpy arrays and the scores."""
+
+    title: str | None
+    duration_s: float
+    wall_s: float
+    signals: dict[str, np.ndarray]
+    rates_hz: dict[str, float]
+    units: dict[str, str | None]
+    scores: dict[str, Score]
+    comparisons: list[dict[str, Any]] = field(default_factory=list)
+    stability_gate: list[str] = field(default_factory=list)
+
+    def time(self, signal: str) -> np.ndarray:
+        """Sample times (s) of a logged signal: t_i = i / rate."""
+        n = self.signals[signal].shape[0]
+        return np.arange(n) / self.rates_hz[signal]
+
+
+@dataclass(frozen=True)
+class CheckResult:
+    """The stability gate's verdict on a graph (``nanomotion check``)."""
+
+    passes: bool
+    report: str
+    failures: list[str]
+    allowed: list[str]
+    order: list[str]
+    rate_transitions: list[str]
+    base_rate_hz: float
+    ticks: int
+
+    def __str__(self) -> str:
+        return self.report
+
+    def __bool__(self) -> bool:
+        return self.passes
+
+
+@dataclass(frozen=True)
+class DiagnoseResult:
+    """``nanomotion diagnose``'s result: the JSON report as a dict (the CLI's
+    ``report.json``) and the augmented graph's YAML (``model_augmented.yaml``,
+    None when nothing was found)."""
+
+    report: dict[str, Any]
+    augmented_yaml: str | None
+
+    @property
+    def found(self) -> list[str]:
+        """The effects named, in order."""
+        return list(self.report.get("found", []))
+
+
+class Graph:
+    """A YAML controller graph, from a file or from text.
+
+    ``Graph("g.yaml")`` or ``Graph(yaml=text)``. Relative parameter files in a
+    graph read from a file resolve against the file's folder, as for the CLI.
+    """
+
+    def __init__(self, path: PathLike | None = None, *, yaml: str | None = None,
+                 origin: str = "<string>", overrides: Mapping[str, Any] | None = None) -> None:
+        if (path is None) == (yaml is None):
+            raise GraphError("give a graph either as a file path or as YAML text, not both or neither")
+        self.path: str | None = None if path is None else os.fspath(path)
+        self.yaml: str | None = yaml
+        self.origin: str = origin if path is None else self.path  # type: ignore[assignment]
+        self.overrides: dict[str, Any] = dict(overrides or {})
+        info = _nm.load_graph(**self._source())
+        self.title: str | None = info["title"]
+        self.base_rate_hz: float = info["base_rate_hz"]
+        self.duration_s: float = info["duration_s"]
+        self.seed: int = info["seed"]
+        self.blocks: list[tuple[str, str]] = [tuple(b) for b in info["blocks"]]  # type: ignore[misc]
+        self.log: list[str] = info["log"]
+        self.score: list[str] = info["score"]
+
+    def _source(self, extra: Mapping[str, Any] | None = None) -> dict[str, Any]:
+        merged = {**self.overrides, **dict(extra or {})}
+        return {"path": self.path, "text": self.yaml, "origin": self.origin,
+                "overrides": _override_pairs(merged)}
+
+    def with_overrides(self, overrides: Mapping[str, Any]) -> "Graph":
+        """The same graph with more dotted-path overrides (later ones win)."""
+        return Graph(self.path, yaml=self.yaml, origin=self.origin,
+                     overrides={**self.overrides, **dict(overrides)})
+
+    def check(self) -> CheckResult:
+        """Build the graph and analyse every feedback loop (the stability gate)."""
+        return CheckResult(**_nm.check_graph(**self._source()))
+
+    def run(self, overrides: Mapping[str, Any] | None = None, *, seed: int | None = None,
+            duration: float | None = None, data: PathLike | Sequence[PathLike] | None = None,
+            data_rate: float | None = None, allow_unproven: bool = False) -> RunResult:
+        """Run the graph (``nanomotion run`` without files). See :func:`run`."""
+        if data is None:
+            files: list[str] = []
+        elif isinstance(data, (str, os.PathLike)):
+            files = [os.fspath(data)]
+        else:
+            files = [os.fspath(d) for d in data]
+        r = _nm.run_graph(**self._source(overrides), seed=seed, duration=duration,
+                          data=files, data_rate=data_rate, allow_unproven=allow_unproven)
+        r["scores"] = {k: Score(**v) for k, v in r["scores"].items()}
+        return RunResult(**r)
+
+    def __repr__(self) -> str:
+        return f"Graph({self.origin!r}, {len(self.blocks)} blocks, {self.duration_s} s at {self.base_rate_hz} Hz)"
+
+
+def _override_pairs(overrides: Mapping[str, Any]) -> list[tuple[str, str]]:
+    """(dotted path, value as YAML text): JSON is YAML, so json.dumps writes it."""
+    out = []
+    for path, value in overrides.items():
+        if isinstance(value, np.generic):
+            value = value.item()
+        elif isinstance(value, np.ndarray):
+            value = value.tolist()
+        out.append((str(path), json.dumps(value)))
+    return out
+
+
+def _graph(graph: PathLike | Graph) -> Graph:
+    return graph if isinstance(graph, Graph) else Graph(graph)
+
+
+def load(path: PathLike) -> Graph:
+    """Read and validate a graph file (YAML schema, block types); raises
+    :class:`GraphError` with the file, line and column."""
+    return Graph(path)
+
+
+def check(graph: PathLike | Graph, overrides: Mapping[str, Any] | None = None) -> CheckResult:
+    """The stability gate's verdict on a graph (``nanomotion check``): closed-loop
+    poles, margins, ‖S‖∞, ‖T‖∞ of every loop; ``passes`` is False when a loop is
+    unstable, unproven without a stated reason, or misses a ``require:`` bound."""
+    g = _graph(graph)
+    return (g.with_overrides(overrides) if overrides else g).check()
+
+
+def run(graph: PathLike | Graph, overrides: Mapping[str, Any] | None = None, *,
+        seed: int | None = None, duration: float | None = None,
+        data: PathLike | Sequence[PathLike] | None = None, data_rate: float | None = None,
+        allow_unproven: bool = False) -> RunResult:
+    """Run a graph as ``nanomotion run`` does, keeping the logs in memory.
+
+    ``overrides`` sets parameters by dotted path before the graph is built
+    (``{"blocks.pi.kp": 2e7, "blocks.stage.den.0": 0.3}``, as ``nanomotion run
+    --set``); a wrong path raises :class:`GraphError` naming the nearest key.
+    ``seed`` and ``duration`` (s) override the graph's; ``data`` is a measured
+    record (CSV with ``t_s``, or MATLAB v5 ``.mat``; a list merges files) played
+    by ``data_column`` blocks and compared with ``compare:`` signals (the duration
+    becomes the data's unless given). Raises :class:`GateError` when the stability
+    gate refuses the graph, unless ``allow_unproven``.
+    """
+    return _graph(graph).run(overrides, seed=seed, duration=duration, data=data,
+                             data_rate=data_rate, allow_unproven=allow_unproven)
+
+
+def diagnose(model: PathLike, data: PathLike, *, max_effects: int = 3, holdout: float = 0.3,
+             seed: int | None = None, effects: Sequence[str] = ()) -> DiagnoseResult:
+    """Name what a model graph misses against a measured record, fit it, and
+    return the report and the augmented graph (``nanomotion diagnose``)."""
+    js, yaml = _nm.diagnose_graph(os.fspath(model), os.fspath(data), max_effects=max_effects,
+                                  holdout=holdout, seed=seed, effects=list(effects))
+    return DiagnoseResult(report=json.loads(js), augmented_yaml=yaml)
+
+
+def timestamp_track(t: np.ndarray, x: np.ndarray, v: np.ndarray, a: np.ndarray | None = None, *,
+                    encoder: Mapping[str, Any] | None = None, order: int = 2,
+                    fallback: str = "thesis", seed: int = 0
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """An encoder with time-stamped events read along a known trajectory, then
+    the time-stamping estimator (thesis Ch. 8).
+
+    ``encoder`` holds the ``timestamp_encoder`` block's parameters (``lines``,
+    ``clock_hz``, ``register_len``, ``skip``, slit errors, ...). Returns the
+    (N, 3) estimates [x̂, v̂, â], the (N,) status (0 fitted, 1 out of band, 2 no
+    events, 3 standstill), the count times the resolution, and the (N, 2+2n)
+    registers.
+    """
+    f = lambda z: None if z is None else np.ascontiguousarray(z, dtype=float)  # noqa: E731
+    return _timestamp_track(f(t), f(x), f(v), f(a), encoder_json=json.dumps(dict(encoder or {})),
+                            order=order, fallback=fallback, seed=seed)
