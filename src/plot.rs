@@ -160,6 +160,24 @@ pub fn draw_svg_panels(figs: &[Figure], path: &Path) -> Result<(), PlotError> {
     Ok(())
 }
 
+/// The data rectangle `(x_min, x_max, y_min, y_max)` of labelled point series, or
+/// `None` when there is no finite point.
+pub fn data_bounds(series: &[(String, Vec<(f64, f64)>)]) -> Option<(f64, f64, f64, f64)> {
+    let (mut x0, mut x1, mut y0, mut y1) = (
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+    );
+    for &(x, y) in series.iter().flat_map(|(_, p)| p.iter()) {
+        x0 = x0.min(x);
+        x1 = x1.max(x);
+        y0 = y0.min(y);
+        y1 = y1.max(y);
+    }
+    (x0.is_finite() && y0.is_finite()).then_some((x0, x1, y0, y1))
+}
+
 /// Draw `fig` on one drawing area of an SVG being written to `path`.
 fn draw_on(
     fig: &Figure,
@@ -210,22 +228,9 @@ fn draw_on(
         });
         all_pos && hi > 0.0 && hi / lo > 100.0
     };
-    let all = series.iter().flat_map(|(_, p)| p.iter());
-    let (mut x0, mut x1, mut y0, mut y1) = (
-        f64::INFINITY,
-        f64::NEG_INFINITY,
-        f64::INFINITY,
-        f64::NEG_INFINITY,
-    );
-    for &(x, y) in all {
-        x0 = x0.min(x);
-        x1 = x1.max(x);
-        y0 = y0.min(y);
-        y1 = y1.max(y);
-    }
-    if !(x0.is_finite() && y0.is_finite()) {
+    let Some((x0, mut x1, y0, y1)) = data_bounds(&series) else {
         return Err(err("nothing finite to plot".into()));
-    }
+    };
     if x1 <= x0 {
         x1 = x0 + if fig.x_scale == Scale::Log { x0 } else { 1.0 };
     }

@@ -1438,22 +1438,9 @@ fn draw_scatter(
 ) -> Result<(), SweepError> {
     use plotters::prelude::*;
     let err = plot_err(path);
-    let all = series.iter().flat_map(|(_, p)| p.iter());
-    let (mut x0, mut x1, mut y0, mut y1) = (
-        f64::INFINITY,
-        f64::NEG_INFINITY,
-        f64::INFINITY,
-        f64::NEG_INFINITY,
-    );
-    for &(x, y) in all {
-        x0 = x0.min(x);
-        x1 = x1.max(x);
-        y0 = y0.min(y);
-        y1 = y1.max(y);
-    }
-    if !(x0.is_finite() && y0.is_finite()) {
+    let Some((x0, x1, y0, y1)) = crate::plot::data_bounds(series) else {
         return Ok(());
-    }
+    };
     let ey = eng_exponent(y0.abs().max(y1.abs()));
     let sy = 10f64.powi(-ey);
     let (y0, y1) = (y0 * sy, y1 * sy);

@@ -486,8 +486,8 @@ fn connection_lines(text: &str) -> Vec<usize> {
     out
 }
 
-/// Levenshtein distance (for suggestions).
-fn edit_distance(a: &str, b: &str) -> usize {
+/// Levenshtein distance in characters (for "did you mean" suggestions).
+pub fn edit_distance(a: &str, b: &str) -> usize {
     let b: Vec<char> = b.chars().collect();
     let mut prev: Vec<usize> = (0..=b.len()).collect();
     for (i, ca) in a.chars().enumerate() {

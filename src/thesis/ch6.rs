@@ -23,10 +23,7 @@ const REL_TOL: f64 = 0.1;
 const SHAPE: f64 = 2.0;
 
 fn tol() -> String {
-    format!(
-        "tolerance ±{:.0} %, shape within a factor {SHAPE}",
-        100.0 * REL_TOL
-    )
+    super::tolerance_text(REL_TOL, SHAPE)
 }
 
 fn row(quantity: &str, thesis_text: &str, thesis: f64, ours: f64, unit: &str, cause: &str) -> Row {

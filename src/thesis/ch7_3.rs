@@ -26,9 +26,9 @@ fn row(quantity: &str, thesis: f64, ours: f64, unit: &str, cause: &str) -> Row {
         ours: format!("{} {unit}", sig(ours, 4)),
         verdict: Verdict::by_ratio(thesis, ours, REL_TOL, SHAPE),
         reason: format!(
-            "ours/thesis = {:.2} (tolerance ±{:.0} %, shape within a factor {SHAPE}). {cause}",
+            "ours/thesis = {:.2} ({}). {cause}",
             ours / thesis,
-            100.0 * REL_TOL
+            super::tolerance_text(REL_TOL, SHAPE)
         ),
     }
 }

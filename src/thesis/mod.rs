@@ -294,7 +294,7 @@ pub fn select(names: &[String], quick: bool) -> Result<Vec<Experiment>, String> 
                 let ids: Vec<&str> = all.iter().map(|e| e.id).collect();
                 let near = ids
                     .iter()
-                    .min_by_key(|id| edit_distance(n, id))
+                    .min_by_key(|id| nanomotion_core::graph::edit_distance(n, id))
                     .map(|id| format!("; nearest: `{id}`"))
                     .unwrap_or_default();
                 return Err(format!(
@@ -311,22 +311,6 @@ pub fn select(names: &[String], quick: bool) -> Result<Vec<Experiment>, String> 
         chosen.retain(|e| e.in_quick);
     }
     Ok(chosen)
-}
-
-/// Levenshtein distance (characters).
-fn edit_distance(a: &str, b: &str) -> usize {
-    let b: Vec<char> = b.chars().collect();
-    let mut prev: Vec<usize> = (0..=b.len()).collect();
-    for (i, ca) in a.chars().enumerate() {
-        let mut cur = vec![i + 1; b.len() + 1];
-        for (j, cb) in b.iter().enumerate() {
-            cur[j + 1] = (prev[j] + usize::from(ca != *cb))
-                .min(prev[j + 1] + 1)
-                .min(cur[j] + 1);
-        }
-        prev = cur;
-    }
-    prev[b.len()]
 }
 
 /// Counts of row verdicts over `outcomes`: (matches, shape, deviates, errors), an
@@ -495,6 +479,15 @@ pub fn sig(x: f64, digits: usize) -> String {
     format!("{x:.decimals$}")
 }
 
+/// How a reason states the rule of [`Verdict::by_ratio`]: "tolerance ±10 %, shape
+/// within a factor 2".
+pub fn tolerance_text(rel_tol: f64, shape_factor: f64) -> String {
+    format!(
+        "tolerance ±{:.0} %, shape within a factor {shape_factor}",
+        100.0 * rel_tol
+    )
+}
+
 /// A `ReproduceError` for experiment `id`.
 pub fn fail(id: &str, message: impl std::fmt::Display) -> ReproduceError {
     ReproduceError {
@@ -592,7 +585,6 @@ mod tests {
         assert_eq!(one.len(), 1);
         let e = select(&["sec_8_6".into()], false).err().unwrap();
         assert!(e.contains("nearest: `sec_8_5`"), "{e}");
-        assert_eq!(edit_distance("kitten", "sitting"), 3);
         assert_eq!(sig(2.5712, 3), "2.57");
         assert_eq!(sig(160.94, 4), "160.9");
         assert_eq!(sig(0.021454, 3), "0.0215");

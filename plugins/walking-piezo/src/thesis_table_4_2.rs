@@ -74,16 +74,8 @@ pub struct Record {
     pub y: Vec<f64>,
 }
 
-/// How records are made.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Protocol {
-    /// Periods run before recording.
-    pub settle_periods: usize,
-    /// Periods averaged.
-    pub periods: usize,
-    /// Simulation step (s).
-    pub dt: f64,
-}
+/// How records are made: the same protocol as the Ch. 4 identification.
+pub use crate::identify::Protocol;
 
 /// Simulate `wave` at 10 Hz on a stage with parameters `p` (μ-variation seed
 /// `seed`); `noise_seed` adds the y-sensor noise (None: noise-free model output).
