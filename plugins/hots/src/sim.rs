@@ -346,6 +346,28 @@ pub fn sec8_5_reference_at(amplitude: f64) -> Result<Vec<[f64; 3]>, ParamError> 
 /// The skips of the Sec. 8.5 comparison, σ ∈ {0, 1, 2, 3, 4, 5, 10, 20}.
 pub const SEC85_SKIPS: [i64; 8] = [0, 1, 2, 3, 4, 5, 10, 20];
 
+/// Check that `reference` covers the Sec. 8.5 run (one `[x, v, a]` per 1 kHz
+/// read; `made_by` names the function that makes it) and build the encoder with
+/// the slit errors.
+fn sec85_setup(
+    slit_errors_counts: &[f64],
+    reference: &[[f64; 3]],
+    made_by: &str,
+) -> Result<TimestampEncoder, ParamError> {
+    let reads = (SEC85_DURATION_S * SEC85_READ_HZ).round() as usize + 1;
+    if reference.len() < reads {
+        return Err(ParamError::new(
+            "reference",
+            format!("has {} reads, the runs {reads}", reference.len()),
+            format!("give one [x, v, a] per 1 kHz read over the run ({made_by})"),
+        ));
+    }
+    Ok(TimestampEncoder {
+        slit_errors_counts: slit_errors_counts.to_vec(),
+        ..Default::default()
+    })
+}
+
 /// The time-stamping rows of the Sec. 8.5 comparison (m = 2, n = 5, each skip of
 /// [`SEC85_SKIPS`]) on x = A sin(2π t) with A = `amplitude`, the estimator's
 /// out-of-band rule `fallback`, scored as [`sec8_5_with_reference`] against the
@@ -361,18 +383,7 @@ pub fn sec8_5_amplitude(
 ) -> Result<Vec<Sec85Row>, ParamError> {
     nanomotion_core::block::check::positive("amplitude", amplitude)?;
     let (hz, dur, settle) = (SEC85_READ_HZ, SEC85_DURATION_S, SEC85_SETTLE_S);
-    let reads = (dur * hz).round() as usize + 1;
-    if reference.len() < reads {
-        return Err(ParamError::new(
-            "reference",
-            format!("has {} reads, the runs {reads}", reference.len()),
-            "give one [x, v, a] per 1 kHz read over the run (sec8_5_reference_at)",
-        ));
-    }
-    let base = TimestampEncoder {
-        slit_errors_counts: slit_errors_counts.to_vec(),
-        ..Default::default()
-    };
+    let base = sec85_setup(slit_errors_counts, reference, "sec8_5_reference_at")?;
     let speed = SEC85_MOVING_SPEED * amplitude / SEC85_AMPLITUDE;
     let traj = move |t| sinusoid(amplitude, t);
     let mut rows = Vec::with_capacity(SEC85_SKIPS.len());
@@ -426,18 +437,7 @@ pub fn sec8_5_with_fallback(
     use crate::model::{ErrorModel, Grid, Target, optimise, sinusoid_samples};
     let traj = sec8_5_motion;
     let (hz, dur, settle) = (SEC85_READ_HZ, SEC85_DURATION_S, SEC85_SETTLE_S);
-    let reads = (dur * hz).round() as usize + 1;
-    if reference.len() < reads {
-        return Err(ParamError::new(
-            "reference",
-            format!("has {} reads, the runs {reads}", reference.len()),
-            "give one [x, v, a] per 1 kHz read over the run (sec8_5_reference)",
-        ));
-    }
-    let base = TimestampEncoder {
-        slit_errors_counts: slit_errors_counts.to_vec(),
-        ..Default::default()
-    };
+    let base = sec85_setup(slit_errors_counts, reference, "sec8_5_reference")?;
     let r0 = simulate(&base, 2, &[], hz, dur, 0, false, traj)?;
     let t = &r0.t;
     let truth = &r0.truth;
