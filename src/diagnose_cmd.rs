@@ -154,7 +154,19 @@ fn print_report(r: &Report) {
                 None => format!("{k} = {v:.4e}"),
             })
             .collect();
-        println!("     parameters: {}", params.join(", "));
+        println!("     parameters at this step: {}", params.join(", "));
+        // Later steps refit earlier effects jointly; say where they ended up.
+        if s.final_params != s.params {
+            let fin: Vec<String> = s
+                .final_params
+                .iter()
+                .map(|(k, v)| format!("{k} = {v:.4e}"))
+                .collect();
+            println!(
+                "     in model_augmented.yaml (after the later joint refits): {}",
+                fin.join(", ")
+            );
+        }
         println!(
             "     held-out rms {:.4e} -> {:.4e} ({:.1} % cut, p = {:.1e})",
             s.holdout_rms_before, s.holdout_rms_after, s.cut_percent, s.p_value

@@ -21,6 +21,7 @@
 //!    when no candidate passes step 4.
 
 use crate::PlfError;
+use crate::effects::resonance::UnmodeledResonance;
 use crate::fit::{BlockEvaluator, Evaluator, FreeParam, Problem, Scale, levenberg_marquardt};
 use crate::stats;
 use crate::surgery::{self, Channel, Site};
@@ -161,8 +162,13 @@ pub struct Step {
     pub block: BlockRef,
     /// Where it entered.
     pub site: String,
-    /// Fitted parameters (all of the block's tunable parameters).
+    /// Parameters as fitted at this step (all of the block's tunable parameters).
+    /// Later steps refit earlier effects jointly, so these can differ from
+    /// `final_params`.
     pub params: BTreeMap<String, f64>,
+    /// The same parameters in the final augmented model (`model_augmented.yaml`),
+    /// after every later joint refit.
+    pub final_params: BTreeMap<String, f64>,
     /// One standard deviation of the fitted parameters (from the Jacobian).
     pub uncertainty: BTreeMap<String, f64>,
     /// One line a person can check.
@@ -262,6 +268,10 @@ struct Ctx<'a> {
     n: usize,
     n_est: usize,
     fs: f64,
+    /// Per compared output, 1 / its scale: every residual is weighed in units of
+    /// its own noise floor (see [`output_scales`]), so that outputs in different
+    /// units (a position in m, a drive in V) count alike.
+    weights: Vec<f64>,
 }
 
 /// [`diagnose`] with a progress callback.
@@ -318,8 +328,10 @@ pub fn diagnose_with_progress(
         nominal.seed = s;
     }
     let channels = surgery::channels(&nominal, &data)?;
-    let ctx = Ctx {
+    check_columns(&data, &channels)?;
+    let mut ctx = Ctx {
         data: &data,
+        weights: vec![1.0; channels.len()],
         channels,
         n,
         n_est,
@@ -328,12 +340,20 @@ pub fn diagnose_with_progress(
     let mut runs = 0usize;
     let mut cur = evaluate_current(&ctx, nominal, Vec::new(), &mut runs)?;
     let nominal_scores = scores(&ctx, &cur);
+    check_finite(&data, &nominal_scores)?;
+    ctx.weights = output_scales(&ctx, &cur.residual)
+        .iter()
+        .map(|s| 1.0 / s)
+        .collect();
+    let ctx = ctx;
     let nominal_tests = tests(&ctx, &cur)?;
     let first_residuals = cur.residual.clone();
     let mut steps: Vec<Step> = Vec::new();
     let mut plots = Vec::new();
     let mut stopped = format!("reached --max-effects {}", opts.max_effects);
     let mut rejected_candidates = Vec::new();
+    // (effect, the outputs it concerns) of every step taken.
+    let mut named: Vec<(&'static str, Vec<usize>)> = Vec::new();
     for step_no in 0..opts.max_effects {
         // At the noise floor already? The floor is estimated from the residual's
         // sample-to-sample differences, so a model error that is itself white —
@@ -346,13 +366,14 @@ pub fn diagnose_with_progress(
         let at_floor = excess.iter().all(|&(ms, floor)| ms <= 1.2 * floor * floor);
         let floor_stop = "the held-out residual is at its noise floor (mean square within 20 % of the white-noise estimate)";
         let mut cands = enumerate(&ctx, &cur, opts)?;
-        // A second quantizer or slit table on the same output is never a new
-        // effect (the joint refit adjusts the first).
+        // An effect named before on an output is never a new effect there (the
+        // joint refit adjusts the first; a second copy at another place of the
+        // same output would only be padding).
         cands.retain(|c| {
-            !(matches!(c.effect, "quantization" | "encoder_slit_error")
-                && steps
-                    .iter()
-                    .any(|s| s.effect == c.effect && s.site == c.site.describe()))
+            let outs = outputs_of(&ctx, &c.site);
+            !named
+                .iter()
+                .any(|(e, o)| *e == c.effect && o.iter().any(|k| outs.contains(k)))
         });
         if at_floor {
             cands.retain(|c| {
@@ -366,6 +387,8 @@ pub fn diagnose_with_progress(
         }
         let total = cands.len();
         let mut results: Vec<Option<Fitted>> = Vec::with_capacity(total);
+        // Why each failed candidate failed (shown in the candidate table).
+        let mut failures: Vec<Option<String>> = Vec::with_capacity(total);
         let threads = opts.threads.max(1);
         // A work queue: each worker takes the next candidate; results land in
         // their candidate's slot, so the outcome does not depend on timing.
@@ -413,16 +436,20 @@ pub fn diagnose_with_progress(
                 Some(Err(e)) => {
                     tracing::debug!(effect = c.effect, site = %c.site.describe(), "candidate failed: {e}");
                     results.push(None);
+                    failures.push(Some(e));
+                    continue;
                 }
                 None => results.push(None),
             }
+            failures.push(None);
         }
         progress(&format!("step {}: deciding", step_no + 1), 1.0);
         let before_ms = weighted_holdout_ms(&ctx, &cur.residual);
         let mut table: Vec<Candidate> = cands
             .iter()
             .zip(&results)
-            .map(|(c, r)| match r {
+            .zip(&failures)
+            .map(|((c, r), why)| match r {
                 Some(f) => Candidate {
                     effect: c.effect.to_string(),
                     site: c.site.describe(),
@@ -437,9 +464,7 @@ pub fn diagnose_with_progress(
                     n_params: c.free.len(),
                     holdout_rms: f64::NAN,
                     score: f64::INFINITY,
-                    note: Some(
-                        "fit failed (refused parameters or diverging runs at every start)".into(),
-                    ),
+                    note: Some(why.clone().unwrap_or_else(|| "fit failed".into())),
                 },
             })
             .collect();
@@ -471,6 +496,7 @@ pub fn diagnose_with_progress(
             if !cur.free.is_empty()
                 && let Ok(j) = joint_refit(&ctx, &f, &mut runs)
                 && weighted_holdout_ms(&ctx, &j.residual) < weighted_holdout_ms(&ctx, &f.residual)
+                && implausible(&ctx, &j.spec, j.free.iter().map(|p| p.block.as_str())).is_none()
             {
                 f = j;
             }
@@ -562,6 +588,7 @@ pub fn diagnose_with_progress(
             }
         }
         let sc = scores(&ctx, &new);
+        named.push((cand.effect, outputs_of(&ctx, &cand.site)));
         steps.push(Step {
             effect: cand.effect.to_string(),
             block: BlockRef {
@@ -570,6 +597,7 @@ pub fn diagnose_with_progress(
             },
             site: cand.site.describe(),
             params,
+            final_params: BTreeMap::new(),
             uncertainty: unc,
             evidence,
             holdout_rms_before: hb,
@@ -583,6 +611,11 @@ pub fn diagnose_with_progress(
     }
     let final_scores = scores(&ctx, &cur);
     let final_tests = tests(&ctx, &cur)?;
+    let mut augmented = cur.spec()?;
+    for st in &mut steps {
+        st.final_params = tunable_params(&augmented, &st.block.name);
+    }
+    allow_fitted_loops(&mut augmented, &data, &steps)?;
     let residuals = ctx
         .channels
         .iter()
@@ -607,18 +640,165 @@ pub fn diagnose_with_progress(
         estimation_samples: n_est,
         holdout_samples: n - n_est,
         runs,
-        augmented: Some(cur.spec()?),
+        augmented: Some(augmented),
         plots,
         residuals,
         rate_hz: fs,
     })
 }
 
+/// Why one of the effect blocks `names` of `spec` is not physical as a
+/// diagnosis (see each effect's `implausible`), or `None`. The band the data
+/// resolve runs from two periods in the record to 0.45 × the sample rate.
+fn implausible<'n>(
+    ctx: &Ctx<'_>,
+    spec: &GraphSpec,
+    names: impl Iterator<Item = &'n str>,
+) -> Option<String> {
+    let band = (2.0 * ctx.fs / ctx.n as f64, 0.45 * ctx.fs);
+    let mut seen: Vec<&str> = Vec::new();
+    for name in names {
+        if seen.contains(&name) {
+            continue;
+        }
+        seen.push(name);
+        let b = spec.blocks.iter().find(|b| b.name == name)?;
+        let p = b.block.tunable().map(|t| t.params()).unwrap_or_default();
+        let why = match (b.block.typetag_name(), p.as_slice()) {
+            ("unmodeled_resonance", &[fp, zp, fz, zz]) => {
+                UnmodeledResonance::new(fp, zp, fz, zz).implausible(band)
+            }
+            _ => None,
+        };
+        if let Some(why) = why {
+            return Some(format!("{name}: {why}"));
+        }
+    }
+    None
+}
+
+/// The tunable parameters of block `name` of `spec`, by name.
+fn tunable_params(spec: &GraphSpec, name: &str) -> BTreeMap<String, f64> {
+    spec.blocks
+        .iter()
+        .find(|b| b.name == name)
+        .and_then(|b| b.block.tunable())
+        .map(|t| t.param_names().into_iter().zip(t.params()).collect())
+        .unwrap_or_default()
+}
+
+/// An effect inside a loop (friction, a sensor's delay, hysteresis on a
+/// controller's drive) has no linear model, so the stability gate calls the
+/// augmented loop unproven and refuses to run it — yet it is a fitted model of
+/// the measured stage, not a design to prove. When the gate's only objection is
+/// that, the augmented model says so in `require: { allow_unproven: … }`, so the
+/// printed `nanomotion run` re-run works; an unstable loop is never allowed.
+fn allow_fitted_loops(
+    spec: &mut GraphSpec,
+    data: &Arc<Dataset>,
+    steps: &[Step],
+) -> Result<(), PlfError> {
+    if steps.is_empty() {
+        return Ok(());
+    }
+    let mut require = spec.require.clone().unwrap_or_default();
+    let (sched, _) = surgery::clone_spec(spec)?
+        .build_with_data(data.clone())
+        .map_err(|e| PlfError::Model(format!("the augmented model does not build: {e}")))?;
+    let report = nanomotion_core::gate::analyse(&sched, &require);
+    let unproven = report.loops.iter().any(|l| !l.unproven.is_empty());
+    if report.passes() || !unproven || require.allow_unproven.is_some() {
+        return Ok(());
+    }
+    let blocks: Vec<&str> = steps.iter().map(|s| s.block.name.as_str()).collect();
+    require.allow_unproven = Some(format!(
+        "a fitted model of the measured stage (nanomotion diagnose inserted {}), not a design: its effect blocks have no linear model",
+        blocks.join(", ")
+    ));
+    spec.require = Some(require);
+    Ok(())
+}
+
 fn weight(ctx: &Ctx<'_>, i: usize) -> f64 {
-    let col = ctx.data.column(&ctx.channels[i].column).unwrap_or(&[]);
-    let m = stats::mean(col);
-    let sd = stats::mean_square(&col.iter().map(|v| v - m).collect::<Vec<_>>()).sqrt();
-    if sd > 0.0 { 1.0 / sd } else { 1.0 }
+    ctx.weights[i]
+}
+
+/// The scale of each compared output's residual: the nominal residual's noise
+/// floor (σ of its white part, [`stats::noise_floor`]), but at least 1/1000 of the
+/// residual's rms (a floor of zero — a quantised signal that mostly repeats its
+/// value — must not give one output all the weight), and the measured column's
+/// deviation when the residual is zero.
+fn output_scales(ctx: &Ctx<'_>, residual: &[Vec<f64>]) -> Vec<f64> {
+    residual
+        .iter()
+        .zip(&ctx.channels)
+        .map(|(r, ch)| {
+            let est = &r[..ctx.n_est];
+            let s = stats::noise_floor(est).max(1e-3 * stats::mean_square(est).sqrt());
+            if s > 0.0 && s.is_finite() {
+                s
+            } else {
+                std_of(ctx.data.column(&ch.column).unwrap_or(&[])).max(f64::MIN_POSITIVE)
+            }
+        })
+        .collect()
+}
+
+/// The measured columns must carry information: a constant column (a stuck or
+/// disconnected sensor) has no fit to improve, and anything fitted to it would be
+/// a confident answer from bad data (audit D1).
+fn check_columns(data: &Dataset, channels: &[Channel]) -> Result<(), PlfError> {
+    for ch in channels {
+        let col = data.column(&ch.column).unwrap_or(&[]);
+        let (lo, hi) = col
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
+                (a.min(v), b.max(v))
+            });
+        // Constant up to the rounding of its own magnitude.
+        if hi - lo <= 4.0 * f64::EPSILON * lo.abs().max(hi.abs()) {
+            return Err(PlfError::Data(format!(
+                "measured column `{}` of {} is constant ({lo:e}) over all {} samples: a stuck or disconnected sensor leaves nothing to diagnose (its fit % is undefined); check the sensor and that `compare:` names the right column",
+                ch.column,
+                data.origin(),
+                col.len()
+            )));
+        }
+    }
+    Ok(())
+}
+
+/// Scores must be finite: finite but huge data (a corrupt sample of 1e308) make
+/// the mean squares overflow, and a diagnosis on them would be no answer (audit D18).
+fn check_finite(data: &Dataset, s: &Scores) -> Result<(), PlfError> {
+    for o in &s.per_output {
+        if !(o.rms.is_finite() && o.holdout_rms.is_finite()) {
+            let col = data.column(&o.column).unwrap_or(&[]);
+            let big = col.iter().fold(0.0f64, |a, v| a.max(v.abs()));
+            return Err(PlfError::Data(format!(
+                "the residual of {} against column `{}` of {} overflows (its mean square is not finite; the column reaches {big:e}): check the record for a corrupt sample, or rescale its units",
+                o.signal,
+                o.column,
+                data.origin()
+            )));
+        }
+    }
+    Ok(())
+}
+
+/// The compared outputs a site concerns: its own output, or every output whose
+/// plant the site's input drives (an effect is named once per output).
+fn outputs_of(ctx: &Ctx<'_>, site: &Site) -> Vec<usize> {
+    match site {
+        Site::Output { compare, .. } | Site::Sensor { compare, .. } => vec![*compare],
+        Site::Input { to, .. } | Site::Feedback { to, .. } => ctx
+            .channels
+            .iter()
+            .enumerate()
+            .filter(|(_, ch)| ch.plant_inputs.iter().any(|(_, t)| t == to))
+            .map(|(i, _)| i)
+            .collect(),
+    }
 }
 
 impl Current {
@@ -746,13 +926,14 @@ fn weighted_holdout_ms(ctx: &Ctx<'_>, residual: &[Vec<f64>]) -> f64 {
 /// Held-out residuals of all outputs, weighted, as one vector per model (outputs
 /// interleaved sample by sample so that batches span every output).
 fn holdout_weighted_vectors(ctx: &Ctx<'_>, a: &[Vec<f64>], b: &[Vec<f64>]) -> (Vec<f64>, Vec<f64>) {
-    let mut va = Vec::new();
-    let mut vb = Vec::new();
+    let len = (ctx.n - ctx.n_est) * a.len();
+    let mut va = Vec::with_capacity(len);
+    let mut vb = Vec::with_capacity(len);
     for k in ctx.n_est..ctx.n {
-        for i in 0..a.len() {
+        for (i, (ai, bi)) in a.iter().zip(b).enumerate() {
             let w = weight(ctx, i);
-            va.push(a[i][k] * w);
-            vb.push(b[i][k] * w);
+            va.push(ai[k] * w);
+            vb.push(bi[k] * w);
         }
     }
     (va, vb)
@@ -1355,6 +1536,7 @@ fn fit_candidate(ctx: &Ctx<'_>, cur: &Current, c: &Cand) -> Result<Fitted, Strin
         Vec<Vec<f64>>,
     );
     let mut best: Option<Best> = None;
+    let mut refused: Option<String> = None;
     let mut runs = 0;
     for start in &c.starts {
         let block = surgery::block_from_json(start.clone()).map_err(|e| e.to_string())?;
@@ -1429,6 +1611,7 @@ fn fit_candidate(ctx: &Ctx<'_>, cur: &Current, c: &Cand) -> Result<Fitted, Strin
                 0,
             )
             .map_err(|e| e.to_string())?;
+            ev.set_weights(&ctx.weights);
             let z0 = vec![0.0; new_free.len()];
             let Some(fit) = levenberg_marquardt(&mut ev, &z0, ctx.n_est, 25) else {
                 continue;
@@ -1443,11 +1626,18 @@ fn fit_candidate(ctx: &Ctx<'_>, cur: &Current, c: &Cand) -> Result<Fitted, Strin
                 .collect();
             (fit.cost, fit.std, residual)
         };
+        if let Some(why) = implausible(ctx, &spec, std::iter::once(name.as_str())) {
+            refused = Some(why);
+            continue;
+        }
         if best.as_ref().is_none_or(|b| cost < b.0) {
             best = Some((cost, spec, name, new_free, std, residual));
         }
     }
-    let (_, spec, name, new_free, std, residual) = best.ok_or("no start could be fitted")?;
+    let (_, spec, name, new_free, std, residual) = best.ok_or_else(|| match refused {
+        Some(why) => format!("refused as not physical: {why}"),
+        None => "fit failed (refused parameters or diverging runs at every start)".to_string(),
+    })?;
     let k = c.free.len() as f64;
     let ne = ctx.n_est as f64;
     let nh = (ctx.n - ctx.n_est) as f64;
@@ -1471,6 +1661,7 @@ fn fit_candidate(ctx: &Ctx<'_>, cur: &Current, c: &Cand) -> Result<Fitted, Strin
 fn joint_refit(ctx: &Ctx<'_>, win: &Fitted, runs: &mut usize) -> Result<Fitted, PlfError> {
     let mut spec = surgery::clone_spec(&win.spec)?;
     let mut ev = Evaluator::new(surgery::clone_spec(&spec)?, ctx.data, &win.free, 0)?;
+    ev.set_weights(&ctx.weights);
     let z0 = vec![0.0; win.free.len()];
     let fit = levenberg_marquardt(&mut ev, &z0, ctx.n_est, 15)
         .ok_or_else(|| PlfError::Model("joint refit could not run".into()))?;

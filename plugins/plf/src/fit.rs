@@ -356,7 +356,15 @@ impl Evaluator {
         &self.measured[i]
     }
 
-    /// The weight (1/σ of the measured signal) of output `i`.
+    /// Weigh the residual of output `i` by `w[i]` instead of 1/σ of its measured
+    /// column (the workflow weighs each output in units of its noise floor).
+    pub fn set_weights(&mut self, w: &[f64]) {
+        for (mine, &given) in self.weight.iter_mut().zip(w) {
+            *mine = given;
+        }
+    }
+
+    /// The weight (1/σ of the measured signal, unless set) of output `i`.
     pub fn weight(&self, i: usize) -> f64 {
         self.weight[i]
     }

@@ -278,7 +278,9 @@ pub fn second_order(
     let mut play = u[0];
     let mut delay_line = vec![u[0]; OVERSAMPLE * 8 + 1];
     let mut res = [0.0f64; 2]; // second-order filter state of the resonance
-    let mut u_prev = u[0];
+    // Each input-side effect's previous input (Bouc–Wen integrates its own
+    // input's increments).
+    let mut prev_in = vec![u[0]; truths.len()];
     let mut y = Vec::with_capacity(n);
     let mut noise_state = 0.0;
     let sigma = 0.01 * x_amp;
@@ -321,38 +323,40 @@ pub fn second_order(
         y.push(ym);
         // Integrate the interval [t_k, t_k+1) with u held.
         for _ in 0..OVERSAMPLE {
-            let du = uk - u_prev;
-            u_prev = uk;
-            // Input-side effects.
+            // Input-side effects, in series in the order named: each acts on the
+            // output of the one before (the drive for the first).
             let mut f = uk;
-            for truth in &truths {
+            for (truth, prev) in truths.iter().zip(prev_in.iter_mut()) {
+                let input = f;
+                let du = input - *prev;
+                *prev = input;
                 f = match truth {
                     Truth::Hysteresis { beta, gamma, h } => {
                         z += du - beta * du.abs() * z - gamma * du * z.abs();
-                        (1.0 - h) * uk + h * z
+                        (1.0 - h) * input + h * z
                     }
                     Truth::Delay { fine_steps } => {
                         delay_line.rotate_right(1);
-                        delay_line[0] = uk;
+                        delay_line[0] = input;
                         delay_line[*fine_steps]
                     }
                     Truth::PositionGain { g, center, scale } => {
                         f * (1.0 + g * (x - center) / scale)
                     }
                     Truth::Creep { gains, taus } => {
-                        let mut s = uk;
+                        let mut s = input;
                         for i in 0..3 {
-                            creep[i] += (uk - creep[i]) * (1.0 - (-dt / taus[i]).exp());
+                            creep[i] += (input - creep[i]) * (1.0 - (-dt / taus[i]).exp());
                             s += gains[i] * creep[i];
                         }
                         s
                     }
-                    Truth::Saturation { lo, hi } => f.clamp(*lo, *hi),
+                    Truth::Saturation { lo, hi } => input.clamp(*lo, *hi),
                     Truth::Backlash { w } => {
-                        if uk - play > w / 2.0 {
-                            play = uk - w / 2.0;
-                        } else if play - uk > w / 2.0 {
-                            play = uk + w / 2.0;
+                        if input - play > w / 2.0 {
+                            play = input - w / 2.0;
+                        } else if play - input > w / 2.0 {
+                            play = input + w / 2.0;
                         }
                         play
                     }

@@ -238,6 +238,72 @@ pub fn fresh_name(spec: &GraphSpec, stem: &str) -> String {
         .expect("some suffix is free")
 }
 
+/// The connections of `spec` leaving `block` (any of its outputs).
+fn leaving<'a>(
+    spec: &'a GraphSpec,
+    block: &'a str,
+) -> impl Iterator<Item = (usize, &'a Connection)> {
+    spec.connections
+        .iter()
+        .enumerate()
+        .filter(move |(_, c)| split(&c.from).0 == block)
+}
+
+/// How many blocks deep the path from a plant's drive to the plant may run
+/// through effects inserted before (far more than `max_effects`).
+const MAX_CHAIN: usize = 32;
+
+/// The connection on which a map of the drive (`Site::Input`) goes: the first hop
+/// out of `from` on the path to `to`. Effects inserted earlier sit on that path
+/// (`from → plf_a.u`, `plf_a.y → to`), so the original connection is gone after
+/// the first insertion; the new effect goes nearest the source, i.e. it acts on
+/// the drive before the effects found earlier (an amplifier's saturation before
+/// the actuator's hysteresis), and never on a force added inside the loop.
+fn drive_connection(spec: &GraphSpec, from: &str, to: &str) -> Result<usize, PlfError> {
+    // Breadth first from `from`'s connections; each entry remembers its first hop.
+    let mut frontier: Vec<(usize, usize)> = spec
+        .connections
+        .iter()
+        .enumerate()
+        .filter(|(_, c)| c.from == from)
+        .map(|(i, _)| (i, i))
+        .collect();
+    for _ in 0..MAX_CHAIN {
+        if let Some(&(first, _)) = frontier
+            .iter()
+            .find(|&&(_, i)| spec.connections[i].to == to)
+        {
+            return Ok(first);
+        }
+        let mut next = Vec::new();
+        for &(first, i) in &frontier {
+            let via = split(&spec.connections[i].to).0;
+            // Never through the plant itself or back through the source.
+            if via == split(to).0 || via == split(from).0 {
+                continue;
+            }
+            next.extend(leaving(spec, via).map(|(j, _)| (first, j)));
+        }
+        if next.is_empty() {
+            break;
+        }
+        frontier = next;
+    }
+    Err(PlfError::Model(format!(
+        "the graph has no path {from} -> {to} (through the effects inserted so far)"
+    )))
+}
+
+/// The connection into the plant input `to` (a force added inside the loop goes
+/// at the force balance, after every map of the drive found before). `from` only
+/// names the drive in the message.
+fn force_connection(spec: &GraphSpec, from: &str, to: &str) -> Result<usize, PlfError> {
+    spec.connections
+        .iter()
+        .position(|c| c.to == to)
+        .ok_or_else(|| PlfError::Model(format!("the graph has no connection {from} -> {to}")))
+}
+
 /// Insert `block` (named from `stem`) at `site`. `s` lists the signals wired to the
 /// block's port `s` (none, one, or several through a `mux`). `rate_hz` overrides
 /// the block's rate (default: the rate of the block it sits beside). Returns the
@@ -251,12 +317,6 @@ pub fn insert(
     rate_hz: Option<f64>,
 ) -> Result<String, PlfError> {
     let name = fresh_name(spec, stem);
-    let find_conn = |spec: &GraphSpec, from: &str, to: &str| -> Result<usize, PlfError> {
-        spec.connections
-            .iter()
-            .position(|c| c.from == from && c.to == to)
-            .ok_or_else(|| PlfError::Model(format!("the graph has no connection {from} -> {to}")))
-    };
     let rate = match site {
         Site::Input { to, .. } | Site::Feedback { to, .. } => {
             rate_hz.or_else(|| rate_of(spec, split(to).0))
@@ -272,11 +332,14 @@ pub fn insert(
     });
     match site {
         Site::Input { from, to } => {
-            let i = find_conn(spec, from, to)?;
-            spec.connections[i].to = format!("{name}.u");
+            // The effect takes over the first hop's destination (the plant itself
+            // when nothing was inserted before, else the earlier effect nearest
+            // the source).
+            let i = drive_connection(spec, from, to)?;
+            let next = std::mem::replace(&mut spec.connections[i].to, format!("{name}.u"));
             spec.connections.push(Connection {
                 from: format!("{name}.y"),
-                to: to.clone(),
+                to: next,
             });
         }
         Site::Output { compare, .. } => {
@@ -307,7 +370,7 @@ pub fn insert(
             });
         }
         Site::Feedback { from, to, position } => {
-            let i = find_conn(spec, from, to)?;
+            let i = force_connection(spec, from, to)?;
             let sum_name = fresh_name(spec, &format!("{name}_sum"));
             let sum = block_from_json(serde_json::json!({"type": "sum", "signs": "++"}))?;
             spec.blocks.push(BlockSpec {
@@ -358,4 +421,115 @@ pub fn insert(
         }
     }
     Ok(name)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nanomotion_core::data::Dataset;
+    use std::sync::Arc;
+
+    fn stage() -> GraphSpec {
+        let _ = std::any::type_name::<crate::effects::Effect>();
+        GraphSpec::from_yaml(
+            "base_rate_hz: 1000\nduration_s: 0.2\nblocks:\n  - { name: drive, type: data_column, column: u }\n  - { name: stage, type: state_space, a: [[0.0, 1.0], [-1000.0, -10.0]], b: [[0.0], [1.0]], c: [[1.0, 0.0]], discretisation: zoh }\nconnections:\n  - { from: drive.y, to: stage.u }\ncompare:\n  - { signal: stage.y, column: y }\n",
+            "stage.yaml",
+        )
+        .unwrap()
+    }
+
+    fn conn(spec: &GraphSpec, from: &str, to: &str) -> bool {
+        spec.connections
+            .iter()
+            .any(|c| c.from == from && c.to == to)
+    }
+
+    /// Issue 24 §1: after one effect on the plant's drive, the connection
+    /// `drive.y -> stage.u` is gone; a second and third input-side effect and a
+    /// force inside the loop must still go in, in their physical order, and the
+    /// graph must still build and run.
+    #[test]
+    fn several_effects_enter_on_the_drive_and_inside_the_loop() {
+        let mut spec = stage();
+        let input = Site::Input {
+            from: "drive.y".into(),
+            to: "stage.u".into(),
+        };
+        let feedback = Site::Feedback {
+            from: "drive.y".into(),
+            to: "stage.u".into(),
+            position: "stage.y".into(),
+        };
+        let block = |v| block_from_json(v).unwrap();
+        let a = insert(
+            &mut spec,
+            "plf_hysteresis",
+            block(serde_json::json!({"type": "hysteresis", "alpha": 1.0, "b": 1.0, "c": 0.8})),
+            &input,
+            &[],
+            None,
+        )
+        .unwrap();
+        let b = insert(
+            &mut spec,
+            "plf_creep",
+            block(serde_json::json!({"type": "creep", "terms": [{"gain": 0.01, "tau_s": 0.1}]})),
+            &input,
+            &[],
+            None,
+        )
+        .unwrap();
+        let f = insert(&mut spec, "plf_friction", block(serde_json::json!({"type": "friction", "coulomb": 0.1, "stribeck": 0.0, "v_stribeck": 1.0, "viscous": 0.0, "v_eps": 0.01})), &feedback, &[], None).unwrap();
+        let d = insert(
+            &mut spec,
+            "plf_time_delay",
+            block(serde_json::json!({"type": "time_delay", "max_delay_s": 0.01, "delay_s": 0.002})),
+            &input,
+            &[],
+            None,
+        )
+        .unwrap();
+        // The drive passes the maps in the reverse order they were found (each
+        // new one nearest the source), then the force balance, then the plant.
+        assert!(conn(&spec, "drive.y", &format!("{d}.u")));
+        assert!(conn(&spec, &format!("{d}.y"), &format!("{b}.u")));
+        assert!(conn(&spec, &format!("{b}.y"), &format!("{a}.u")));
+        assert!(conn(&spec, &format!("{a}.y"), &format!("{f}_sum.in0")));
+        assert!(conn(&spec, &format!("{f}.y"), &format!("{f}_sum.in1")));
+        assert!(conn(&spec, &format!("{f}_sum.y"), "stage.u"));
+        assert!(conn(&spec, "stage.y", &format!("{f}.u")));
+        assert_eq!(
+            spec.connections
+                .iter()
+                .filter(|c| c.to == "stage.u")
+                .count(),
+            1
+        );
+        let n = 200;
+        let u: Vec<f64> = (0..n).map(|k| (k as f64 * 0.05).sin()).collect();
+        let data = Dataset::from_columns(
+            "test",
+            1000.0,
+            0.0,
+            vec![("u".into(), u), ("y".into(), vec![0.0; n])],
+        )
+        .unwrap();
+        spec.build_with_data(Arc::new(data))
+            .expect("the augmented graph builds");
+    }
+
+    #[test]
+    fn a_drive_that_does_not_reach_the_plant_is_a_typed_error() {
+        let mut spec = stage();
+        let site = Site::Input {
+            from: "nowhere.y".into(),
+            to: "stage.u".into(),
+        };
+        let b = block_from_json(serde_json::json!({"type": "backlash", "width": 0.1})).unwrap();
+        let e = insert(&mut spec, "plf_backlash", b, &site, &[], None).unwrap_err();
+        assert!(
+            e.to_string().contains("no path nowhere.y -> stage.u"),
+            "{e}"
+        );
+    }
 }

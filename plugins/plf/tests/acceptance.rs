@@ -37,6 +37,7 @@ fn check_named(effect: &str, seed: u64) {
         r.stopped_because
     );
     for s in &r.steps {
+        eprintln!("  step {} at {}: {:?}", s.effect, s.site, s.final_params);
         for c in s.candidates.iter().take(5) {
             eprintln!(
                 "    {} {} ({} params): held-out {:.3e}",
@@ -147,5 +148,147 @@ fn noise_alone_names_nothing() {
         alarms.len() <= 2,
         "{} false alarms of 50: {alarms:?}",
         alarms.len()
+    );
+}
+
+/// Issue 24 §1: two effects that both enter on the plant's drive or inside its
+/// loop. Before the fix every second input-side or in-loop candidate failed
+/// ("the graph has no connection drive.y -> stage.u") and only one was named.
+#[test]
+fn two_drive_side_effects_are_both_named() {
+    for (pair, seed) in [("hysteresis+creep", 5), ("friction+time_delay", 6)] {
+        let r = run(pair, seed, 12_000, 3);
+        eprintln!("{pair}: found {:?}; {}", r.found, r.stopped_because);
+        for s in &r.steps {
+            eprintln!(
+                "  {} at {}: held-out {:.3e} -> {:.3e}",
+                s.effect, s.site, s.holdout_rms_before, s.holdout_rms_after
+            );
+        }
+        for want in pair.split('+') {
+            assert!(
+                r.found.iter().any(|f| f == want),
+                "{pair}: {want} not named; found {:?}",
+                r.found
+            );
+        }
+        // The augmented model runs as printed: the gate accepts a fitted effect
+        // inside the loop (friction), which has no linear model.
+        let aug = nanomotion_plf::surgery::clone_spec(r.augmented.as_ref().unwrap()).unwrap();
+        let require = aug.require.clone().unwrap_or_default();
+        let rec = generate::second_order(pair, seed, 12_000, false).unwrap();
+        let (sched, _) = aug.build_with_data(std::sync::Arc::new(rec.data)).unwrap();
+        let gate = nanomotion_core::gate::analyse(&sched, &require);
+        assert!(
+            gate.passes(),
+            "{pair}: the gate refuses the augmented model: {gate:?}"
+        );
+        // No candidate failed for want of a connection into the plant.
+        for s in &r.steps {
+            for c in &s.candidates {
+                let note = c.note.as_deref().unwrap_or("");
+                assert!(
+                    !note.contains("has no connection") && !note.contains("has no path"),
+                    "{pair}: {} at {}: {}",
+                    c.effect,
+                    c.site,
+                    note
+                );
+            }
+        }
+    }
+}
+
+/// Issue 24 §6: an effect is named at most once per output, and every step's
+/// `final_params` are the parameters of its block in the augmented model.
+#[test]
+fn found_is_unique_and_final_parameters_are_the_augmented_models() {
+    let r = run("hysteresis+repetitive_disturbance", 4, 12_000, 4);
+    let mut seen = r.found.clone();
+    seen.sort();
+    seen.dedup();
+    assert_eq!(seen.len(), r.found.len(), "found twice: {:?}", r.found);
+    let aug = r.augmented.as_ref().expect("an augmented model");
+    for s in &r.steps {
+        let b = aug
+            .blocks
+            .iter()
+            .find(|b| b.name == s.block.name)
+            .unwrap_or_else(|| panic!("{} is not in the augmented model", s.block.name));
+        let t = b.block.tunable().expect("effect blocks are tunable");
+        for (name, value) in t.param_names().into_iter().zip(t.params()) {
+            assert_eq!(
+                s.final_params.get(&name).copied(),
+                Some(value),
+                "{}.{name}",
+                s.block.name
+            );
+        }
+        assert_eq!(s.final_params.len(), s.params.len());
+    }
+}
+
+/// Audit D1: a stuck sensor (a constant measured column) is bad data, not a
+/// quantiser with a perfect fit.
+#[test]
+fn a_constant_measured_column_is_refused() {
+    link();
+    let rec = generate::second_order("none", 7, 2000, false).unwrap();
+    let spec = GraphSpec::from_yaml(&rec.nominal_yaml, "generated.yaml").unwrap();
+    let c = &spec.compare[0].column;
+    let cols: Vec<(String, Vec<f64>)> = rec
+        .data
+        .names()
+        .iter()
+        .map(|name| {
+            let v = rec.data.column(name).unwrap();
+            let v = if name == c {
+                vec![1.25e-3; v.len()]
+            } else {
+                v.to_vec()
+            };
+            (name.clone(), v)
+        })
+        .collect();
+    let data =
+        nanomotion_core::data::Dataset::from_columns("stuck.csv", rec.data.rate_hz(), 0.0, cols)
+            .unwrap();
+    let e = diagnose(&spec, &data, &Options::default()).unwrap_err();
+    let msg = e.to_string();
+    assert!(
+        msg.contains(&format!("`{c}`")) && msg.contains("constant"),
+        "{msg}"
+    );
+    assert!(msg.contains("stuck.csv"), "{msg}");
+}
+
+/// Audit D18: finite but huge samples overflow the mean squares; the answer is
+/// an error naming the column, not a report with non-finite scores.
+#[test]
+fn finite_but_huge_samples_are_refused() {
+    link();
+    let rec = generate::second_order("none", 8, 2000, false).unwrap();
+    let spec = GraphSpec::from_yaml(&rec.nominal_yaml, "generated.yaml").unwrap();
+    let c = &spec.compare[0].column;
+    let cols: Vec<(String, Vec<f64>)> = rec
+        .data
+        .names()
+        .iter()
+        .map(|name| {
+            let mut v = rec.data.column(name).unwrap().to_vec();
+            if name == c {
+                v[1500] = 1e300;
+            }
+            (name.clone(), v)
+        })
+        .collect();
+    let data =
+        nanomotion_core::data::Dataset::from_columns("huge.csv", rec.data.rate_hz(), 0.0, cols)
+            .unwrap();
+    let e = diagnose(&spec, &data, &Options::default()).unwrap_err();
+    let msg = e.to_string();
+    assert!(
+        msg.contains(&format!("`{c}`")) && msg.contains("overflows"),
+        "{msg}"
     );
 }

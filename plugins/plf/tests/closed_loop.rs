@@ -107,6 +107,18 @@ fn a_delay_in_the_sensor_path_is_placed_inside_the_loop() {
         output_side.holdout_rms,
         step.holdout_rms_after
     );
+    // Issue 24 §6: the augmented model runs as printed (`nanomotion run`): the
+    // stability gate accepts it although its effect block has no linear model.
+    let aug =
+        nanomotion_plf::surgery::clone_spec(rep.augmented.as_ref().expect("an augmented model"))
+            .unwrap();
+    let require = aug.require.clone().unwrap_or_default();
+    let (sched, _) = aug.build_with_data(Arc::new(data.clone())).unwrap();
+    let gate = nanomotion_core::gate::analyse(&sched, &require);
+    assert!(
+        gate.passes(),
+        "the gate refuses the augmented model: {gate:?}"
+    );
     // The fitted delay is the truth's one sample.
     let d = step.params["delay_s"] * RATE;
     assert!((d - 1.0).abs() < 0.05, "fitted delay {d} samples");

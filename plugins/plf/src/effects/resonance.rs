@@ -13,6 +13,10 @@ use std::f64::consts::TAU;
 /// roots and no longer a resonance).
 pub const MAX_DAMPING: f64 = 100.0;
 
+/// Smallest departure of |R(jω)| from 1 (dB) that a diagnosed resonance must
+/// show in the data's band ([`UnmodeledResonance::implausible`]).
+pub const MIN_PEAK_DB: f64 = 1.0;
+
 /// `unmodeled_resonance`:
 ///
 /// ```text
@@ -77,6 +81,58 @@ impl UnmodeledResonance {
             None,
         )
         .map_err(|e| ParamError::new("f_pole_hz", e.to_string(), "check the frequencies"))
+    }
+
+    /// Why these parameters are not a mode an engineer would accept as a stage's
+    /// missing resonance when the data cover `band_hz` = (lowest, highest
+    /// frequency resolved), or `None` when they are. A flexible pole–zero pair can
+    /// absorb any leftover of an imperfect fit; as a *diagnosis* it must be a
+    /// lightly damped mode inside the band that changes the response visibly:
+    /// - ζ ≤ 1 for both pairs (above 1 a pair is two real roots: a lag or lead,
+    ///   not a resonance; the block itself accepts up to [`MAX_DAMPING`]);
+    /// - both frequencies inside the band (a pair at 0.02 Hz in a 6 s record is a
+    ///   drift in disguise, one above the band is invisible);
+    /// - not a near-cancelling pair: |R(jω)| departs from 1 by at least
+    ///   [`MIN_PEAK_DB`] somewhere in the band.
+    pub fn implausible(&self, band_hz: (f64, f64)) -> Option<String> {
+        let (lo, hi) = band_hz;
+        for (what, z) in [("pole", self.zeta_pole), ("zero", self.zeta_zero)] {
+            if !(z > 0.0 && z <= 1.0) {
+                return Some(format!(
+                    "damping ratio of the {what} pair ζ = {z:.3e} is not that of a resonance (0 < ζ ≤ 1)"
+                ));
+            }
+        }
+        for (what, f) in [("pole", self.f_pole_hz), ("zero", self.f_zero_hz)] {
+            if !(f >= lo && f <= hi) {
+                return Some(format!(
+                    "{what} frequency {f:.4e} Hz lies outside the band the data resolve ({lo:.3e}–{hi:.3e} Hz)"
+                ));
+            }
+        }
+        let (wp, wz) = (TAU * self.f_pole_hz, TAU * self.f_zero_hz);
+        let g = (wp / wz) * (wp / wz);
+        let mag_db = |f: f64| {
+            let w = TAU * f;
+            let num = (g * (wz * wz - w * w)).hypot(g * 2.0 * self.zeta_zero * wz * w);
+            let den = (wp * wp - w * w).hypot(2.0 * self.zeta_pole * wp * w);
+            20.0 * (num / den).log10()
+        };
+        // On a log grid, plus the two pairs' own frequencies (where the peak and
+        // the notch are).
+        let grid = 400;
+        let peak = (0..=grid)
+            .map(|k| lo * (hi / lo).powf(k as f64 / grid as f64))
+            .chain([self.f_pole_hz, self.f_zero_hz])
+            .map(|f| mag_db(f).abs())
+            .fold(0.0f64, f64::max);
+        if peak < MIN_PEAK_DB {
+            return Some(format!(
+                "the pole and zero pairs ({:.4e} Hz, {:.4e} Hz) nearly cancel: the response departs from 1 by {peak:.2} dB at most (a resonance shows at least {MIN_PEAK_DB} dB)",
+                self.f_pole_hz, self.f_zero_hz
+            ));
+        }
+        None
     }
 
     /// The normalised biquad coefficients [b0, b1, b2, a1, a2] (a0 = 1) in z⁻¹
