@@ -386,6 +386,12 @@ pub fn diagnose_with_progress(
             }
         }
         let total = cands.len();
+        // Names refused before any fit, by physics (see `phase_locked`).
+        let spec_now = cur.spec()?;
+        let locked: Vec<Option<String>> = cands
+            .iter()
+            .map(|c| time_period(c).and_then(|p| phase_locked(&ctx, &spec_now, p)))
+            .collect();
         let mut results: Vec<Option<Fitted>> = Vec::with_capacity(total);
         // Why each failed candidate failed (shown in the candidate table).
         let mut failures: Vec<Option<String>> = Vec::with_capacity(total);
@@ -399,17 +405,21 @@ pub fn diagnose_with_progress(
         std::thread::scope(|sc| {
             for _ in 0..threads.min(total.max(1)) {
                 let tx = tx.clone();
-                let (next, slots, cands, ctx, cur) = (&next, &slots, &cands, &ctx, &cur);
+                let (next, slots, cands, ctx, cur, locked) =
+                    (&next, &slots, &cands, &ctx, &cur, &locked);
                 sc.spawn(move || {
                     loop {
                         let i = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
                         if i >= cands.len() {
                             break;
                         }
-                        let r = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-                            fit_candidate(ctx, cur, &cands[i])
-                        }))
-                        .unwrap_or_else(|_| Err("the fit panicked".into()));
+                        let r = match &locked[i] {
+                            Some(why) => Err(format!("not tried: {why}")),
+                            None => std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+                                fit_candidate(ctx, cur, &cands[i])
+                            }))
+                            .unwrap_or_else(|_| Err("the fit panicked".into())),
+                        };
                         if let Ok(mut slot) = slots[i].lock() {
                             *slot = Some(r);
                         }
@@ -1020,6 +1030,66 @@ fn std_of(x: &[f64]) -> f64 {
 
 /// The period (in samples) of the strongest line of `r`, if at least three periods
 /// fit in `r` (a slower "period" is a trend, not a repetition).
+/// The period (s) of a candidate disturbance periodic in *time*, if it is one.
+fn time_period(c: &Cand) -> Option<f64> {
+    let start = c.starts.first()?;
+    (c.effect == "repetitive_disturbance" && start.get("variable")?.as_str()? == "time")
+        .then(|| start.get("period")?.as_f64())
+        .flatten()
+}
+
+/// Why a residual periodic in time with period `period_s` must not be named an
+/// external disturbance: when an excitation of the model (a `data_column` the
+/// graph reads: the drive, or a closed loop's reference) itself repeats every
+/// m periods (m = 1…8: its own period, or the residual is one of its harmonics),
+/// any nonlinear map of the input leaves a residual locked in phase to it, and a
+/// disturbance independent of the input cannot be told from that on this record.
+/// The input-driven effects stay candidates. `None` when no excitation repeats.
+fn phase_locked(ctx: &Ctx<'_>, spec: &GraphSpec, period_s: f64) -> Option<String> {
+    let n = ctx.n;
+    let lag0 = period_s * ctx.fs;
+    if !(lag0.is_finite() && lag0 >= 2.0) {
+        return None;
+    }
+    for b in &spec.blocks {
+        if b.block.typetag_name() != "data_column" {
+            continue;
+        }
+        let json = surgery::block_to_json(b.block.as_ref());
+        let Some(col) = json.get("column").and_then(|c| c.as_str()) else {
+            continue;
+        };
+        let Some(x) = ctx.data.column(col) else {
+            continue;
+        };
+        let m0 = stats::mean(x);
+        for m in 1..=8usize {
+            let lag = m as f64 * lag0;
+            if lag > 0.5 * n as f64 {
+                break;
+            }
+            // Correlation of x(k) with x(k + lag), the latter interpolated
+            // linearly at the fractional lag.
+            let (li, frac) = (lag.floor() as usize, lag.fract());
+            let (mut sxy, mut sxx, mut syy) = (0.0, 0.0, 0.0);
+            for k in 0..n - li - 1 {
+                let a = x[k] - m0;
+                let b = (1.0 - frac) * x[k + li] + frac * x[k + li + 1] - m0;
+                sxy += a * b;
+                sxx += a * a;
+                syy += b * b;
+            }
+            let c = sxy / (sxx * syy).sqrt().max(f64::MIN_POSITIVE);
+            if c > 0.95 {
+                return Some(format!(
+                    "the residual's line (period {period_s:.4e} s) is locked to the excitation: column `{col}` repeats every {m} × that period (correlation {c:.3}), so the residual is what a map of the input leaves, not a disturbance independent of it; an excitation that does not repeat at this period would tell them apart"
+                ));
+            }
+        }
+    }
+    None
+}
+
 fn line_period(r: &[f64]) -> Option<f64> {
     let (_, f) = stats::fisher_g(r);
     (f > 0.0 && 1.0 / f <= r.len() as f64 / 3.0).then(|| 1.0 / f)

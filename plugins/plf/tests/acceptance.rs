@@ -292,3 +292,75 @@ fn finite_but_huge_samples_are_refused() {
         "{msg}"
     );
 }
+
+/// Issue 24 §3: under a periodic drive, an input nonlinearity leaves a residual
+/// periodic in time at the drive's own period. That is an effect of the input,
+/// not an external disturbance: a saturating amplifier on a 4 Hz sine drive must
+/// not be named `repetitive_disturbance` (the truth is the core `saturation`
+/// block, a sharp clip; the plf candidate is a smooth-cornered saturation).
+#[test]
+fn a_residual_locked_to_a_periodic_drive_is_not_named_a_disturbance() {
+    use nanomotion_core::data::Dataset;
+    use std::sync::Arc;
+    link();
+    let (rate, n) = (2000.0, 12_000usize);
+    let graph = |clip: bool| {
+        let (b, c) = if clip {
+            (
+                "  - { name: amp, type: saturation, lower: -0.6, upper: 0.6 }\n",
+                "  - { from: drive.y, to: amp.u }\n  - { from: amp.y, to: stage.u }\n",
+            )
+        } else {
+            ("", "  - { from: drive.y, to: stage.u }\n")
+        };
+        format!(
+            "base_rate_hz: {rate}\nduration_s: {}\nblocks:\n  - {{ name: drive, type: data_column, column: u }}\n{b}  - {{ name: stage, type: state_space, a: [[0.0, 1.0], [-35530.6, -37.7]], b: [[0.0], [35530.6e-6]], c: [[1.0, 0.0]], discretisation: zoh }}\nconnections:\n{c}compare:\n  - {{ signal: stage.y, column: y }}\n",
+            n as f64 / rate
+        )
+    };
+    let u: Vec<f64> = (0..n)
+        .map(|k| (2.0 * std::f64::consts::PI * 4.0 * k as f64 / rate).sin())
+        .collect();
+    let drive = Dataset::from_columns("sine", rate, 0.0, vec![("u".into(), u.clone())]).unwrap();
+    let mut truth = GraphSpec::from_yaml(&graph(true), "truth.yaml").unwrap();
+    truth.log.push("stage.y".into());
+    let (mut s, _) = truth.build_with_data(Arc::new(drive)).unwrap();
+    let run = s.run(|_| {});
+    let mut rng = nanomotion_core::rng::Rng::new(11);
+    let y: Vec<f64> = run
+        .logs
+        .iter()
+        .find(|l| l.name == "stage.y")
+        .unwrap()
+        .data
+        .iter()
+        .map(|v| v + 5e-9 * rng.normal())
+        .collect();
+    let data =
+        Dataset::from_columns("sine", rate, 0.0, vec![("u".into(), u), ("y".into(), y)]).unwrap();
+    let nominal = GraphSpec::from_yaml(&graph(false), "nominal.yaml").unwrap();
+    let r = diagnose(&nominal, &data, &Options::default()).unwrap();
+    eprintln!("periodic drive: found {:?}; {}", r.found, r.stopped_because);
+    for s in &r.steps {
+        for c in s.candidates.iter().take(6) {
+            eprintln!(
+                "    {} {} {:.3e} {:?}",
+                c.effect, c.site, c.holdout_rms, c.note
+            );
+        }
+    }
+    assert!(!r.found.is_empty(), "nothing named");
+    assert!(
+        !r.found.iter().any(|f| f == "repetitive_disturbance"),
+        "found {:?}",
+        r.found
+    );
+    assert!(
+        r.steps[0].candidates.iter().any(|c| c
+            .note
+            .as_deref()
+            .is_some_and(|n| n.contains("locked to the excitation"))),
+        "no disturbance candidate was refused as phase-locked"
+    );
+    assert_eq!(r.found[0], "saturation");
+}
