@@ -167,6 +167,14 @@ fn print_report(r: &Report) {
                 fin.join(", ")
             );
         }
+        if !s.derived.is_empty() {
+            let d: Vec<String> = s
+                .derived
+                .iter()
+                .map(|(k, v)| format!("{k} = {v:.4e}"))
+                .collect();
+            println!("     derived from the final fit: {}", d.join(", "));
+        }
         println!(
             "     held-out rms {:.4e} -> {:.4e} ({:.1} % cut, p = {:.1e})",
             s.holdout_rms_before, s.holdout_rms_after, s.cut_percent, s.p_value

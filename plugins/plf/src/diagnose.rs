@@ -21,6 +21,7 @@
 //!    when no candidate passes step 4.
 
 use crate::PlfError;
+use crate::effects::creep::{Creep, CreepTerm};
 use crate::effects::resonance::UnmodeledResonance;
 use crate::fit::{BlockEvaluator, Evaluator, FreeParam, Problem, Scale, levenberg_marquardt};
 use crate::stats;
@@ -169,6 +170,10 @@ pub struct Step {
     /// The same parameters in the final augmented model (`model_augmented.yaml`),
     /// after every later joint refit.
     pub final_params: BTreeMap<String, f64>,
+    /// Physical quantities derived from the final fitted block, in the units of
+    /// the signal it acts on: `coulomb` (the Coulomb level of a friction force
+    /// of the stage's own motion, whichever block fitted it; see `ForceSplit`).
+    pub derived: BTreeMap<String, f64>,
     /// One standard deviation of the fitted parameters (from the Jacobian).
     pub uncertainty: BTreeMap<String, f64>,
     /// One line a person can check.
@@ -354,6 +359,8 @@ pub fn diagnose_with_progress(
     let mut rejected_candidates = Vec::new();
     // (effect, the outputs it concerns) of every step taken.
     let mut named: Vec<(&'static str, Vec<usize>)> = Vec::new();
+    // Per step: (force signal, position) of an effect fed by the stage's own motion.
+    let mut own_forces: Vec<Option<(String, String)>> = Vec::new();
     for step_no in 0..opts.max_effects {
         // At the noise floor already? The floor is estimated from the residual's
         // sample-to-sample differences, so a model error that is itself white —
@@ -369,11 +376,15 @@ pub fn diagnose_with_progress(
         // An effect named before on an output is never a new effect there (the
         // joint refit adjusts the first; a second copy at another place of the
         // same output would only be padding).
+        // A hysteretic force of the stage's own motion after friction was named
+        // there is that same force again.
         cands.retain(|c| {
             let outs = outputs_of(&ctx, &c.site);
-            !named
-                .iter()
-                .any(|(e, o)| *e == c.effect && o.iter().any(|k| outs.contains(k)))
+            let own_motion = matches!(c.site, Site::Feedback { .. });
+            !named.iter().any(|(e, o)| {
+                (*e == c.effect || (own_motion && *e == "friction"))
+                    && o.iter().any(|k| outs.contains(k))
+            })
         });
         if at_floor {
             cands.retain(|c| {
@@ -577,6 +588,32 @@ pub fn diagnose_with_progress(
         );
         plots.push(evidence_plot(&ctx, &cur, cand, &win, step_no + 1));
         let new = evaluate_current(&ctx, win.spec, win.free.clone(), &mut runs)?;
+        // A hysteretic force of the stage's own motion that the direction of
+        // motion sets is friction (see `ForceSplit`), whichever block fitted it.
+        let own_force = match &cand.site {
+            Site::Feedback { position, .. } => {
+                Some((format!("{}.y", win.block_name), position.clone()))
+            }
+            _ => None,
+        };
+        let split = match &own_force {
+            Some((force, position)) => force_split(
+                &signal(&ctx, &new, force)?,
+                &signal(&ctx, &new, position)?,
+                ctx.fs,
+            ),
+            None => None,
+        };
+        let (effect_name, evidence) = match split {
+            Some(sp) if cand.effect == "hysteresis" && sp.is_friction() => (
+                "friction",
+                format!(
+                    "named friction, not hysteresis: the fitted force of the stage's own motion is set by the direction of motion (corr² with sign v = {:.2}, with the position = {:.2}), a Coulomb level of {:.4e} — the Dahl/presliding form of friction; {evidence}",
+                    sp.direction_r2, sp.position_r2, sp.coulomb
+                ),
+            ),
+            _ => (cand.effect, evidence),
+        };
         let new_spec = new.spec()?;
         let block = new_spec
             .blocks
@@ -598,9 +635,10 @@ pub fn diagnose_with_progress(
             }
         }
         let sc = scores(&ctx, &new);
-        named.push((cand.effect, outputs_of(&ctx, &cand.site)));
+        named.push((effect_name, outputs_of(&ctx, &cand.site)));
+        own_forces.push(own_force);
         steps.push(Step {
-            effect: cand.effect.to_string(),
+            effect: effect_name.to_string(),
             block: BlockRef {
                 name: win.block_name.clone(),
                 type_name: block.block.typetag_name().to_string(),
@@ -608,6 +646,7 @@ pub fn diagnose_with_progress(
             site: cand.site.describe(),
             params,
             final_params: BTreeMap::new(),
+            derived: BTreeMap::new(),
             uncertainty: unc,
             evidence,
             holdout_rms_before: hb,
@@ -622,8 +661,17 @@ pub fn diagnose_with_progress(
     let final_scores = scores(&ctx, &cur);
     let final_tests = tests(&ctx, &cur)?;
     let mut augmented = cur.spec()?;
-    for st in &mut steps {
+    for (st, own) in steps.iter_mut().zip(&own_forces) {
         st.final_params = tunable_params(&augmented, &st.block.name);
+        if let (Some((force, position)), "friction") = (own, st.effect.as_str())
+            && let Some(sp) = force_split(
+                &signal(&ctx, &cur, force)?,
+                &signal(&ctx, &cur, position)?,
+                ctx.fs,
+            )
+        {
+            st.derived.insert("coulomb".into(), sp.coulomb);
+        }
     }
     allow_fitted_loops(&mut augmented, &data, &steps)?;
     let residuals = ctx
@@ -678,6 +726,16 @@ fn implausible<'n>(
             ("unmodeled_resonance", &[fp, zp, fz, zz]) => {
                 UnmodeledResonance::new(fp, zp, fz, zz).implausible(band)
             }
+            ("creep", terms) if terms.len() % 2 == 0 => Creep::new(
+                terms
+                    .chunks(2)
+                    .map(|c| CreepTerm {
+                        gain: c[0],
+                        tau_s: c[1],
+                    })
+                    .collect(),
+            )
+            .implausible(ctx.n as f64 / ctx.fs, 1.0 / ctx.fs),
             _ => None,
         };
         if let Some(why) = why {
@@ -1028,8 +1086,6 @@ fn std_of(x: &[f64]) -> f64 {
     stats::mean_square(&x.iter().map(|v| v - m).collect::<Vec<_>>()).sqrt()
 }
 
-/// The period (in samples) of the strongest line of `r`, if at least three periods
-/// fit in `r` (a slower "period" is a trend, not a repetition).
 /// The period (s) of a candidate disturbance periodic in *time*, if it is one.
 fn time_period(c: &Cand) -> Option<f64> {
     let start = c.starts.first()?;
@@ -1090,9 +1146,94 @@ fn phase_locked(ctx: &Ctx<'_>, spec: &GraphSpec, period_s: f64) -> Option<String
     None
 }
 
+/// The period (in samples) of the strongest line of `r`, if at least three periods
+/// fit in `r` (a slower "period" is a trend, not a repetition).
 fn line_period(r: &[f64]) -> Option<f64> {
     let (_, f) = stats::fisher_g(r);
     (f > 0.0 && 1.0 / f <= r.len() as f64 / 3.0).then(|| 1.0 / f)
+}
+
+/// How a force fed back from the stage's own motion into its force balance
+/// splits, over the samples where the stage moves (|v| above a tenth of its
+/// rms): the part set by the direction of motion — a friction force (Coulomb,
+/// and Dahl/presliding friction, whose loop is a hysteresis of the position
+/// that saturates within a short presliding distance) — and the part that
+/// follows the position — a hysteretic restoring force (Bouc–Wen mounts,
+/// piezo stacks' elastic hysteresis). An engineer names the first friction
+/// and the second hysteresis, whichever block fits it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct ForceSplit {
+    /// corr(force, sign v)² over the moving samples.
+    direction_r2: f64,
+    /// corr(force, position)² over the same samples.
+    position_r2: f64,
+    /// |Fc|: the sign(v) coefficient of the least-squares fit
+    /// force ≈ f₀ + k·position + Fc·sign(v) (force units).
+    coulomb: f64,
+}
+
+impl ForceSplit {
+    fn is_friction(&self) -> bool {
+        self.direction_r2 > self.position_r2
+    }
+}
+
+fn force_split(force: &[f64], pos: &[f64], fs: f64) -> Option<ForceSplit> {
+    let n = force.len().min(pos.len());
+    if n < 3 {
+        return None;
+    }
+    let v: Vec<f64> = pos[..n].windows(2).map(|w| (w[1] - w[0]) * fs).collect();
+    let v_rms = stats::mean_square(&v).sqrt();
+    if !(v_rms > 0.0) {
+        return None;
+    }
+    // Sample k + 1 is the one the velocity v[k] leads into.
+    let rows: Vec<(f64, f64, f64)> = v
+        .iter()
+        .enumerate()
+        .filter(|(_, vk)| vk.abs() > 0.1 * v_rms)
+        .map(|(k, vk)| (force[k + 1], pos[k + 1], vk.signum()))
+        .collect();
+    if rows.len() < 10 {
+        return None;
+    }
+    let corr2 = |a: &dyn Fn(&(f64, f64, f64)) -> f64, b: &dyn Fn(&(f64, f64, f64)) -> f64| {
+        let m = rows.len() as f64;
+        let (ma, mb) = rows
+            .iter()
+            .fold((0.0, 0.0), |(x, y), r| (x + a(r) / m, y + b(r) / m));
+        let (mut sab, mut saa, mut sbb) = (0.0, 0.0, 0.0);
+        for r in &rows {
+            let (da, db) = (a(r) - ma, b(r) - mb);
+            sab += da * db;
+            saa += da * da;
+            sbb += db * db;
+        }
+        if saa > 0.0 && sbb > 0.0 {
+            sab * sab / (saa * sbb)
+        } else {
+            0.0
+        }
+    };
+    let direction_r2 = corr2(&|r| r.0, &|r| r.2);
+    let position_r2 = corr2(&|r| r.0, &|r| r.1);
+    // The position standardised, so that nm and m strokes condition alike.
+    let ys: Vec<f64> = rows.iter().map(|r| r.1).collect();
+    let (ym, ysd) = (stats::mean(&ys), std_of(&ys).max(f64::MIN_POSITIVE));
+    let mut ata = nalgebra::Matrix3::<f64>::zeros();
+    let mut atb = nalgebra::Vector3::<f64>::zeros();
+    for &(f, y, s) in &rows {
+        let a = nalgebra::Vector3::new(1.0, (y - ym) / ysd, s);
+        ata += a * a.transpose();
+        atb += a * f;
+    }
+    let coef = ata.lu().solve(&atb)?;
+    coef[2].is_finite().then(|| ForceSplit {
+        direction_r2,
+        position_r2,
+        coulomb: coef[2].abs(),
+    })
 }
 
 /// The spatial period of `r` as a function of `pos` (binned on a uniform grid).
@@ -1384,6 +1525,24 @@ fn enumerate(ctx: &Ctx<'_>, cur: &Current, opts: &Options) -> Result<Vec<Cand>, 
             }
             if want("time_delay") {
                 out.push(time_delay(fs, inp.clone(), None, None));
+            }
+            if want("drift") {
+                // A drive's zero that is off or moves (an amplifier's offset, a
+                // constant force on the stage): inside a loop the controller
+                // answers it, so it shows on the drive rather than at the output.
+                out.push(Cand {
+                    effect: "drift",
+                    site: inp.clone(),
+                    output: None,
+                    starts: vec![
+                        json!({"type": "drift", "offset": 0.0, "rate": 0.0, "curvature": 0.0}),
+                    ],
+                    // The offset only: a trend of the drive fitted on the
+                    // estimation part is the loop's answer to everything else.
+                    free: vec![(0, Scale::Linear(0.1 * su))],
+                    s: vec![],
+                    rate_hz: None,
+                });
             }
             if want("saturation") {
                 let (lo, hi) = u

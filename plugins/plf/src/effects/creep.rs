@@ -59,6 +59,50 @@ impl Creep {
         }
     }
 
+    /// Why these fitted terms are not creep as a diagnosis of a record `t_len_s`
+    /// long sampled every `dt_s`, or `None`. Creep is the slow growth of a
+    /// response after a change of the drive:
+    /// - every time constant between one sample and the record's length (a lag
+    ///   slower than the record is a ramp — a drift in disguise; one faster than
+    ///   a sample is a gain);
+    /// - a total creep Σ kᵢ in (0, 1]: the response grows, by at most as much
+    ///   again (measured piezo creep is a few to 30 % per decade); a response that
+    ///   shrinks is a relaxation or a low-frequency gain error;
+    /// - a step response that never falls over the record:
+    ///   Σ kᵢ/τᵢ·e^{−t/τᵢ} ≥ 0.
+    pub fn implausible(&self, t_len_s: f64, dt_s: f64) -> Option<String> {
+        for (i, t) in self.terms.iter().enumerate() {
+            if !(t.tau_s >= dt_s && t.tau_s <= t_len_s) {
+                return Some(format!(
+                    "terms[{i}].tau_s = {:.3e} s lies outside one sample to the record's length ({dt_s:.3e}–{t_len_s:.3e} s)",
+                    t.tau_s
+                ));
+            }
+        }
+        let total: f64 = self.terms.iter().map(|t| t.gain).sum();
+        if !(total > 0.0 && total <= 1.0) {
+            return Some(format!(
+                "the total creep Σ k = {total:.3e} is not a growth of the response by 0–100 %"
+            ));
+        }
+        let rate = |t: f64| -> f64 {
+            self.terms
+                .iter()
+                .map(|c| c.gain / c.tau_s * (-t / c.tau_s).exp())
+                .sum()
+        };
+        let scale = self
+            .terms
+            .iter()
+            .map(|c| (c.gain / c.tau_s).abs())
+            .fold(0.0, f64::max);
+        let grid = 200;
+        (0..=grid)
+            .map(|k| dt_s * (t_len_s / dt_s).powf(k as f64 / grid as f64))
+            .find(|&t| rate(t) < -1e-9 * scale)
+            .map(|t| format!("the step response falls at t = {t:.3e} s: a relaxation, not creep"))
+    }
+
     fn check_terms(terms: &[CreepTerm]) -> Result<(), ParamError> {
         check_count("terms", terms.len(), 1, MAX_TERMS)?;
         for (i, t) in terms.iter().enumerate() {
