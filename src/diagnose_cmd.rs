@@ -124,6 +124,40 @@ fn print_report(r: &Report) {
             t.noise_floor
         );
     }
+    if let Some(c) = &r.calibration {
+        let fmt = |m: &std::collections::BTreeMap<String, f64>| {
+            m.iter()
+                .map(|(k, v)| match c.uncertainty.get(k) {
+                    Some(u) if m == &c.params => format!("{k} = {v:.4} ± {u:.1e}"),
+                    _ => format!("{k} = {v:.4}"),
+                })
+                .collect::<Vec<_>>()
+                .join(", ")
+        };
+        println!(
+            "\nstep 0: nominal calibration {}: {}",
+            if c.accepted {
+                "(kept: the nominal's own parameters were off)"
+            } else {
+                "(not kept: the nominal's parameters explain no significant share)"
+            },
+            fmt(&c.params)
+        );
+        if c.accepted && !c.final_params.is_empty() && c.final_params != c.params {
+            println!(
+                "     in model_augmented.yaml (after the later joint refits): {}",
+                fmt(&c.final_params)
+            );
+        }
+        println!(
+            "     held-out rms {:.4e} -> {:.4e} ({:.1} % cut, {:.0} % of the excess over the noise floor, p = {:.1e})",
+            c.holdout_rms_before,
+            c.holdout_rms_after,
+            c.cut_percent,
+            c.excess_cut_percent,
+            c.p_value
+        );
+    }
     for (k, s) in r.steps.iter().enumerate() {
         println!("\nstep {}: candidates tried (best first):", k + 1);
         for c in s.candidates.iter().take(8) {
@@ -146,6 +180,19 @@ fn print_report(r: &Report) {
             s.effect, s.block.name, s.block.type_name, s.site
         );
         println!("     evidence: {}", s.evidence);
+        for a in &s.ambiguous_with {
+            println!(
+                "     ambiguous: [{}, {}] — {} ({}) explains the held-out data as well (held-out rms {:.4e}; {} better only with p = {:.2}); to tell them apart: {}",
+                s.effect,
+                a.effect,
+                a.effect,
+                a.site,
+                a.holdout_rms,
+                s.effect,
+                a.p_value,
+                a.experiment
+            );
+        }
         let params: Vec<String> = s
             .params
             .iter()
@@ -189,12 +236,17 @@ fn print_report(r: &Report) {
             .join(", ")
     );
     println!(
-        "final: rms {:.4e}, held-out rms {:.4e}, fit {:.1} % (nominal held-out {:.4e}: {:.1} % cut)",
+        "final: rms {:.4e}, held-out rms {:.4e}, fit {:.1} % (nominal held-out {:.4e}: {:.1} % cut{})",
         r.final_scores.rms,
         r.final_scores.holdout_rms,
         r.final_scores.fit_percent,
         r.nominal.holdout_rms,
-        100.0 * (1.0 - r.final_scores.holdout_rms / r.nominal.holdout_rms)
+        r.holdout_cut_percent,
+        if r.final_scores.per_output.len() > 1 {
+            ", each output in units of its noise floor"
+        } else {
+            ""
+        }
     );
     println!("stopped because {}", r.stopped_because);
     if !r.rejected_candidates.is_empty() {

@@ -439,8 +439,28 @@ pub struct StateSpaceBlock {
     /// Tustin pre-warp frequency (Hz).
     #[serde(default)]
     pub prewarp_hz: Option<f64>,
+    /// Calibration gain g on the input: B, D ← g·B, g·D (default 1). Fitted by
+    /// `nanomotion diagnose`'s nominal calibration (see [`Tunable`]).
+    #[serde(default = "unity", skip_serializing_if = "is_unity")]
+    pub gain: f64,
+    /// Calibration time scale λ of a continuous model: A, B ← λA, λB, i.e.
+    /// G(s) ← G(s/λ) — every mode's frequency × λ, damping ratios and static
+    /// gain unchanged (default 1; must stay 1 for a discrete model).
+    #[serde(default = "unity", skip_serializing_if = "is_unity")]
+    pub frequency_scale: f64,
     #[serde(skip)]
     core: Option<LinearCore>,
+    /// The sample period the block was built for (re-realised by `set_params`).
+    #[serde(skip)]
+    built_dt: Option<f64>,
+}
+
+fn unity() -> f64 {
+    1.0
+}
+
+fn is_unity(v: &f64) -> bool {
+    *v == 1.0
 }
 
 impl StateSpaceBlock {
@@ -461,8 +481,62 @@ impl StateSpaceBlock {
             discrete: sys.dt.is_some(),
             discretisation: if sys.dt.is_some() { None } else { method },
             prewarp_hz: None,
+            gain: 1.0,
+            frequency_scale: 1.0,
             core: None,
+            built_dt: None,
         }
+    }
+
+    /// Check the matrices and the calibration, discretise at `dt` and set up the
+    /// stepper (what `build` and `set_params` share).
+    fn realise(&mut self, dt: f64) -> Result<(), ParamError> {
+        let (n, m, p) = self.dims();
+        check::size("a (states)", n, 0, MAX_SS_STATES)?;
+        check::width("b (inputs)", m.max(1))?;
+        check::width("c (outputs)", p.max(1))?;
+        if m == 0 || p == 0 {
+            return Err(ParamError::new(
+                if n > 0 { "b" } else { "d" },
+                "gives no inputs or no outputs",
+                "give B (n×m) and C (p×n) with m, p ≥ 1 (or D for a static gain)",
+            ));
+        }
+        check::positive("gain", self.gain)?;
+        check::positive("frequency_scale", self.frequency_scale)?;
+        if self.discrete && self.frequency_scale != 1.0 {
+            return Err(ParamError::new(
+                "frequency_scale",
+                format!("is {} on a discrete model", self.frequency_scale),
+                "remove it (a time scale applies to a continuous model only)",
+            ));
+        }
+        let lambda = self.frequency_scale;
+        let a = matrix_from_rows("a", &self.a, n, n)? * lambda;
+        let b = matrix_from_rows("b", &self.b, n, m)? * (lambda * self.gain);
+        let c = matrix_from_rows("c", &self.c, p, n)?;
+        let d = if self.d.is_empty() {
+            DMatrix::zeros(p, m)
+        } else {
+            matrix_from_rows("d", &self.d, p, m)? * self.gain
+        };
+        let method = c2d_method(self.discrete, self.discretisation, self.prewarp_hz, dt)?;
+        let sys = StateSpace::new(a, b, c, d, if self.discrete { Some(dt) } else { None })
+            .map_err(|e| lti_to_param("a", e))?;
+        let model = match method {
+            None => sys,
+            Some(mth) => lti::c2d(&sys, dt, mth).map_err(|e| lti_to_param("a", e))?,
+        };
+        if model.a.iter().chain(model.b.iter()).any(|v| !v.is_finite()) {
+            return Err(ParamError::new(
+                "a",
+                "discretisation gave non-finite matrices",
+                "check A for poles at s = 2/T (Tustin)",
+            ));
+        }
+        self.core = Some(LinearCore::new(model, 1).map_err(|e| lti_to_param("a", e))?);
+        self.built_dt = Some(dt);
+        Ok(())
     }
 
     fn dims(&self) -> (usize, usize, usize) {
@@ -498,44 +572,68 @@ impl Block for StateSpaceBlock {
     }
 
     fn build(&mut self, ctx: &BuildContext) -> Result<(), ParamError> {
-        let (n, m, p) = self.dims();
-        check::size("a (states)", n, 0, MAX_SS_STATES)?;
-        check::width("b (inputs)", m.max(1))?;
-        check::width("c (outputs)", p.max(1))?;
-        if m == 0 || p == 0 {
-            return Err(ParamError::new(
-                if n > 0 { "b" } else { "d" },
-                "gives no inputs or no outputs",
-                "give B (n×m) and C (p×n) with m, p ≥ 1 (or D for a static gain)",
-            ));
-        }
-        let a = matrix_from_rows("a", &self.a, n, n)?;
-        let b = matrix_from_rows("b", &self.b, n, m)?;
-        let c = matrix_from_rows("c", &self.c, p, n)?;
-        let d = if self.d.is_empty() {
-            DMatrix::zeros(p, m)
-        } else {
-            matrix_from_rows("d", &self.d, p, m)?
-        };
-        let method = c2d_method(self.discrete, self.discretisation, self.prewarp_hz, ctx.dt)?;
-        let sys = StateSpace::new(a, b, c, d, if self.discrete { Some(ctx.dt) } else { None })
-            .map_err(|e| lti_to_param("a", e))?;
-        let model = match method {
-            None => sys,
-            Some(mth) => lti::c2d(&sys, ctx.dt, mth).map_err(|e| lti_to_param("a", e))?,
-        };
-        if model.a.iter().chain(model.b.iter()).any(|v| !v.is_finite()) {
-            return Err(ParamError::new(
-                "a",
-                "discretisation gave non-finite matrices",
-                "check A for poles at s = 2/T (Tustin)",
-            ));
-        }
-        self.core = Some(LinearCore::new(model, 1).map_err(|e| lti_to_param("a", e))?);
-        Ok(())
+        self.realise(ctx.dt)
+    }
+
+    fn tunable(&self) -> Option<&dyn crate::Tunable> {
+        Some(self)
+    }
+    fn tunable_mut(&mut self) -> Option<&mut dyn crate::Tunable> {
+        Some(self)
     }
 }
 controller_impl!(StateSpaceBlock);
+
+/// The calibration of a plant model: `[gain]` for a discrete model,
+/// `[gain, frequency_scale]` for a continuous one (see the fields). A built
+/// block is re-realised at once (outside any tick: it allocates).
+impl crate::Tunable for StateSpaceBlock {
+    fn param_names(&self) -> Vec<String> {
+        let mut v = vec!["gain".to_string()];
+        if !self.discrete {
+            v.push("frequency_scale".into());
+        }
+        v
+    }
+    fn params(&self) -> Vec<f64> {
+        let mut v = vec![self.gain];
+        if !self.discrete {
+            v.push(self.frequency_scale);
+        }
+        v
+    }
+    fn set_params(&mut self, p: &[f64]) -> Result<(), ParamError> {
+        let want = if self.discrete { 1 } else { 2 };
+        if p.len() != want {
+            return Err(ParamError::new(
+                "params",
+                format!("{} values given", p.len()),
+                if self.discrete {
+                    "give [gain]"
+                } else {
+                    "give [gain, frequency_scale]"
+                },
+            ));
+        }
+        let old = (self.gain, self.frequency_scale);
+        self.gain = p[0];
+        if !self.discrete {
+            self.frequency_scale = p[1];
+        }
+        let result = match self.built_dt {
+            Some(dt) => self.realise(dt),
+            None => check::positive("gain", self.gain)
+                .and_then(|_| check::positive("frequency_scale", self.frequency_scale)),
+        };
+        if result.is_err() {
+            (self.gain, self.frequency_scale) = old;
+            if let Some(dt) = self.built_dt {
+                self.realise(dt)?;
+            }
+        }
+        result
+    }
+}
 
 crate::submit_block_doc! {
     BlockDoc {
@@ -550,6 +648,8 @@ crate::submit_block_doc! {
             ParamDoc { name: "discrete", doc: "true if the model is discrete at the block's rate", default: Some("false") },
             ParamDoc { name: "discretisation", doc: "tustin | zoh (required for a continuous model)", default: None },
             ParamDoc { name: "prewarp_hz", doc: "Tustin pre-warp frequency (Hz)", default: Some("none") },
+            ParamDoc { name: "gain", doc: "calibration gain on the input (B, D ← g·B, g·D)", default: Some("1") },
+            ParamDoc { name: "frequency_scale", doc: "calibration time scale of a continuous model (A, B ← λA, λB: frequencies × λ)", default: Some("1") },
         ],
         ports: "u[m] -> y[p]",
     }

@@ -6,14 +6,17 @@
 //! nanomotion diagnose DIR/model.yaml DIR/record.csv
 //! ```
 //!
-//! EFFECT is a vocabulary name (or `none`); `axis_coupling` makes a two-axis record.
+//! EFFECT is a vocabulary name (or `none`); `axis_coupling` makes a two-axis record;
+//! `scenario` writes record SEED of [`nanomotion_plf::scenario`] (SAMPLES ignored).
 
 use nanomotion_plf::generate;
 
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
     if args.len() != 4 {
-        eprintln!("usage: make_record EFFECT[+EFFECT] SEED SAMPLES DIR");
+        eprintln!(
+            "usage: make_record EFFECT[+EFFECT] SEED SAMPLES DIR   (or: make_record scenario SEED 0 DIR)"
+        );
         std::process::exit(2);
     }
     let (effect, dir) = (&args[0], std::path::PathBuf::from(&args[3]));
@@ -21,7 +24,14 @@ fn main() {
         eprintln!("error: SEED and SAMPLES must be whole numbers");
         std::process::exit(2);
     };
-    let rec = if effect == "axis_coupling" {
+    let rec = if effect == "scenario" {
+        // A record of the wider distribution (SAMPLES is ignored: the scenario
+        // draws its own length).
+        nanomotion_plf::scenario::draw(seed).map(|s| {
+            eprintln!("scenario {seed}: {:?}", s.family);
+            s.record
+        })
+    } else if effect == "axis_coupling" {
         generate::two_axis(effect, seed, n)
     } else {
         generate::second_order(effect, seed, n, false)

@@ -59,6 +59,10 @@ pub struct Options {
     pub effects: Vec<String>,
     /// Worker threads for candidate fits (default 2).
     pub threads: usize,
+    /// Let the nominal model's own parameters compete with the effects
+    /// (default true): the gain and time scale of every continuous
+    /// `state_space` block (see [`Calibration`]).
+    pub calibrate: bool,
 }
 
 impl Default for Options {
@@ -71,6 +75,7 @@ impl Default for Options {
             min_excess_cut: 0.3,
             effects: Vec::new(),
             threads: 2,
+            calibrate: true,
         }
     }
 }
@@ -182,7 +187,8 @@ pub struct Step {
     pub holdout_rms_before: f64,
     /// Held-out rms after.
     pub holdout_rms_after: f64,
-    /// Cut of the held-out rms (%).
+    /// Cut of the held-out residual (%), each output in units of its noise
+    /// floor (the cut of the held-out rms for one output).
     pub cut_percent: f64,
     /// p-value of the held-out improvement test.
     pub p_value: f64,
@@ -190,6 +196,58 @@ pub struct Step {
     pub per_output: Vec<OutputScore>,
     /// Every candidate tried, best first.
     pub candidates: Vec<Candidate>,
+    /// Other names the held-out data cannot tell from this one (empty: the
+    /// name is clear). The step keeps the best-scoring name; each alternative
+    /// says which experiment would decide.
+    pub ambiguous_with: Vec<Alternative>,
+}
+
+/// A second name that explains a step's data as well as the one taken.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Alternative {
+    /// Vocabulary name.
+    pub effect: String,
+    /// Where it entered.
+    pub site: String,
+    /// Held-out rms with it instead of the named effect.
+    pub holdout_rms: f64,
+    /// p-value of "the named effect predicts the held-out data better than
+    /// this one" (large: the data cannot tell them apart).
+    pub p_value: f64,
+    /// The experiment that would tell the two apart.
+    pub experiment: String,
+}
+
+/// The nominal calibration: the nominal model's own parameters — the gain g
+/// and the time scale λ (every mode's frequency × λ) of each continuous
+/// `state_space` block. A nominal that is a few per cent off is a *nominal
+/// error*, not a missing effect: left alone, it is what a flexible effect
+/// block (a gain varying with position, a resonance) would be named for. At
+/// every step until it is taken, it competes with the best effect on the same
+/// penalised held-out score and is taken (without using up a step) when it
+/// predicts better and passes the same tests; later steps refit it jointly
+/// with every effect. An effect that also moves a gain or a time scale a
+/// little (creep, a delay) is named when it predicts better.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Calibration {
+    /// Whether it was kept.
+    pub accepted: bool,
+    /// Fitted values, `block.parameter` → value (1 = as the nominal gives it).
+    pub params: BTreeMap<String, f64>,
+    /// The same in the final augmented model, after the later joint refits.
+    pub final_params: BTreeMap<String, f64>,
+    /// One standard deviation of the fitted values (from the Jacobian).
+    pub uncertainty: BTreeMap<String, f64>,
+    /// Held-out rms before.
+    pub holdout_rms_before: f64,
+    /// Held-out rms after.
+    pub holdout_rms_after: f64,
+    /// Cut of the held-out rms (%).
+    pub cut_percent: f64,
+    /// p-value of the held-out improvement test.
+    pub p_value: f64,
+    /// Share of the mean square above the noise floor it removed (%).
+    pub excess_cut_percent: f64,
 }
 
 /// Data behind a plot (the CLI draws it).
@@ -216,6 +274,9 @@ pub struct Report {
     pub nominal: Scores,
     /// Residual tests of the nominal model.
     pub nominal_tests: Vec<ResidualTests>,
+    /// The nominal calibration as last tried (`None` when off or nothing to
+    /// calibrate); `accepted` says whether the model carries it.
+    pub calibration: Option<Calibration>,
     /// Names of the effects found, in order.
     pub found: Vec<String>,
     /// The steps.
@@ -223,6 +284,10 @@ pub struct Report {
     /// Scores of the augmented model.
     #[serde(rename = "final")]
     pub final_scores: Scores,
+    /// Cut of the held-out residual from the nominal to the augmented model
+    /// (%), each output in units of its noise floor (the measure every decision
+    /// uses; equal to the cut of the held-out rms for one output).
+    pub holdout_cut_percent: f64,
     /// Residual tests of the augmented model.
     pub final_tests: Vec<ResidualTests>,
     /// Why the workflow stopped.
@@ -353,6 +418,9 @@ pub fn diagnose_with_progress(
     let ctx = ctx;
     let nominal_tests = tests(&ctx, &cur)?;
     let first_residuals = cur.residual.clone();
+    // The nominal calibration competes with the effects at every step until
+    // it is taken (see `Calibration`); the last one tried is reported.
+    let mut calibration: Option<Calibration> = None;
     let mut steps: Vec<Step> = Vec::new();
     let mut plots = Vec::new();
     let mut stopped = format!("reached --max-effects {}", opts.max_effects);
@@ -361,7 +429,8 @@ pub fn diagnose_with_progress(
     let mut named: Vec<(&'static str, Vec<usize>)> = Vec::new();
     // Per step: (force signal, position) of an effect fed by the stage's own motion.
     let mut own_forces: Vec<Option<(String, String)>> = Vec::new();
-    for step_no in 0..opts.max_effects {
+    while steps.len() < opts.max_effects {
+        let step_no = steps.len();
         // At the noise floor already? The floor is estimated from the residual's
         // sample-to-sample differences, so a model error that is itself white —
         // an encoder's rounding when the stage crosses about an lsb per sample —
@@ -512,7 +581,33 @@ pub fn diagnose_with_progress(
             ms * (1.0 + k_of(f) * ne.ln() / ne) * (1.0 + k_of(f) / nh.sqrt())
         };
         let mut best: Option<(usize, Fitted, f64)> = None;
-        for &i in order.iter().take(if cur.free.is_empty() { 1 } else { 3 }) {
+        let mut finalists = 0;
+        for &i in &order {
+            if finalists == if cur.free.is_empty() { 1 } else { 3 } {
+                break;
+            }
+            // A hysteresis block whose fitted map has no loop is not hysteresis
+            // (see `memory_share`): it stands in for a gain, a saturation or a
+            // smooth misfit, and is not named.
+            let refusal = match (cands[i].effect, &results[i]) {
+                ("hysteresis", Some(f)) => without_memory(&ctx, f),
+                ("friction", Some(f)) => viscous_only(&ctx, f),
+                _ => None,
+            };
+            if let Some(why) = refusal
+                && let Some(f) = &results[i]
+            {
+                if let Some(row) = table.iter_mut().find(|r| {
+                    r.effect == cands[i].effect
+                        && r.site == cands[i].site.describe()
+                        && r.score == f.score
+                }) {
+                    row.note = Some(format!("refused as not physical: {why}"));
+                }
+                results[i] = None;
+                continue;
+            }
+            finalists += 1;
             let mut f = results[i].take().expect("fitted");
             if !cur.free.is_empty()
                 && let Ok(j) = joint_refit(&ctx, &f, &mut runs)
@@ -523,31 +618,52 @@ pub fn diagnose_with_progress(
             }
             let sc = penalised(&f, weighted_holdout_ms(&ctx, &f.residual));
             if best.as_ref().is_none_or(|b| sc < b.2) {
+                if let Some((j, beaten, _)) = best.take() {
+                    results[j] = Some(beaten);
+                }
                 best = Some((i, f, sc));
+            } else {
+                // Kept: an alternative name is judged against the winner below.
+                results[i] = Some(f);
             }
         }
-        let (bi, win, _) = best.expect("at least one candidate");
+        let Some((bi, win, best_score)) = best else {
+            stopped = "no candidate could be fitted as a physical effect".into();
+            rejected_candidates = table.clone();
+            break;
+        };
         let cand = &cands[bi];
+        // The nominal's own parameters against the best effect: a nominal a few
+        // per cent off is a nominal error, which a flexible effect would
+        // otherwise be named for; an effect that also moves a gain and a time
+        // scale a little (creep, a delay) is named when it predicts better.
+        if opts.calibrate
+            && !calibration.as_ref().is_some_and(|c| c.accepted)
+            && let Some((mut cal, calibrated, cal_ms)) = calibrate(&ctx, &cur, &mut runs)?
+        {
+            let k = cal.params.len() as f64;
+            let (ne, nh) = (ctx.n_est as f64, (ctx.n - ctx.n_est) as f64);
+            let cal_score = cal_ms * (1.0 + k * ne.ln() / ne) * (1.0 + k / nh.sqrt());
+            let before_ms = weighted_holdout_ms(&ctx, &cur.residual);
+            let cut = excess_cut(&ctx, &excess, at_floor, before_ms, cal_ms);
+            let level = opts.alpha / (total + 1) as f64;
+            cal.accepted = cal_score < best_score
+                && !at_floor
+                && cal.p_value < level
+                && cut >= opts.min_excess_cut;
+            cal.excess_cut_percent = 100.0 * cut;
+            let accepted = cal.accepted;
+            calibration = Some(cal);
+            if accepted {
+                cur = calibrated;
+                continue;
+            }
+        }
         let after_ms = weighted_holdout_ms(&ctx, &win.residual);
         let (worse, better) = holdout_weighted_vectors(&ctx, &cur.residual, &win.residual);
         let (test, _rel) = stats::improvement_test(&worse, &better, 200);
         let level = opts.alpha / total.max(1) as f64;
-        let floor_ms: f64 = excess
-            .iter()
-            .zip(&ctx.channels)
-            .enumerate()
-            .map(|(i, (&(_, f), _))| f * f * weight(&ctx, i).powi(2))
-            .sum();
-        let excess_before = if at_floor {
-            before_ms
-        } else {
-            (before_ms - floor_ms).max(0.0)
-        };
-        let excess_cut = if excess_before > 0.0 {
-            (before_ms - after_ms) / excess_before
-        } else {
-            0.0
-        };
+        let excess_cut = excess_cut(&ctx, &excess, at_floor, before_ms, after_ms);
         let hb = holdout_rms(&ctx, &cur.residual);
         let ha = holdout_rms(&ctx, &win.residual);
         if test.p_value >= level || excess_cut < opts.min_excess_cut {
@@ -587,7 +703,12 @@ pub fn diagnose_with_progress(
             test.p_value
         );
         plots.push(evidence_plot(&ctx, &cur, cand, &win, step_no + 1));
-        let new = evaluate_current(&ctx, win.spec, win.free.clone(), &mut runs)?;
+        let new = evaluate_current(
+            &ctx,
+            surgery::clone_spec(&win.spec)?,
+            win.free.clone(),
+            &mut runs,
+        )?;
         // A hysteretic force of the stage's own motion that the direction of
         // motion sets is friction (see `ForceSplit`), whichever block fitted it.
         let own_force = match &cand.site {
@@ -614,6 +735,16 @@ pub fn diagnose_with_progress(
             ),
             _ => (cand.effect, evidence),
         };
+        let ambiguous_with = alternatives(
+            &ctx,
+            &cur,
+            &cands,
+            &results,
+            &order,
+            &win,
+            [effect_name, cand.effect],
+            (level, &excess, at_floor, opts.min_excess_cut),
+        );
         let new_spec = new.spec()?;
         let block = new_spec
             .blocks
@@ -651,16 +782,31 @@ pub fn diagnose_with_progress(
             evidence,
             holdout_rms_before: hb,
             holdout_rms_after: sc.holdout_rms,
-            cut_percent: 100.0 * (1.0 - sc.holdout_rms / hb),
+            cut_percent: 100.0 * (1.0 - (after_ms / before_ms).sqrt()),
             p_value: test.p_value,
             per_output: sc.per_output,
             candidates: table,
+            ambiguous_with,
         });
         cur = new;
     }
     let final_scores = scores(&ctx, &cur);
+    let holdout_cut_percent = 100.0
+        * (1.0
+            - (weighted_holdout_ms(&ctx, &cur.residual)
+                / weighted_holdout_ms(&ctx, &first_residuals))
+            .sqrt());
     let final_tests = tests(&ctx, &cur)?;
     let mut augmented = cur.spec()?;
+    if let Some(cal) = calibration.as_mut().filter(|c| c.accepted) {
+        for key in cal.params.keys().cloned().collect::<Vec<_>>() {
+            if let Some((block, param)) = key.split_once('.')
+                && let Some(v) = tunable_params(&augmented, block).get(param)
+            {
+                cal.final_params.insert(key, *v);
+            }
+        }
+    }
     for (st, own) in steps.iter_mut().zip(&own_forces) {
         st.final_params = tunable_params(&augmented, &st.block.name);
         if let (Some((force, position)), "friction") = (own, st.effect.as_str())
@@ -689,9 +835,11 @@ pub fn diagnose_with_progress(
     Ok(Report {
         nominal: nominal_scores,
         nominal_tests,
+        calibration,
         found: steps.iter().map(|s| s.effect.clone()).collect(),
         steps,
         final_scores,
+        holdout_cut_percent,
         final_tests,
         stopped_because: stopped,
         rejected_candidates,
@@ -703,6 +851,219 @@ pub fn diagnose_with_progress(
         residuals,
         rate_hz: fs,
     })
+}
+
+/// The p-value above which the held-out data are said not to tell the named
+/// effect from an alternative.
+const AMBIGUOUS_P: f64 = 0.05;
+
+/// The names other than `named` (fitted as `fitted_as`) whose best candidate would itself have been
+/// accepted at this step (significant, removing `min_cut` of the excess) and
+/// that the winner does not beat significantly on the held-out data
+/// (p ≥ [`AMBIGUOUS_P`]); the best candidate of each other effect, at most two.
+#[allow(clippy::too_many_arguments)]
+fn alternatives(
+    ctx: &Ctx<'_>,
+    cur: &Current,
+    cands: &[Cand],
+    results: &[Option<Fitted>],
+    order: &[usize],
+    win: &Fitted,
+    [named, fitted_as]: [&str; 2],
+    (level, excess, at_floor, min_cut): (f64, &[(f64, f64)], bool, f64),
+) -> Vec<Alternative> {
+    let before_ms = weighted_holdout_ms(ctx, &cur.residual);
+    let mut seen: Vec<&str> = vec![named, fitted_as];
+    let mut out = Vec::new();
+    for &i in order {
+        let (c, Some(f)) = (&cands[i], &results[i]) else {
+            continue;
+        };
+        if seen.contains(&c.effect) {
+            continue;
+        }
+        seen.push(c.effect);
+        let (worse, better) = holdout_weighted_vectors(ctx, &cur.residual, &f.residual);
+        let (own, _) = stats::improvement_test(&worse, &better, 200);
+        let cut = excess_cut(
+            ctx,
+            excess,
+            at_floor,
+            before_ms,
+            weighted_holdout_ms(ctx, &f.residual),
+        );
+        if own.p_value >= level || cut < min_cut {
+            continue;
+        }
+        let (alt, w) = holdout_weighted_vectors(ctx, &f.residual, &win.residual);
+        let (vs, _) = stats::improvement_test(&alt, &w, 200);
+        if vs.p_value >= AMBIGUOUS_P {
+            out.push(Alternative {
+                effect: c.effect.to_string(),
+                site: c.site.describe(),
+                holdout_rms: holdout_rms(ctx, &f.residual),
+                p_value: vs.p_value,
+                experiment: telling_experiment(named, c.effect).to_string(),
+            });
+            if out.len() == 2 {
+                break;
+            }
+        }
+    }
+    out
+}
+
+/// The experiment that tells effect `a` from effect `b` (the physics each
+/// has and the other has not).
+fn telling_experiment(a: &str, b: &str) -> &'static str {
+    let pair = |x: &str, y: &str| (a == x && b == y) || (a == y && b == x);
+    let one = |x: &str| a == x || b == x;
+    if pair("friction", "hysteresis") {
+        "strokes at two speeds with a stop between reversals: friction depends on the direction of motion and lets go at rest; hysteresis follows the drive's turning points whatever the speed"
+    } else if pair("drift", "creep") {
+        "hold the drive after a step for several times the record's longest time constant: creep settles towards a level, drift goes on whether the drive moved or not"
+    } else if pair("time_delay", "unmodeled_resonance") {
+        "a sine sweep through the band: a delay's phase falls in proportion to frequency at constant gain, a resonance shows a peak in gain"
+    } else if pair("quantization", "encoder_slit_error") {
+        "a slow move over several revolutions: rounding error repeats every lsb, slit errors every revolution with a pattern of their own"
+    } else if one("saturation") {
+        "strokes of several amplitudes: saturation acts only above a level, the alternative at every amplitude"
+    } else if one("repetitive_disturbance") {
+        "a record with the drive held still (or at another period): an external disturbance goes on, an effect of the drive does not"
+    } else if one("drift") || one("creep") {
+        "a long record at rest after a step: what remains is drift or creep, without the dynamic effects"
+    } else {
+        "a second record with another excitation (amplitude, speed, frequency content), scored with both augmented models"
+    }
+}
+
+/// The share of the held-out mean square above the noise floor that going
+/// from `before_ms` to `after_ms` removes (of the whole mean square `at_floor`).
+fn excess_cut(
+    ctx: &Ctx<'_>,
+    excess: &[(f64, f64)],
+    at_floor: bool,
+    before_ms: f64,
+    after_ms: f64,
+) -> f64 {
+    let floor_ms: f64 = excess
+        .iter()
+        .enumerate()
+        .map(|(i, &(_, f))| f * f * weight(ctx, i).powi(2))
+        .sum();
+    let excess_before = if at_floor {
+        before_ms
+    } else {
+        (before_ms - floor_ms).max(0.0)
+    };
+    if excess_before > 0.0 {
+        (before_ms - after_ms) / excess_before
+    } else {
+        0.0
+    }
+}
+
+/// The nominal calibration (see [`Calibration`]): fit the gain and time scale
+/// of every continuous `state_space` block of the current model, from λ = 1
+/// and from λ = 1 ∓ 8 % (a lightly damped mode a few per cent off is a local
+/// minimum away). Returns the report (not yet judged), the calibrated model
+/// and its weighted held-out mean square; `None` when the model has nothing
+/// to calibrate or no fit runs.
+fn calibrate(
+    ctx: &Ctx<'_>,
+    cur: &Current,
+    runs: &mut usize,
+) -> Result<Option<(Calibration, Current, f64)>, PlfError> {
+    let spec = cur.spec()?;
+    let mut free = Vec::new();
+    for b in &spec.blocks {
+        if b.block.typetag_name() != "state_space" {
+            continue;
+        }
+        let names = b
+            .block
+            .tunable()
+            .map(|t| t.param_names())
+            .unwrap_or_default();
+        if names.iter().any(|n| n == "frequency_scale") {
+            for index in 0..names.len() {
+                free.push(FreeParam {
+                    block: b.name.clone(),
+                    index,
+                    scale: Scale::Log,
+                });
+            }
+        }
+    }
+    if free.is_empty() {
+        return Ok(None);
+    }
+    let mut best: Option<(f64, GraphSpec, Vec<f64>, Vec<Vec<f64>>)> = None;
+    for start in [1.0, 0.92, 1.08] {
+        let mut start_spec = surgery::clone_spec(&spec)?;
+        for b in start_spec.blocks.iter_mut() {
+            if free.iter().any(|f| f.block == b.name)
+                && let Some(t) = b.block.tunable_mut()
+            {
+                let mut p = t.params();
+                p[1] *= start;
+                t.set_params(&p)
+                    .map_err(|e| PlfError::Model(format!("block `{}`: {e}", b.name)))?;
+            }
+        }
+        let mut ev = Evaluator::new(surgery::clone_spec(&start_spec)?, ctx.data, &free, 0)?;
+        ev.set_weights(&ctx.weights);
+        let z0 = vec![0.0; free.len()];
+        let Some(fit) = levenberg_marquardt(&mut ev, &z0, ctx.n_est, 25) else {
+            continue;
+        };
+        *runs += fit.runs + 1;
+        let mut fitted = surgery::clone_spec(&start_spec)?;
+        ev.export(&fit.z, &mut fitted)?;
+        if !ev.run(&fit.z, ctx.n) {
+            continue;
+        }
+        if best.as_ref().is_none_or(|b| fit.cost < b.0) {
+            let residual = (0..ev.outputs())
+                .map(|i| ev.residual(i, 0..ctx.n))
+                .collect();
+            best = Some((fit.cost, fitted, fit.std, residual));
+        }
+    }
+    let Some((_, fitted, std, residual)) = best else {
+        return Ok(None);
+    };
+    let before_ms = weighted_holdout_ms(ctx, &cur.residual);
+    let after_ms = weighted_holdout_ms(ctx, &residual);
+    let (worse, better) = holdout_weighted_vectors(ctx, &cur.residual, &residual);
+    let (test, _) = stats::improvement_test(&worse, &better, 200);
+    let mut params = BTreeMap::new();
+    let mut uncertainty = BTreeMap::new();
+    for (k, f) in free.iter().enumerate() {
+        let block = fitted.blocks.iter().find(|b| b.name == f.block);
+        if let Some(t) = block.and_then(|b| b.block.tunable()) {
+            let key = format!("{}.{}", f.block, t.param_names()[f.index]);
+            params.insert(key.clone(), t.params()[f.index]);
+            if let Some(s) = std.get(k).filter(|s| s.is_finite()) {
+                uncertainty.insert(key, *s);
+            }
+        }
+    }
+    let hb = holdout_rms(ctx, &cur.residual);
+    let ha = holdout_rms(ctx, &residual);
+    let cal = Calibration {
+        accepted: false,
+        params,
+        final_params: BTreeMap::new(),
+        uncertainty,
+        holdout_rms_before: hb,
+        holdout_rms_after: ha,
+        cut_percent: 100.0 * (1.0 - (after_ms / before_ms).sqrt()),
+        p_value: test.p_value,
+        excess_cut_percent: f64::NAN,
+    };
+    let calibrated = evaluate_current(ctx, fitted, free, runs)?;
+    Ok(Some((cal, calibrated, after_ms)))
 }
 
 /// Why one of the effect blocks `names` of `spec` is not physical as a
@@ -1101,6 +1462,18 @@ fn time_period(c: &Cand) -> Option<f64> {
 /// any nonlinear map of the input leaves a residual locked in phase to it, and a
 /// disturbance independent of the input cannot be told from that on this record.
 /// The input-driven effects stay candidates. `None` when no excitation repeats.
+/// A residual line is locked to a measured input when the input repeats
+/// after one of the first `PHASE_LOCK_HARMONICS` multiples of the line's
+/// period with at least this correlation. The line's period is refined off
+/// the periodogram's grid ([`refine_line`]), so a truly locked line correlates
+/// to within round-off of the refinement; a looser bound (0.95, ±18° of phase)
+/// called a disturbance locked whenever one of eight multiples of its period
+/// happened to come near a multiple of a sine excitation's (about one record
+/// in two): 0.998 is ±3.6°.
+const PHASE_LOCK_CORRELATION: f64 = 0.998;
+/// See [`PHASE_LOCK_CORRELATION`].
+const PHASE_LOCK_HARMONICS: usize = 6;
+
 fn phase_locked(ctx: &Ctx<'_>, spec: &GraphSpec, period_s: f64) -> Option<String> {
     let n = ctx.n;
     let lag0 = period_s * ctx.fs;
@@ -1119,7 +1492,7 @@ fn phase_locked(ctx: &Ctx<'_>, spec: &GraphSpec, period_s: f64) -> Option<String
             continue;
         };
         let m0 = stats::mean(x);
-        for m in 1..=8usize {
+        for m in 1..=PHASE_LOCK_HARMONICS {
             let lag = m as f64 * lag0;
             if lag > 0.5 * n as f64 {
                 break;
@@ -1136,7 +1509,7 @@ fn phase_locked(ctx: &Ctx<'_>, spec: &GraphSpec, period_s: f64) -> Option<String
                 syy += b * b;
             }
             let c = sxy / (sxx * syy).sqrt().max(f64::MIN_POSITIVE);
-            if c > 0.95 {
+            if c > PHASE_LOCK_CORRELATION {
                 return Some(format!(
                     "the residual's line (period {period_s:.4e} s) is locked to the excitation: column `{col}` repeats every {m} × that period (correlation {c:.3}), so the residual is what a map of the input leaves, not a disturbance independent of it; an excitation that does not repeat at this period would tell them apart"
                 ));
@@ -1150,7 +1523,53 @@ fn phase_locked(ctx: &Ctx<'_>, spec: &GraphSpec, period_s: f64) -> Option<String
 /// fit in `r` (a slower "period" is a trend, not a repetition).
 fn line_period(r: &[f64]) -> Option<f64> {
     let (_, f) = stats::fisher_g(r);
+    let f = refine_line(r, f);
     (f > 0.0 && 1.0 / f <= r.len() as f64 / 3.0).then(|| 1.0 / f)
+}
+
+/// The frequency (cycles per sample) of the line of `r` near the periodogram
+/// bin `f0`, refined off the bin grid: the maximum of |Σ rₖ e^{−i2πfk}| over
+/// f0 ± one bin (golden-section search). A bin is 1/N wide, so a line between
+/// bins is found to a small fraction of it — what a phase comparison over the
+/// whole record needs.
+fn refine_line(r: &[f64], f0: f64) -> f64 {
+    let n = r.len();
+    if n < 8 || f0.is_nan() || f0 <= 0.0 {
+        return f0;
+    }
+    let m = stats::mean(r);
+    let power = |f: f64| {
+        let (mut re, mut im) = (0.0, 0.0);
+        let w = 2.0 * std::f64::consts::PI * f;
+        for (k, v) in r.iter().enumerate() {
+            let (s, c) = (w * k as f64).sin_cos();
+            re += (v - m) * c;
+            im -= (v - m) * s;
+        }
+        re * re + im * im
+    };
+    let bin = 1.0 / n as f64;
+    let (mut a, mut b) = ((f0 - bin).max(0.5 * bin), (f0 + bin).min(0.5));
+    let g = 0.5 * (5f64.sqrt() - 1.0);
+    let (mut c, mut d) = (b - g * (b - a), a + g * (b - a));
+    let (mut pc, mut pd) = (power(c), power(d));
+    for _ in 0..30 {
+        if pc > pd {
+            b = d;
+            d = c;
+            pd = pc;
+            c = b - g * (b - a);
+            pc = power(c);
+        } else {
+            a = c;
+            c = d;
+            pc = pd;
+            d = a + g * (b - a);
+            pd = power(d);
+        }
+    }
+    let f = 0.5 * (a + b);
+    if power(f) >= power(f0) { f } else { f0 }
 }
 
 /// How a force fed back from the stage's own motion into its force balance
@@ -1185,7 +1604,7 @@ fn force_split(force: &[f64], pos: &[f64], fs: f64) -> Option<ForceSplit> {
     }
     let v: Vec<f64> = pos[..n].windows(2).map(|w| (w[1] - w[0]) * fs).collect();
     let v_rms = stats::mean_square(&v).sqrt();
-    if !(v_rms > 0.0) {
+    if v_rms.is_nan() || v_rms <= 0.0 {
         return None;
     }
     // Sample k + 1 is the one the velocity v[k] leads into.
@@ -1233,6 +1652,123 @@ fn force_split(force: &[f64], pos: &[f64], fs: f64) -> Option<ForceSplit> {
         direction_r2,
         position_r2,
         coulomb: coef[2].abs(),
+    })
+}
+
+/// Share of the nonlinear part of a rate-independent map x ↦ y that has
+/// memory: y minus its straight-line fit on x is the nonlinear part; its
+/// single-valued part is its mean in 64 bins of equal count over x; the rest
+/// depends on the path (the loop). `None` when the map is linear to round-off.
+fn memory_share(x: &[f64], y: &[f64]) -> Option<f64> {
+    let n = x.len().min(y.len());
+    if n < 128 {
+        return None;
+    }
+    let (xm, ym) = (stats::mean(&x[..n]), stats::mean(&y[..n]));
+    let (mut sxy, mut sxx) = (0.0, 0.0);
+    for k in 0..n {
+        sxy += (x[k] - xm) * (y[k] - ym);
+        sxx += (x[k] - xm) * (x[k] - xm);
+    }
+    let slope = if sxx > 0.0 { sxy / sxx } else { 0.0 };
+    let nl: Vec<f64> = (0..n).map(|k| y[k] - ym - slope * (x[k] - xm)).collect();
+    let nl_ms = stats::mean_square(&nl);
+    let y_ms = stats::mean_square(&y[..n].iter().map(|v| v - ym).collect::<Vec<_>>());
+    if nl_ms.is_nan() || nl_ms <= 1e-12 * y_ms {
+        return None;
+    }
+    let mut idx: Vec<usize> = (0..n).collect();
+    idx.sort_by(|&a, &b| x[a].total_cmp(&x[b]));
+    let bins = 64;
+    let mut mem = 0.0;
+    for b in 0..bins {
+        let part = &idx[b * n / bins..(b + 1) * n / bins];
+        if part.is_empty() {
+            continue;
+        }
+        let m = part.iter().map(|&k| nl[k]).sum::<f64>() / part.len() as f64;
+        mem += part.iter().map(|&k| (nl[k] - m).powi(2)).sum::<f64>();
+    }
+    Some(mem / n as f64 / nl_ms)
+}
+
+/// The least share of its nonlinear part a fitted hysteresis map must owe to
+/// memory (a loop) to be named hysteresis.
+const MIN_MEMORY_SHARE: f64 = 0.25;
+
+/// Why fitted hysteresis candidate `f` is not hysteresis, or `None`: its
+/// block's output against its input (the drive, or the stage position for a
+/// force inside the loop) is close to a single-valued map.
+fn without_memory(ctx: &Ctx<'_>, f: &Fitted) -> Option<String> {
+    let output = format!("{}.y", f.block_name);
+    let input = f
+        .spec
+        .connections
+        .iter()
+        .find(|c| c.to == format!("{}.u", f.block_name))?
+        .from
+        .clone();
+    let mut spec = surgery::clone_spec(&f.spec).ok()?;
+    for name in [&input, &output] {
+        if !spec.log.contains(name) {
+            spec.log.push(name.clone());
+        }
+    }
+    let mut ev = Evaluator::new(spec, ctx.data, &[], 0).ok()?;
+    if !ev.run(&[], ctx.n) {
+        return None;
+    }
+    let (x, y) = (ev.log_series(&input)?, ev.log_series(&output)?);
+    match memory_share(&x, &y) {
+        Some(share) if share >= MIN_MEMORY_SHARE => None,
+        Some(share) => Some(format!(
+            "the fitted map from {input} has no loop to speak of ({:.0} % of its nonlinear part has memory, {:.0} % needed): a single-valued map, not hysteresis",
+            100.0 * share,
+            100.0 * MIN_MEMORY_SHARE
+        )),
+        None => Some(format!(
+            "the fitted map from {input} is linear: a gain, not hysteresis"
+        )),
+    }
+}
+
+/// The least share of a fitted friction force's variance that must come from
+/// its Coulomb (direction-set) part for it to be named friction.
+const MIN_COULOMB_SHARE: f64 = 0.25;
+
+/// Why fitted friction candidate `f` is not friction, or `None`: its force is
+/// mostly the viscous term, proportional to the velocity — a damping the
+/// nominal has wrong (a linear model error), not the direction-set force
+/// friction is. Shares from the fitted parameters and the stage velocity:
+/// Coulomb F_c² (|sign v| = 1 while moving) against (F_v·v_rms)².
+fn viscous_only(ctx: &Ctx<'_>, f: &Fitted) -> Option<String> {
+    let block = f.spec.blocks.iter().find(|b| b.name == f.block_name)?;
+    let p = block.block.tunable()?.params();
+    let (coulomb, viscous) = (p.first()?.abs(), p.get(3)?.abs());
+    let input = f
+        .spec
+        .connections
+        .iter()
+        .find(|c| c.to == format!("{}.u", f.block_name))?
+        .from
+        .clone();
+    let mut spec = surgery::clone_spec(&f.spec).ok()?;
+    if !spec.log.contains(&input) {
+        spec.log.push(input.clone());
+    }
+    let mut ev = Evaluator::new(spec, ctx.data, &[], 0).ok()?;
+    if !ev.run(&[], ctx.n) {
+        return None;
+    }
+    let x = ev.log_series(&input)?;
+    let v: Vec<f64> = x.windows(2).map(|w| (w[1] - w[0]) * ctx.fs).collect();
+    let fv = viscous * stats::mean_square(&v).sqrt();
+    let share = coulomb * coulomb / (coulomb * coulomb + fv * fv).max(f64::MIN_POSITIVE);
+    (share < MIN_COULOMB_SHARE).then(|| {
+        format!(
+            "the fitted force is {:.0} % viscous (Coulomb level {coulomb:.3e} against a viscous force of {fv:.3e} rms): a damping the nominal has wrong, not friction",
+            100.0 * (1.0 - share)
+        )
     })
 }
 

@@ -18,6 +18,7 @@ pub mod diagnose;
 pub mod effects;
 pub mod fit;
 pub mod generate;
+pub mod scenario;
 pub mod stats;
 pub mod surgery;
 

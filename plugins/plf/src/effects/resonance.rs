@@ -13,6 +13,10 @@ use std::f64::consts::TAU;
 /// roots and no longer a resonance).
 pub const MAX_DAMPING: f64 = 100.0;
 
+/// The least damping ratio of a structural resonance's pole pair (Q = 5000;
+/// flexure stages and piezo stacks in air have ζ ≈ 10⁻³ and more).
+pub const MIN_POLE_DAMPING: f64 = 1e-4;
+
 /// Smallest departure of |R(jω)| from 1 (dB) that a diagnosed resonance must
 /// show in the data's band ([`UnmodeledResonance::implausible`]).
 pub const MIN_PEAK_DB: f64 = 1.0;
@@ -102,6 +106,12 @@ impl UnmodeledResonance {
                     "damping ratio of the {what} pair ζ = {z:.3e} is not that of a resonance (0 < ζ ≤ 1)"
                 ));
             }
+        }
+        if self.zeta_pole < MIN_POLE_DAMPING {
+            return Some(format!(
+                "the pole pair's damping ζ = {:.3e} is below {MIN_POLE_DAMPING:.0e} (Q > 5000): an undamped oscillator rings on at {:.4e} Hz without the drive — what a periodic disturbance does, not a structure's resonance",
+                self.zeta_pole, self.f_pole_hz
+            ));
         }
         for (what, f) in [("pole", self.f_pole_hz), ("zero", self.f_zero_hz)] {
             if !(f >= lo && f <= hi) {
