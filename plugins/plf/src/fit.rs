@@ -456,9 +456,9 @@ impl Problem for Evaluator {
                 .column(&self.columns[i])
                 .expect("a column checked when the evaluator was built");
             let (decim, weight) = (self.decim[i], self.weight[i]);
-            for k in self.skip..n {
+            for (k, m) in measured.iter().enumerate().take(n).skip(self.skip) {
                 let model = log.get(k * decim).copied().unwrap_or(f64::NAN);
-                let v = (measured[k] - model) * weight;
+                let v = (m - model) * weight;
                 if !v.is_finite() {
                     return false;
                 }
