@@ -476,8 +476,10 @@ pub fn diagnose_with_progress(
         // Why each failed candidate failed (shown in the candidate table).
         let mut failures: Vec<Option<String>> = Vec::with_capacity(total);
         let threads = opts.threads.max(1);
-        // A work queue: each worker takes the next candidate; results land in
-        // their candidate's slot, so the outcome does not depend on timing.
+        // A work queue: each worker takes the next candidate, longest first;
+        // results land in their candidate's slot, so the outcome does not depend
+        // on timing.
+        let queue = crate::pool::longest_first(&cands, fit_cost);
         let next = std::sync::atomic::AtomicUsize::new(0);
         let slots: Vec<std::sync::Mutex<Option<Result<Fitted, String>>>> =
             (0..total).map(|_| std::sync::Mutex::new(None)).collect();
@@ -485,14 +487,14 @@ pub fn diagnose_with_progress(
         std::thread::scope(|sc| {
             for _ in 0..threads.min(total.max(1)) {
                 let tx = tx.clone();
-                let (next, slots, cands, ctx, cur, locked) =
-                    (&next, &slots, &cands, &ctx, &cur, &locked);
+                let (next, slots, cands, ctx, cur, locked, queue) =
+                    (&next, &slots, &cands, &ctx, &cur, &locked, &queue);
                 sc.spawn(move || {
                     loop {
-                        let i = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-                        if i >= cands.len() {
+                        let k = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                        let Some(&i) = queue.get(k) else {
                             break;
-                        }
+                        };
                         let r = match &locked[i] {
                             Some(why) => Err(format!("not tried: {why}")),
                             None => std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
@@ -581,14 +583,16 @@ pub fn diagnose_with_progress(
             ms * (1.0 + k_of(f) * ne.ln() / ne) * (1.0 + k_of(f) / nh.sqrt())
         };
         let mut best: Option<(usize, Fitted, f64)> = None;
-        let mut finalists = 0;
+        // The finalists: the best one (three once effects are named, for the
+        // joint refit), passing over fits that are not physical as named.
+        let mut finalists: Vec<usize> = Vec::new();
         for &i in &order {
-            if finalists == if cur.free.is_empty() { 1 } else { 3 } {
+            if finalists.len() == if cur.free.is_empty() { 1 } else { 3 } {
                 break;
             }
             // A hysteresis block whose fitted map has no loop is not hysteresis
             // (see `memory_share`): it stands in for a gain, a saturation or a
-            // smooth misfit, and is not named.
+            // smooth misfit; a friction force that is all viscous is a damping.
             let refusal = match (cands[i].effect, &results[i]) {
                 ("hysteresis", Some(f)) => without_memory(&ctx, f),
                 ("friction", Some(f)) => viscous_only(&ctx, f),
@@ -607,10 +611,34 @@ pub fn diagnose_with_progress(
                 results[i] = None;
                 continue;
             }
-            finalists += 1;
-            let mut f = results[i].take().expect("fitted");
-            if !cur.free.is_empty()
-                && let Ok(j) = joint_refit(&ctx, &f, &mut runs)
+            finalists.push(i);
+        }
+        let top: Vec<Fitted> = finalists
+            .iter()
+            .map(|&i| results[i].take().expect("fitted"))
+            .collect();
+        // The joint refits are independent: one per core.
+        type Joint = Option<(Result<Fitted, PlfError>, usize)>;
+        let top: Vec<(Fitted, Joint)> = if cur.free.is_empty() {
+            top.into_iter().map(|f| (f, None)).collect()
+        } else {
+            crate::pool::map(
+                top,
+                opts.threads,
+                |_| 1.0,
+                |f| {
+                    let mut n_runs = 0;
+                    let j = joint_refit(&ctx, &f, &mut n_runs);
+                    (f, Some((j, n_runs)))
+                },
+            )
+        };
+        for (&i, (mut f, joint)) in finalists.iter().zip(top) {
+            let joint = joint.map(|(j, n_runs)| {
+                runs += n_runs;
+                j
+            });
+            if let Some(Ok(j)) = joint
                 && weighted_holdout_ms(&ctx, &j.residual) < weighted_holdout_ms(&ctx, &f.residual)
                 && implausible(&ctx, &j.spec, j.free.iter().map(|p| p.block.as_str())).is_none()
             {
@@ -2288,6 +2316,14 @@ fn slit_count(r: &[f64], y: &[f64], pitch: f64, slits: usize) -> Option<usize> {
         }
     }
     best.map(|(nn, _)| nn)
+}
+
+/// A rough cost of fitting candidate `c`, for the work queue's order only (it
+/// changes no result): runs ≈ starts × (parameters + 2) per iteration, a run of
+/// the whole graph costing several times a run of an output-side block alone.
+fn fit_cost(c: &Cand) -> f64 {
+    let per_run = if c.output.is_some() { 1.0 } else { 8.0 };
+    c.starts.len() as f64 * (c.free.len() + 2) as f64 * per_run
 }
 
 fn fit_candidate(ctx: &Ctx<'_>, cur: &Current, c: &Cand) -> Result<Fitted, String> {

@@ -6,7 +6,10 @@
 //!
 //! Nothing is parsed or allocated per sample inside a run: parameters are written
 //! into the [`Tunable`](nanomotion_core::Tunable) blocks, the scheduler is reset and
-//! stepped, and the compared logs are read in place.
+//! stepped, and the compared logs are read in place. The measured columns are
+//! read from the shared dataset (not copied per evaluator), and the optimiser
+//! reuses its residual and Jacobian buffers from run to run, so a fit costs its
+//! runs — O(N) each — and nothing that grows faster with the record.
 
 use crate::PlfError;
 use nanomotion_core::Scheduler;
@@ -40,9 +43,10 @@ pub trait Problem {
     fn theta(&self, z: &[f64]) -> Vec<f64>;
     /// dθ/dz at `z`, element-wise.
     fn dtheta_dz(&self, z: &[f64]) -> Vec<f64>;
-    /// The weighted residuals over the first `n` samples, `None` if the model
-    /// refuses the parameters or diverges.
-    fn weighted_residuals(&mut self, z: &[f64], n: usize) -> Option<Vec<f64>>;
+    /// The weighted residuals over the first `n` samples, written into `out`
+    /// (cleared first; its allocation is reused from run to run); `false` if the
+    /// model refuses the parameters or diverges.
+    fn weighted_residuals(&mut self, z: &[f64], n: usize, out: &mut Vec<f64>) -> bool;
 }
 
 fn theta_of(free: &[(Scale, f64)], z: &[f64]) -> Vec<f64> {
@@ -177,15 +181,13 @@ impl Problem for BlockEvaluator {
     fn dtheta_dz(&self, z: &[f64]) -> Vec<f64> {
         dtheta_of(&self.free_scales(), z)
     }
-    fn weighted_residuals(&mut self, z: &[f64], n: usize) -> Option<Vec<f64>> {
+    fn weighted_residuals(&mut self, z: &[f64], n: usize, out: &mut Vec<f64>) -> bool {
+        out.clear();
         if !self.run(z, n) {
-            return None;
+            return false;
         }
-        Some(
-            (self.skip..self.y.len())
-                .map(|k| (self.measured[k] - self.y[k]) * self.weight)
-                .collect(),
-        )
+        out.extend((self.skip..self.y.len()).map(|k| (self.measured[k] - self.y[k]) * self.weight));
+        true
     }
 }
 
@@ -194,7 +196,9 @@ pub struct Evaluator {
     sched: Scheduler,
     /// (execution index of block, parameter index, scale, start value).
     free: Vec<(usize, usize, Scale, f64)>,
-    measured: Vec<Vec<f64>>,
+    /// The record (shared, not copied) and the measured column of each output.
+    data: Arc<Dataset>,
+    columns: Vec<String>,
     /// Log samples per data sample, per compared output.
     decim: Vec<usize>,
     /// Normalisation of each output's residual (its measured standard deviation).
@@ -226,7 +230,7 @@ impl Evaluator {
         let (sched, _) = spec
             .build_with_data(data.clone())
             .map_err(|e| PlfError::Model(e.to_string()))?;
-        let mut measured = Vec::new();
+        let mut columns = Vec::new();
         let mut decim = Vec::new();
         let mut weight = Vec::new();
         let compares: Vec<(String, String)> = sched
@@ -253,16 +257,20 @@ impl Evaluator {
                 )));
             }
             let m = crate::stats::mean(col);
-            let sd =
-                crate::stats::mean_square(&col.iter().map(|v| v - m).collect::<Vec<_>>()).sqrt();
+            let sd = if col.is_empty() {
+                0.0
+            } else {
+                (col.iter().map(|v| (v - m) * (v - m)).sum::<f64>() / col.len() as f64).sqrt()
+            };
             weight.push(if sd > 0.0 { 1.0 / sd } else { 1.0 });
-            measured.push(col.to_vec());
+            columns.push(column.clone());
             decim.push(mr as usize);
         }
         let mut me = Self {
             sched,
             free: Vec::new(),
-            measured,
+            data: data.clone(),
+            columns,
             decim,
             weight,
             ticks_per_sample: tps as u64,
@@ -297,7 +305,7 @@ impl Evaluator {
 
     /// Number of compared outputs.
     pub fn outputs(&self) -> usize {
-        self.measured.len()
+        self.columns.len()
     }
 
     /// Data samples in the record.
@@ -353,7 +361,9 @@ impl Evaluator {
 
     /// The measured column of output `i`.
     pub fn measured(&self, i: usize) -> &[f64] {
-        &self.measured[i]
+        self.data
+            .column(&self.columns[i])
+            .expect("a column checked when the evaluator was built")
     }
 
     /// Weigh the residual of output `i` by `w[i]` instead of 1/σ of its measured
@@ -397,7 +407,7 @@ impl Evaluator {
         // A trial step may diverge: that is an answer ("reject this step"), not an
         // error to locate, so only the compared logs are scanned (no replay, no
         // warning).
-        (0..self.measured.len()).all(|i| {
+        (0..self.outputs()).all(|i| {
             self.sched
                 .compare_log(i)
                 .is_some_and(|(log, _)| log.iter().all(|v| v.is_finite()))
@@ -413,9 +423,8 @@ impl Evaluator {
 
     /// Residuals `measured − model` of output `i` over data samples `range`, from the last run.
     pub fn residual(&self, i: usize, range: std::ops::Range<usize>) -> Vec<f64> {
-        range
-            .map(|k| self.measured[i][k] - self.model(i, k))
-            .collect()
+        let measured = self.measured(i);
+        range.map(|k| measured[k] - self.model(i, k)).collect()
     }
 
     /// Model output `i` over `range`, from the last run.
@@ -433,21 +442,30 @@ impl Problem for Evaluator {
     }
     /// Weighted residual vector (all outputs, samples `skip..n`) for `z`, or `None`
     /// when the run fails.
-    fn weighted_residuals(&mut self, z: &[f64], n: usize) -> Option<Vec<f64>> {
+    fn weighted_residuals(&mut self, z: &[f64], n: usize, out: &mut Vec<f64>) -> bool {
+        out.clear();
         if !self.run(z, n) {
-            return None;
+            return false;
         }
-        let mut r = Vec::with_capacity(self.outputs() * n);
+        out.reserve(self.outputs() * n.saturating_sub(self.skip));
         for i in 0..self.outputs() {
-            for k in self.skip..n {
-                let v = (self.measured[i][k] - self.model(i, k)) * self.weight[i];
+            // The log and the column looked up once per output, not per sample.
+            let (log, _) = self.sched.compare_log(i).expect("compare index");
+            let measured = self
+                .data
+                .column(&self.columns[i])
+                .expect("a column checked when the evaluator was built");
+            let (decim, weight) = (self.decim[i], self.weight[i]);
+            for (k, m) in measured.iter().enumerate().take(n).skip(self.skip) {
+                let model = log.get(k * decim).copied().unwrap_or(f64::NAN);
+                let v = (m - model) * weight;
                 if !v.is_finite() {
-                    return None;
+                    return false;
                 }
-                r.push(v);
+                out.push(v);
             }
         }
-        Some(r)
+        true
     }
 }
 
@@ -485,8 +503,15 @@ pub fn levenberg_marquardt<P: Problem>(
 ) -> Option<Fit> {
     let p = z0.len();
     let mut z = z0.to_vec();
-    let mut r = ev.weighted_residuals(&z, n)?;
+    let mut r = Vec::new();
+    if !ev.weighted_residuals(&z, n, &mut r) {
+        return None;
+    }
     let mut cost: f64 = r.iter().map(|v| v * v).sum();
+    // Buffers of the record's length, allocated once per fit: a trial run's
+    // residuals, a Jacobian column's, and Jᵀ.
+    let (mut rn, mut rj) = (Vec::with_capacity(r.len()), Vec::with_capacity(r.len()));
+    let mut jt = nalgebra::DMatrix::<f64>::zeros(p, r.len());
     let mut runs = 1;
     let mut lambda = 1e-3;
     let mut nu = 2.0;
@@ -503,23 +528,19 @@ pub fn levenberg_marquardt<P: Problem>(
             let mut zj = z.clone();
             zj[j] += h;
             runs += 1;
-            match ev.weighted_residuals(&zj, n) {
-                Some(rj) => {
-                    for (i, (a, b)) in rj.iter().zip(&r).enumerate() {
-                        jac[(i, j)] = (a - b) / h;
-                    }
-                }
-                None => {
-                    ok = false;
-                    break;
-                }
+            if !ev.weighted_residuals(&zj, n, &mut rj) {
+                ok = false;
+                break;
+            }
+            for (dst, (a, b)) in jac.column_mut(j).iter_mut().zip(rj.iter().zip(&r)) {
+                *dst = (a - b) / h;
             }
         }
         if !ok {
             break;
         }
         have_jac = true;
-        let jt = jac.transpose();
+        jac.transpose_to(&mut jt);
         let jtj = &jt * &jac;
         let g = &jt * nalgebra::DVector::from_column_slice(&r);
         let mut improved = false;
@@ -535,12 +556,12 @@ pub fn levenberg_marquardt<P: Problem>(
             };
             let zn: Vec<f64> = z.iter().zip(step.iter()).map(|(a, b)| a + b).collect();
             runs += 1;
-            if let Some(rn) = ev.weighted_residuals(&zn, n) {
+            if ev.weighted_residuals(&zn, n, &mut rn) {
                 let cn: f64 = rn.iter().map(|v| v * v).sum();
                 if cn < cost {
                     let rel = (cost - cn) / cost.max(1e-300);
                     z = zn;
-                    r = rn;
+                    std::mem::swap(&mut r, &mut rn);
                     cost = cn;
                     lambda = (lambda / 3.0).max(1e-12);
                     nu = 2.0;

@@ -12,12 +12,14 @@
 //!   periodic lines, held-out improvement), tested for their false-alarm rates.
 //! - [`surgery`]: where an effect can enter a graph, and inserting it.
 //! - [`fit`]: parameter fitting by re-simulation (Levenberg–Marquardt).
+//! - [`pool`]: independent fits run on every core, results in a fixed order.
 //! - [`diagnose()`]: the workflow itself.
 
 pub mod diagnose;
 pub mod effects;
 pub mod fit;
 pub mod generate;
+pub mod pool;
 pub mod scenario;
 pub mod stats;
 pub mod surgery;

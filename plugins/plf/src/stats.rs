@@ -183,48 +183,131 @@ pub fn mean_square(x: &[f64]) -> f64 {
 }
 
 /// Normalised sample autocorrelation ρ(0..=max_lag) (biased estimator, mean removed).
+/// O(n·L) by direct sums for a few lags, O(n log n) by FFT for many
+/// ([`lag_products`]).
 pub fn autocorrelation(x: &[f64], max_lag: usize) -> Vec<f64> {
     let n = x.len();
     let m = mean(x);
     let c0: f64 = x.iter().map(|v| (v - m) * (v - m)).sum();
-    (0..=max_lag.min(n.saturating_sub(1)))
-        .map(|k| {
-            if c0 == 0.0 {
-                return if k == 0 { 1.0 } else { 0.0 };
-            }
-            let mut s = 0.0;
-            for i in k..n {
-                s += (x[i] - m) * (x[i - k] - m);
-            }
-            s / c0
-        })
-        .collect()
+    let lags = max_lag.min(n.saturating_sub(1));
+    if c0 == 0.0 {
+        return (0..=lags).map(|k| if k == 0 { 1.0 } else { 0.0 }).collect();
+    }
+    let centred: Vec<f64> = x.iter().map(|v| v - m).collect();
+    let s = lag_products(&centred, &centred, lags);
+    s[lags..].iter().map(|v| v / c0).collect()
 }
 
 /// Normalised cross-correlation ρ_xy(τ) = Σ x(t+τ) y(t) / √(Σx² Σy²) for τ in
-/// −max_lag..=max_lag (means removed), returned with index τ + max_lag.
+/// −max_lag..=max_lag (means removed), returned with index τ + max_lag
+/// ([`lag_products`]: O(n log n) for many lags).
 pub fn cross_correlation(x: &[f64], y: &[f64], max_lag: usize) -> Vec<f64> {
     let n = x.len().min(y.len());
     let (mx, my) = (mean(&x[..n]), mean(&y[..n]));
     let sx: f64 = x[..n].iter().map(|v| (v - mx) * (v - mx)).sum();
     let sy: f64 = y[..n].iter().map(|v| (v - my) * (v - my)).sum();
     let norm = (sx * sy).sqrt();
-    let lags = max_lag as isize;
-    (-lags..=lags)
-        .map(|tau| {
-            if norm == 0.0 {
-                return 0.0;
-            }
-            let mut s = 0.0;
-            for t in 0..n as isize {
-                let i = t + tau;
-                if i >= 0 && (i as usize) < n {
-                    s += (x[i as usize] - mx) * (y[t as usize] - my);
+    if norm == 0.0 {
+        return vec![0.0; 2 * max_lag + 1];
+    }
+    let xc: Vec<f64> = x[..n].iter().map(|v| v - mx).collect();
+    let yc: Vec<f64> = y[..n].iter().map(|v| v - my).collect();
+    lag_products(&xc, &yc, max_lag)
+        .into_iter()
+        .map(|s| s / norm)
+        .collect()
+}
+
+/// Lagged product sums s(τ) = Σ_t a(t+τ)·b(t) over every t where both samples
+/// exist, for τ = −max_lag..=max_lag (index τ + max_lag; lags beyond the record
+/// give 0). Direct sums cost n·(2L+1) multiply–adds; above [`FFT_MIN_LAGS`] lags
+/// they are computed by FFT of the zero-padded signals in O(n log n) — the same
+/// sums up to round-off: |error| ≤ ~10⁻¹⁵·log₂(n)·√(Σa²·Σb²), which is the scale
+/// every caller normalises by (pinned against the direct sums in the tests).
+pub fn lag_products(a: &[f64], b: &[f64], max_lag: usize) -> Vec<f64> {
+    let n = a.len().min(b.len());
+    let (a, b) = (&a[..n], &b[..n]);
+    let lags = 2 * max_lag + 1;
+    if max_lag < FFT_MIN_LAGS || n < 2 {
+        return (0..lags)
+            .map(|i| {
+                let tau = i as isize - max_lag as isize;
+                let s = tau.unsigned_abs();
+                if s >= n {
+                    0.0
+                } else if tau >= 0 {
+                    a[s..].iter().zip(&b[..n - s]).map(|(x, y)| x * y).sum()
+                } else {
+                    a[..n - s].iter().zip(&b[s..]).map(|(x, y)| x * y).sum()
                 }
+            })
+            .collect();
+    }
+    use rustfft::{FftPlanner, num_complex::Complex};
+    // Zero padding to m ≥ n + L keeps the circular sums of lags |τ| ≤ L free of
+    // wrap-around; m is a product of 2s and 3s (fast sizes).
+    let m = fast_size(n + max_lag.min(n));
+    // a as the real part, b as the imaginary part: one forward transform. Both
+    // are scaled to unit norm first, so that a signal much smaller than the other
+    // does not drown in its round-off.
+    let norm = |x: &[f64]| {
+        let s = x.iter().map(|v| v * v).sum::<f64>().sqrt();
+        if s > 0.0 && s.is_finite() { s } else { 1.0 }
+    };
+    let (na, nb) = (norm(a), norm(b));
+    let mut z: Vec<Complex<f64>> = (0..m)
+        .map(|k| {
+            if k < n {
+                Complex::new(a[k] / na, b[k] / nb)
+            } else {
+                Complex::new(0.0, 0.0)
             }
-            s / norm
+        })
+        .collect();
+    let mut planner = FftPlanner::new();
+    planner.plan_fft_forward(m).process(&mut z);
+    // A_k = (Z_k + Z*_{m−k})/2, B_k = (Z_k − Z*_{m−k})/(2i); S_k = A_k·B*_k.
+    let mut s: Vec<Complex<f64>> = (0..m)
+        .map(|k| {
+            let zk = z[k];
+            let zm = z[(m - k) % m].conj();
+            let ak = (zk + zm) * 0.5;
+            let bk = (zk - zm) * Complex::new(0.0, -0.5);
+            ak * bk.conj()
+        })
+        .collect();
+    planner.plan_fft_inverse(m).process(&mut s);
+    let scale = na * nb / m as f64;
+    (0..lags)
+        .map(|i| {
+            let tau = i as isize - max_lag as isize;
+            if tau.unsigned_abs() >= n {
+                0.0
+            } else {
+                s[tau.rem_euclid(m as isize) as usize].re * scale
+            }
         })
         .collect()
+}
+
+/// Below this many lags [`lag_products`] sums directly: 2L+1 passes over the
+/// data cost about what two FFTs of the padded length do near L = 32 (so the
+/// Ljung–Box test's 20 lags stay direct sums, bit for bit as before).
+pub const FFT_MIN_LAGS: usize = 32;
+
+/// The smallest 2^i·3^j ≥ n.
+fn fast_size(n: usize) -> usize {
+    let mut best = usize::MAX;
+    let mut p3 = 1usize;
+    while p3 < 2 * n.max(1) {
+        let mut p = p3;
+        while p < n {
+            p *= 2;
+        }
+        best = best.min(p);
+        p3 *= 3;
+    }
+    best
 }
 
 /// Result of a hypothesis test.
@@ -372,19 +455,14 @@ pub fn improvement_test(worse: &[f64], better: &[f64], max_lag: usize) -> (Test,
     let cross: f64 = r.iter().zip(&delta).map(|(a, b)| a * b).sum();
     let m = mean(r);
     let l = max_lag.min(n / 4);
+    let centred: Vec<f64> = r.iter().map(|v| v - m).collect();
+    // Lags 0..=l of both lagged sums ([`lag_products`]: by FFT for many lags).
+    let sums_r = lag_products(&centred, &centred, l);
+    let sums_delta = lag_products(&delta, &delta, l);
     let mut v = 0.0;
     for j in 0..=l {
-        let gamma_r = r[..n - j]
-            .iter()
-            .zip(&r[j..])
-            .map(|(a, b)| (a - m) * (b - m))
-            .sum::<f64>()
-            / n as f64;
-        let c_delta: f64 = delta[..n - j]
-            .iter()
-            .zip(&delta[j..])
-            .map(|(a, b)| a * b)
-            .sum();
+        let gamma_r = sums_r[l + j] / n as f64;
+        let c_delta = sums_delta[l + j];
         let w = 1.0 - j as f64 / (l + 1) as f64;
         v += if j == 0 { 1.0 } else { 2.0 * w } * gamma_r * c_delta;
     }
@@ -779,6 +857,119 @@ mod tests {
                 })
                 .count();
             assert!(alarms <= 32, "coloured {coloured}: {alarms} of 400");
+        }
+    }
+
+    /// The lagged sums as they were computed before the FFT path: one direct
+    /// sum per lag, O(n·L).
+    fn direct_lag_products(a: &[f64], b: &[f64], max_lag: usize) -> Vec<f64> {
+        let n = a.len().min(b.len()) as isize;
+        (-(max_lag as isize)..=max_lag as isize)
+            .map(|tau| {
+                (0..n)
+                    .filter(|t| (0..n).contains(&(t + tau)))
+                    .map(|t| a[(t + tau) as usize] * b[t as usize])
+                    .sum()
+            })
+            .collect()
+    }
+
+    /// The held-out variance V of [`improvement_test`] by direct lagged sums (the
+    /// code before the FFT path).
+    fn direct_improvement_z(worse: &[f64], better: &[f64], max_lag: usize) -> f64 {
+        let n = worse.len();
+        let delta: Vec<f64> = worse.iter().zip(better).map(|(w, b)| w - b).collect();
+        let cross: f64 = worse.iter().zip(&delta).map(|(a, b)| a * b).sum();
+        let m = mean(worse);
+        let l = max_lag.min(n / 4);
+        let mut v = 0.0;
+        for j in 0..=l {
+            let gamma_r = (0..n - j)
+                .map(|t| (worse[t] - m) * (worse[t + j] - m))
+                .sum::<f64>()
+                / n as f64;
+            let c_delta: f64 = (0..n - j).map(|t| delta[t] * delta[t + j]).sum();
+            let w = 1.0 - j as f64 / (l + 1) as f64;
+            v += if j == 0 { 1.0 } else { 2.0 * w } * gamma_r * c_delta;
+        }
+        cross / v.sqrt()
+    }
+
+    #[test]
+    fn fft_lag_products_equal_the_direct_sums() {
+        // Seeded coloured and offset signals, lengths with awkward factors
+        // (primes, powers of two, shorter than the lags), few and many lags.
+        let mut rng = Rng::new(41);
+        for &n in &[2usize, 3, 17, 64, 97, 1000, 1024, 4099, 20_000] {
+            let e = white(n, 1000 + n as u64);
+            let mut y = 0.0;
+            let a: Vec<f64> = e
+                .iter()
+                .map(|v| {
+                    y = 0.9 * y + v;
+                    3.0 + y
+                })
+                .collect();
+            let b: Vec<f64> = (0..n).map(|_| 1e-6 * rng.normal()).collect();
+            // Lags beyond the record only where the direct sums stay cheap.
+            let beyond = if n < 2000 { vec![n + 3] } else { vec![] };
+            for &lags in [0usize, 5, FFT_MIN_LAGS, 50, 200].iter().chain(&beyond) {
+                for (x, w) in [(&a, &b), (&a, &a), (&b, &a)] {
+                    let fast = lag_products(x, w, lags);
+                    let slow = direct_lag_products(x, w, lags);
+                    assert_eq!(fast.len(), slow.len());
+                    // Relative to the scale every caller normalises by.
+                    let scale = (mean_square(x) * mean_square(w)).sqrt() * n as f64;
+                    for (tau, (f, s)) in fast.iter().zip(&slow).enumerate() {
+                        assert!(
+                            (f - s).abs() <= 1e-12 * scale,
+                            "n {n}, lags {lags}, τ index {tau}: {f} vs {s}"
+                        );
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn correlation_statistics_equal_their_direct_forms() {
+        for seed in 0..6u64 {
+            let n = 3000 + 977 * seed as usize;
+            let u = white(n, 300 + seed);
+            let mut y = 0.0;
+            let r: Vec<f64> = white(n, 600 + seed)
+                .iter()
+                .zip(&u)
+                .map(|(e, v)| {
+                    y = 0.8 * y + e + 0.2 * v;
+                    y
+                })
+                .collect();
+            // ρ normalised by c0: absolute agreement to 1e-12.
+            let m = mean(&r);
+            let centred: Vec<f64> = r.iter().map(|v| v - m).collect();
+            let c0: f64 = centred.iter().map(|v| v * v).sum();
+            let slow = direct_lag_products(&centred, &centred, 300);
+            for (k, rho) in autocorrelation(&r, 300).iter().enumerate() {
+                assert!((rho - slow[300 + k] / c0).abs() < 1e-12, "lag {k}");
+            }
+            let (mr, mu) = (mean(&r), mean(&u));
+            let rc: Vec<f64> = r.iter().map(|v| v - mr).collect();
+            let uc: Vec<f64> = u.iter().map(|v| v - mu).collect();
+            let norm = (mean_square(&rc) * mean_square(&uc)).sqrt() * n as f64;
+            let slow = direct_lag_products(&rc, &uc, 120);
+            for (i, c) in cross_correlation(&r, &u, 120).iter().enumerate() {
+                assert!((c - slow[i] / norm).abs() < 1e-12, "τ index {i}");
+            }
+            // The improvement test's z against its direct computation.
+            let better: Vec<f64> = r.iter().zip(&u).map(|(a, v)| a - 0.1 * v).collect();
+            let (t, _) = improvement_test(&r, &better, 200);
+            let z = direct_improvement_z(&r, &better, 200);
+            assert!(
+                (t.statistic - z).abs() <= 1e-12 * z.abs(),
+                "{} vs {z}",
+                t.statistic
+            );
         }
     }
 
