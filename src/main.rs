@@ -152,6 +152,11 @@ enum Command {
         /// Sample rate (Hz) of a `.mat` data file that has no time vector `t`.
         #[arg(long, value_name = "HZ", requires = "data")]
         data_rate: Option<f64>,
+        /// Also print each loop's L, S = 1/(1 + L) and T = L/(1 + L), and the T(z)
+        /// of each learning block (`t_model:` to paste), as YAML transfer
+        /// functions in z.
+        #[arg(long)]
+        print_loop: bool,
     },
     /// Check the stability criteria of the graph's repetitive controllers: (5.5) for
     /// a fixed period N, (5.9) ‖Q(1 − T L z^l)‖∞ < 1/√(M − m + 1) for a delay varying
@@ -314,7 +319,8 @@ fn main() -> ExitCode {
             graph,
             data,
             data_rate,
-        } => check(graph, &data, data_rate),
+            print_loop,
+        } => check(graph, &data, data_rate, print_loop),
         Command::RcCheck { graph } => match nanomotion::dvrc::check::rc_check_file(&graph) {
             Ok(report) if report.blocks.is_empty() => Err(format!(
                 "{}: no repetitive_control, high_order_rc or dvrc block, nothing to check (fix: rc-check a graph with a repetitive controller, e.g. examples/rc_dvrc.yaml; `nanomotion check` validates any graph)",
@@ -423,7 +429,12 @@ fn load_data(
     Ok(merged.map(std::sync::Arc::new))
 }
 
-fn check(graph: PathBuf, data: &[PathBuf], data_rate: Option<f64>) -> Result<(), String> {
+fn check(
+    graph: PathBuf,
+    data: &[PathBuf],
+    data_rate: Option<f64>,
+    print_loop: bool,
+) -> Result<(), String> {
     let mut spec = load(&graph)?;
     let require = spec.require.clone();
     let data = load_data(&graph, &spec, data, data_rate)?;
@@ -462,6 +473,9 @@ fn check(graph: PathBuf, data: &[PathBuf], data_rate: Option<f64>) -> Result<(),
         }
     }
     say!("{}", gate.to_string().trim_end());
+    if print_loop {
+        say!("{}", gate_cmd::print_loops(&gate).trim_end());
+    }
     gate_cmd::verdict(&gate)
 }
 

