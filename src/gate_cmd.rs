@@ -80,7 +80,8 @@ pub fn print_loops(report: &GateReport) -> String {
         }
         match &p.loop_transfer {
             Some(l) if l.is_siso() => {
-                let eye = StateSpace::gain(nanomotion::core::nalgebra::DMatrix::identity(1, 1), l.dt);
+                let eye =
+                    StateSpace::gain(nanomotion::core::nalgebra::DMatrix::identity(1, 1), l.dt);
                 let _ = writeln!(out, "    break_at: \"{}\"", p.break_at);
                 let _ = writeln!(out, "    L: {}", tf(l));
                 for (name, sys) in [
@@ -98,10 +99,18 @@ pub fn print_loops(report: &GateReport) -> String {
                 }
             }
             Some(_) => {
-                let _ = writeln!(out, "    # MIMO loop (break at {}): no scalar L, S, T", p.break_at);
+                let _ = writeln!(
+                    out,
+                    "    # MIMO loop (break at {}): no scalar L, S, T",
+                    p.break_at
+                );
             }
             None => {
-                let _ = writeln!(out, "    # loop transfer not formed: {}", p.notes.join("; "));
+                let _ = writeln!(
+                    out,
+                    "    # loop transfer not formed: {}",
+                    p.notes.join("; ")
+                );
             }
         }
         if !p.learning.is_empty() {

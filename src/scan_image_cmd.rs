@@ -312,11 +312,17 @@ mod tests {
     /// value in volts was labelled (and scaled) as nm.
     #[test]
     fn columns_match_without_their_unit_and_keep_it() {
-        assert_eq!(matches_column("mode.y (m)", "mode.y"), Some(Some("m".into())));
+        assert_eq!(
+            matches_column("mode.y (m)", "mode.y"),
+            Some(Some("m".into()))
+        );
         assert_eq!(matches_column("mode.y (m)", "mode.y (m)"), Some(None));
         assert_eq!(matches_column("mode.y", "mode.y"), Some(None));
         assert_eq!(matches_column("mode.yy (m)", "mode.y"), None);
-        assert_eq!(matches_column("pos[1] (m)", "pos[1]"), Some(Some("m".into())));
+        assert_eq!(
+            matches_column("pos[1] (m)", "pos[1]"),
+            Some(Some("m".into()))
+        );
         let volts = Axis::new(3, Some("V".into()), "nm", 1e9);
         assert_eq!((volts.scale, volts.unit.as_str()), (1.0, "V"));
         let metres = Axis::new(3, Some("m".into()), "nm", 1e9);

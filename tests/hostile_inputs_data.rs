@@ -71,7 +71,10 @@ fn run_refuses_a_constant_measured_column() {
         t.contains("column `y_pos_m`") && t.contains("constant"),
         "{t}"
     );
-    assert!(!t.lines().any(|l| l.starts_with("stage.y ")), "no scores: {t}");
+    assert!(
+        !t.lines().any(|l| l.starts_with("stage.y ")),
+        "no scores: {t}"
+    );
     let _ = std::fs::remove_dir_all(&d);
 }
 
@@ -329,7 +332,10 @@ fn rc_check_takes_t_from_the_graph_and_check_prints_it() {
     let without_t = d.join("without_t.yaml");
     std::fs::write(
         &without_t,
-        text.replace("    t_model: { num: [0.2], den: [1.0, -0.8] }   # the true T, for rc-check\n", ""),
+        text.replace(
+            "    t_model: { num: [0.2], den: [1.0, -0.8] }   # the true T, for rc-check\n",
+            "",
+        ),
     )
     .unwrap();
     nanomotion::link_plugins();
@@ -343,7 +349,13 @@ fn rc_check_takes_t_from_the_graph_and_check_prints_it() {
     // Without the graph's T (the old path) the block is refused.
     let spec = GraphSpec::from_file(&without_t).unwrap();
     let old = nanomotion::dvrc::check::rc_check_graph(&spec);
-    assert!(old.blocks[0].criterion.as_ref().unwrap_err().contains("no T(z)"));
+    assert!(
+        old.blocks[0]
+            .criterion
+            .as_ref()
+            .unwrap_err()
+            .contains("no T(z)")
+    );
     // `check --print-loop` prints T to paste as `t_model:`: 0.2/(z − 0.8).
     let o = nm(&["check", "examples/rc_standard.yaml", "--print-loop"]);
     let t = text_of(&o);
@@ -351,16 +363,27 @@ fn rc_check_takes_t_from_the_graph_and_check_prints_it() {
     for key in ["    L: {", "    S: {", "    T: {", "      - block: rc"] {
         assert!(t.contains(key), "{key}: {t}");
     }
-    let line = t.lines().find(|l| l.trim_start().starts_with("t_model:")).unwrap();
+    let line = t
+        .lines()
+        .find(|l| l.trim_start().starts_with("t_model:"))
+        .unwrap();
     let tf: nanomotion::dvrc::rc::TfModel =
         nanomotion::core::yaml::from_str(line.trim_start().trim_start_matches("t_model:"), "t")
             .unwrap();
     for w in [0.1, 1.0, 2.5] {
         let z = nanomotion::core::lti::Complex::from_polar(1.0, w);
-        let ev = |c: &[f64]| c.iter().fold(nanomotion::core::lti::Complex::new(0.0, 0.0), |a, &x| a * z + x);
+        let ev = |c: &[f64]| {
+            c.iter()
+                .fold(nanomotion::core::lti::Complex::new(0.0, 0.0), |a, &x| {
+                    a * z + x
+                })
+        };
         let got = ev(&tf.num) / ev(&tf.den);
         let want = nanomotion::core::lti::Complex::new(0.2, 0.0) / (z - 0.8);
-        assert!((got - want).norm() < 1e-9 * want.norm(), "{w}: {got} vs {want}");
+        assert!(
+            (got - want).norm() < 1e-9 * want.norm(),
+            "{w}: {got} vs {want}"
+        );
     }
     let _ = std::fs::remove_dir_all(&d);
 }

@@ -248,7 +248,8 @@ fn learning_blocks_are_judged_by_their_criterion_with_the_loops_t() {
     // ‖Q‖∞ ≈ 1 is above the bound 0.063: a lower learning gain cannot fix it
     // (audit, "smaller issues": the hint said so).
     assert!(
-        f.contains("lowering the learning gain cannot help") && !f.contains("fix: lower the learning gain"),
+        f.contains("lowering the learning gain cannot help")
+            && !f.contains("fix: lower the learning gain"),
         "{f}"
     );
     // A learning filter inverting a T four times too small (L·T ≈ 4, so

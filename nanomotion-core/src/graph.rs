@@ -281,8 +281,8 @@ impl GraphSpec {
                 (lines.len() == spec.connections.len()).then(|| (origin.to_string(), lines));
             return Ok(spec);
         }
-        let mut spec = crate::yaml::from_str::<GraphSpec>(text, origin)
-            .map_err(add_type_suggestion)?;
+        let mut spec =
+            crate::yaml::from_str::<GraphSpec>(text, origin).map_err(add_type_suggestion)?;
         let lines = connection_lines(text);
         if lines.len() == spec.connections.len() {
             spec.connection_lines = Some((origin.to_string(), lines));
@@ -785,7 +785,9 @@ fn compile_with(
                         bytes_text(planned as f64),
                         bytes_text(MAX_GRAPH_BYTES as f64)
                     ),
-                    format!("lower `{field}` here or in the blocks before, or use fewer such blocks"),
+                    format!(
+                        "lower `{field}` here or in the blocks before, or use fewer such blocks"
+                    ),
                 ),
             });
         }

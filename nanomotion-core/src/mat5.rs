@@ -49,7 +49,7 @@ struct Bytes<'a> {
     big_endian: bool,
 }
 
-impl<'a> Bytes<'a> {
+impl Bytes<'_> {
     fn u32_at(&self, at: usize) -> Option<u32> {
         let s: [u8; 4] = self.b.get(at..at + 4)?.try_into().ok()?;
         Some(if self.big_endian {
@@ -58,9 +58,9 @@ impl<'a> Bytes<'a> {
             u32::from_le_bytes(s)
         })
     }
-    /// The tag at `at`: (type, data offset, data length, bytes to the next
-    /// element, padded to 8 unless `compressed_unpadded` and it is compressed).
-    /// `Err(declared)` when the data run past the end.
+    /// The element whose tag is at `at`: its type, its data and where the next
+    /// element starts (data padded to 8 bytes, except a compressed element's).
+    /// [`Cut`] when the element runs past the end of the bytes.
     fn tag(&self, at: usize) -> Result<Tag, Cut> {
         let first = self.u32_at(at).ok_or(Cut {
             declared: 8,
@@ -343,7 +343,7 @@ fn numbers(ty: u32, data: &[u8], big_endian: bool) -> Result<Vec<f64>, String> {
         data: &[u8],
         f: impl Fn([u8; N]) -> Result<f64, String>,
     ) -> Result<Vec<f64>, String> {
-        if data.len() % N != 0 {
+        if !data.len().is_multiple_of(N) {
             return Err(format!(
                 "{} bytes of data are not a whole number of {N}-byte values; the file is damaged",
                 data.len()
@@ -518,7 +518,7 @@ pub(crate) mod tests {
     /// A whole `.mat` file of row vectors `(name, class, values)` written as MATLAB
     /// and scipy write them; `compress`: each variable as `miCOMPRESSED`.
     pub(crate) fn mat_file(vars: &[(&str, u32, Vec<f64>)], compress: bool) -> Vec<u8> {
-        let mut f = format!("MATLAB 5.0 MAT-file, written by nanomotion's tests").into_bytes();
+        let mut f = b"MATLAB 5.0 MAT-file, written by nanomotion's tests".to_vec();
         f.resize(116, b' ');
         f.extend_from_slice(&[0; 8]);
         f.extend_from_slice(&0x0100u16.to_le_bytes());

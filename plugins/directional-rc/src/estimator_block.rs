@@ -322,7 +322,8 @@ impl Block for RotationEstimator {
         let samples = (self.max_line_s / dt).ceil();
         let bytes = if samples.is_finite() && samples >= 0.0 {
             let cap = samples.min(usize::MAX as f64 / 64.0) as usize + 2;
-            cap.saturating_mul(self.lines.saturating_add(4)).saturating_mul(8)
+            cap.saturating_mul(self.lines.saturating_add(4))
+                .saturating_mul(8)
         } else {
             0
         };

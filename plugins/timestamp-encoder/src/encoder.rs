@@ -317,7 +317,7 @@ impl TimestampEncoder {
         if k == 0 || k > self.state.k || k + cap <= self.state.k {
             return None;
         }
-        if (k - 1) % s1 != 0 && k != self.state.k {
+        if !(k - 1).is_multiple_of(s1) && k != self.state.k {
             return None;
         }
         let j = (k % cap) as usize;
@@ -359,7 +359,7 @@ impl TimestampEncoder {
             self.store(k, t, level);
             k += s1;
         }
-        if (last - 1) % s1 != 0 {
+        if !(last - 1).is_multiple_of(s1) {
             let (t, level) = time_of(self, count - 1);
             self.store(last, t, level);
         }
