@@ -143,6 +143,20 @@ enum Command {
     Check {
         /// The graph file (YAML).
         graph: PathBuf,
+        /// Measured data for a graph that reads data (`data_column`, `compare:`),
+        /// as for `run --data`: the columns and rates are checked too, and the
+        /// duration becomes the data's length. Without it such a graph is checked
+        /// with placeholder columns (wiring, rates and loops only).
+        #[arg(long, value_name = "FILE")]
+        data: Vec<PathBuf>,
+        /// Sample rate (Hz) of a `.mat` data file that has no time vector `t`.
+        #[arg(long, value_name = "HZ", requires = "data")]
+        data_rate: Option<f64>,
+        /// Also print each loop's L, S = 1/(1 + L) and T = L/(1 + L), and the T(z)
+        /// of each learning block (`t_model:` to paste), as YAML transfer
+        /// functions in z.
+        #[arg(long)]
+        print_loop: bool,
     },
     /// Check the stability criteria of the graph's repetitive controllers: (5.5) for
     /// a fixed period N, (5.9) ‖Q(1 − T L z^l)‖∞ < 1/√(M − m + 1) for a delay varying
@@ -301,7 +315,12 @@ fn main() -> ExitCode {
             data_rate,
             allow_unproven,
         }),
-        Command::Check { graph } => check(graph),
+        Command::Check {
+            graph,
+            data,
+            data_rate,
+            print_loop,
+        } => check(graph, &data, data_rate, print_loop),
         Command::RcCheck { graph } => match nanomotion::dvrc::check::rc_check_file(&graph) {
             Ok(report) if report.blocks.is_empty() => Err(format!(
                 "{}: no repetitive_control, high_order_rc or dvrc block, nothing to check (fix: rc-check a graph with a repetitive controller, e.g. examples/rc_dvrc.yaml; `nanomotion check` validates any graph)",
@@ -384,10 +403,56 @@ fn load(graph: &PathBuf) -> Result<GraphSpec, String> {
     GraphSpec::from_file(graph).map_err(|e| e.to_string())
 }
 
-fn check(graph: PathBuf) -> Result<(), String> {
-    let spec = load(&graph)?;
+/// The measured data of `--data FILE…` (merged), refused for a graph that reads
+/// no data (it would only change the duration: audit D17).
+fn load_data(
+    graph: &std::path::Path,
+    spec: &GraphSpec,
+    files: &[PathBuf],
+    data_rate: Option<f64>,
+) -> Result<Option<std::sync::Arc<nanomotion::core::data::Dataset>>, String> {
+    if !files.is_empty() && !spec.reads_data() {
+        return Err(format!(
+            "{}: --data was given, but the graph reads no data (no `data_column` block, no `compare:` entry), so the data would only change its duration (fix: drop --data, or play a column with a `data_column` block / compare an output with `compare:`)",
+            graph.display()
+        ));
+    }
+    let mut merged: Option<nanomotion::core::data::Dataset> = None;
+    for path in files {
+        let d = nanomotion::core::data::Dataset::from_file_with_rate(path, data_rate)
+            .map_err(|e| e.to_string())?;
+        merged = Some(match merged {
+            None => d,
+            Some(m) => m.merge(d).map_err(|e| e.to_string())?,
+        });
+    }
+    Ok(merged.map(std::sync::Arc::new))
+}
+
+fn check(
+    graph: PathBuf,
+    data: &[PathBuf],
+    data_rate: Option<f64>,
+    print_loop: bool,
+) -> Result<(), String> {
+    let mut spec = load(&graph)?;
     let require = spec.require.clone();
-    let (sched, report) = spec.build().map_err(|e| e.to_string())?;
+    let data = load_data(&graph, &spec, data, data_rate)?;
+    let (sched, report) = match data {
+        Some(d) => {
+            spec.duration_s = d.duration_s();
+            spec.build_with_data(d)
+        }
+        None if spec.reads_data() => {
+            eprintln!(
+                "note: no --data given: `data_column` blocks play a placeholder 0; names, ports, rates and loops are checked, the columns and the data's rate are not (fix: `nanomotion check {} --data FILE` checks them too)",
+                graph.display()
+            );
+            spec.build_without_data()
+        }
+        None => spec.build(),
+    }
+    .map_err(|e| e.to_string())?;
     let gate = gate_cmd::analyse(&sched, require.as_ref());
     say!("{}: ok", graph.display());
     say!(
@@ -408,6 +473,9 @@ fn check(graph: PathBuf) -> Result<(), String> {
         }
     }
     say!("{}", gate.to_string().trim_end());
+    if print_loop {
+        say!("{}", gate_cmd::print_loops(&gate).trim_end());
+    }
     gate_cmd::verdict(&gate)
 }
 
@@ -442,16 +510,7 @@ fn run(args: RunArgs) -> Result<(), String> {
     if let Some(s) = seed {
         spec.seed = s;
     }
-    let mut merged: Option<nanomotion::core::data::Dataset> = None;
-    for path in &data {
-        let d = nanomotion::core::data::Dataset::from_file_with_rate(path, data_rate)
-            .map_err(|e| e.to_string())?;
-        merged = Some(match merged {
-            None => d,
-            Some(m) => m.merge(d).map_err(|e| e.to_string())?,
-        });
-    }
-    let data = merged.map(std::sync::Arc::new);
+    let data = load_data(&graph, &spec, &data, data_rate)?;
     if data.is_none() && !spec.compare.is_empty() {
         return Err(format!(
             "{}: the graph compares {} signal(s) with measured data (`compare:`), but no data was given (fix: run with --data FILE)",

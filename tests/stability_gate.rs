@@ -245,6 +245,13 @@ fn learning_blocks_are_judged_by_their_criterion_with_the_loops_t() {
     assert!(!g.passes());
     let f = g.failures().join("\n");
     assert!(f.contains("learning block `rc` violates (5.9)"), "{f}");
+    // ‖Q‖∞ ≈ 1 is above the bound 0.063: a lower learning gain cannot fix it
+    // (audit, "smaller issues": the hint said so).
+    assert!(
+        f.contains("lowering the learning gain cannot help")
+            && !f.contains("fix: lower the learning gain"),
+        "{f}"
+    );
     // A learning filter inverting a T four times too small (L·T ≈ 4, so
     // |1 − T L| ≈ 3) breaks (5.5) for the standard RC, as rc-check (with the
     // declared t_model) also finds.

@@ -125,6 +125,10 @@ pub struct BuildContext {
     /// The folder relative file names in parameters resolve against (the graph
     /// file's folder); `None`: the working directory.
     pub base_dir: Option<std::path::PathBuf>,
+    /// Build for checking without measured data (`nanomotion check` without
+    /// `--data`): blocks that play data (`data_column`) play a placeholder 0
+    /// instead of refusing, so wiring and loops can be checked.
+    pub placeholder_data: bool,
 }
 
 impl BuildContext {
@@ -136,6 +140,7 @@ impl BuildContext {
             seed,
             data: None,
             base_dir: None,
+            placeholder_data: false,
         }
     }
 
@@ -280,6 +285,17 @@ pub trait Block: Send + Debug {
     /// few numbers keep the default 0.
     fn memory_bytes(&self) -> usize {
         0
+    }
+    /// The heap memory [`Block::build`] will allocate at sample period `dt` (s),
+    /// from the parameters alone (before it is built), and the field that sets
+    /// it: the graph compiler adds
+    /// these up and refuses a graph above
+    /// [`MAX_GRAPH_BYTES`](crate::graph::MAX_GRAPH_BYTES) before any block
+    /// allocates anything. Blocks with large buffers (delay lines, memories)
+    /// implement it; the default is `("", 0)`.
+    fn planned_bytes(&self, dt: f64) -> (&'static str, usize) {
+        let _ = dt;
+        ("", 0)
     }
     /// The role the block plays.
     fn role(&self) -> Role {

@@ -753,30 +753,21 @@ impl Dataset {
                 "save it as v5 in MATLAB (`save(file, vars..., '-v7')`) or export CSV",
             ));
         }
-        // The reader is a parser of untrusted input: turn a panic in it into an error.
-        let parsed = std::panic::catch_unwind(|| matfile::MatFile::parse(bytes));
-        let mat = match parsed {
-            Ok(Ok(m)) => m,
-            Ok(Err(e)) => {
-                return Err(DataError::new(
-                    origin,
-                    format!("cannot be parsed as a MATLAB v5 file: {e}"),
-                    "save it again from MATLAB as v5/v7 (not v7.3), or export CSV",
-                ));
-            }
-            Err(_) => {
-                return Err(DataError::new(
-                    origin,
-                    "is damaged: the .mat reader failed on it",
-                    "save it again from MATLAB as v5/v7 (not v7.3), or export CSV",
-                ));
-            }
-        };
+        let vars = crate::mat5::read(bytes, MAX_FILE_BYTES as usize).map_err(|problem| {
+            DataError::new(
+                origin,
+                problem,
+                "copy or save the file again completely (MATLAB `save(file, vars..., '-v7')`), or export CSV",
+            )
+        })?;
         let mut columns: Vec<(String, Vec<f64>)> = Vec::new();
         let mut scalar_rate: Option<(String, f64)> = None;
-        for a in mat.arrays() {
-            let name = a.name().to_string();
-            let values = mat_values(a.data()).map_err(|p| {
+        for a in vars {
+            if a.non_numeric {
+                continue;
+            }
+            let name = a.name;
+            let values = a.values.map_err(|p| {
                 DataError::new(
                     origin,
                     p,
@@ -784,7 +775,7 @@ impl Dataset {
                 )
                 .in_column(&name)
             })?;
-            let size = a.size();
+            let size = a.dims;
             let non_unit = size.iter().filter(|&&d| d != 1).count();
             if values.len() == 1 {
                 if ["fs", "fs_hz", "rate_hz"].contains(&name.as_str()) {
@@ -982,48 +973,6 @@ fn check_given_rate(d: &Dataset, rate_hz: f64) -> Result<(), DataError> {
     Ok(())
 }
 
-/// The real values of a `.mat` numeric array as `f64`, or why not.
-#[cfg(feature = "mat")]
-fn mat_values(data: &matfile::NumericData) -> Result<Vec<f64>, String> {
-    use matfile::NumericData as N;
-    fn conv<T: Copy + Into<f64>>(real: &[T], imag: bool) -> Result<Vec<f64>, String> {
-        if imag {
-            return Err("variable is complex; only real signals are data".into());
-        }
-        Ok(real.iter().map(|&v| v.into()).collect())
-    }
-    fn conv64<T: Copy + TryInto<i128>>(real: &[T], imag: bool) -> Result<Vec<f64>, String> {
-        if imag {
-            return Err("variable is complex; only real signals are data".into());
-        }
-        real.iter()
-            .map(|&v| {
-                let i: i128 = v.try_into().map_err(|_| "value out of range".to_string())?;
-                let f = i as f64;
-                if f as i128 == i {
-                    Ok(f)
-                } else {
-                    Err(format!(
-                        "64-bit integer {i} has no exact f64 value; convert the variable to double"
-                    ))
-                }
-            })
-            .collect()
-    }
-    match data {
-        N::Double { real, imag } => conv(real, imag.is_some()),
-        N::Single { real, imag } => conv(real, imag.is_some()),
-        N::Int8 { real, imag } => conv(real, imag.is_some()),
-        N::UInt8 { real, imag } => conv(real, imag.is_some()),
-        N::Int16 { real, imag } => conv(real, imag.is_some()),
-        N::UInt16 { real, imag } => conv(real, imag.is_some()),
-        N::Int32 { real, imag } => conv(real, imag.is_some()),
-        N::UInt32 { real, imag } => conv(real, imag.is_some()),
-        N::Int64 { real, imag } => conv64(real, imag.is_some()),
-        N::UInt64 { real, imag } => conv64(real, imag.is_some()),
-    }
-}
-
 // ---------------------------------------------------------------------------------
 // Comparing model outputs with measured columns
 // ---------------------------------------------------------------------------------
@@ -1122,45 +1071,101 @@ pub fn compare_signal(
             "run the model as long as the data (drop --duration)",
         ));
     }
-    let measured = measured_all[..n].to_vec();
     let model: Vec<f64> = model.iter().step_by(m).take(n).copied().collect();
-    let residual: Vec<f64> = measured.iter().zip(&model).map(|(y, h)| y - h).collect();
-    let nf = n as f64;
-    let mean_y = measured.iter().sum::<f64>() / nf;
-    let spread = measured
-        .iter()
-        .map(|y| (y - mean_y) * (y - mean_y))
-        .sum::<f64>()
-        .sqrt();
-    let norm_r = residual.iter().map(|r| r * r).sum::<f64>().sqrt();
-    if spread <= 1e-12 * mean_y.abs() || spread == 0.0 {
-        return Err(err(
-            format!(
-                "the measured column is constant ({mean_y}), so fit % = 100·(1 − ‖y − ŷ‖/‖y − ȳ‖) is undefined"
-            ),
-            "compare a column that varies (a constant record carries no information about the model)",
-        ));
-    }
     if !model.iter().all(|v| v.is_finite()) {
         return Err(err(
             "the model signal is not finite".into(),
             "check the model's parameters (an unstable model diverges)",
         ));
     }
+    let measured = &measured_all[..n];
+    if let Some(e) = constant_column(measured) {
+        return Err(err(
+            format!(
+                "the measured column is constant ({e:e}) over the {n} compared samples (a stuck or disconnected sensor), so fit % = 100·(1 − ‖y − ŷ‖/‖y − ȳ‖) is undefined"
+            ),
+            "compare a column that varies: check the sensor, and that `compare:` names the right column",
+        ));
+    }
+    let scores = Scores::of(measured, &model);
+    if !scores.all_finite() {
+        let largest = |v: &[f64]| v.iter().fold(0.0f64, |a, x| a.max(x.abs()));
+        return Err(err(
+            format!(
+                "the scores overflow (rms {}, fit % {}): the measured column reaches {:e} and the model {:e}, too large to square in f64",
+                scores.rms,
+                scores.fit_percent,
+                largest(measured),
+                largest(&model)
+            ),
+            "check the record for a corrupt sample (a value like 1e308, in this column or in a played input column), or rescale its units",
+        ));
+    }
+    let residual: Vec<f64> = measured.iter().zip(&model).map(|(y, h)| y - h).collect();
     Ok(Comparison {
         signal: signal.to_string(),
         column: column.to_string(),
         samples: n,
         rate_hz: data.rate_hz(),
         model_decimation: m,
-        rms: norm_r / nf.sqrt(),
-        max_abs: residual.iter().fold(0.0f64, |a, r| a.max(r.abs())),
-        mean: residual.iter().sum::<f64>() / nf,
-        fit_percent: 100.0 * (1.0 - norm_r / spread),
-        measured,
+        rms: scores.rms,
+        max_abs: scores.max_abs,
+        mean: scores.mean,
+        fit_percent: scores.fit_percent,
+        measured: measured.to_vec(),
         model,
         residual,
     })
+}
+
+/// The value of a column that is constant up to the rounding of its own magnitude
+/// (all samples within 4 ulp of each other: a stuck or disconnected sensor), or
+/// `None` if it varies. A constant measured column carries no information about a
+/// model: its fit % is undefined.
+pub fn constant_column(values: &[f64]) -> Option<f64> {
+    let (lo, hi) = values
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
+            (a.min(v), b.max(v))
+        });
+    (lo <= hi && hi - lo <= 4.0 * f64::EPSILON * lo.abs().max(hi.abs())).then_some(lo)
+}
+
+/// The residual scores of a comparison (see [`Comparison`]).
+struct Scores {
+    rms: f64,
+    max_abs: f64,
+    mean: f64,
+    fit_percent: f64,
+}
+
+impl Scores {
+    /// Scores of `measured − model`; the mean ȳ is taken about the first sample,
+    /// so that a column that varies only in its last digits is not made to vary
+    /// by the rounding of its mean.
+    fn of(measured: &[f64], model: &[f64]) -> Self {
+        let nf = measured.len() as f64;
+        let y0 = measured.first().copied().unwrap_or(0.0);
+        let mean_y = y0 + measured.iter().map(|y| y - y0).sum::<f64>() / nf;
+        let spread = measured
+            .iter()
+            .map(|y| (y - mean_y) * (y - mean_y))
+            .sum::<f64>()
+            .sqrt();
+        let residual = || measured.iter().zip(model).map(|(y, h)| y - h);
+        let norm_r = residual().map(|r| r * r).sum::<f64>().sqrt();
+        Self {
+            rms: norm_r / nf.sqrt(),
+            max_abs: residual().fold(0.0f64, |a, r| a.max(r.abs())),
+            mean: residual().sum::<f64>() / nf,
+            fit_percent: 100.0 * (1.0 - norm_r / spread),
+        }
+    }
+    fn all_finite(&self) -> bool {
+        [self.rms, self.max_abs, self.mean, self.fit_percent]
+            .iter()
+            .all(|v| v.is_finite())
+    }
 }
 
 /// Compare every `compare:` entry of a graph that has run with the measured data
@@ -1436,6 +1441,57 @@ mod tests {
         .unwrap()
     }
 
+    /// Audit D10 and D11: an int32 vector made a valid v5 file unreadable, and a
+    /// file cut by one byte lost its last variable silently.
+    #[cfg(feature = "mat")]
+    #[test]
+    fn mat_int32_columns_load_and_cut_files_name_the_variable() {
+        use crate::mat5::tests::mat_file;
+        let n = 40;
+        let t: Vec<f64> = (0..n).map(|k| k as f64 / 1000.0).collect();
+        let u: Vec<f64> = (0..n).map(|k| (k as f64 * 37.0) % 501.0 - 250.0).collect();
+        let y: Vec<f64> = (0..n).map(|k| (k as f64 * 0.1).sin()).collect();
+        for compress in [false, true] {
+            let bytes = mat_file(
+                &[
+                    ("t_s", 6, t.clone()),
+                    ("u_force_N", 12, u.clone()),
+                    ("y_pos_m", 6, y.clone()),
+                ],
+                compress,
+            );
+            let d = Dataset::from_mat_bytes(&bytes, "int32_col.mat", None).unwrap();
+            assert_eq!(d.column("u_force_N").unwrap(), &u[..]);
+            assert_eq!(d.rate_hz(), 1000.0);
+            // An int32 time vector in ms would be refused for its rate only; in
+            // whole seconds at 1 Hz it is read.
+            let secs: Vec<f64> = (0..n).map(|k| k as f64).collect();
+            let b = mat_file(&[("t", 12, secs), ("y", 6, y.clone())], compress);
+            assert_eq!(
+                Dataset::from_mat_bytes(&b, "t32.mat", None)
+                    .unwrap()
+                    .rate_hz(),
+                1.0
+            );
+            let four = mat_file(
+                &[
+                    ("t_s", 6, t.clone()),
+                    ("u_force_N", 6, u.clone()),
+                    ("y_pos_m", 6, y.clone()),
+                    ("zz_extra", 6, y.clone()),
+                ],
+                compress,
+            );
+            let e = Dataset::from_mat_bytes(&four[..four.len() - 1], "trunc_one_byte.mat", None)
+                .unwrap_err();
+            assert!(
+                e.problem.contains("cut off") && e.problem.contains("`zz_extra`"),
+                "{e}"
+            );
+            assert!(e.problem.contains("after `y_pos_m`"), "{e}");
+        }
+    }
+
     #[test]
     fn scores_match_closed_forms() {
         let y: Vec<f64> = (0..32).map(|k| (k as f64 * 0.3).sin() + 2.0).collect();
@@ -1482,6 +1538,56 @@ mod tests {
         assert!(e.problem.contains("constant"), "{e}");
         let e = compare_signal("m.y", &y[..10], 1, 100.0, &d, "y").unwrap_err();
         assert!(e.problem.contains("only 10 samples overlap"), "{e}");
+    }
+
+    /// Audit D1: a stuck sensor (a constant column whose mean is not exactly its
+    /// value after rounding) gave a fit of −5.6e17 % instead of the documented error.
+    #[test]
+    fn a_constant_measured_column_is_refused_whatever_its_rounding() {
+        let n = 6000;
+        let d = Dataset::from_columns("const.csv", 1000.0, 0.0, vec![("y".into(), vec![1e-6; n])])
+            .unwrap();
+        let model: Vec<f64> = (0..n).map(|k| 1e-4 * (k as f64 * 0.01).sin()).collect();
+        let e = compare_signal("stage.y", &model, 1, 1000.0, &d, "y").unwrap_err();
+        assert!(e.problem.contains("constant (1e-6)"), "{e}");
+        assert_eq!(e.column.as_deref(), Some("y"));
+        assert_eq!(constant_column(&[2.0, 2.0 + 1e-9]), None);
+        assert_eq!(constant_column(&[0.0; 3]), Some(0.0));
+    }
+
+    /// Audit D18: finite but huge values made the scores ±inf with a result.
+    #[test]
+    fn scores_that_overflow_are_refused() {
+        let y: Vec<f64> = (0..32).map(|k| (k as f64 * 0.3).sin()).collect();
+        let d = dataset(y.clone());
+        let mut model = y.clone();
+        model[5] = 3.6e303;
+        let e = compare_signal("m.y", &model, 1, 100.0, &d, "y").unwrap_err();
+        assert!(
+            e.problem.contains("overflow") && e.problem.contains("3.6e303"),
+            "{e}"
+        );
+        assert!(e.fix.contains("corrupt sample"), "{e}");
+    }
+
+    proptest::proptest! {
+        /// Whatever finite columns are compared, a comparison is either refused
+        /// or has finite scores, with fit % ≤ 100 and rms ≤ max |residual|.
+        #[test]
+        fn comparisons_are_finite_or_refused(
+            y in proptest::collection::vec(-1.0f64..1.0, 16..64),
+            scale in -300i32..=308,
+        ) {
+            let s = 10f64.powi(scale);
+            let y: Vec<f64> = y.iter().map(|v| v * s).collect();
+            let model: Vec<f64> = y.iter().rev().copied().collect();
+            let d = dataset(y);
+            if let Ok(c) = compare_signal("m.y", &model, 1, 100.0, &d, "y") {
+                proptest::prop_assert!(c.rms.is_finite() && c.fit_percent.is_finite());
+                proptest::prop_assert!(c.fit_percent <= 100.0);
+                proptest::prop_assert!(c.rms <= c.max_abs * (1.0 + 1e-12));
+            }
+        }
     }
 
     #[test]

@@ -90,7 +90,13 @@ pub struct GraphSpec {
     pub title: Option<String>,
     /// Base tick rate (Hz): every block's rate must divide it.
     pub base_rate_hz: f64,
-    /// Simulated duration (s).
+    /// Simulated duration (s). May be left out of a graph that reads measured
+    /// data ([`GraphSpec::reads_data`]): it is then the data's length. Left out,
+    /// it reads as NaN until the graph is built with its data.
+    #[serde(
+        default = "duration_from_data",
+        skip_serializing_if = "duration_absent"
+    )]
     pub duration_s: f64,
     /// Seed of all random blocks (each block derives its own stream from it and its
     /// name).
@@ -133,6 +139,15 @@ pub struct GraphSpec {
     pub base_dir: Option<std::path::PathBuf>,
 }
 
+/// `duration_s` left out: NaN until the data's length replaces it.
+fn duration_from_data() -> f64 {
+    f64::NAN
+}
+
+fn duration_absent(d: &f64) -> bool {
+    d.is_nan()
+}
+
 /// What the loader did on its own initiative, for the user to see.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct BuildReport {
@@ -164,6 +179,9 @@ pub const LOG_CHUNK_TICKS: u64 = 1 << 16;
 /// and each block's
 /// [`Block::memory_bytes`]; a graph above it is refused with the breakdown.
 pub const MAX_GRAPH_BYTES: usize = 4 << 30;
+
+/// Longest block name, in characters (ASCII).
+pub const MAX_BLOCK_NAME_CHARS: usize = 100;
 
 /// Longest `title`, in characters.
 pub const MAX_TITLE_CHARS: usize = 200;
@@ -263,9 +281,8 @@ impl GraphSpec {
                 (lines.len() == spec.connections.len()).then(|| (origin.to_string(), lines));
             return Ok(spec);
         }
-        let mut spec = crate::yaml::from_str::<GraphSpec>(text, origin)
-            .map_err(add_type_suggestion)
-            .map_err(|e| locate_unknown_field(e, text))?;
+        let mut spec =
+            crate::yaml::from_str::<GraphSpec>(text, origin).map_err(add_type_suggestion)?;
         let lines = connection_lines(text);
         if lines.len() == spec.connections.len() {
             spec.connection_lines = Some((origin.to_string(), lines));
@@ -316,12 +333,32 @@ impl GraphSpec {
     }
 
     /// [`GraphSpec::build`] with measured data attached: blocks that play recorded
-    /// signals (`data_column`) read it when they are built.
+    /// signals (`data_column`) read it when they are built. A graph without
+    /// `duration_s` runs for the data's length.
     pub fn build_with_data(
         self,
         data: std::sync::Arc<crate::data::Dataset>,
     ) -> Result<(Scheduler, BuildReport), GraphError> {
         compile(self, Some(data), None)
+    }
+
+    /// [`GraphSpec::build`] of a graph that reads measured data, without the data,
+    /// to check it (`nanomotion check` without `--data`): `data_column` blocks play
+    /// a placeholder 0, so names, ports, rates, order and loops are checked; the
+    /// columns and the data's rate are not. A graph without `duration_s` gets 0 s.
+    pub fn build_without_data(self) -> Result<(Scheduler, BuildReport), GraphError> {
+        compile_with(self, None, None, true)
+    }
+
+    /// Whether the graph reads measured data: it has a `data_column` block or a
+    /// `compare:` entry. Data given to a graph that does not would only change
+    /// its duration.
+    pub fn reads_data(&self) -> bool {
+        !self.compare.is_empty()
+            || self
+                .blocks
+                .iter()
+                .any(|b| b.block.typetag_name() == "data_column")
     }
 }
 
@@ -377,31 +414,16 @@ fn add_type_suggestion(e: GraphError) -> GraphError {
     GraphError::Parse { origin, message }
 }
 
-/// Inside a block, the parser (typetag buffers the block's map) reports an
-/// unknown field at the block's first line and "at line" of its last field. Find
-/// the line that really holds the key and say so, with the text of that line.
-fn locate_unknown_field(e: GraphError, text: &str) -> GraphError {
-    let GraphError::Parse {
-        origin,
-        mut message,
-    } = e
-    else {
-        return e;
-    };
-    let Some(pos) = message.find("unknown field `") else {
-        return GraphError::Parse { origin, message };
-    };
+/// Where an unknown field is: (0-based line, 1-based column, what the parser
+/// said without its locations), searching from the reported line on.
+fn unknown_field_site(
+    message: &str,
+    text: &str,
+    first_line: usize,
+) -> Option<(usize, usize, String)> {
+    let pos = message.find("unknown field `")?;
     let rest = &message[pos + "unknown field `".len()..];
-    let Some(end) = rest.find('`') else {
-        return GraphError::Parse { origin, message };
-    };
-    let field = rest[..end].to_string();
-    // The reported line: "line N column M" at the start of the message.
-    let first_line = message
-        .strip_prefix("line ")
-        .and_then(|r| r.split_whitespace().next())
-        .and_then(|n| n.parse::<usize>().ok())
-        .unwrap_or(1);
+    let field = &rest[..rest.find('`')?];
     let is_key_on = |line: &str| {
         line.match_indices(&format!("{field}:")).any(|(i, _)| {
             i == 0
@@ -411,15 +433,11 @@ fn locate_unknown_field(e: GraphError, text: &str) -> GraphError {
                     .is_some_and(|c| c == ' ' || c == '{' || c == ',' || c == '-' || c == '\t')
         })
     };
-    let Some((n, line)) = text
+    let (n, line) = text
         .lines()
         .enumerate()
         .skip(first_line.saturating_sub(1))
-        .find(|(_, l)| is_key_on(l))
-    else {
-        return GraphError::Parse { origin, message };
-    };
-    // What the parser said about the field, without its locations.
+        .find(|(_, l)| is_key_on(l))?;
     let first = message.lines().next().unwrap_or("");
     let what = first[first.find("unknown field `").unwrap_or(0)..]
         .split(" at line ")
@@ -431,6 +449,78 @@ fn locate_unknown_field(e: GraphError, text: &str) -> GraphError {
         .map(|(i, _)| i + 1)
         .next()
         .unwrap_or(1);
+    Some((n, column, what))
+}
+
+/// Where a value of the wrong type is (audit D21): inside a block the parser
+/// reports the entry's first line and the line after it, not the field; the
+/// field is the key between them whose value is the one the parser quotes
+/// (`invalid type: string "fast", expected f64`). Returns (0-based line,
+/// 1-based column of the key, the message naming the field).
+fn bad_value_site(message: &str, text: &str, first_line: usize) -> Option<(usize, usize, String)> {
+    let first = message.lines().next()?;
+    let from = first.find("invalid type: ")?;
+    let mut parts = first[from..].split(" at line ");
+    let what = parts.next()?;
+    let last_line = parts
+        .next()
+        .and_then(|r| r.split(|c: char| !c.is_ascii_digit()).next())
+        .and_then(|n| n.parse::<usize>().ok())
+        .filter(|&l| l >= first_line)
+        .unwrap_or(usize::MAX);
+    let unexpected = &what["invalid type: ".len()..];
+    let value = match unexpected.strip_prefix("string \"") {
+        Some(r) => r.split('"').next()?,
+        None => unexpected.split('`').nth(1)?,
+    };
+    for (n, line) in text
+        .lines()
+        .enumerate()
+        .skip(first_line.saturating_sub(1))
+        .take(last_line.saturating_sub(first_line.saturating_sub(1)))
+    {
+        for (i, _) in line.match_indices(':') {
+            let key_start = line[..i]
+                .rfind(|c: char| !(c.is_ascii_alphanumeric() || c == '_'))
+                .map_or(0, |k| k + 1);
+            let key = &line[key_start..i];
+            let token = line[i + 1..]
+                .split([',', '}', '#'])
+                .next()
+                .unwrap_or("")
+                .trim()
+                .trim_matches(|c| c == '"' || c == '\'');
+            if !key.is_empty() && token == value {
+                return Some((n, key_start + 1, format!("field `{key}`: {what}")));
+            }
+        }
+    }
+    None
+}
+
+/// Inside a block, the parser (typetag buffers the block's map) reports an
+/// unknown field or a value of the wrong type at the block's first line and "at
+/// line" of its last field. Find the line that really holds the key and say so,
+/// naming the field, with the text of that line.
+pub(crate) fn locate_field(e: GraphError, text: &str) -> GraphError {
+    let GraphError::Parse {
+        origin,
+        mut message,
+    } = e
+    else {
+        return e;
+    };
+    // The reported line: "line N column M" at the start of the message.
+    let first_line = message
+        .strip_prefix("line ")
+        .and_then(|r| r.split_whitespace().next())
+        .and_then(|n| n.parse::<usize>().ok())
+        .unwrap_or(1);
+    let Some((n, column, what)) = unknown_field_site(&message, text, first_line)
+        .or_else(|| bad_value_site(&message, text, first_line))
+    else {
+        return GraphError::Parse { origin, message };
+    };
     // The message rebuilt at the typo's own line, with the lines around it.
     let lines: Vec<&str> = text.lines().collect();
     let width = (n + 2).to_string().len();
@@ -501,9 +591,17 @@ pub fn edit_distance(a: &str, b: &str) -> usize {
     prev[b.len()]
 }
 
+/// Longest word (bytes) "did you mean" compares: the edit distance costs the
+/// product of the two lengths, and a name this long is no typo of a short one.
+pub const MAX_SUGGEST_BYTES: usize = 64;
+
 /// Whether `candidate` is near enough to `word` to suggest it ("did you mean").
+/// Words longer than [`MAX_SUGGEST_BYTES`] are never compared (audit D8: the
+/// comparison was quadratic in the length of a 160 000-character name).
 pub fn is_near(word: &str, candidate: &str) -> bool {
-    edit_distance(word, candidate) <= (candidate.len().max(word.len()) / 2).max(2)
+    word.len() <= MAX_SUGGEST_BYTES
+        && candidate.len() <= MAX_SUGGEST_BYTES
+        && edit_distance(word, candidate) <= (candidate.len().max(word.len()) / 2).max(2)
 }
 
 /// The candidate nearest to `word`, if it is reasonably near.
@@ -512,8 +610,8 @@ pub(crate) fn nearest<'a>(
     candidates: impl Iterator<Item = &'a str>,
 ) -> Option<&'a str> {
     candidates
+        .filter(|c| is_near(word, c))
         .map(|c| (edit_distance(word, c), c))
-        .filter(|(d, c)| *d <= (c.len().max(word.len()) / 2).max(2))
         .min_by_key(|(d, _)| *d)
         .map(|(_, c)| c)
 }
@@ -546,6 +644,7 @@ fn setting(field: &str, problem: impl Into<String>, fix: impl Into<String>) -> G
 /// rate transitions, so they can never collide with a user's block).
 pub fn valid_block_name(name: &str) -> bool {
     !name.is_empty()
+        && name.len() <= MAX_BLOCK_NAME_CHARS
         && name
             .chars()
             .all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-')
@@ -563,6 +662,15 @@ fn compile(
     spec: GraphSpec,
     data: Option<std::sync::Arc<crate::data::Dataset>>,
     chunk_ticks: Option<u64>,
+) -> Result<(Scheduler, BuildReport), GraphError> {
+    compile_with(spec, data, chunk_ticks, false)
+}
+
+fn compile_with(
+    spec: GraphSpec,
+    data: Option<std::sync::Arc<crate::data::Dataset>>,
+    chunk_ticks: Option<u64>,
+    placeholder_data: bool,
 ) -> Result<(Scheduler, BuildReport), GraphError> {
     let GraphSpec {
         title,
@@ -603,6 +711,18 @@ fn compile(
             ));
         }
     }
+    let duration_s = match (&data, placeholder_data) {
+        (_, _) if !duration_s.is_nan() => duration_s,
+        (Some(d), _) => d.duration_s(),
+        (None, true) => 0.0,
+        (None, false) => {
+            return Err(setting(
+                "duration_s",
+                "is missing (or NaN)",
+                "give the duration in seconds (`duration_s: 2.0`); a graph that reads measured data may leave it out and run with the data (`--data FILE`), whose length it then takes",
+            ));
+        }
+    };
     if !(duration_s.is_finite() && duration_s >= 0.0) {
         return Err(setting(
             "duration_s",
@@ -643,6 +763,36 @@ fn compile(
     }
     let base_dt = 1.0 / base_rate_hz;
 
+    // 0. The blocks' buffers, from their parameters, before any is allocated
+    // (a block whose own size is out of range is left to its build's message).
+    let mut planned = 0usize;
+    for b in &blocks {
+        let (field, bytes) = b
+            .block
+            .planned_bytes(1.0 / b.rate_hz.unwrap_or(base_rate_hz));
+        if bytes > MAX_GRAPH_BYTES {
+            continue;
+        }
+        planned = planned.saturating_add(bytes);
+        if planned > MAX_GRAPH_BYTES {
+            return Err(GraphError::Param {
+                block: b.name.clone(),
+                type_name: b.block.typetag_name().to_string(),
+                source: crate::ParamError::new(
+                    field,
+                    format!(
+                        "the blocks up to this one need {} of buffers, more than the {} a graph may use (checked before anything is allocated)",
+                        bytes_text(planned as f64),
+                        bytes_text(MAX_GRAPH_BYTES as f64)
+                    ),
+                    format!(
+                        "lower `{field}` here or in the blocks before, or use fewer such blocks"
+                    ),
+                ),
+            });
+        }
+    }
+
     // 1. Names, rates, build.
     let mut pending: Vec<Pending> = Vec::with_capacity(blocks.len());
     let mut block_bytes = 0usize;
@@ -650,8 +800,18 @@ fn compile(
         if !valid_block_name(&b.name) {
             return Err(setting(
                 "blocks.name",
-                format!("`{}` is not a valid block name", b.name.escape_debug()),
-                "use ASCII letters, digits, `_` and `-` only (`.` separates block and port; `:` is reserved for blocks the loader inserts, such as rate transitions)",
+                if b.name.len() > MAX_BLOCK_NAME_CHARS {
+                    format!(
+                        "`{}…` has {} characters, more than {MAX_BLOCK_NAME_CHARS}",
+                        b.name.chars().take(20).collect::<String>().escape_debug(),
+                        b.name.chars().count()
+                    )
+                } else {
+                    format!("`{}` is not a valid block name", b.name.escape_debug())
+                },
+                format!(
+                    "use at most {MAX_BLOCK_NAME_CHARS} ASCII letters, digits, `_` and `-` (`.` separates block and port; `:` is reserved for blocks the loader inserts, such as rate transitions)"
+                ),
             ));
         }
         if pending.iter().any(|p| p.name == b.name) {
@@ -676,6 +836,10 @@ fn compile(
         let ctx = BuildContext::new(b.name.clone(), dt, derive_seed(seed, &b.name))
             .with_data(data.clone())
             .with_base_dir(base_dir.clone());
+        let ctx = BuildContext {
+            placeholder_data,
+            ..ctx
+        };
         block.build(&ctx).map_err(|source| GraphError::Param {
             block: b.name.clone(),
             type_name: type_name.clone(),
@@ -1270,6 +1434,58 @@ fn find_cycle(pending: &[Pending], indegree: &[usize]) -> String {
 
 #[cfg(test)]
 mod tests {
+    /// Audit D8: a 160 000-character block name and a reference to another one
+    /// made "did you mean" run for minutes (quadratic edit distance).
+    #[test]
+    fn long_names_are_refused_at_once() {
+        let n = 160_000;
+        let (a, b) = ("a".repeat(n), "b".repeat(n));
+        let text = format!(
+            "base_rate_hz: 1000\nduration_s: 1\nblocks:\n  - {{ name: {a}, type: gain, k: 1.0 }}\n  - {{ name: c, type: constant, value: 1.0 }}\nconnections:\n  - {{ from: {b}.y, to: {a}.u }}\n"
+        );
+        let start = std::time::Instant::now();
+        let e = super::GraphSpec::from_yaml(&text, "longname.yaml")
+            .unwrap()
+            .build()
+            .err()
+            .unwrap()
+            .to_string();
+        assert!(start.elapsed().as_secs_f64() < 2.0, "{:?}", start.elapsed());
+        assert!(e.contains("160000 characters, more than 100"), "{e}");
+        assert!(!super::is_near(&a, &b) && super::is_near("gian", "gain"));
+        let start = std::time::Instant::now();
+        assert_eq!(super::nearest(&a, [b.as_str()].into_iter()), None);
+        assert!(start.elapsed().as_secs_f64() < 0.1);
+    }
+    /// Audit D21: a wrong-type value inside a block named neither the field nor
+    /// its line (the parser pointed at the entry's first line and the next one).
+    #[test]
+    fn a_wrong_type_value_names_its_field_and_line() {
+        let text = "base_rate_hz: 4000\nduration_s: 0.1\nblocks:\n  - name: w\n    type: walking_waveform\n  - name: s\n    type: walking_piezo_stage\n    stage_mass_kg: 0.428\n    preload_n: 55.0\n    mu: 0.2\n    mu_pair_rel: 0.1\n    mu_spatial_rel: 0.1\n    substeps: 2\n    tol_n: fast\n    max_iter: 200\nconnections:\n  - { from: w.u, to: s.u }\n";
+        // The core has no walking stage: a core block shows the same.
+        let text = text
+            .replace("walking_waveform", "constant\n    value: 1.0")
+            .replace(
+                "type: walking_piezo_stage\n    stage_mass_kg: 0.428\n    preload_n: 55.0\n    mu: 0.2\n    mu_pair_rel: 0.1\n    mu_spatial_rel: 0.1\n    substeps: 2\n    tol_n: fast\n    max_iter: 200",
+                "type: pid\n    kp: 1.0\n    ki: 2.0\n    kd: fast\n    derivative_cutoff_hz: 100.0",
+            )
+            .replace("w.u, to: s.u", "w.y, to: s.e");
+        let e = super::GraphSpec::from_yaml(&text, "typeerr.yaml")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("line 11 column 5: field `kd`: invalid type: string \"fast\""),
+            "{e}"
+        );
+        assert!(e.contains("11 |     kd: fast"), "{e}");
+        // Flow style: the key on its own line too.
+        let flow = "base_rate_hz: 10\nduration_s: 1\nblocks:\n  - { name: c, type: constant, value: 1.0 }\n  - { name: g, type: gain,\n      k: NaN }\n";
+        let e = super::GraphSpec::from_yaml(flow, "f.yaml")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("line 6 column 7: field `k`"), "{e}");
+    }
+
     use super::*;
 
     #[test]

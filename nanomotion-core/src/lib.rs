@@ -36,6 +36,8 @@ pub mod gate;
 pub mod graph;
 pub mod include;
 pub mod lti;
+#[cfg(feature = "mat")]
+mod mat5;
 pub mod models;
 pub mod overrides;
 pub mod rng;

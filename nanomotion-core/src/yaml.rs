@@ -14,9 +14,17 @@ pub fn from_str<T: DeserializeOwned>(text: &str, origin: &str) -> Result<T, Grap
     let opts = serde_saphyr::options!(
         non_finite_float_policy: serde_saphyr::NonFiniteFloatPolicy::PassThrough,
     );
-    serde_saphyr::from_str_with_options(text, opts).map_err(|e| GraphError::Parse {
-        origin: origin.to_string(),
-        message: plain_message(&e.to_string(), origin),
+    serde_saphyr::from_str_with_options(text, opts).map_err(|e| {
+        // Inside a map the parser buffers (a block entry, a tagged config), an
+        // unknown field or a wrong-type value is reported at the map's first
+        // line: name the field at its own line.
+        crate::graph::locate_field(
+            GraphError::Parse {
+                origin: origin.to_string(),
+                message: plain_message(&e.to_string(), origin),
+            },
+            text,
+        )
     })
 }
 

@@ -132,6 +132,11 @@ pub fn run_spec(py: Python<'_>, mut spec: GraphSpec, o: RunOptions) -> PyResult<
         spec.seed = s;
     }
     let data = load_data(&o.data, o.data_rate)?;
+    if data.is_some() && !spec.reads_data() {
+        return Err(data_err(
+            "data was given, but the graph reads no data (no `data_column` block, no `compare:` entry), so it would only change the duration (fix: drop data=, or play a column with a `data_column` block / compare an output with `compare:`)".to_string(),
+        ));
+    }
     if data.is_none() && !spec.compare.is_empty() {
         return Err(data_err(format!(
             "the graph compares {} signal(s) with measured data (`compare:`), but no data was given (fix: run with data=\"FILE\")",

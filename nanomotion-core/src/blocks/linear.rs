@@ -988,6 +988,11 @@ impl Block for Delay {
         self.buf.len() * std::mem::size_of::<f64>()
     }
 
+    fn planned_bytes(&self, _dt: f64) -> (&'static str, usize) {
+        let values = self.d.saturating_mul(self.width);
+        ("d", values.saturating_mul(std::mem::size_of::<f64>()))
+    }
+
     fn build(&mut self, ctx: &BuildContext) -> Result<(), ParamError> {
         check::width("width", self.width)?;
         check::buffer("d", self.d, 0, self.width)?;

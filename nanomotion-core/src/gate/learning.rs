@@ -73,12 +73,30 @@ pub struct LearningCheck {
     pub n_max: usize,
     /// Σ|w_i| for a high-order RC.
     pub weight_sum: Option<f64>,
+    /// The T(z) the criterion used (the loop closed without learning, from the
+    /// learning output w to minus the error e): what L is designed from.
+    pub t: StateSpace,
+    /// ‖Q‖∞: what ‖H‖∞ tends to as the learning gain goes to 0. When it is at or
+    /// above the bound, lowering the learning gain cannot satisfy the criterion.
+    pub q_hinf: f64,
 }
 
 impl LearningCheck {
     /// ‖H‖∞ below the bound.
     pub fn holds(&self) -> bool {
         self.hinf < self.bound
+    }
+    /// What to change when the criterion fails: with ‖Q‖∞ at or above the bound
+    /// lowering the learning gain cannot help (H → Q as L → 0).
+    pub fn fix(&self) -> String {
+        if self.q_hinf >= self.bound {
+            format!(
+                "lowering the learning gain cannot help (as it goes to 0, ‖H‖∞ goes to ‖Q‖∞ = {:.4}, at or above the bound): make L a closer inverse of T where |Q| is large, lower the Q cut-off, or narrow [n_min, n_max]",
+                self.q_hinf
+            )
+        } else {
+            "lower the learning gain or the Q cut-off, or narrow [n_min, n_max]".to_string()
+        }
     }
     /// Which criterion.
     pub fn criterion(&self) -> &'static str {
@@ -132,6 +150,7 @@ pub fn criterion(
     }
     let h = loop_h(t, &model.l_causal, model.preview, &model.q)?;
     let r = hinfnorm(&h)?;
+    let q_hinf = hinfnorm(&model.q)?.norm;
     let mut bound = 1.0 / ((model.n_max - model.n_min + 1) as f64).sqrt();
     if let Some(ws) = model.weight_sum {
         bound = 1.0 / ws;
@@ -144,5 +163,7 @@ pub fn criterion(
         n_min: model.n_min,
         n_max: model.n_max,
         weight_sum: model.weight_sum,
+        t: t.clone(),
+        q_hinf,
     })
 }

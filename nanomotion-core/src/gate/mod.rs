@@ -151,6 +151,9 @@ pub struct PointAnalysis {
     pub learning: Vec<LearningCheck>,
     /// Anything the analysis could not do, or cross-checks that disagreed.
     pub notes: Vec<String>,
+    /// The loop transfer L at the break (negative feedback: the loop is
+    /// (I + L)⁻¹), when it was formed.
+    pub loop_transfer: Option<StateSpace>,
 }
 
 /// The analysis of one loop.
@@ -220,13 +223,14 @@ impl LoopReport {
             }
             for c in p.learning.iter().filter(|c| !c.holds()) {
                 v.push(format!(
-                    "loop `{}`{}: learning block `{}` violates {}: ‖Q(z^-l − T L_c)‖∞ = {:.4} ≥ bound {:.4} (convergence not guaranteed; fix: lower the learning gain or the Q cut-off, or narrow [n_min, n_max])",
+                    "loop `{}`{}: learning block `{}` violates {}: ‖Q(z^-l − T L_c)‖∞ = {:.4} ≥ bound {:.4} (convergence not guaranteed; fix: {})",
                     self.name,
                     at_label(&p.label),
                     c.block,
                     c.criterion(),
                     c.hinf,
-                    c.bound
+                    c.bound,
+                    c.fix()
                 ));
             }
         }
@@ -838,6 +842,7 @@ fn analyse_point(
         loci_min_distance: None,
         learning: Vec::new(),
         notes: Vec::new(),
+        loop_transfer: None,
     };
     // Level by level, fastest first: compose, then lift to the next rate. A
     // connection is closed at the level of its slower end (once: the lifted part
@@ -959,6 +964,7 @@ fn analyse_point(
         }
     };
     loop_measures(&l, &mut out);
+    out.loop_transfer = Some(l);
     out
 }
 

@@ -316,6 +316,19 @@ impl Block for RotationEstimator {
         });
         Ok(())
     }
+    fn planned_bytes(&self, dt: f64) -> (&'static str, usize) {
+        // The line store (lines × samples per line) and the estimator's
+        // workspace (about four values per sample), from `max_line_s`.
+        let samples = (self.max_line_s / dt).ceil();
+        let bytes = if samples.is_finite() && samples >= 0.0 {
+            let cap = samples.min(usize::MAX as f64 / 64.0) as usize + 2;
+            cap.saturating_mul(self.lines.saturating_add(4))
+                .saturating_mul(8)
+        } else {
+            0
+        };
+        ("max_line_s", bytes)
+    }
     fn memory_bytes(&self) -> usize {
         self.state.as_ref().map_or(0, |s| {
             s.z.capacity() * std::mem::size_of::<f64>() + s.ws.memory_bytes()

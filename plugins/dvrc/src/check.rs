@@ -2,8 +2,10 @@
 //! block of a graph before it runs.
 //!
 //! For each `repetitive_control`, `high_order_rc` and `dvrc` block, T(z) is taken
-//! from its `t_model`, or from its `learning` filter when that is a ZPETC of T;
-//! the filters are built at the block's rate and
+//! from its `t_model`, or from its `learning` filter when that is a ZPETC of T,
+//! or else ([`rc_check_file`]) from the block's feedback loop in the graph, as the
+//! stability gate of `nanomotion check` assembles it; the filters are built at
+//! the block's rate and
 //!
 //! - `repetitive_control`: criterion (5.5) (fixed N);
 //! - `dvrc`: criterion (5.9) for N_k ∈ \[n_min, n_max\], plus, when the lifted
@@ -206,13 +208,44 @@ impl fmt::Display for RcCheckReport {
 /// not cover (docs/repetitive-control.md, "High-order RC and the α-feedback path").
 pub const HIGH_ORDER_NOTE: &str = "note: ‖H‖∞·Σ|w_i| < 1 covers a disturbance that does not depend on the loop; when it is periodic in a variable the loop moves (the walking piezo's leg angle α = 2π∫f_α dt, f_α from u) the loop is not LTI and this is no guarantee: on the walking-piezo Table 5.1 loops high-order RC ends above no RC although it holds (docs/repetitive-control.md)";
 
-fn t_of(t: Option<TfModel>, dt: f64) -> Result<StateSpace, String> {
-    let t = t.ok_or_else(|| {
-        "no T(z): give `t_model: {num, den}` or a `learning: {kind: zpetc, ...}`".to_string()
-    })?;
+/// T(z) of a block: its `t_model`, a ZPETC learning filter's T, or else the T
+/// the stability gate assembled from the block's loop in the graph (`graph_t`).
+fn t_of(
+    t: Option<TfModel>,
+    dt: f64,
+    graph_t: Result<Option<&StateSpace>, &str>,
+) -> Result<StateSpace, String> {
+    let Some(t) = t else {
+        return match graph_t {
+            Ok(Some(t)) => Ok(t.clone()),
+            Ok(None) => Err("no T(z): the block is in no stable feedback loop the stability gate could analyse (`nanomotion check` shows why); give `t_model: {num, den}` or a `learning: {kind: zpetc, ...}`".to_string()),
+            Err(e) => Err(format!("no T(z): the graph could not be built to take T from its loop ({e}); give `t_model: {{num, den}}` or a `learning: {{kind: zpetc, ...}}`")),
+        };
+    };
     TransferFunction::new(t.num, t.den, Some(dt))
         .and_then(|tf| tf.to_ss_cascade())
         .map_err(|e| format!("t_model: {e}"))
+}
+
+/// The T(z) of every learning block of `spec`'s feedback loops, as the stability
+/// gate assembles it (block name → T), or why the graph could not be built.
+pub fn graph_loop_ts(
+    spec: GraphSpec,
+) -> Result<std::collections::BTreeMap<String, StateSpace>, String> {
+    let require = spec.require.clone().unwrap_or_default();
+    let built = if spec.reads_data() {
+        spec.build_without_data()
+    } else {
+        spec.build()
+    };
+    let (sched, _) = built.map_err(|e| e.to_string())?;
+    let report = nanomotion_core::gate::analyse(&sched, &require);
+    Ok(report
+        .loops
+        .iter()
+        .filter_map(|l| l.points.first())
+        .flat_map(|p| p.learning.iter().map(|c| (c.block.clone(), c.t.clone())))
+        .collect())
 }
 
 fn filters(l: &FilterSpec, q: &FilterSpec, dt: f64) -> Result<(Filter, Filter), String> {
@@ -228,8 +261,18 @@ const LIFTED_MAX_DIM: usize = 24;
 /// branch and bound grows like delays^depth).
 const LIFTED_MAX_DELAYS: usize = 4;
 
-/// Check every RC block of `spec` (see the [module docs](self)).
+/// Check every RC block of `spec` (see the [module docs](self)); T(z) comes
+/// from `t_model` or a ZPETC learning filter only (see [`rc_check_file`]).
 pub fn rc_check_graph(spec: &GraphSpec) -> RcCheckReport {
+    rc_check_graph_with(spec, Ok(&Default::default()))
+}
+
+/// [`rc_check_graph`] with the T(z) of the graph's loops ([`graph_loop_ts`]) for
+/// blocks that have neither `t_model` nor a ZPETC learning filter.
+pub fn rc_check_graph_with(
+    spec: &GraphSpec,
+    graph_ts: Result<&std::collections::BTreeMap<String, StateSpace>, &str>,
+) -> RcCheckReport {
     let mut out = RcCheckReport::default();
     for b in &spec.blocks {
         let Ok(v) = serde_json::to_value(&b.block) else {
@@ -248,6 +291,7 @@ pub fn rc_check_graph(spec: &GraphSpec) -> RcCheckReport {
             o.remove("type");
         }
         let dt = 1.0 / b.rate_hz.unwrap_or(spec.base_rate_hz);
+        let graph_t = graph_ts.map(|m| m.get(&b.name));
         let mut check = BlockCheck {
             name: b.name.clone(),
             type_name: ty.clone(),
@@ -262,20 +306,20 @@ pub fn rc_check_graph(spec: &GraphSpec) -> RcCheckReport {
                 "repetitive_control" => {
                     let p: RepetitiveControl =
                         serde_json::from_value(body).map_err(|e| e.to_string())?;
-                    let t = t_of(TfModel::resolve(&p.t_model, &p.learning), dt)?;
+                    let t = t_of(TfModel::resolve(&p.t_model, &p.learning), dt, graph_t)?;
                     let (l, q) = filters(&p.learning, &p.robustness, dt)?;
                     check.criterion = rc_criterion(&t, &l, &q, p.n, p.n).map_err(|e| e.to_string());
                 }
                 "high_order_rc" => {
                     let p: HighOrderRc = serde_json::from_value(body).map_err(|e| e.to_string())?;
-                    let t = t_of(TfModel::resolve(&p.t_model, &p.learning), dt)?;
+                    let t = t_of(TfModel::resolve(&p.t_model, &p.learning), dt, graph_t)?;
                     let (l, q) = filters(&p.learning, &p.robustness, dt)?;
                     check.criterion = rc_criterion(&t, &l, &q, p.n, p.n).map_err(|e| e.to_string());
                     check.weight_sum = Some(p.weights.iter().map(|w| w.abs()).sum());
                 }
                 _ => {
                     let p: Dvrc = serde_json::from_value(body).map_err(|e| e.to_string())?;
-                    let t = t_of(TfModel::resolve(&p.t_model, &p.learning), dt)?;
+                    let t = t_of(TfModel::resolve(&p.t_model, &p.learning), dt, graph_t)?;
                     let (l, q) = filters(&p.learning, &p.robustness, dt)?;
                     check.criterion =
                         rc_criterion(&t, &l, &q, p.n_min, p.n_max).map_err(|e| e.to_string());
@@ -325,12 +369,17 @@ pub fn rc_check_graph(spec: &GraphSpec) -> RcCheckReport {
     out
 }
 
-/// [`rc_check_graph`] on a YAML file (the error is boxed: `GraphError` is large).
+/// [`rc_check_graph`] on a YAML file (the error is boxed: `GraphError` is large),
+/// with T(z) taken from the graph's loops, as `nanomotion check` assembles it,
+/// for blocks without `t_model` or a ZPETC learning filter.
 pub fn rc_check_file(
     path: &std::path::Path,
 ) -> Result<RcCheckReport, Box<nanomotion_core::GraphError>> {
-    Ok(rc_check_graph(
-        &GraphSpec::from_file(path).map_err(Box::new)?,
+    let spec = GraphSpec::from_file(path).map_err(Box::new)?;
+    let ts = graph_loop_ts(GraphSpec::from_file(path).map_err(Box::new)?);
+    Ok(rc_check_graph_with(
+        &spec,
+        ts.as_ref().map_err(String::as_str),
     ))
 }
 

@@ -167,6 +167,13 @@ impl FilterSpec {
 /// sample; the thesis's Q filters have about 100.
 pub const MAX_FIR_TAPS: usize = 16_385;
 
+/// Most taps of an FIR filter that gets an analysis model (a state-space model
+/// of taps − 1 states, dense: (taps − 1)² × 8 bytes, 2 MiB here), for the
+/// stability gate and `rc-check`: 513. Longer filters run, but have no model
+/// (audit D4: a 16 385-tap filter cost 2 GiB and 16 s to build its model), so a
+/// loop with one is unproven, and `rc-check` says which `taps` to lower.
+pub const MAX_MODEL_TAPS: usize = 513;
+
 /// FIR runtime: a doubled ring buffer so that the convolution is one contiguous
 /// dot product (no wrap-around test in the inner loop).
 #[derive(Debug, Clone)]
@@ -241,9 +248,13 @@ enum Runtime {
 pub struct Filter {
     runtime: Runtime,
     delay: usize,
-    model: StateSpace,
+    /// The analysis model; `None` for an FIR filter of more than
+    /// [`MAX_MODEL_TAPS`] taps.
+    model: Option<StateSpace>,
     /// FIR taps, if the filter is FIR.
     taps: Option<Vec<f64>>,
+    /// Sample period (s).
+    dt: Option<f64>,
 }
 
 impl Filter {
@@ -252,8 +263,9 @@ impl Filter {
         Self {
             runtime: Runtime::Fir(FirState::new(&h)),
             delay,
-            model: fir2ss(&h, dt),
+            model: (h.len() <= MAX_MODEL_TAPS).then(|| fir2ss(&h, dt)),
             taps: Some(h),
+            dt: Some(dt),
         }
     }
 
@@ -265,14 +277,32 @@ impl Filter {
         Ok(Self {
             runtime: Runtime::Ss(SsStepper::new(&model)?),
             delay,
-            model,
+            dt: model.dt,
+            model: Some(model),
             taps: None,
         })
     }
 
-    /// The exact discrete model of the causal realisation that is run.
-    pub fn model(&self) -> &StateSpace {
-        &self.model
+    /// The exact discrete model of the causal realisation that is run, or why
+    /// there is none (an FIR filter of more than [`MAX_MODEL_TAPS`] taps).
+    pub fn model(&self) -> Result<&StateSpace, LtiError> {
+        self.model.as_ref().ok_or_else(|| {
+            LtiError::Domain(format!(
+                "the FIR filter has {} taps; stability is analysed for FIR filters of at most {MAX_MODEL_TAPS} taps (their model has taps − 1 states) (fix: lower `taps` to at most {MAX_MODEL_TAPS}, or give the filter as `iir`)",
+                self.taps.as_ref().map_or(0, Vec::len)
+            ))
+        })
+    }
+
+    /// Heap bytes of the filter: taps, run-time buffer and analysis model.
+    pub fn memory_bytes(&self) -> usize {
+        let f = std::mem::size_of::<f64>();
+        let taps = self.taps.as_ref().map_or(0, Vec::len);
+        let model = self
+            .model
+            .as_ref()
+            .map_or(0, |m| (m.a.len() + m.b.len() + m.c.len() + m.d.len()) * f);
+        3 * taps * f + model
     }
 
     /// The FIR taps, if this is an FIR filter.
@@ -282,7 +312,7 @@ impl Filter {
 
     /// Frequency response of the causal realisation at `w_rad_s` (rad/s).
     pub fn freqresp_at(&self, w_rad_s: f64) -> Complex<f64> {
-        match (&self.taps, self.model.dt) {
+        match (&self.taps, self.dt) {
             (Some(h), Some(dt)) => {
                 let zi = Complex::from_polar(1.0, -w_rad_s * dt);
                 let mut acc = Complex::new(0.0, 0.0);
@@ -291,7 +321,10 @@ impl Filter {
                 }
                 acc
             }
-            _ => self.model.freqresp_siso_at(w_rad_s),
+            _ => self
+                .model
+                .as_ref()
+                .map_or(Complex::new(f64::NAN, 0.0), |m| m.freqresp_siso_at(w_rad_s)),
         }
     }
 
@@ -338,7 +371,7 @@ mod tests {
         let mut f = Filter::fir(h.clone(), 3, DT);
         let u: Vec<f64> = (0..40).map(|k| ((k * 7 % 11) as f64) - 5.0).collect();
         let y: Vec<f64> = u.iter().map(|&x| f.filter(x)).collect();
-        let y_ss = lsim_siso(f.model(), &u).unwrap();
+        let y_ss = lsim_siso(f.model().unwrap(), &u).unwrap();
         for k in 0..u.len() {
             let direct: f64 = (0..h.len())
                 .filter(|&j| j <= k)
@@ -348,7 +381,7 @@ mod tests {
             assert!((y[k] - y_ss[k]).abs() < 1e-12);
         }
         let w = 2.0 * std::f64::consts::PI * 300.0;
-        assert!((f.freqresp_at(w) - f.model().freqresp_siso_at(w)).norm() < 1e-12);
+        assert!((f.freqresp_at(w) - f.model().unwrap().freqresp_siso_at(w)).norm() < 1e-12);
         assert_eq!(f.preview_samples(), 3);
     }
 

@@ -125,9 +125,34 @@ impl MemoryLoop {
         })
     }
 
-    /// Bytes held by the memory and preview delay lines.
+    /// Bytes held by the memory and preview delay lines and the two filters.
     pub fn memory_bytes(&self) -> usize {
         (self.mem.max_delay() + self.wdel.max_delay() + 2) * std::mem::size_of::<f64>()
+            + self.l.memory_bytes()
+            + self.q.memory_bytes()
+    }
+
+    /// Bytes the memory of a loop with delays up to `n_max` (and `weights`
+    /// periods of `n_period`) and filters `learning`, `robustness` will hold, from
+    /// the parameters alone (reserved before anything is allocated).
+    pub fn planned_bytes(
+        n_max: usize,
+        n_period: usize,
+        weights: usize,
+        learning: &FilterSpec,
+        robustness: &FilterSpec,
+    ) -> usize {
+        let f = std::mem::size_of::<f64>();
+        let filter = |s: &FilterSpec| match s {
+            FilterSpec::FirLowpass { taps, .. } => fir_bytes(*taps),
+            FilterSpec::Fir { coefficients, .. } => fir_bytes(coefficients.len()),
+            _ => 0,
+        };
+        n_max
+            .saturating_add(weights.saturating_sub(1).saturating_mul(n_period))
+            .saturating_mul(f)
+            .saturating_add(filter(learning))
+            .saturating_add(filter(robustness))
     }
 
     /// Phase 1: the RC output w_k for delay N_k (clamped to \[n_min, n_max\]).
@@ -223,24 +248,37 @@ impl TfModel {
     }
 }
 
+/// Heap bytes of an FIR filter of `taps` taps: taps, run-time buffer and, up to
+/// [`crate::filters::MAX_MODEL_TAPS`], its dense analysis model.
+fn fir_bytes(taps: usize) -> usize {
+    let f = std::mem::size_of::<f64>();
+    let states = if taps <= crate::filters::MAX_MODEL_TAPS {
+        taps.saturating_sub(1)
+    } else {
+        0
+    };
+    (3 * taps + states * states + 2 * states + 1) * f
+}
+
 /// What the stability gate needs of a built memory loop (`Block::learning`):
-/// the filters as they are run and the delay range.
+/// the filters as they are run and the delay range; `None` when a filter has no
+/// analysis model (an FIR filter too long to analyse): the loop is then unproven.
 fn learning_of(
     m: &MemoryLoop,
     n_min: usize,
     n_max: usize,
     weight_sum: Option<f64>,
-) -> nanomotion_core::gate::LearningModel {
-    nanomotion_core::gate::LearningModel {
-        l_causal: m.learning().model().clone(),
+) -> Option<nanomotion_core::gate::LearningModel> {
+    Some(nanomotion_core::gate::LearningModel {
+        l_causal: m.learning().model().ok()?.clone(),
         preview: m.learning().preview_samples(),
-        q: m.robustness().model().clone(),
+        q: m.robustness().model().ok()?.clone(),
         n_min,
         n_max,
         weight_sum,
         error_input: 0,
         output: 0,
-    }
+    })
 }
 
 /// The plain-Rust sample methods (`step`, `output_w`, `learn`) and the
@@ -299,6 +337,9 @@ macro_rules! fixed_delay_rc_adapters {
             fn build(&mut self, ctx: &BuildContext) -> Result<(), ParamError> {
                 self.prepare(ctx.dt)
             }
+            fn planned_bytes(&self, _dt: f64) -> (&'static str, usize) {
+                ("n", self.planned_memory())
+            }
             fn memory_bytes(&self) -> usize {
                 self.core.as_ref().map_or(0, MemoryLoop::memory_bytes)
             }
@@ -348,9 +389,13 @@ pub struct RepetitiveControl {
 }
 
 impl RepetitiveControl {
+    /// Bytes the built block will hold, from its parameters.
+    fn planned_memory(&self) -> usize {
+        MemoryLoop::planned_bytes(self.n, 0, 1, &self.learning, &self.robustness)
+    }
     /// The gate's view: (5.5) with N fixed.
     fn learning_model(&self) -> Option<nanomotion_core::gate::LearningModel> {
-        Some(learning_of(self.core.as_ref()?, self.n, self.n, None))
+        learning_of(self.core.as_ref()?, self.n, self.n, None)
     }
     /// Standard RC with delay `n`, learning `l` and robustness `q`; call
     /// [`Block::build`] (or use [`RepetitiveControl::built`]).
@@ -437,10 +482,20 @@ pub struct HighOrderRc {
 }
 
 impl HighOrderRc {
+    /// Bytes the built block will hold, from its parameters.
+    fn planned_memory(&self) -> usize {
+        MemoryLoop::planned_bytes(
+            self.n,
+            self.n,
+            self.weights.len(),
+            &self.learning,
+            &self.robustness,
+        )
+    }
     /// The gate's view: the small-gain condition with Σ|w_i|.
     fn learning_model(&self) -> Option<nanomotion_core::gate::LearningModel> {
         let ws = self.weights.iter().map(|w| w.abs()).sum();
-        Some(learning_of(self.core.as_ref()?, self.n, self.n, Some(ws)))
+        learning_of(self.core.as_ref()?, self.n, self.n, Some(ws))
     }
     /// High-order RC with W = 2 − z^-N.
     pub fn new(n: usize, learning: FilterSpec, robustness: FilterSpec) -> Self {
@@ -647,6 +702,13 @@ impl Block for Dvrc {
     fn build(&mut self, ctx: &BuildContext) -> Result<(), ParamError> {
         self.prepare(ctx.dt)
     }
+    fn planned_bytes(&self, _dt: f64) -> (&'static str, usize) {
+        (
+            "n_max",
+            MemoryLoop::planned_bytes(self.n_max, 0, 1, &self.learning, &self.robustness)
+                .saturating_add(self.n_max.saturating_add(1).saturating_mul(8)),
+        )
+    }
     fn memory_bytes(&self) -> usize {
         self.core.as_ref().map_or(0, |(m, _)| {
             m.memory_bytes() + (self.n_max + 1) * std::mem::size_of::<f64>()
@@ -662,7 +724,7 @@ impl Block for Dvrc {
     }
     fn learning(&self) -> Option<nanomotion_core::gate::LearningModel> {
         let (m, _) = self.core.as_ref()?;
-        Some(learning_of(m, self.n_min, self.n_max, None))
+        learning_of(m, self.n_min, self.n_max, None)
     }
 }
 

@@ -33,7 +33,7 @@ use std::fmt;
 /// The formula lives in the core ([`nanomotion_core::gate::learning::loop_h`]),
 /// where the stability gate evaluates the same criteria for any graph.
 pub fn loop_h(t: &StateSpace, l: &Filter, q: &Filter) -> Result<StateSpace, LtiError> {
-    nanomotion_core::gate::learning::loop_h(t, l.model(), l.preview_samples(), q.model())
+    nanomotion_core::gate::learning::loop_h(t, l.model()?, l.preview_samples(), q.model()?)
 }
 
 /// Result of [`rc_criterion`].

@@ -23,11 +23,11 @@ fn m_model(l: &Filter, q: &Filter, n: usize, weights: &[f64]) -> StateSpace {
         w = parallel(&w, &delay(i * n, DT).scaled(*wi)).unwrap();
     }
     let fwd = series(
-        &series(&series(l.model(), q.model()).unwrap(), &w).unwrap(),
+        &series(&series(l.model().unwrap(), q.model().unwrap()).unwrap(), &w).unwrap(),
         &delay(n - lp - qd, DT),
     )
     .unwrap();
-    let lp_loop = series(&series(q.model(), &w).unwrap(), &delay(n - qd, DT)).unwrap();
+    let lp_loop = series(&series(q.model().unwrap(), &w).unwrap(), &delay(n - qd, DT)).unwrap();
     let sm = feedback(&one(), &lp_loop, 1.0).unwrap();
     series(&fwd, &sm).unwrap()
 }

@@ -79,6 +79,43 @@ pub(crate) fn positive(name: &str, v: f64) -> Result<(), MimoError> {
     }
 }
 
+/// Largest magnitude of a gain, weight or coupling in a synthesis config (and
+/// smallest of a positive weight: 1/this): 10¹². Beyond it the H∞ problem's
+/// numbers (γ, γ², the Riccati solutions) leave the range f64 resolves, and
+/// the synthesis could not end (audit D7: `k_s: 1e200` hung).
+pub const MAX_MAGNITUDE: f64 = 1e12;
+
+/// Check that `v` is a positive number in [1/[`MAX_MAGNITUDE`], [`MAX_MAGNITUDE`]].
+pub(crate) fn weight(name: &str, v: f64) -> Result<(), MimoError> {
+    positive(name, v)?;
+    if (1.0 / MAX_MAGNITUDE..=MAX_MAGNITUDE).contains(&v) {
+        Ok(())
+    } else {
+        Err(MimoError::param(
+            name,
+            format!(
+                "is {v:e}, outside [{:e}, {MAX_MAGNITUDE:e}]",
+                1.0 / MAX_MAGNITUDE
+            ),
+            "give a weight within 12 decades of 1 (rescale the plant's units if its numbers are that large)",
+        ))
+    }
+}
+
+/// Check that `v` is finite and |v| ≤ [`MAX_MAGNITUDE`].
+pub(crate) fn magnitude(name: &str, v: f64) -> Result<(), MimoError> {
+    finite(name, v)?;
+    if v.abs() <= MAX_MAGNITUDE {
+        Ok(())
+    } else {
+        Err(MimoError::param(
+            name,
+            format!("is {v:e}, larger in magnitude than {MAX_MAGNITUDE:e}"),
+            "rescale the plant's units (e.g. µm instead of nm) so its gains stay within 10¹²",
+        ))
+    }
+}
+
 /// Check that `v` is finite.
 pub(crate) fn finite(name: &str, v: f64) -> Result<(), MimoError> {
     if v.is_finite() {

@@ -14,7 +14,7 @@
 //! ("some off-diagonal terms have a minus sign in order to let the phase
 //! correspond to the phase at low frequencies in the measured FRF").
 
-use crate::error::{MimoError, finite, positive};
+use crate::error::{MimoError, magnitude, positive};
 use crate::optim::nelder_mead;
 use nalgebra::DMatrix;
 use nanomotion_core::analysis::CMatrix;
@@ -70,7 +70,7 @@ impl CoupledPlant {
             ));
         }
         for (i, t) in self.diagonal.iter().enumerate() {
-            finite(&format!("plant.diagonal[{i}].gain"), t.gain)?;
+            magnitude(&format!("plant.diagonal[{i}].gain"), t.gain)?;
             if t.gain == 0.0 {
                 return Err(MimoError::param(
                     format!("plant.diagonal[{i}].gain"),
@@ -90,7 +90,7 @@ impl CoupledPlant {
         }
         for (j, r) in self.coupling.iter().enumerate() {
             for (i, v) in r.iter().enumerate() {
-                finite(&format!("plant.coupling[{j}][{i}]"), *v)?;
+                magnitude(&format!("plant.coupling[{j}][{i}]"), *v)?;
             }
         }
         Ok(())

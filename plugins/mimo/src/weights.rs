@@ -20,7 +20,7 @@
 //! requires), f_T = 45 Hz so that the diagonal crossovers come out close to the
 //! decentralised controller's, which is how the thesis says it chose them.
 
-use crate::error::{MimoError, finite, positive};
+use crate::error::{MimoError, finite, positive, weight};
 use nalgebra::DMatrix;
 use nanomotion_core::lti::{StateSpace, append};
 use serde::{Deserialize, Serialize};
@@ -97,11 +97,11 @@ impl MixedSensitivityWeights {
 
     /// Check every number; names the offending field.
     pub fn validate(&self) -> Result<(), MimoError> {
-        positive("weights.k_s", self.k_s)?;
-        positive("weights.c", self.c)?;
-        positive("weights.k_t", self.k_t)?;
-        positive("weights.alpha_t", self.alpha_t)?;
-        positive("weights.beta_t", self.beta_t)?;
+        weight("weights.k_s", self.k_s)?;
+        weight("weights.c", self.c)?;
+        weight("weights.k_t", self.k_t)?;
+        weight("weights.alpha_t", self.alpha_t)?;
+        weight("weights.beta_t", self.beta_t)?;
         positive("weights.near_integrator_hz", self.near_integrator_hz)?;
         if self.axes.is_empty() {
             return Err(MimoError::param(
@@ -271,6 +271,30 @@ mod tests {
         assert!((ws.evalfr(s)[(0, 0)].norm() - 0.5).abs() < 1e-6);
         assert!((wt.evalfr(Complex::new(0.0, 0.0))[(2, 2)].re - 0.5).abs() < 1e-12);
         assert!((wt.evalfr(s)[(2, 2)].norm() - 50.0).abs() < 1e-4);
+    }
+
+    /// Audit D7: `k_s: 1e200` passed "finite and > 0" and `synth` never ended;
+    /// weights outside 12 decades of 1 are refused at once, naming the field.
+    #[test]
+    fn weights_beyond_twelve_decades_are_refused() {
+        for (v, ok) in [
+            (1e200, false),
+            (1e13, false),
+            (1e12, true),
+            (1e-12, true),
+            (1e-13, false),
+        ] {
+            let mut w = MixedSensitivityWeights::thesis_afm();
+            w.k_s = v;
+            match w.validate() {
+                Ok(()) => assert!(ok, "{v}"),
+                Err(e) => {
+                    assert!(!ok, "{v}: {e}");
+                    let e = e.to_string();
+                    assert!(e.contains("weights.k_s") && e.contains("outside"), "{e}");
+                }
+            }
+        }
     }
 
     #[test]

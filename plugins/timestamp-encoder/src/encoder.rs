@@ -308,10 +308,16 @@ impl TimestampEncoder {
     pub fn events_so_far(&self) -> u64 {
         self.state.k
     }
-    /// Event number `k` (time s, level counts), if it is still in the history.
+    /// Event number `k` (time s, level counts), if it is still in the history
+    /// and the register can read it: with skip σ only the grid events
+    /// k ≡ 1 (mod σ + 1) and the newest are timed (all of them for σ = 0).
     pub fn event(&self, k: u64) -> Option<(f64, f64)> {
         let cap = self.state.ring_t.len() as u64;
+        let s1 = self.skip as u64 + 1;
         if k == 0 || k > self.state.k || k + cap <= self.state.k {
+            return None;
+        }
+        if !(k - 1).is_multiple_of(s1) && k != self.state.k {
             return None;
         }
         let j = (k % cap) as usize;
@@ -335,11 +341,35 @@ impl TimestampEncoder {
         c
     }
 
-    fn push(&mut self, t_true: f64, level: i64) {
+    /// Number the next `count` events k + 1 … k + count and time those the
+    /// register can ever read: the grid events k ≡ 1 (mod σ + 1) and the last one
+    /// (the newest, if no event follows). `time_of(i)` gives the true time and
+    /// level of the i-th (0-based). Work: at most n + 1 crossings timed however
+    /// many edges are crossed (audit D9: all n(σ + 1) = 16 M were timed per tick).
+    fn push_run(&mut self, count: i64, mut time_of: impl FnMut(&Self, i64) -> (f64, i64)) {
+        if count <= 0 {
+            return;
+        }
+        let s1 = self.skip as u64 + 1;
+        let k0 = self.state.k;
+        let last = k0 + count as u64;
+        let mut k = k0 + 1 + (s1 - k0 % s1) % s1;
+        while k <= last {
+            let (t, level) = time_of(self, (k - k0 - 1) as i64);
+            self.store(k, t, level);
+            k += s1;
+        }
+        if !(last - 1).is_multiple_of(s1) {
+            let (t, level) = time_of(self, count - 1);
+            self.store(last, t, level);
+        }
+        self.state.k = last;
+    }
+
+    fn store(&mut self, k: u64, t_true: f64, level: i64) {
         let st = &mut self.state;
-        st.k += 1;
         let cap = st.ring_t.len() as u64;
-        let j = (st.k % cap) as usize;
+        let j = (k % cap) as usize;
         st.ring_t[j] = (t_true * self.clock_hz).floor() / self.clock_hz;
         st.ring_x[j] = level as f64;
     }
@@ -389,10 +419,11 @@ impl TimestampEncoder {
                 let c_new = self.cell(ub).max(c);
                 let first = (c + 1).max(c_new - cap + 1);
                 self.state.k += (first - c - 1) as u64;
-                for l in first..=c_new {
-                    let s = solve_monotone(&p, self.edge_pos(l), sa, sb, true);
-                    self.push(t0 + s * h, l);
-                }
+                self.push_run(c_new - first + 1, |enc, i| {
+                    let l = first + i;
+                    let s = solve_monotone(&p, enc.edge_pos(l), sa, sb, true);
+                    (t0 + s * h, l)
+                });
                 self.state.count = c_new;
             } else if ub < ua {
                 let c_new = self.cell(ub).min(c);
@@ -401,10 +432,12 @@ impl TimestampEncoder {
                 let total = c - c_new;
                 let n_skipped = total - total.min(cap);
                 self.state.k += n_skipped as u64;
-                for l in ((c_new + 1)..=c).rev().skip(n_skipped as usize) {
-                    let s = solve_monotone(&p, self.edge_pos(l), sa, sb, false);
-                    self.push(t0 + s * h, l);
-                }
+                let top = c - n_skipped;
+                self.push_run(total - n_skipped, |enc, i| {
+                    let l = top - i;
+                    let s = solve_monotone(&p, enc.edge_pos(l), sa, sb, false);
+                    (t0 + s * h, l)
+                });
                 self.state.count = c_new;
             }
             sa = sb;

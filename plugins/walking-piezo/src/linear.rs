@@ -893,6 +893,15 @@ impl Block for FittedStageBlock {
     fn memory_bytes(&self) -> usize {
         self.sim.as_ref().map_or(0, FittedStage::memory_bytes)
     }
+    fn planned_bytes(&self, dt: f64) -> (&'static str, usize) {
+        let samples = (self.params.delay_s / dt).round();
+        let bytes = if samples.is_finite() && samples >= 0.0 {
+            (samples.min(usize::MAX as f64 / 16.0) as usize + 1).saturating_mul(8)
+        } else {
+            0
+        };
+        ("delay_s", bytes)
+    }
     fn lti(&self) -> Option<StateSpace> {
         let d = self.sim.as_ref()?.discrete.clone()?;
         let n = d.nstates();
