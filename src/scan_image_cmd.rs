@@ -110,6 +110,8 @@ pub fn run(
             d[2].push(num(z)?);
         }
     }
+    // The images appear in the run folder only when all are drawn.
+    let folder = nanomotion::output::OutputFolder::add_to(run_dir).map_err(|e| e.to_string())?;
     for (s, d) in specs.iter().zip(&mut data) {
         let n = d[2].len().max(1) as f64;
         let mean = d[2].iter().sum::<f64>() / n;
@@ -122,7 +124,7 @@ pub fn run(
                 s.name
             )
         })?;
-        let path = run_dir.join(format!("{}.svg", s.name));
+        let path = folder.dir().join(format!("{}.svg", s.name));
         draw_heat_map(
             &img,
             &format!(
@@ -139,11 +141,12 @@ pub fn run(
             &path,
         )
         .map_err(|e| e.to_string())?;
-        println!(
+        say!(
             "wrote {} ({} samples, rms {rms:.3} nm)",
-            path.display(),
+            run_dir.join(format!("{}.svg", s.name)).display(),
             d[2].len()
         );
     }
+    folder.commit(None).map_err(|e| e.to_string())?;
     Ok(())
 }
