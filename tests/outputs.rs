@@ -148,6 +148,83 @@ fn an_interrupted_run_leaves_no_partial_folder_and_keeps_the_previous_run() {
     std::fs::remove_dir_all(&dir).ok();
 }
 
+/// D13: SIGINT at several points of a diagnosis (which does not poll the
+/// flag: the signal thread cleans up after its grace period) and of a sweep
+/// (which stops starting runs): exit 130, nothing staged is left, the sweep's
+/// lock is released and its finished rows resume.
+#[test]
+fn sigint_during_diagnose_and_sweep_leaves_nothing_half_written() {
+    let dir = scratch("sigint2");
+    for delay_ms in [150u64, 900, 2500] {
+        let target = dir.join(format!("d{delay_ms}"));
+        let mut child = nm()
+            .args([
+                "diagnose",
+                "examples/diagnose/model.yaml",
+                "examples/diagnose/record.csv",
+                "--out",
+            ])
+            .arg(&target)
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap();
+        std::thread::sleep(Duration::from_millis(delay_ms));
+        signal(child.id(), "-INT");
+        let status = child.wait().unwrap();
+        let left = partials(&dir);
+        assert_eq!(left, Vec::<String>::new(), "after {delay_ms} ms: leaked");
+        // Either stopped (130, nothing) or finished before the signal (0, complete).
+        match status.code() {
+            Some(130) => assert!(!target.exists(), "after {delay_ms} ms"),
+            Some(0) => assert!(target.join("nanomotion-run.json").exists()),
+            other => panic!("after {delay_ms} ms: {other:?}"),
+        }
+    }
+    let sweep = dir.join("sw");
+    let study = dir.join("study.yaml");
+    std::fs::write(
+        &study,
+        format!(
+            "graph: {ROOT}/examples/quickstart.yaml\nset: {{ duration_s: 1.5, score.0.from_s: 0.1, score.1.from_s: 0.1 }}\nstudy: grid\nparameters:\n  - {{ path: blocks.pi.zero_hz, values: [1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0, 10.0, 11.0, 12.0, 13.0, 14.0, 15.0, 16.0] }}\n"
+        ),
+    )
+    .unwrap();
+    let mut child = nm()
+        .args(["sweep"])
+        .arg(&study)
+        .args(["--jobs", "1", "--out"])
+        .arg(&sweep)
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let t = Instant::now();
+    while t.elapsed() < Duration::from_secs(60)
+        && std::fs::read_to_string(sweep.join("rows.jsonl")).map_or(0, |r| r.lines().count()) < 2
+    {
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    signal(child.id(), "-INT");
+    let status = child.wait().unwrap();
+    assert_eq!(status.code(), Some(130), "{status}");
+    assert!(
+        !sweep.join(nanomotion::output::LOCK_FILE).exists(),
+        "lock left"
+    );
+    assert_eq!(partials(&sweep), Vec::<String>::new());
+    let done = std::fs::read_to_string(sweep.join("rows.jsonl")).unwrap();
+    let done = done.lines().count();
+    assert!((2..16).contains(&done), "{done} rows before the signal");
+    let (rc, so, e) = out(nm().args(["sweep"]).arg(&study).arg("--out").arg(&sweep));
+    assert_eq!(rc, 0, "{so}{e}");
+    assert!(
+        so.contains(&format!("resumed: {done} finished rows")),
+        "{so}"
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}
+
 /// D13: a partial folder of a process that no longer runs (`kill -9`) is
 /// removed by the next command writing there; one of a running process is not.
 #[test]

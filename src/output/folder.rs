@@ -333,13 +333,11 @@ impl OutputFolder {
     /// folders of processes that no longer run are removed first.
     pub fn add_to(target: &Path) -> Result<Self, OutputError> {
         match std::fs::metadata(target) {
-            Ok(m) if !m.is_dir() => {
-                return Err(folder_err(
-                    target,
-                    "is a file, not a folder".into(),
-                    "pass another --out, or remove the file",
-                ));
-            }
+            Ok(m) if !m.is_dir() => Err(folder_err(
+                target,
+                "is a file, not a folder".into(),
+                "pass another --out, or remove the file",
+            )),
             Ok(_) => Self::inside(target, Placement::Inside { replace: false }, false),
             Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
                 std::fs::create_dir_all(target).map_err(io(target))?;
@@ -413,8 +411,13 @@ impl OutputFolder {
             std::fs::write(&path, text).map_err(io(&path))?;
             names.push(MANIFEST.to_string());
         }
-        // A signal's cleanup waits until the files are in place.
+        // A signal's cleanup waits until the files are in place; after a
+        // signal nothing new is put in place.
         let mut guard = signals::hold();
+        if let Some(signal) = signals::interrupted() {
+            drop(guard);
+            return Err(OutputError::Interrupted { signal });
+        }
         match self.placement {
             Placement::Sibling { replace } => self.commit_sibling(replace, &names)?,
             Placement::Inside { replace } => {
