@@ -414,7 +414,7 @@ fn main() -> ExitCode {
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(msg) => {
-            tell!("error: {msg}");
+            tell!("error: {}", nanomotion::output::unstaged(&msg));
             ExitCode::FAILURE
         }
     }

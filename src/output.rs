@@ -56,7 +56,7 @@ pub mod signals;
 
 pub use folder::{
     FolderLock, LOCK_FILE, MANIFEST, Manifest, OutputFolder, process_alive, refuse_foreign,
-    write_atomic,
+    unstaged, write_atomic,
 };
 
 fn io(path: &Path) -> impl FnOnce(std::io::Error) -> OutputError + '_ {

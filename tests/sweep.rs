@@ -447,6 +447,26 @@ fn a_grid_larger_than_the_bound_is_refused_naming_the_parameter() {
         "{e}"
     );
     assert!(t.elapsed().as_secs_f64() < 5.0, "{:?}", t.elapsed());
+    // Sizes at the bound: exactly MAX_RUNS plans (lazily: its last run is the
+    // range's end); one more is refused; a seeds list counts.
+    let max = nanomotion::sweep::MAX_RUNS;
+    let grid = |steps: usize, seeds: &str| {
+        load(&format!(
+            "study: grid\n{seeds}parameters:\n  - {{ path: blocks.pi.kp, range: [1.0e7, 1.0e8], steps: {steps} }}\n"
+        ))
+    };
+    let p = grid(max, "").unwrap().plan();
+    assert_eq!(p.len(), max);
+    assert_eq!(
+        p.run(max - 1).unwrap().parameters[0].value.as_f64(),
+        Some(1.0e8)
+    );
+    assert!(grid(max + 1, "").is_err());
+    assert_eq!(grid(max / 2, "seeds: [1, 2]\n").unwrap().plan().len(), max);
+    let e = grid(max / 2 + 1, "seeds: [1, 2]\n")
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("× 2 seeds"), "{e}");
     // A seeds list multiplies the size.
     let e = load("study: monte-carlo\nruns: 10000000\nseeds: [1, 2]\nparameters:\n  - { path: blocks.pi.kp, range: [1.0e7, 1.0e8] }\n")
         .unwrap_err()

@@ -554,6 +554,41 @@ impl Drop for OutputFolder {
     }
 }
 
+/// `message` with every staging folder in a path replaced by its target
+/// (`out/.run.partial-12-0/signals.csv` → `out/run/signals.csv`,
+/// `mnt/.nanomotion.partial-12-0/a.svg` → `mnt/a.svg`): an error names the
+/// file the user asked for, not a hidden folder that is gone by then.
+pub fn unstaged(message: &str) -> String {
+    let mut out = String::with_capacity(message.len());
+    let mut rest = message;
+    while let Some(at) = rest.find(".partial-") {
+        let start = rest[..at]
+            .rfind(['/', '\\', ' ', '`', '\''])
+            .map_or(0, |i| i + 1);
+        let after = &rest[at + ".partial-".len()..];
+        let tag = after
+            .find(|c: char| !(c.is_ascii_digit() || c == '-'))
+            .unwrap_or(after.len());
+        let segment = &rest[start..at];
+        if tag == 0 || !segment.starts_with('.') {
+            out.push_str(&rest[..at + 1]);
+            rest = &rest[at + 1..];
+            continue;
+        }
+        out.push_str(&rest[..start]);
+        let mut next = &after[tag..];
+        if segment == INSIDE_PREFIX.trim_end_matches(".partial-") {
+            // Inside the target: drop the segment and its separator.
+            next = next.strip_prefix(['/', '\\']).unwrap_or(next);
+        } else {
+            out.push_str(&segment[1..]);
+        }
+        rest = next;
+    }
+    out.push_str(rest);
+    out
+}
+
 /// Write `contents` to `path` whole or not at all: into a hidden temporary
 /// file beside it (named with the process id), then renamed over `path`.
 pub fn write_atomic(path: &Path, contents: impl AsRef<[u8]>) -> Result<(), OutputError> {
@@ -784,6 +819,22 @@ mod tests {
         drop(OutputFolder::add_to(&missing).unwrap());
         assert!(!missing.exists(), "a folder made for nothing is removed");
         std::fs::remove_dir_all(&d).ok();
+    }
+
+    #[test]
+    fn errors_name_the_target_not_the_staging_folder() {
+        assert_eq!(
+            unstaged("error: full/.s.partial-12-0/controller.yaml: No space left"),
+            "error: full/s/controller.yaml: No space left"
+        );
+        assert_eq!(
+            unstaged("cannot write `mnt/.nanomotion.partial-7-3/a.svg`: busy"),
+            "cannot write `mnt/a.svg`: busy"
+        );
+        assert_eq!(
+            unstaged("x.partial-y and .a.partial-z"),
+            "x.partial-y and .a.partial-z"
+        );
     }
 
     #[test]
