@@ -1,5 +1,5 @@
 //! Ctrl-C (SIGINT), SIGTERM and SIGHUP: the staging folders and locks of
-//! [`super::folder`] are removed before the process ends.
+//! [`super::OutputFolder`] and [`super::FolderLock`] are removed before the process ends.
 //!
 //! [`install`] (called by the `nanomotion` binary, not by the library) starts a
 //! thread that waits for the signals (`signal-hook`). On a signal it raises the
