@@ -251,6 +251,7 @@ enum Dim {
         log: bool,
     },
     Normal(Normal),
+    #[serde(rename = "lognormal")]
     LogNormal(LogNormal),
 }
 
