@@ -79,7 +79,11 @@ fn clean_up(list: &mut Vec<Cleanup>) {
     list.sort_by_key(|c| matches!(c, Cleanup::EmptyDir(_)));
     for c in list.drain(..) {
         let _ = match &c {
-            Cleanup::Tree(p) => std::fs::remove_dir_all(p),
+            // The command may still be writing into it: try a few times.
+            Cleanup::Tree(p) => (0..5)
+                .map(|_| std::fs::remove_dir_all(p))
+                .find(|r| r.is_ok() || !p.exists())
+                .unwrap_or(Ok(())),
             Cleanup::File(p) => std::fs::remove_file(p),
             Cleanup::EmptyDir(p) => std::fs::remove_dir(p),
         };
