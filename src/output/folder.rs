@@ -435,6 +435,16 @@ impl OutputFolder {
 
     fn commit_sibling(&mut self, replace: bool, names: &[String]) -> Result<(), OutputError> {
         let target = self.target.clone();
+        // Another command may have written the target since `prepare` (two runs
+        // into one --out): its complete output is replaced like any previous one.
+        let replace = replace || (target.is_dir() && !visible_entries(&target)?.is_empty());
+        if replace {
+            refuse_foreign(
+                &target,
+                &[],
+                "it was filled while this command ran: move it away",
+            )?;
+        }
         let result = if replace {
             let old = self.staging.with_file_name(format!(
                 "{}.old",
@@ -819,6 +829,34 @@ mod tests {
         drop(OutputFolder::add_to(&missing).unwrap());
         assert!(!missing.exists(), "a folder made for nothing is removed");
         std::fs::remove_dir_all(&d).ok();
+    }
+
+    #[test]
+    fn an_output_committed_meanwhile_by_another_command_is_replaced() {
+        let d = scratch("race");
+        let target = d.join("out");
+        let a = OutputFolder::prepare(&target, false).unwrap();
+        let b = OutputFolder::prepare(&target, false).unwrap();
+        std::fs::write(a.dir().join("a.csv"), "a").unwrap();
+        std::fs::write(b.dir().join("b.csv"), "b").unwrap();
+        a.commit(Some(&M)).unwrap();
+        b.commit(Some(&M)).unwrap();
+        assert!(target.join("b.csv").exists() && !target.join("a.csv").exists());
+        assert_eq!(partials_in(&d), 0);
+        std::fs::remove_dir_all(&d).ok();
+    }
+
+    fn partials_in(d: &Path) -> usize {
+        std::fs::read_dir(d)
+            .unwrap()
+            .filter(|e| {
+                e.as_ref()
+                    .unwrap()
+                    .file_name()
+                    .to_string_lossy()
+                    .contains(".partial-")
+            })
+            .count()
     }
 
     #[test]
