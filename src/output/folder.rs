@@ -437,14 +437,15 @@ impl OutputFolder {
         let target = self.target.clone();
         // Another command may have written the target since `prepare` (two runs
         // into one --out): its complete output is replaced like any previous one.
-        let replace = replace || (target.is_dir() && !visible_entries(&target)?.is_empty());
-        if replace {
+        let appeared = !replace && target.is_dir() && !visible_entries(&target)?.is_empty();
+        if appeared {
             refuse_foreign(
                 &target,
                 &[],
                 "it was filled while this command ran: move it away",
             )?;
         }
+        let replace = replace || appeared;
         let result = if replace {
             let old = self.staging.with_file_name(format!(
                 "{}.old",
