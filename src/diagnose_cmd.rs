@@ -3,6 +3,7 @@
 use indicatif::{ProgressBar, ProgressStyle};
 use nanomotion::core::data::Dataset;
 use nanomotion::core::graph::GraphSpec;
+use nanomotion::output::{Manifest, OutputFolder, write_atomic};
 use nanomotion::plf::diagnose::{Options, PlotData, Report, diagnose_with_progress};
 use nanomotion::plot::{Figure, Scale, Series, draw_svg};
 use std::path::{Path, PathBuf};
@@ -18,6 +19,7 @@ pub struct Args {
     pub holdout: f64,
     pub seed: Option<u64>,
     pub effects: Vec<String>,
+    pub force: bool,
 }
 
 pub fn run(a: Args) -> Result<(), String> {
@@ -38,6 +40,9 @@ pub fn run(a: Args) -> Result<(), String> {
             a.holdout
         ));
     }
+    // The folder is checked (and its staging folder made) before the work, so
+    // a bad --out costs nothing; files appear only when all are written.
+    let folder = OutputFolder::prepare(&out, a.force).map_err(|e| e.to_string())?;
     let opts = Options {
         max_effects: a.max_effects,
         holdout: a.holdout,
@@ -45,7 +50,7 @@ pub fn run(a: Args) -> Result<(), String> {
         effects: a.effects.clone(),
         ..Options::default()
     };
-    println!(
+    say!(
         "diagnosing {} against {} ({} samples at {} Hz; last {:.0} % held out)",
         a.model.display(),
         a.data.display(),
@@ -77,15 +82,26 @@ pub fn run(a: Args) -> Result<(), String> {
         b.finish_and_clear();
     }
     print_report(&report);
-    println!(
+    say!(
         "({} graph runs in {:.1} s)",
         report.runs,
         start.elapsed().as_secs_f64()
     );
-    std::fs::create_dir_all(&out).map_err(|e| format!("cannot create {}: {e}", out.display()))?;
-    let files = write(&out, &report, &a)?;
-    println!("wrote {} files to {}", files.len(), out.display());
-    println!(
+    let json = write(folder.dir(), &report, &a)?;
+    let model = a.model.display().to_string();
+    let files = folder
+        .commit(Some(&Manifest {
+            command: "diagnose",
+            graph: &model,
+            title: &spec.title,
+            stability_gate: &[],
+        }))
+        .map_err(|e| e.to_string())?;
+    if let Some(extra) = &a.json {
+        write_atomic(extra, &json).map_err(|e| e.to_string())?;
+    }
+    say!("wrote {} files to {}", files.len(), out.display());
+    say!(
         "re-run the augmented model: nanomotion run {} --data {}",
         out.join("model_augmented.yaml").display(),
         a.data.display()
@@ -94,13 +110,15 @@ pub fn run(a: Args) -> Result<(), String> {
 }
 
 fn print_report(r: &Report) {
-    println!("\nnominal model:");
-    println!(
+    say!("\nnominal model:");
+    say!(
         "  rms {:.4e}, held-out rms {:.4e}, fit {:.1} %",
-        r.nominal.rms, r.nominal.holdout_rms, r.nominal.fit_percent
+        r.nominal.rms,
+        r.nominal.holdout_rms,
+        r.nominal.fit_percent
     );
     for t in &r.nominal_tests {
-        println!(
+        say!(
             "  {}: whiteness Ljung–Box Q = {:.0} (p = {:.1e}{}); input correlation with {} |z| = {:.1} at lag {} (p = {:.1e}{}); strongest line {:.3} Hz (Fisher g p = {:.1e}); noise floor ≈ {:.3e}",
             t.signal,
             t.whiteness.statistic,
@@ -134,7 +152,7 @@ fn print_report(r: &Report) {
                 .collect::<Vec<_>>()
                 .join(", ")
         };
-        println!(
+        say!(
             "\nstep 0: nominal calibration {}: {}",
             if c.accepted {
                 "(kept: the nominal's own parameters were off)"
@@ -144,12 +162,12 @@ fn print_report(r: &Report) {
             fmt(&c.params)
         );
         if c.accepted && !c.final_params.is_empty() && c.final_params != c.params {
-            println!(
+            say!(
                 "     in model_augmented.yaml (after the later joint refits): {}",
                 fmt(&c.final_params)
             );
         }
-        println!(
+        say!(
             "     held-out rms {:.4e} -> {:.4e} ({:.1} % cut, {:.0} % of the excess over the noise floor, p = {:.1e})",
             c.holdout_rms_before,
             c.holdout_rms_after,
@@ -159,29 +177,35 @@ fn print_report(r: &Report) {
         );
     }
     for (k, s) in r.steps.iter().enumerate() {
-        println!("\nstep {}: candidates tried (best first):", k + 1);
+        say!("\nstep {}: candidates tried (best first):", k + 1);
         for c in s.candidates.iter().take(8) {
             match &c.note {
-                None => println!(
+                None => say!(
                     "  {:<24} {:<52} {:>2} params  held-out rms {:.4e}",
-                    c.effect, c.site, c.n_params, c.holdout_rms
+                    c.effect,
+                    c.site,
+                    c.n_params,
+                    c.holdout_rms
                 ),
-                Some(n) => println!("  {:<24} {:<52} {n}", c.effect, c.site),
+                Some(n) => say!("  {:<24} {:<52} {n}", c.effect, c.site),
             }
         }
         if s.candidates.len() > 8 {
-            println!(
+            say!(
                 "  ... and {} more (see the JSON report)",
                 s.candidates.len() - 8
             );
         }
-        println!(
+        say!(
             "  => named: {} (block `{}`, type `{}`), {}",
-            s.effect, s.block.name, s.block.type_name, s.site
+            s.effect,
+            s.block.name,
+            s.block.type_name,
+            s.site
         );
-        println!("     evidence: {}", s.evidence);
+        say!("     evidence: {}", s.evidence);
         for a in &s.ambiguous_with {
-            println!(
+            say!(
                 "     ambiguous: [{}, {}] — {} ({}) explains the held-out data as well (held-out rms {:.4e}; {} better only with p = {:.2}); to tell them apart: {}",
                 s.effect,
                 a.effect,
@@ -201,7 +225,7 @@ fn print_report(r: &Report) {
                 None => format!("{k} = {v:.4e}"),
             })
             .collect();
-        println!("     parameters at this step: {}", params.join(", "));
+        say!("     parameters at this step: {}", params.join(", "));
         // Later steps refit earlier effects jointly; say where they ended up.
         if s.final_params != s.params {
             let fin: Vec<String> = s
@@ -209,7 +233,7 @@ fn print_report(r: &Report) {
                 .iter()
                 .map(|(k, v)| format!("{k} = {v:.4e}"))
                 .collect();
-            println!(
+            say!(
                 "     in model_augmented.yaml (after the later joint refits): {}",
                 fin.join(", ")
             );
@@ -220,14 +244,17 @@ fn print_report(r: &Report) {
                 .iter()
                 .map(|(k, v)| format!("{k} = {v:.4e}"))
                 .collect();
-            println!("     derived from the final fit: {}", d.join(", "));
+            say!("     derived from the final fit: {}", d.join(", "));
         }
-        println!(
+        say!(
             "     held-out rms {:.4e} -> {:.4e} ({:.1} % cut, p = {:.1e})",
-            s.holdout_rms_before, s.holdout_rms_after, s.cut_percent, s.p_value
+            s.holdout_rms_before,
+            s.holdout_rms_after,
+            s.cut_percent,
+            s.p_value
         );
     }
-    println!(
+    say!(
         "\nfound: [{}]",
         r.found
             .iter()
@@ -235,7 +262,7 @@ fn print_report(r: &Report) {
             .collect::<Vec<_>>()
             .join(", ")
     );
-    println!(
+    say!(
         "final: rms {:.4e}, held-out rms {:.4e}, fit {:.1} % (nominal held-out {:.4e}: {:.1} % cut{})",
         r.final_scores.rms,
         r.final_scores.holdout_rms,
@@ -248,16 +275,19 @@ fn print_report(r: &Report) {
             ""
         }
     );
-    println!("stopped because {}", r.stopped_because);
+    say!("stopped because {}", r.stopped_because);
     if !r.rejected_candidates.is_empty() {
-        println!("  (the last step's best candidates:");
+        say!("  (the last step's best candidates:");
         for c in r.rejected_candidates.iter().take(4) {
-            println!(
+            say!(
                 "     {:<24} {:<52} {:>2} params  held-out rms {:.4e}",
-                c.effect, c.site, c.n_params, c.holdout_rms
+                c.effect,
+                c.site,
+                c.n_params,
+                c.holdout_rms
             );
         }
-        println!("  )");
+        say!("  )");
     }
 }
 
@@ -298,8 +328,8 @@ fn plot(p: &PlotData, path: &Path) -> Result<(), String> {
     .map_err(|e| e.to_string())
 }
 
-fn write(out: &Path, r: &Report, a: &Args) -> Result<Vec<PathBuf>, String> {
-    let mut files = Vec::new();
+/// Write the files into `out` (the staging folder); returns the JSON report.
+fn write(out: &Path, r: &Report, a: &Args) -> Result<String, String> {
     let io = |p: &Path| {
         let p = p.display().to_string();
         move |e: std::io::Error| format!("cannot write {p}: {e}")
@@ -318,20 +348,13 @@ fn write(out: &Path, r: &Report, a: &Args) -> Result<Vec<PathBuf>, String> {
             }
         );
         std::fs::write(&path, header + &yaml).map_err(io(&path))?;
-        files.push(path);
     }
     let json = serde_json::to_string_pretty(r).map_err(|e| e.to_string())?;
     let path = out.join("report.json");
     std::fs::write(&path, &json).map_err(io(&path))?;
-    files.push(path);
-    if let Some(extra) = &a.json {
-        std::fs::write(extra, &json).map_err(io(extra))?;
-        files.push(extra.clone());
-    }
     for p in &r.plots {
         let path = out.join(format!("evidence_{}.svg", p.name));
         plot(p, &path)?;
-        files.push(path);
     }
     for (signal, before, after) in &r.residuals {
         let stem = nanomotion::output::file_stem(signal);
@@ -360,7 +383,6 @@ fn write(out: &Path, r: &Report, a: &Args) -> Result<Vec<PathBuf>, String> {
             &path,
         )
         .map_err(|e| e.to_string())?;
-        files.push(path);
         // As the thesis reads it: the square root of the cumulative PSD, in the
         // signal's unit, whose end value is the residual's standard deviation.
         let root = |(f, c): (Vec<f64>, Vec<f64>)| {
@@ -395,7 +417,6 @@ fn write(out: &Path, r: &Report, a: &Args) -> Result<Vec<PathBuf>, String> {
             &path,
         )
         .map_err(|e| e.to_string())?;
-        files.push(path);
     }
-    Ok(files)
+    Ok(json)
 }

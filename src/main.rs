@@ -1,5 +1,22 @@
 //! The `nanomotion` command: run, check and inspect YAML controller graphs.
 
+/// `println!` that survives a closed pipe (`nanomotion run … | head -1`): a
+/// broken pipe ends the printing quietly (the command still finishes its work
+/// and writes its files), any other write error is reported once on stderr.
+macro_rules! say {
+    ($($t:tt)*) => {
+        $crate::emit(false, format_args!($($t)*))
+    };
+}
+
+/// `eprintln!` that survives a closed pipe (`nanomotion run … 2>&1 | head -1`),
+/// as [`say!`] does for standard output.
+macro_rules! tell {
+    ($($t:tt)*) => {
+        $crate::emit(true, format_args!($($t)*))
+    };
+}
+
 mod diagnose_cmd;
 mod gate_cmd;
 mod optimize_cmd;
@@ -16,27 +33,27 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::{Duration, Instant};
 
-/// `println!` that survives a closed pipe (`nanomotion run … | head -1`): a
-/// broken pipe ends the printing quietly (files are still written), any other
-/// write error is reported once on stderr.
-macro_rules! say {
-    ($($t:tt)*) => {
-        emit(format_args!($($t)*))
-    };
-}
-
-fn emit(args: std::fmt::Arguments<'_>) {
+/// One line to standard output (`to_stderr`: standard error). A stream that
+/// failed once (a closed pipe) is not written again.
+fn emit(to_stderr: bool, args: std::fmt::Arguments<'_>) {
     use std::io::Write as _;
     use std::sync::atomic::{AtomicBool, Ordering};
-    static FAILED: AtomicBool = AtomicBool::new(false);
-    if FAILED.load(Ordering::Relaxed) {
+    static FAILED: [AtomicBool; 2] = [AtomicBool::new(false), AtomicBool::new(false)];
+    let failed = &FAILED[usize::from(to_stderr)];
+    if failed.load(Ordering::Relaxed) {
         return;
     }
-    let mut out = std::io::stdout().lock();
-    if let Err(e) = out.write_fmt(args).and_then(|()| out.write_all(b"\n")) {
-        FAILED.store(true, Ordering::Relaxed);
-        if e.kind() != std::io::ErrorKind::BrokenPipe {
-            eprintln!("warning: cannot write to standard output: {e}");
+    let r = if to_stderr {
+        let mut e = std::io::stderr().lock();
+        e.write_fmt(args).and_then(|()| e.write_all(b"\n"))
+    } else {
+        let mut o = std::io::stdout().lock();
+        o.write_fmt(args).and_then(|()| o.write_all(b"\n"))
+    };
+    if let Err(e) = r {
+        failed.store(true, Ordering::Relaxed);
+        if e.kind() != std::io::ErrorKind::BrokenPipe && !to_stderr {
+            tell!("warning: cannot write to standard output: {e}");
         }
     }
 }
@@ -212,6 +229,9 @@ enum Command {
         /// Only try these effects (comma separated vocabulary names).
         #[arg(long, value_delimiter = ',')]
         effects: Vec<String>,
+        /// Replace a non-empty output folder that does not hold a previous output.
+        #[arg(long)]
+        force: bool,
     },
     /// Heat maps of a scan from a run folder (`signals.csv`): for each `--image
     /// NAME=H,V,VALUE` an SVG `NAME.svg` of VALUE (nm, mean removed; a leading `-`
@@ -237,9 +257,12 @@ enum Command {
     Synth {
         /// The synthesis config (YAML), e.g. examples/mimo/afm_synth.yaml.
         config: PathBuf,
-        /// Output folder (created if missing).
+        /// Output folder (created if missing; written atomically, as `run` does).
         #[arg(long, short, default_value = "out/synth")]
         out: PathBuf,
+        /// Replace a non-empty output folder that does not hold a previous output.
+        #[arg(long)]
+        force: bool,
     },
     /// Run a parameter study (grid, random, latin-hypercube or monte-carlo over
     /// graph parameters by dotted path) in parallel: writes `results.csv`,
@@ -252,7 +275,7 @@ enum Command {
         /// Output folder (default out/sweep_<study stem>).
         #[arg(long, short)]
         out: Option<PathBuf>,
-        /// Parallel runs (default: all cores).
+        /// Parallel runs (default: all cores; more than the cores is capped).
         #[arg(long, short, default_value_t = 0)]
         jobs: usize,
         /// Discard the finished rows in the output folder and start again.
@@ -279,6 +302,9 @@ enum Command {
         /// List the experiments and exit.
         #[arg(long)]
         list: bool,
+        /// Replace a non-empty output folder that does not hold a previous output.
+        #[arg(long)]
+        force: bool,
     },
     /// List the registered block types, with their ports and parameters.
     Blocks {
@@ -291,6 +317,11 @@ fn main() -> ExitCode {
     nanomotion::link_plugins();
     let cli = Cli::parse();
     init_tracing(cli.verbose);
+    if let Err(e) = nanomotion::output::signals::install() {
+        tell!(
+            "warning: cannot catch Ctrl-C ({e}): an interrupted command may leave a hidden `.OUT.partial-PID` folder, removed by the next command writing there"
+        );
+    }
     let result = match cli.command {
         Command::Run {
             graph,
@@ -349,6 +380,7 @@ fn main() -> ExitCode {
             holdout,
             seed,
             effects,
+            force,
         } => diagnose_cmd::run(diagnose_cmd::Args {
             model,
             data,
@@ -358,6 +390,7 @@ fn main() -> ExitCode {
             holdout,
             seed,
             effects,
+            force,
         }),
         Command::ScanImage {
             run_dir,
@@ -365,7 +398,7 @@ fn main() -> ExitCode {
             from_s,
             pixels,
         } => scan_image_cmd::run(&run_dir, &images, from_s, (pixels[0], pixels[1])),
-        Command::Synth { config, out } => synth_cmd::synth(&config, &out),
+        Command::Synth { config, out, force } => synth_cmd::synth(&config, &out, force),
         Command::Sweep {
             study,
             out,
@@ -379,21 +412,28 @@ fn main() -> ExitCode {
             quick,
             out,
             list,
+            force,
         } => match reproduce_cmd::run(reproduce_cmd::Args {
             names: &names,
             quick,
             out: &out,
             list,
+            force,
         }) {
             Ok(true) => Ok(()),
             Ok(false) => return ExitCode::FAILURE,
             Err(e) => Err(e),
         },
     };
+    if let Some(signal) = nanomotion::output::signals::interrupted() {
+        // Stopped by Ctrl-C or SIGTERM: what was staged has been removed.
+        tell!("interrupted by signal {signal}: stopped; no partial output was left");
+        return ExitCode::from(128 + signal as u8);
+    }
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(msg) => {
-            eprintln!("error: {msg}");
+            tell!("error: {}", nanomotion::output::unstaged(&msg));
             ExitCode::FAILURE
         }
     }
@@ -536,7 +576,7 @@ fn run(args: RunArgs) -> Result<(), String> {
     let gate_lines =
         gate_cmd::before_run(&gate_cmd::analyse(&sched, require.as_ref()), allow_unproven)?;
     for r in &report.rate_transitions {
-        eprintln!("note: rate transition {r}");
+        tell!("note: rate transition {r}");
     }
     // The output folder is checked (and its temporary folder made) before the
     // simulation, so a bad --out costs nothing.
@@ -549,12 +589,10 @@ fn run(args: RunArgs) -> Result<(), String> {
     let folder = if no_files {
         None
     } else {
-        Some(nanomotion::output::RunFolder::prepare(&out, force).map_err(|e| e.to_string())?)
+        Some(nanomotion::output::OutputFolder::prepare(&out, force).map_err(|e| e.to_string())?)
     };
     if sched.ticks_total() == 0 {
-        eprintln!(
-            "note: duration 0 s: nothing is simulated, logs are empty and no plots are drawn"
-        );
+        tell!("note: duration 0 s: nothing is simulated, logs are empty and no plots are drawn");
     }
     let mut writer = match &folder {
         Some(f) => Some(
@@ -568,7 +606,10 @@ fn run(args: RunArgs) -> Result<(), String> {
     let result = sched.run_streamed(
         |chunks| match &mut writer {
             Some(w) => w.chunk(chunks),
-            None => Ok(()),
+            None => match nanomotion::output::signals::interrupted() {
+                Some(signal) => Err(nanomotion::output::OutputError::Interrupted { signal }),
+                None => Ok(()),
+            },
         },
         |fraction| {
             // Show a bar only for runs that last more than a second.
@@ -663,7 +704,7 @@ fn run(args: RunArgs) -> Result<(), String> {
         }
     }
     if let (Some(folder), Some(writer)) = (folder, writer) {
-        eprintln!("writing files to {} ...", out.display());
+        tell!("writing files to {} ...", out.display());
         let dir = folder.dir().to_path_buf();
         let started = Instant::now();
         let mut wbar: Option<ProgressBar> = None;
@@ -700,22 +741,17 @@ fn run(args: RunArgs) -> Result<(), String> {
                     .map_err(|e| e.to_string())?,
             );
         }
-        let names: Vec<String> = files
-            .iter()
-            .filter_map(|f| f.file_name())
-            .map(|n| n.to_string_lossy().into_owned())
-            .collect();
         let graph_name = graph.display().to_string();
-        folder
-            .commit(&nanomotion::output::Manifest {
+        let written = folder
+            .commit(Some(&nanomotion::output::Manifest {
+                command: "run",
                 graph: &graph_name,
                 title: &result.title,
-                files: names,
-                complete: true,
                 stability_gate: &gate_lines,
-            })
+            }))
             .map_err(|e| e.to_string())?;
-        say!("wrote {} files to {}", files.len() + 1, out.display());
+        debug_assert_eq!(written.len(), files.len() + 1);
+        say!("wrote {} files to {}", written.len(), out.display());
     }
     Ok(())
 }

@@ -3,6 +3,8 @@
 //! resumable run file and the optimised waveform as a driver YAML fragment.
 
 use indicatif::{ProgressBar, ProgressStyle};
+use nanomotion::output::signals::interrupted;
+use nanomotion::output::{FolderLock, OutputError, write_atomic};
 use nanomotion::walking_piezo::optimize::{
     OptimizeConfig, Phase, Prepared, optimize, read_run_file, waveform_yaml,
 };
@@ -27,10 +29,11 @@ pub fn optimize_waveform(config: &Path, out: &Path, budget: Option<f64>) -> Resu
         }
         cfg.budget = cfg.budget.scaled(f);
     }
-    std::fs::create_dir_all(out).map_err(|e| format!("{}: {e}", out.display()))?;
+    // One optimisation at a time writes a run file (a second is refused).
+    let _lock = FolderLock::acquire(out).map_err(|e| e.to_string())?;
     let run_file = out.join(RUN_FILE);
     let start = Instant::now();
-    eprintln!(
+    tell!(
         "{}: {} objective at f_alpha = {} Hz, v_r = {} um/s",
         config.display(),
         cfg.objective.name(),
@@ -42,7 +45,7 @@ pub fn optimize_waveform(config: &Path, out: &Path, budget: Option<f64>) -> Resu
         let f = read_run_file(&run_file).map_err(|e| e.to_string())?;
         let done: u32 = f.search.phases.iter().map(|p| p.chunks_done).sum();
         if f.fingerprint == prepared.fingerprint() {
-            eprintln!("resuming from {} ({done} chunks done)", run_file.display());
+            tell!("resuming from {} ({done} chunks done)", run_file.display());
         }
     }
     let total: u32 = [
@@ -68,15 +71,22 @@ pub fn optimize_waveform(config: &Path, out: &Path, budget: Option<f64>) -> Resu
             p.best_cost,
             p.evaluations
         ));
-        ControlFlow::Continue(())
+        // Ctrl-C: stop after this chunk (the run file holds it: resumable).
+        match interrupted() {
+            Some(_) => ControlFlow::Break(()),
+            None => ControlFlow::Continue(()),
+        }
     })
     .map_err(|e| e.to_string())?;
     bar.finish_and_clear();
+    if let Some(signal) = interrupted() {
+        return Err(OutputError::Interrupted { signal }.to_string());
+    }
     let yaml = waveform_yaml(&prepared, &outcome);
     let wf = out.join(WAVEFORM_FILE);
-    std::fs::write(&wf, yaml).map_err(|e| format!("{}: {e}", wf.display()))?;
+    write_atomic(&wf, yaml).map_err(|e| e.to_string())?;
     let s = &outcome.search;
-    println!(
+    say!(
         "{} objective: asymmetric {:.4} um/s -> optimised {:.4} um/s ({:+.1} %), A = {:.3} V",
         cfg.objective.name(),
         outcome.asymmetric_cost,
@@ -84,7 +94,7 @@ pub fn optimize_waveform(config: &Path, out: &Path, budget: Option<f64>) -> Resu
         100.0 * (outcome.cost / outcome.asymmetric_cost - 1.0),
         outcome.amplitude_v
     );
-    println!(
+    say!(
         "  simulated annealing {:.4}, particle swarm {:.4} ({} wins), local {:.4}; {} evaluations in {:.1} s",
         s.phase(Phase::SimulatedAnnealing).best.exact_cost(),
         s.phase(Phase::ParticleSwarm).best.exact_cost(),
@@ -96,6 +106,6 @@ pub fn optimize_waveform(config: &Path, out: &Path, budget: Option<f64>) -> Resu
         s.evaluations(),
         start.elapsed().as_secs_f64()
     );
-    println!("wrote {} and {}", wf.display(), run_file.display());
+    say!("wrote {} and {}", wf.display(), run_file.display());
     Ok(())
 }

@@ -1,4 +1,7 @@
-//! Writing a run's results: CSV signals, JSON metrics, SVG plots.
+//! Writing results: every command's output folder ([`OutputFolder`]: staged,
+//! put in place when complete, cleaned up on a signal, stale partial folders of
+//! dead processes removed), and a run's files (CSV signals, JSON metrics, SVG
+//! plots).
 
 use crate::plot::{Figure, PlotError, Scale, Series, draw_svg};
 use nanomotion_core::scheduler::{LogChunk, RunResult, SignalLog};
@@ -30,6 +33,12 @@ pub enum OutputError {
     /// A plot could not be drawn.
     #[error(transparent)]
     Plot(#[from] PlotError),
+    /// A signal (Ctrl-C, SIGTERM) stopped the command; nothing was written.
+    #[error("interrupted by signal {signal}: nothing was written (the partial output was removed)")]
+    Interrupted {
+        /// The signal's number.
+        signal: i32,
+    },
     /// The output folder cannot be used.
     #[error("output folder `{path}`: {problem} (fix: {fix})")]
     Folder {
@@ -42,162 +51,13 @@ pub enum OutputError {
     },
 }
 
-/// Name of the manifest written last into every run folder: a folder without it
-/// is not a complete run (and a folder with it came from `nanomotion run`).
-pub const MANIFEST: &str = "nanomotion-run.json";
+mod folder;
+pub mod signals;
 
-/// The manifest (`nanomotion-run.json`), written last.
-#[derive(Debug, Serialize)]
-pub struct Manifest<'a> {
-    /// The graph file.
-    pub graph: &'a str,
-    /// Graph title.
-    pub title: &'a Option<String>,
-    /// Files of the run (names inside the folder).
-    pub files: Vec<String>,
-    /// Always `true`: the run was written completely.
-    pub complete: bool,
-    /// What the stability gate let through and why (`require: allow_unproven`
-    /// reasons, or the refusal that `--allow-unproven` overrode); empty when
-    /// every loop was proven.
-    pub stability_gate: &'a [String],
-}
-
-/// An output folder being written: files go into a hidden temporary sibling
-/// folder, which [`RunFolder::commit`] renames to the target in one step, so a
-/// reader sees the previous complete run or the new complete run, never a mix.
-/// Dropped without commit (an error, a panic), the temporary folder is removed.
-#[derive(Debug)]
-pub struct RunFolder {
-    target: PathBuf,
-    tmp: PathBuf,
-    replace: bool,
-    committed: bool,
-}
-
-impl RunFolder {
-    /// Check `target` before a run and create the temporary folder beside it.
-    ///
-    /// - a missing folder is created (with its parents);
-    /// - a folder holding a previous complete run (its [`MANIFEST`]) is replaced;
-    /// - an empty folder is used;
-    /// - any other non-empty folder is refused unless `force`, then replaced
-    ///   whole (stale files of earlier graphs never stay beside new ones);
-    /// - a file, or a folder that cannot be written, is an error now, before
-    ///   the simulation runs.
-    pub fn prepare(target: &Path, force: bool) -> Result<Self, OutputError> {
-        let folder_err = |problem: String, fix: &str| OutputError::Folder {
-            path: target.display().to_string(),
-            problem,
-            fix: fix.into(),
-        };
-        let mut replace = false;
-        match std::fs::metadata(target) {
-            Ok(m) if !m.is_dir() => {
-                return Err(folder_err(
-                    "is a file, not a folder".into(),
-                    "pass another --out, or remove the file",
-                ));
-            }
-            Ok(_) => {
-                let entries: Vec<String> = std::fs::read_dir(target)
-                    .map_err(io(target))?
-                    .filter_map(Result::ok)
-                    .map(|e| e.file_name().to_string_lossy().into_owned())
-                    .collect();
-                if !entries.is_empty() {
-                    let ours = entries.iter().any(|e| e == MANIFEST);
-                    if !ours && !force {
-                        let mut shown: Vec<&str> =
-                            entries.iter().take(3).map(String::as_str).collect();
-                        if entries.len() > 3 {
-                            shown.push("...");
-                        }
-                        return Err(folder_err(
-                            format!(
-                                "is not empty and does not hold a previous nanomotion run ({} entries: {})",
-                                entries.len(),
-                                shown.join(", ")
-                            ),
-                            "pass --force to replace its whole content, or choose another --out",
-                        ));
-                    }
-                    replace = true;
-                }
-            }
-            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
-            Err(e) => return Err(io(target)(e)),
-        }
-        let parent = match target.parent() {
-            Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
-            _ => PathBuf::from("."),
-        };
-        std::fs::create_dir_all(&parent).map_err(io(&parent))?;
-        let name = target
-            .file_name()
-            .map_or_else(|| "out".into(), |n| n.to_string_lossy().into_owned());
-        let tmp = parent.join(format!(".{name}.partial-{}", std::process::id()));
-        if tmp.exists() {
-            std::fs::remove_dir_all(&tmp).map_err(io(&tmp))?;
-        }
-        std::fs::create_dir(&tmp).map_err(io(&tmp))?;
-        Ok(Self {
-            target: target.to_path_buf(),
-            tmp,
-            replace,
-            committed: false,
-        })
-    }
-
-    /// The folder to write the files into (the temporary one).
-    pub fn dir(&self) -> &Path {
-        &self.tmp
-    }
-
-    /// The final folder.
-    pub fn target(&self) -> &Path {
-        &self.target
-    }
-
-    /// Write the manifest last, then put the folder in place of the target.
-    pub fn commit(mut self, manifest: &Manifest<'_>) -> Result<(), OutputError> {
-        let path = self.tmp.join(MANIFEST);
-        let text = serde_json::to_string_pretty(manifest).map_err(|e| OutputError::Csv {
-            path: path.display().to_string(),
-            message: e.to_string(),
-        })?;
-        std::fs::write(&path, text).map_err(io(&path))?;
-        if self.replace {
-            let old = self.tmp.with_file_name(format!(
-                "{}.old",
-                self.tmp.file_name().unwrap_or_default().to_string_lossy()
-            ));
-            std::fs::rename(&self.target, &old).map_err(io(&self.target))?;
-            if let Err(e) = std::fs::rename(&self.tmp, &self.target) {
-                // Put the previous run back.
-                let _ = std::fs::rename(&old, &self.target);
-                return Err(io(&self.target)(e));
-            }
-            std::fs::remove_dir_all(&old).map_err(io(&old))?;
-        } else {
-            if self.target.exists() {
-                // An empty folder made before the run.
-                std::fs::remove_dir(&self.target).map_err(io(&self.target))?;
-            }
-            std::fs::rename(&self.tmp, &self.target).map_err(io(&self.target))?;
-        }
-        self.committed = true;
-        Ok(())
-    }
-}
-
-impl Drop for RunFolder {
-    fn drop(&mut self) {
-        if !self.committed {
-            let _ = std::fs::remove_dir_all(&self.tmp);
-        }
-    }
-}
+pub use folder::{
+    FolderLock, LOCK_FILE, MANIFEST, Manifest, OutputFolder, process_alive, refuse_foreign,
+    unstaged, write_atomic,
+};
 
 fn io(path: &Path) -> impl FnOnce(std::io::Error) -> OutputError + '_ {
     move |source| OutputError::Io {
@@ -569,6 +429,9 @@ impl RunWriter {
     /// call, all logs in the same order every time).
     pub fn chunk(&mut self, chunks: &[LogChunk<'_>]) -> Result<(), OutputError> {
         use std::fmt::Write as _;
+        if let Some(signal) = signals::interrupted() {
+            return Err(OutputError::Interrupted { signal });
+        }
         if !self.started {
             self.start(chunks)?;
         }

@@ -2,6 +2,7 @@
 //! table and write `fidelity.md`, `fidelity.json` (deterministic) and `timings.json`.
 
 use indicatif::{ProgressBar, ProgressStyle};
+use nanomotion::output::{Manifest, OutputFolder};
 use nanomotion::thesis::{self, Mode};
 use std::path::Path;
 use std::time::Instant;
@@ -12,14 +13,15 @@ pub struct Args<'a> {
     pub quick: bool,
     pub out: &'a Path,
     pub list: bool,
+    pub force: bool,
 }
 
 /// Run it; `Ok(false)` when an experiment could not run (exit status non-zero).
 pub fn run(args: Args<'_>) -> Result<bool, String> {
     if args.list {
-        println!("{:<12} {:<6} title", "id", "quick");
+        say!("{:<12} {:<6} title", "id", "quick");
         for e in thesis::experiments() {
-            println!(
+            say!(
                 "{:<12} {:<6} {}",
                 e.id,
                 if e.in_quick { "yes" } else { "no" },
@@ -34,8 +36,8 @@ pub fn run(args: Args<'_>) -> Result<bool, String> {
             "no experiment selected (fix: drop --quick, or name experiments that are in the quick set; `nanomotion reproduce --list`)".into(),
         );
     }
-    std::fs::create_dir_all(args.out)
-        .map_err(|e| format!("cannot create `{}`: {e}", args.out.display()))?;
+    // Checked before the experiments run; the files appear when all are written.
+    let folder = OutputFolder::prepare(args.out, args.force).map_err(|e| e.to_string())?;
     let mode = if args.quick { Mode::Quick } else { Mode::Full };
     let bar = ProgressBar::new(chosen.len() as u64);
     bar.set_style(
@@ -73,19 +75,31 @@ pub fn run(args: Args<'_>) -> Result<bool, String> {
             serde_json::to_string_pretty(&timings).unwrap_or_default() + "\n",
         ),
     ] {
-        let path = args.out.join(name);
+        let path = folder.dir().join(name);
         std::fs::write(&path, text)
             .map_err(|e| format!("cannot write `{}`: {e}", path.display()))?;
     }
-    println!(
+    folder
+        .commit(Some(&Manifest {
+            command: "reproduce",
+            graph: "",
+            title: &Some(command.clone()),
+            stability_gate: &[],
+        }))
+        .map_err(|e| e.to_string())?;
+    say!(
         "{:<10} {:<48} {:>10} {:>12} {:>10}",
-        "id", "quantity", "verdict", "thesis", "ours"
+        "id",
+        "quantity",
+        "verdict",
+        "thesis",
+        "ours"
     );
     for o in &outcomes {
         match &o.report {
             Some(r) => {
                 for row in &r.rows {
-                    println!(
+                    say!(
                         "{:<10} {:<48} {:>10} {:>12} {:>10}",
                         o.id,
                         clip(&row.quantity, 48),
@@ -95,7 +109,7 @@ pub fn run(args: Args<'_>) -> Result<bool, String> {
                     );
                 }
             }
-            None => println!(
+            None => say!(
                 "{:<10} {:<48} {:>10} {}",
                 o.id,
                 clip(&o.title, 48),
@@ -106,7 +120,7 @@ pub fn run(args: Args<'_>) -> Result<bool, String> {
     }
     let [m, s, d, e] = thesis::tally(&outcomes);
     let total: f64 = walls.iter().sum();
-    println!(
+    say!(
         "{} experiments in {total:.1} s: {m} matches, {s} shape, {d} deviates, {e} error(s); wrote fidelity.md, fidelity.json, timings.json to {}",
         outcomes.len(),
         args.out.display()

@@ -171,6 +171,8 @@ pub fn run(
     }
     check_options(from_s, pixels)?;
     let files = run_csvs(run_dir)?;
+    // The images appear in the run folder only when all are drawn.
+    let folder = nanomotion::output::OutputFolder::add_to(run_dir).map_err(|e| e.to_string())?;
     for s in specs {
         // The file holding all three columns.
         let find = |name: &str| -> Vec<(usize, usize, Option<String>)> {
@@ -220,14 +222,26 @@ pub fn run(
         let h = Axis::new(hj, hu.clone(), "µm", 1e6);
         let v = Axis::new(vj, vu, "µm", 1e6);
         let z = Axis::new(zj, zu, "nm", 1e9);
-        draw_one(run_dir, s, path, header, [&h, &v, &z], from_s, pixels)?;
+        draw_one(
+            run_dir,
+            folder.dir(),
+            s,
+            path,
+            header,
+            [&h, &v, &z],
+            from_s,
+            pixels,
+        )?;
     }
+    folder.commit(None).map_err(|e| e.to_string())?;
     Ok(())
 }
 
 /// Read the three columns of one image from `csv_path` and draw it.
+#[allow(clippy::too_many_arguments)]
 fn draw_one(
     run_dir: &Path,
+    out_dir: &Path,
     s: &ImageSpec,
     csv_path: &Path,
     header: &[String],
@@ -278,7 +292,7 @@ fn draw_one(
             s.name
         )
     })?;
-    let path = run_dir.join(format!("{}.svg", s.name));
+    let path = out_dir.join(format!("{}.svg", s.name));
     let unit = &z.unit;
     draw_heat_map(
         &img,
@@ -296,9 +310,9 @@ fn draw_one(
         &path,
     )
     .map_err(|e| e.to_string())?;
-    println!(
+    say!(
         "wrote {} ({} samples, rms {rms:.3} {unit})",
-        path.display(),
+        run_dir.join(format!("{}.svg", s.name)).display(),
         d[2].len()
     );
     Ok(())

@@ -88,6 +88,10 @@ pub enum SweepError {
     /// A plot could not be drawn.
     #[error(transparent)]
     Plot(#[from] crate::plot::PlotError),
+    /// The output folder cannot be used (another sweep writes it, a folder of
+    /// the user's), or Ctrl-C stopped the study.
+    #[error(transparent)]
+    Output(#[from] crate::output::OutputError),
 }
 
 fn io_err(path: &Path) -> impl FnOnce(std::io::Error) -> SweepError + '_ {
@@ -235,8 +239,9 @@ pub struct StudyFile {
     pub gate: GateMode,
 }
 
-/// A parameter's design, validated.
-#[derive(Debug, Clone, PartialEq)]
+/// A parameter's design, validated (as stored in `plan.json`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
 enum Dim {
     Values(Vec<Value>),
     Range {
@@ -246,6 +251,7 @@ enum Dim {
         log: bool,
     },
     Normal(Normal),
+    #[serde(rename = "lognormal")]
     LogNormal(LogNormal),
 }
 
@@ -264,28 +270,41 @@ impl Dim {
         }
     }
 
-    /// The grid points, if this dimension has them.
-    fn grid(&self) -> Option<Vec<Value>> {
+    /// The number of grid points, if this dimension has them.
+    fn grid_len(&self) -> Option<usize> {
         match self {
-            Dim::Values(v) => Some(v.clone()),
+            Dim::Values(v) => Some(v.len()),
+            Dim::Range { steps: Some(n), .. } => Some(*n),
+            _ => None,
+        }
+    }
+
+    /// Grid point `k` (< [`Dim::grid_len`]), computed on demand.
+    fn grid_at(&self, k: usize) -> Value {
+        match self {
+            Dim::Values(v) => v[k].clone(),
             Dim::Range {
                 lo,
                 hi,
                 steps: Some(n),
                 log,
-            } => Some(
-                (0..*n)
-                    .map(|k| {
-                        let f = k as f64 / (*n - 1) as f64;
-                        Value::from(if *log {
-                            lo * (hi / lo).powf(f)
-                        } else {
-                            lo + f * (hi - lo)
-                        })
-                    })
-                    .collect(),
-            ),
-            _ => None,
+            } => {
+                let f = k as f64 / (*n - 1) as f64;
+                Value::from(if *log {
+                    lo * (hi / lo).powf(f)
+                } else {
+                    lo + f * (hi - lo)
+                })
+            }
+            other => other.at(0.5),
+        }
+    }
+
+    /// Whether every value of this dimension is a number.
+    fn numeric(&self) -> bool {
+        match self {
+            Dim::Values(v) => v.iter().all(Value::is_number),
+            _ => true,
         }
     }
 }
@@ -442,7 +461,8 @@ fn erf_small(x: f64) -> f64 {
 }
 
 /// How graph seeds are chosen.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
 enum Seeds {
     Graph,
     PerRun,
@@ -460,7 +480,9 @@ pub struct PlannedRun {
     pub seed: Option<u64>,
 }
 
-/// The deterministic run plan of a study.
+/// The deterministic run plan of a study: its definition (designs, seeds,
+/// size), from which each run is generated on demand ([`Plan::run`]), so a
+/// plan of millions of runs costs no more memory than its study file.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Plan {
     /// Hash of the plan, the graph file's text, the fixed overrides and the gate
@@ -470,8 +492,148 @@ pub struct Plan {
     pub kind: Kind,
     /// The varied parameters' paths (the table's parameter columns).
     pub parameters: Vec<String>,
-    /// The runs.
-    pub runs: Vec<PlannedRun>,
+    /// Number of runs (design points × seeds).
+    pub size: usize,
+    /// Seed of the sampling.
+    pub seed: u64,
+    /// Each parameter's design, validated.
+    designs: Vec<Dim>,
+    /// The graph seeds.
+    seeds: Seeds,
+}
+
+impl Plan {
+    /// Number of runs.
+    pub fn len(&self) -> usize {
+        self.size
+    }
+
+    /// Whether the plan has no runs.
+    pub fn is_empty(&self) -> bool {
+        self.size == 0
+    }
+
+    /// Seeds per design point.
+    fn seeds_per_point(&self) -> usize {
+        match &self.seeds {
+            Seeds::List(s) => s.len(),
+            _ => 1,
+        }
+    }
+
+    /// Run `index`, generated from the definition (`None` past the end): the
+    /// same index always gives the same run, bit for bit.
+    pub fn run(&self, index: usize) -> Option<PlannedRun> {
+        if index >= self.size {
+            return None;
+        }
+        let per = self.seeds_per_point();
+        let (point, s) = (index / per, index % per);
+        let points = self.size / per;
+        let values: Vec<Value> = match self.kind {
+            Kind::Grid => {
+                // Mixed radix, the first parameter outermost.
+                let mut rest = point;
+                let mut v: Vec<Value> = self
+                    .designs
+                    .iter()
+                    .rev()
+                    .map(|d| {
+                        let n = d.grid_len().unwrap_or(1).max(1);
+                        let k = rest % n;
+                        rest /= n;
+                        d.grid_at(k)
+                    })
+                    .collect();
+                v.reverse();
+                v
+            }
+            Kind::Random | Kind::MonteCarlo => {
+                let mut rng = Rng::new(mix(self.seed, point as u64));
+                self.designs
+                    .iter()
+                    .map(|d| d.at(open_uniform(&mut rng)))
+                    .collect()
+            }
+            Kind::LatinHypercube => {
+                let mut rng = Rng::new(mix(self.seed, point as u64));
+                self.designs
+                    .iter()
+                    .enumerate()
+                    .map(|(k, d)| {
+                        let key = mix(self.seed ^ 0x4C48_5300, k as u64);
+                        let stratum = permuted(point as u64, points as u64, key);
+                        d.at((stratum as f64 + open_uniform(&mut rng)) / points as f64)
+                    })
+                    .collect()
+            }
+        };
+        let seed = match &self.seeds {
+            Seeds::PerRun => {
+                let mut x = self.seed ^ (index as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15);
+                Some(splitmix64(&mut x) >> 1)
+            }
+            Seeds::List(list) => Some(list[s]),
+            Seeds::Graph => None,
+        };
+        let parameters = self
+            .parameters
+            .iter()
+            .zip(values)
+            .map(|(p, value)| Override {
+                path: p.clone(),
+                segments: nanomotion_core::overrides::Path::parse(p)
+                    .expect("checked when the study was loaded"),
+                value,
+            })
+            .collect();
+        Some(PlannedRun {
+            index,
+            parameters,
+            seed,
+        })
+    }
+
+    /// Every run, in order, generated one at a time.
+    pub fn runs(&self) -> impl Iterator<Item = PlannedRun> + '_ {
+        (0..self.size).filter_map(|i| self.run(i))
+    }
+
+    /// Whether parameter `k` only takes numbers.
+    fn numeric(&self, k: usize) -> bool {
+        self.designs.get(k).is_some_and(Dim::numeric)
+    }
+}
+
+/// A 64-bit mix of a seed and a counter (splitmix64 of their combination).
+fn mix(seed: u64, k: u64) -> u64 {
+    let mut x = seed ^ k.wrapping_mul(0xD1B5_4A32_D192_ED03);
+    splitmix64(&mut x)
+}
+
+/// Position of `i` in a pseudo-random permutation of 0..n chosen by `key`: a
+/// four-round Feistel network on the smallest even number of bits covering n,
+/// cycle-walked back into 0..n (a bijection of 0..n, computed without storing
+/// the permutation).
+fn permuted(i: u64, n: u64, key: u64) -> u64 {
+    if n <= 1 {
+        return 0;
+    }
+    let bits = (64 - (n - 1).leading_zeros()).max(2);
+    let half = bits.div_ceil(2);
+    let mask = (1u64 << half) - 1;
+    let mut x = i;
+    loop {
+        let (mut l, mut r) = (x >> half, x & mask);
+        for round in 0..4u64 {
+            let f = mix(key ^ round.wrapping_mul(0x9E37_79B9), r) & mask;
+            (l, r) = (r, l ^ f);
+        }
+        x = (l << half) | r;
+        if x < n {
+            return x;
+        }
+    }
 }
 
 /// One score of a run (as `nanomotion run` prints it).
@@ -524,6 +686,7 @@ pub struct Study {
     fixed: Vec<Override>,
     dims: Vec<Dim>,
     seeds: Seeds,
+    size: usize,
 }
 
 /// Largest study file read: 16 MiB.
@@ -645,7 +808,7 @@ impl Study {
             } else {
                 unreachable!("one design was checked to be present")
             };
-            if file.study == Kind::Grid && dim.grid().is_none() {
+            if file.study == Kind::Grid && dim.grid_len().is_none() {
                 return Err(bad(
                     format!("parameter `{}` has no grid points", p.path),
                     "a grid needs `values` or `range` with `steps`; distributions belong in a `monte-carlo` or `random` study",
@@ -689,6 +852,8 @@ impl Study {
                 ));
             }
         };
+        refuse_duplicate_paths(&file, text, origin)?;
+        let size = plan_size(&file, &dims, &seeds, origin)?;
         let study = Study {
             origin: origin.into(),
             graph_path,
@@ -696,6 +861,7 @@ impl Study {
             fixed,
             dims,
             seeds,
+            size,
             file,
         };
         study.check_graph()?;
@@ -730,96 +896,9 @@ impl Study {
     }
 
     /// The deterministic plan: the same study file (and graph) gives the same
-    /// plan, bit for bit, on every machine.
+    /// plan, bit for bit, on every machine. Only its definition is built; runs
+    /// are generated on demand ([`Plan::run`]).
     pub fn plan(&self) -> Plan {
-        let mut rng = Rng::new(self.file.seed);
-        // Design points: one value per parameter.
-        let points: Vec<Vec<Value>> = match self.file.study {
-            Kind::Grid => {
-                let axes: Vec<Vec<Value>> = self
-                    .dims
-                    .iter()
-                    .map(|d| d.grid().unwrap_or_default())
-                    .collect();
-                let mut out: Vec<Vec<Value>> = vec![Vec::new()];
-                for axis in &axes {
-                    out = out
-                        .into_iter()
-                        .flat_map(|p| {
-                            axis.iter().map(move |v| {
-                                let mut q = p.clone();
-                                q.push(v.clone());
-                                q
-                            })
-                        })
-                        .collect();
-                }
-                out
-            }
-            Kind::Random | Kind::MonteCarlo => {
-                let n = self.file.runs.unwrap_or(0);
-                (0..n)
-                    .map(|_| {
-                        self.dims
-                            .iter()
-                            .map(|d| d.at(open_uniform(&mut rng)))
-                            .collect()
-                    })
-                    .collect()
-            }
-            Kind::LatinHypercube => {
-                let n = self.file.runs.unwrap_or(0);
-                let strata: Vec<Vec<usize>> =
-                    self.dims.iter().map(|_| permutation(n, &mut rng)).collect();
-                (0..n)
-                    .map(|i| {
-                        self.dims
-                            .iter()
-                            .zip(&strata)
-                            .map(|(d, perm)| {
-                                let u = (perm[i] as f64 + open_uniform(&mut rng)) / n as f64;
-                                d.at(u)
-                            })
-                            .collect()
-                    })
-                    .collect()
-            }
-        };
-        let seed_list: Vec<Option<u64>> = match &self.seeds {
-            Seeds::List(s) => s.iter().map(|x| Some(*x)).collect(),
-            _ => vec![None],
-        };
-        let mut runs = Vec::with_capacity(points.len() * seed_list.len());
-        for point in &points {
-            for s in &seed_list {
-                let index = runs.len();
-                let seed = match self.seeds {
-                    Seeds::PerRun => {
-                        let mut x =
-                            self.file.seed ^ (index as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15);
-                        Some(splitmix64(&mut x) >> 1)
-                    }
-                    _ => *s,
-                };
-                let parameters = self
-                    .file
-                    .parameters
-                    .iter()
-                    .zip(point)
-                    .map(|(p, v)| Override {
-                        path: p.path.clone(),
-                        segments: nanomotion_core::overrides::Path::parse(&p.path)
-                            .expect("checked when the study was loaded"),
-                        value: v.clone(),
-                    })
-                    .collect();
-                runs.push(PlannedRun {
-                    index,
-                    parameters,
-                    seed,
-                });
-            }
-        }
         let mut plan = Plan {
             study_hash: String::new(),
             kind: self.file.study,
@@ -829,7 +908,10 @@ impl Study {
                 .iter()
                 .map(|p| p.path.clone())
                 .collect(),
-            runs,
+            size: self.size,
+            seed: self.file.seed,
+            designs: self.dims.clone(),
+            seeds: self.seeds.clone(),
         };
         let mut h = Fnv::default();
         h.write(serde_json::to_string(&plan).unwrap_or_default().as_bytes());
@@ -924,9 +1006,11 @@ impl Study {
         Ok(())
     }
 
-    /// Run the plan's runs `indices` on a pool of `jobs` threads (0: all cores),
-    /// calling `on_row` as each finishes (from the worker threads). The rows come
-    /// back in the order of `indices`. An index outside the plan is an error row.
+    /// Run the plan's runs `indices` on a pool of `jobs` threads (0: all cores;
+    /// more than the cores is capped, see [`capped_jobs`]), calling `on_row` as
+    /// each finishes (from the worker threads). The rows come back in the order
+    /// of `indices`. An index outside the plan is an error row. After Ctrl-C
+    /// ([`crate::output::signals`]) no more runs start: fewer rows come back.
     pub fn run_chunk(
         &self,
         plan: &Plan,
@@ -938,9 +1022,13 @@ impl Study {
         let work = || {
             indices
                 .par_iter()
-                .map(|&i| {
-                    let row = match plan.runs.get(i) {
-                        Some(run) => self.run_one(plan, run),
+                .filter_map(|&i| {
+                    // Ctrl-C: start no more runs (the finished ones are kept).
+                    if crate::output::signals::interrupted().is_some() {
+                        return None;
+                    }
+                    let row = match plan.run(i) {
+                        Some(run) => self.run_one(plan, &run),
                         None => Row {
                             study: plan.study_hash.clone(),
                             index: i,
@@ -951,19 +1039,181 @@ impl Study {
                             gate: None,
                             error: Some(format!(
                                 "run {i} is not in the plan, which has {} runs",
-                                plan.runs.len()
+                                plan.len()
                             )),
                         },
                     };
                     on_row(&row);
-                    row
+                    Some(row)
                 })
                 .collect()
         };
-        match rayon::ThreadPoolBuilder::new().num_threads(jobs).build() {
+        match rayon::ThreadPoolBuilder::new()
+            .num_threads(capped_jobs(jobs).0)
+            .build()
+        {
             Ok(pool) => pool.install(work),
             Err(_) => work(),
         }
+    }
+}
+
+/// The 1-based lines of `text` where `key` (a parameter path) is written: as
+/// the value of `path:`, or as a key of `set:` (`key:`).
+fn lines_naming(text: &str, key: &str) -> Vec<usize> {
+    let path_char = |c: char| c.is_alphanumeric() || matches!(c, '.' | '_' | '[' | ']' | '-');
+    let mut out = Vec::new();
+    for (n, line) in text.lines().enumerate() {
+        let hit = line.match_indices(key).any(|(at, _)| {
+            let before = line[..at].trim_end_matches(['"', '\'']);
+            let after = line[at + key.len()..].trim_start_matches(['"', '\'']);
+            let whole = !before.ends_with(path_char) && !after.starts_with(path_char);
+            whole && (before.trim_end().ends_with("path:") || after.trim_start().starts_with(':'))
+        });
+        if hit {
+            out.push(n + 1);
+        }
+    }
+    out
+}
+
+/// A parameter path given twice (two `parameters:` entries, or a parameter that
+/// `set:` also fixes) is refused, naming both lines: only one value would be
+/// used, and the table would show both.
+fn refuse_duplicate_paths(file: &StudyFile, text: &str, origin: &str) -> Result<(), SweepError> {
+    use nanomotion_core::overrides::Path as OPath;
+    let parsed: Vec<Option<OPath>> = file
+        .parameters
+        .iter()
+        .map(|p| OPath::parse(&p.path).ok())
+        .collect();
+    let where_ = |key: &str, nth: usize, entry: String| match lines_naming(text, key).get(nth) {
+        Some(l) => format!("line {l}"),
+        None => entry,
+    };
+    for j in 0..parsed.len() {
+        for i in 0..j {
+            if parsed[i].is_some() && parsed[i] == parsed[j] {
+                let (a, b) = (&file.parameters[i].path, &file.parameters[j].path);
+                let same = usize::from(a == b);
+                return Err(SweepError::Study {
+                    origin: origin.into(),
+                    problem: format!(
+                        "parameter `{b}` is given twice: {} (`{a}`) and {} (`{b}`); only the second value would be used",
+                        where_(a, 0, format!("parameters entry {}", i + 1)),
+                        where_(b, same, format!("parameters entry {}", j + 1)),
+                    ),
+                    fix: "give each path once (list several values in one entry: `values: [...]`)"
+                        .into(),
+                });
+            }
+        }
+        for key in file.set.keys() {
+            if parsed[j].is_some() && OPath::parse(key).ok() == parsed[j] {
+                let b = &file.parameters[j].path;
+                return Err(SweepError::Study {
+                    origin: origin.into(),
+                    problem: format!(
+                        "`{b}` is both fixed by `set:` ({}) and varied ({}); the varied value would silently win",
+                        where_(key, 0, "in `set:`".into()),
+                        where_(
+                            b,
+                            usize::from(key == b),
+                            format!("parameters entry {}", j + 1)
+                        ),
+                    ),
+                    fix: format!("remove `{key}` from `set:` or the parameter entry"),
+                });
+            }
+        }
+    }
+    Ok(())
+}
+
+/// The number of runs of a study, refused above [`MAX_RUNS`] before anything
+/// is allocated, naming the parameter (or setting) to lower.
+fn plan_size(
+    file: &StudyFile,
+    dims: &[Dim],
+    seeds: &Seeds,
+    origin: &str,
+) -> Result<usize, SweepError> {
+    let per = match seeds {
+        Seeds::List(s) => s.len(),
+        _ => 1,
+    };
+    let too_many = |problem: String, fix: String| SweepError::Study {
+        origin: origin.into(),
+        problem,
+        fix,
+    };
+    let points = match file.study {
+        Kind::Grid => {
+            let mut n: Option<usize> = Some(1);
+            let mut largest: Option<(usize, usize)> = None;
+            for (k, d) in dims.iter().enumerate() {
+                let len = d.grid_len().unwrap_or(1);
+                n = n.and_then(|n| n.checked_mul(len));
+                if largest.is_none_or(|(_, l)| len > l) {
+                    largest = Some((k, len));
+                }
+            }
+            match (n, largest) {
+                (Some(n), _) if n.checked_mul(per).is_some_and(|t| t <= MAX_RUNS) => n,
+                (n, Some((k, len))) => {
+                    let p = &file.parameters[k];
+                    let what = if p.steps.is_some() { "steps" } else { "values" };
+                    return Err(too_many(
+                        format!(
+                            "the grid has {} runs ({}{}), more than the {MAX_RUNS} a study may plan",
+                            n.and_then(|n| n.checked_mul(per))
+                                .map_or_else(|| "more than 2^64".to_string(), |t| t.to_string()),
+                            dims.iter()
+                                .map(|d| d.grid_len().unwrap_or(1).to_string())
+                                .collect::<Vec<_>>()
+                                .join(" × "),
+                            if per > 1 {
+                                format!(" × {per} seeds")
+                            } else {
+                                String::new()
+                            },
+                        ),
+                        format!(
+                            "lower `{what}` of parameter `{}` ({len} points), or split the study",
+                            p.path
+                        ),
+                    ));
+                }
+                (_, None) => 1,
+            }
+        }
+        _ => file.runs.unwrap_or(0),
+    };
+    match points.checked_mul(per) {
+        Some(t) if t <= MAX_RUNS => Ok(t),
+        _ => Err(too_many(
+            format!(
+                "{points} runs × {per} seeds is more than the {MAX_RUNS} runs a study may plan"
+            ),
+            "lower `runs`, or list fewer `seeds`".into(),
+        )),
+    }
+}
+
+/// `jobs` as used (0: all cores), capped at the machine's cores: more threads
+/// than cores only slow the runs down. Returns the count and, when capped, a
+/// note saying so.
+pub fn capped_jobs(jobs: usize) -> (usize, Option<String>) {
+    let cores = std::thread::available_parallelism().map_or(1, usize::from);
+    match jobs {
+        0 => (cores, None),
+        j if j > cores => (
+            cores,
+            Some(format!(
+                "--jobs {j} is more than the {cores} core(s) of this machine: using {cores}"
+            )),
+        ),
+        j => (j, None),
     }
 }
 
@@ -991,16 +1241,6 @@ impl Fnv {
 /// A uniform draw in the open interval (0, 1): inverse CDFs stay finite.
 fn open_uniform(rng: &mut Rng) -> f64 {
     ((rng.next_u64() >> 11) as f64 + 0.5) * (1.0 / (1u64 << 53) as f64)
-}
-
-/// A uniformly random permutation of 0..n (Fisher–Yates).
-fn permutation(n: usize, rng: &mut Rng) -> Vec<usize> {
-    let mut p: Vec<usize> = (0..n).collect();
-    for i in (1..n).rev() {
-        let j = (rng.next_u64() % (i as u64 + 1)) as usize;
-        p.swap(i, j);
-    }
-    p
 }
 
 /// The append-only file of finished rows (`rows.jsonl`, one JSON [`Row`] per
@@ -1033,7 +1273,7 @@ impl RowStore {
                     .and_then(|f| f.set_len(whole.len() as u64))
                     .map_err(io_err(&path))?;
             }
-            let mut seen = vec![false; plan.runs.len()];
+            let mut seen = vec![false; plan.len()];
             let mut other: Option<(String, usize)> = None;
             for line in whole.lines().filter(|l| !l.trim().is_empty()) {
                 let Ok(row) = serde_json::from_str::<Row>(line) else {
@@ -1116,11 +1356,7 @@ impl Columns {
             }
         }
         let numeric = (0..plan.parameters.len())
-            .map(|k| {
-                plan.runs
-                    .iter()
-                    .all(|r| r.parameters.get(k).is_some_and(|o| o.value.is_number()))
-            })
+            .map(|k| plan.numeric(k))
             .collect();
         Columns {
             parameters: plan.parameters.clone(),
@@ -1160,8 +1396,27 @@ fn score_of<'a>(r: &'a Row, signal: &str) -> Option<&'a ScoreValue> {
 }
 
 /// Write `results.csv`, `results.parquet`, `plan.json` and the plots into `dir`
-/// from `rows` (any order; one per index). Returns the files written.
+/// from `rows` (any order; one per index), atomically: staged in a hidden
+/// folder inside `dir` and renamed in when all are written, with the manifest
+/// last ([`crate::output::OutputFolder::add_to`]; `rows.jsonl` stays). Returns
+/// the files written.
 pub fn write_results(
+    dir: &Path,
+    study: &Study,
+    plan: &Plan,
+    rows: &[Row],
+) -> Result<Vec<PathBuf>, SweepError> {
+    let folder = crate::output::OutputFolder::add_to(dir)?;
+    write_results_into(folder.dir(), study, plan, rows)?;
+    Ok(folder.commit(Some(&crate::output::Manifest {
+        command: "sweep",
+        graph: &study.origin,
+        title: &study.file.title,
+        stability_gate: &[],
+    }))?)
+}
+
+fn write_results_into(
     dir: &Path,
     study: &Study,
     plan: &Plan,
@@ -1577,15 +1832,37 @@ pub struct RunOptions {
 /// and plots.
 pub fn run_study(study: &Study, out: &Path, opts: &RunOptions) -> Result<Summary, SweepError> {
     let plan = study.plan();
-    let (store, done) = RowStore::open(out, &plan, opts.restart)?;
-    let mut finished = vec![false; plan.runs.len()];
+    // A folder of the user's is not written into; a second sweep into the same
+    // folder is refused while this one runs.
+    crate::output::refuse_foreign(out, &[ROWS_FILE], "empty it")?;
+    let lock = crate::output::FolderLock::acquire(out)?;
+    let result = run_locked(study, &plan, out, opts);
+    if result.is_err() && lock.created_folder() {
+        // Nothing finished: leave no folder behind (the lock removes it).
+        let rows = out.join(ROWS_FILE);
+        if std::fs::metadata(&rows).is_ok_and(|m| m.len() == 0) {
+            let _ = std::fs::remove_file(rows);
+        }
+    }
+    result
+}
+
+fn run_locked(
+    study: &Study,
+    plan: &Plan,
+    out: &Path,
+    opts: &RunOptions,
+) -> Result<Summary, SweepError> {
+    let (store, done) = RowStore::open(out, plan, opts.restart)?;
+    let mut finished = vec![false; plan.len()];
     for r in &done {
         finished[r.index] = true;
     }
-    let mut todo: Vec<usize> = (0..plan.runs.len()).filter(|i| !finished[*i]).collect();
-    if let Some(n) = opts.limit {
-        todo.truncate(n);
-    }
+    let todo: Vec<usize> = (0..plan.len())
+        .filter(|i| !finished[*i])
+        .take(opts.limit.unwrap_or(usize::MAX))
+        .collect();
+    drop(finished);
     let bar = if opts.progress {
         let b = indicatif::ProgressBar::new(todo.len() as u64);
         b.set_style(
@@ -1601,7 +1878,7 @@ pub fn run_study(study: &Study, out: &Path, opts: &RunOptions) -> Result<Summary
     };
     let write_error: std::sync::Mutex<Option<SweepError>> = std::sync::Mutex::new(None);
     let start = std::time::Instant::now();
-    let new_rows = study.run_chunk(&plan, &todo, opts.jobs, |row| {
+    let new_rows = study.run_chunk(plan, &todo, opts.jobs, |row| {
         if let Err(e) = store.append(row) {
             let mut slot = write_error
                 .lock()
@@ -1621,15 +1898,19 @@ pub fn run_study(study: &Study, out: &Path, opts: &RunOptions) -> Result<Summary
     {
         return Err(e);
     }
+    if let Some(signal) = crate::output::signals::interrupted() {
+        // The finished rows are in rows.jsonl: the next run resumes there.
+        return Err(crate::output::OutputError::Interrupted { signal }.into());
+    }
     let resumed = done.len();
     let computed = new_rows.len();
     let mut rows = done;
     rows.extend(new_rows);
     rows.sort_by_key(|r| r.index);
     let failed = rows.iter().filter(|r| r.error.is_some()).count();
-    let files = write_results(out, study, &plan, &rows)?;
+    let files = write_results(out, study, plan, &rows)?;
     Ok(Summary {
-        planned: plan.runs.len(),
+        planned: plan.len(),
         resumed,
         computed,
         failed,
@@ -1716,10 +1997,15 @@ mod tests {
     }
 
     #[test]
-    fn permutation_is_a_permutation() {
-        let mut rng = Rng::new(4);
-        let mut p = permutation(1000, &mut rng);
-        p.sort_unstable();
-        assert_eq!(p, (0..1000).collect::<Vec<_>>());
+    fn permuted_is_a_permutation_of_every_size() {
+        for (n, key) in [(1u64, 1u64), (2, 2), (3, 3), (17, 4), (1000, 5), (4097, 6)] {
+            let mut p: Vec<u64> = (0..n).map(|i| permuted(i, n, key)).collect();
+            p.sort_unstable();
+            assert_eq!(p, (0..n).collect::<Vec<_>>(), "n {n}");
+        }
+        // Another key, another order.
+        let a: Vec<u64> = (0..100).map(|i| permuted(i, 100, 1)).collect();
+        let b: Vec<u64> = (0..100).map(|i| permuted(i, 100, 2)).collect();
+        assert_ne!(a, b);
     }
 }

@@ -18,17 +18,16 @@ pub fn sweep(
             .map_or_else(|| "sweep".into(), |s| s.to_string_lossy().into_owned());
         PathBuf::from("out").join(format!("sweep_{}", nanomotion::output::file_stem(&stem)))
     });
-    let jobs_used = if jobs == 0 {
-        std::thread::available_parallelism().map_or(1, usize::from)
-    } else {
-        jobs
-    };
+    let (jobs_used, capped) = nanomotion::sweep::capped_jobs(jobs);
+    if let Some(note) = capped {
+        tell!("note: {note}");
+    }
     let plan = study.plan();
-    eprintln!(
+    tell!(
         "{}: {} study, {} runs (plan {}), {} parallel job(s), into {}",
         file.display(),
         plan.kind.as_str(),
-        plan.runs.len(),
+        plan.len(),
         plan.study_hash,
         jobs_used,
         out.display()
@@ -37,7 +36,7 @@ pub fn sweep(
         &study,
         &out,
         &RunOptions {
-            jobs,
+            jobs: jobs_used,
             restart,
             limit,
             progress: true,
@@ -45,13 +44,13 @@ pub fn sweep(
     )
     .map_err(|e| e.to_string())?;
     if s.resumed > 0 {
-        println!(
+        say!(
             "resumed: {} finished rows kept from {}",
             s.resumed,
             out.display()
         );
     }
-    println!(
+    say!(
         "computed {} runs in {:.3} s ({:.1} runs/s on {} job(s)); {} of the {} finished rows failed (see the `error` column)",
         s.computed,
         s.wall_s,
@@ -62,8 +61,8 @@ pub fn sweep(
     );
     let left = s.planned - s.resumed - s.computed;
     if left > 0 {
-        println!("{left} runs left: run the same command again to continue");
+        say!("{left} runs left: run the same command again to continue");
     }
-    println!("wrote {} files to {}", s.files.len(), out.display());
+    say!("wrote {} files to {}", s.files.len(), out.display());
     Ok(())
 }

@@ -10,6 +10,7 @@ use nanomotion::core::analysis::CMatrix;
 use nanomotion::core::lti::{Complex, StateSpace};
 use nanomotion::mimo::config::{GeneralizedPlantJson, SynthConfig, SynthResult, run};
 use nanomotion::mimo::{decentral, synth};
+use nanomotion::output::{Manifest, OutputFolder};
 use nanomotion::plot::{Figure, Scale, Series, draw_svg, draw_svg_panels};
 use serde::Serialize;
 use std::f64::consts::TAU;
@@ -45,7 +46,7 @@ fn responses(sys: &StateSpace, f: &[f64]) -> Vec<CMatrix> {
 }
 
 /// Run the design of `config` into `out`.
-pub fn synth(config: &Path, out: &Path) -> Result<(), String> {
+pub fn synth(config: &Path, out: &Path, force: bool) -> Result<(), String> {
     let meta = std::fs::metadata(config).map_err(|e| format!("{}: {e}", config.display()))?;
     if meta.len() > MAX_CONFIG_BYTES {
         return Err(format!(
@@ -57,10 +58,13 @@ pub fn synth(config: &Path, out: &Path) -> Result<(), String> {
     let text = std::fs::read_to_string(config).map_err(|e| format!("{}: {e}", config.display()))?;
     let cfg =
         SynthConfig::from_yaml(&text, &config.display().to_string()).map_err(|e| e.to_string())?;
+    // Checked before the synthesis; the files appear only when all are written
+    // (a graph `include:`s controller.yaml: it is never left half-written).
+    let folder = OutputFolder::prepare(out, force).map_err(|e| e.to_string())?;
     let r = run(&cfg).map_err(|e| format!("{}: {e}", config.display()))?;
-    std::fs::create_dir_all(out).map_err(|e| format!("{}: {e}", out.display()))?;
+    let stage = folder.dir();
     let write = |name: &str, text: String| -> Result<(), String> {
-        let p = out.join(name);
+        let p = stage.join(name);
         std::fs::write(&p, text).map_err(|e| format!("{}: {e}", p.display()))
     };
     let entry = vec![BlockEntry {
@@ -93,8 +97,17 @@ pub fn synth(config: &Path, out: &Path) -> Result<(), String> {
         serde_json::to_string(&GeneralizedPlantJson::from_synthesis(&r.synthesis))
             .map_err(|e| e.to_string())?,
     )?;
-    plots(&cfg, &r, out)?;
-    println!(
+    plots(&cfg, &r, stage)?;
+    let config_name = config.display().to_string();
+    folder
+        .commit(Some(&Manifest {
+            command: "synth",
+            graph: &config_name,
+            title: &None,
+            stability_gate: &[],
+        }))
+        .map_err(|e| e.to_string())?;
+    say!(
         "γ = {:.4} (bracket [{:.4}, {:.4}], ‖N‖∞ = {:.4}), controller order {}, synthesis {:.3} s",
         r.synthesis.gamma,
         r.synthesis.gamma_infeasible,
@@ -109,7 +122,7 @@ pub fn synth(config: &Path, out: &Path) -> Result<(), String> {
             .collect::<Vec<_>>()
             .join(", ")
     };
-    println!(
+    say!(
         "MIMO: crossovers {{{}}} Hz, ‖S_o‖∞ = {:.2} dB, ‖T_o‖∞ = {:.2} dB, sampled loop spectral radius {:.6}",
         fmt(&r.loop_report.crossovers_hz),
         db(r.loop_report.s_o_hinf),
@@ -117,13 +130,16 @@ pub fn synth(config: &Path, out: &Path) -> Result<(), String> {
         r.sampled_spectral_radius
     );
     if let Some(red) = &r.reduction {
-        println!(
+        say!(
             "reduced to {} states: ‖K − K_r‖∞ = {:.3e} ≤ 2Σσ_tail = {:.3e}, closed loop stable: {}",
-            red.order, red.error, red.error_bound, red.loop_report.stable
+            red.order,
+            red.error,
+            red.error_bound,
+            red.loop_report.stable
         );
     }
     if let Some(d) = &r.decentralised {
-        println!(
+        say!(
             "decentralised (7.2): crossovers {{{}}} Hz, ‖S_o‖∞ = {:.2} dB, ‖N(K_d)‖∞ = {:.3}; (7.4) {} (max σ̄(T_d)·μ̄(E) = {:.3e}, μ bound gap ≤ {:.1e})",
             fmt(&d.loop_report.crossovers_hz),
             db(d.loop_report.s_o_hinf),
@@ -137,13 +153,14 @@ pub fn synth(config: &Path, out: &Path) -> Result<(), String> {
             d.worst_mu_gap
         );
         for (band, a, b) in &d.s_o_offdiag_db {
-            println!(
+            say!(
                 "  max off-diagonal |S_o| in {:.0}–{:.0} Hz: H∞ {a:.1} dB, decentralised {b:.1} dB",
-                band[0], band[1]
+                band[0],
+                band[1]
             );
         }
     }
-    println!(
+    say!(
         "wrote controller.yaml, report.json, generalized_plant.json and plots into {}",
         out.display()
     );

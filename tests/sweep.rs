@@ -56,16 +56,16 @@ fn the_same_study_gives_the_same_plan_bit_for_bit() {
         serde_json::to_string(&a).unwrap(),
         serde_json::to_string(&b).unwrap()
     );
-    assert_eq!(a.runs.len(), 12);
+    assert_eq!(a.len(), 12);
     // The plan survives JSON exactly (float_roundtrip).
     let back: Plan = serde_json::from_str(&serde_json::to_string(&a).unwrap()).unwrap();
     assert_eq!(back, a);
     // Another sampling seed, another plan (and hash).
     let c = study(&MC.replace("seed: 5", "seed: 6")).plan();
-    assert_ne!(c.runs, a.runs);
+    assert_ne!(c.runs().collect::<Vec<_>>(), a.runs().collect::<Vec<_>>());
     assert_ne!(c.study_hash, a.study_hash);
     // Draws follow their distributions: the mass around 0.255 within 6 σ.
-    for r in &a.runs {
+    for r in a.runs() {
         let m = r.parameters[0].value.as_f64().unwrap();
         assert!((m - 0.255).abs() < 0.06, "{m}");
     }
@@ -77,19 +77,21 @@ fn grid_is_the_cartesian_product_with_seeds_innermost() {
         "study: grid\nseeds: [1, 2]\nparameters:\n  - { path: blocks.pi.kp, range: [1.0e7, 1.0e9], steps: 3, log: true }\n  - { path: blocks.pi.zero_hz, values: [2.0, 4.0] }\n",
     );
     let p = s.plan();
-    assert_eq!(p.runs.len(), 3 * 2 * 2);
+    assert_eq!(p.len(), 3 * 2 * 2);
     let kp: Vec<f64> = p
-        .runs
-        .iter()
+        .runs()
         .map(|r| r.parameters[0].value.as_f64().unwrap())
         .collect();
     // Log spacing: 1e7, 1e8, 1e9 (to rounding of powf).
     for (k, want) in [1e7, 1e8, 1e9].iter().enumerate() {
         assert!((kp[4 * k] - want).abs() < 1e-9 * want, "{kp:?}");
     }
-    assert_eq!(p.runs[0].seed, Some(1));
-    assert_eq!(p.runs[1].seed, Some(2));
-    assert_eq!(p.runs[2].parameters[1].value, serde_json::json!(4.0));
+    assert_eq!(p.run(0).unwrap().seed, Some(1));
+    assert_eq!(p.run(1).unwrap().seed, Some(2));
+    assert_eq!(
+        p.run(2).unwrap().parameters[1].value,
+        serde_json::json!(4.0)
+    );
 }
 
 /// Each dimension's values, mapped back to probabilities (the range by plain
@@ -105,7 +107,7 @@ fn latin_hypercube_hits_every_stratum_once_per_dimension() {
         assert_eq!(p.kind, Kind::LatinHypercube);
         let strata = |f: &dyn Fn(f64) -> f64, k: usize| {
             let mut hit = vec![0usize; n];
-            for r in &p.runs {
+            for r in p.runs() {
                 let u = f(r.parameters[k].value.as_f64().unwrap());
                 hit[((u * n as f64) as usize).min(n - 1)] += 1;
             }
@@ -411,4 +413,200 @@ fn cli_set_and_sweep() {
     assert_eq!(rows.len(), 12);
     assert_eq!(&h[2..4], ["blocks.pi.kp", "blocks.pi.zero_hz"]);
     std::fs::remove_dir_all(d).ok();
+}
+
+// ---- issue 25: plans bounded and lazy, duplicates, locks, --jobs --------------
+
+/// D5: a grid of 10⁸ points, or of more than 2⁶⁴, is refused when the study is
+/// read, naming the parameter to lower; nothing is allocated first.
+#[test]
+fn a_grid_larger_than_the_bound_is_refused_naming_the_parameter() {
+    nanomotion::link_plugins();
+    let load = |body: &str| {
+        Study::from_yaml(
+            &format!("graph: {QUICKSTART}\nset: {{ duration_s: 0.6 }}\n{body}"),
+            "steps_huge.yaml",
+            Path::new("."),
+        )
+    };
+    let e = load("study: grid\nparameters:\n  - path: blocks.pi.kp\n    range: [1.0e7, 1.0e8]\n    steps: 100000000\n")
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("100000000 runs")
+            && e.contains(&nanomotion::sweep::MAX_RUNS.to_string())
+            && e.contains("lower `steps` of parameter `blocks.pi.kp`"),
+        "{e}"
+    );
+    let t = std::time::Instant::now();
+    let e = load("study: grid\nparameters:\n  - { path: blocks.pi.kp, range: [1.0e7, 1.0e8], steps: 4294967296 }\n  - { path: blocks.pi.zero_hz, range: [1.0, 8.0], steps: 4294967297 }\n  - { path: blocks.stage.den.0, range: [0.2, 0.3], steps: 4294967296 }\n")
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("more than 2^64") && e.contains("`blocks.pi.zero_hz`"),
+        "{e}"
+    );
+    assert!(t.elapsed().as_secs_f64() < 5.0, "{:?}", t.elapsed());
+    // Sizes at the bound: exactly MAX_RUNS plans (lazily: its last run is the
+    // range's end); one more is refused; a seeds list counts.
+    let max = nanomotion::sweep::MAX_RUNS;
+    let grid = |steps: usize, seeds: &str| {
+        load(&format!(
+            "study: grid\n{seeds}parameters:\n  - {{ path: blocks.pi.kp, range: [1.0e7, 1.0e8], steps: {steps} }}\n"
+        ))
+    };
+    let p = grid(max, "").unwrap().plan();
+    assert_eq!(p.len(), max);
+    assert_eq!(
+        p.run(max - 1).unwrap().parameters[0].value.as_f64(),
+        Some(1.0e8)
+    );
+    assert!(grid(max + 1, "").is_err());
+    assert_eq!(grid(max / 2, "seeds: [1, 2]\n").unwrap().plan().len(), max);
+    let e = grid(max / 2 + 1, "seeds: [1, 2]\n")
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("× 2 seeds"), "{e}");
+    // A seeds list multiplies the size.
+    let e = load("study: monte-carlo\nruns: 10000000\nseeds: [1, 2]\nparameters:\n  - { path: blocks.pi.kp, range: [1.0e7, 1.0e8] }\n")
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("lower `runs`"), "{e}");
+}
+
+/// D5: a Monte-Carlo study at the documented maximum (10⁷ runs) plans at once
+/// and runs 2 of them with a `plan.json` of its definition (a few hundred
+/// bytes, not 1.8 GB), and its runs are generated on demand, the same every time.
+#[test]
+fn the_largest_monte_carlo_plan_is_lazy_and_its_plan_file_small() {
+    let s = study(&format!(
+        "study: monte-carlo\nruns: {}\nseed: 2009\nparameters:\n  - {{ path: blocks.pi.kp, range: [1.0e7, 1.0e8] }}\n",
+        nanomotion::sweep::MAX_RUNS
+    ));
+    let t = std::time::Instant::now();
+    let p = s.plan();
+    assert_eq!(p.len(), nanomotion::sweep::MAX_RUNS);
+    let last = p.run(p.len() - 1).unwrap();
+    assert_eq!(last.index, p.len() - 1);
+    assert!(p.run(p.len()).is_none());
+    assert_eq!(s.plan().run(p.len() - 1), Some(last));
+    assert!(t.elapsed().as_secs_f64() < 2.0, "{:?}", t.elapsed());
+    let out = dir("mc_max");
+    let sum = run_study(
+        &s,
+        &out,
+        &RunOptions {
+            jobs: 1,
+            limit: Some(2),
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    assert_eq!(
+        (sum.planned, sum.computed),
+        (nanomotion::sweep::MAX_RUNS, 2)
+    );
+    let plan_len = std::fs::metadata(out.join("plan.json")).unwrap().len();
+    assert!(plan_len < 4096, "plan.json is {plan_len} bytes");
+    let back: Plan =
+        serde_json::from_str(&std::fs::read_to_string(out.join("plan.json")).unwrap()).unwrap();
+    assert_eq!(back, p);
+    assert_eq!(back.run(1), p.run(1), "the file regenerates the runs");
+    std::fs::remove_dir_all(&out).ok();
+}
+
+/// D15: the same path twice (or a path both fixed by `set:` and varied) is
+/// refused, naming both lines.
+#[test]
+fn the_same_parameter_path_twice_is_refused_naming_both_lines() {
+    nanomotion::link_plugins();
+    let text = format!(
+        "graph: {QUICKSTART}\nset: {{ duration_s: 0.6, score.0.from_s: 0.1 }}\nstudy: random\nruns: 4\nparameters:\n  - path: blocks.pi.kp\n    range: [1.0e7, 1.0e8]\n  - path: blocks.pi.kp\n    range: [1.0e7, 1.0e8]\n"
+    );
+    let e = Study::from_yaml(&text, "dup.yaml", Path::new("."))
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("`blocks.pi.kp` is given twice") && e.contains("line 6") && e.contains("line 8"),
+        "{e}"
+    );
+    // Another spelling of the same place: den.0 and den[0].
+    let text = format!(
+        "graph: {QUICKSTART}\nstudy: grid\nparameters:\n  - {{ path: blocks.stage.den.0, values: [0.25] }}\n  - path: blocks.stage.den[0]\n    values: [0.26]\n"
+    );
+    let e = Study::from_yaml(&text, "dup.yaml", Path::new("."))
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("line 4") && e.contains("line 5"), "{e}");
+    // Fixed by `set:` and varied.
+    let text = format!(
+        "graph: {QUICKSTART}\nset: {{ duration_s: 0.6 }}\nstudy: grid\nparameters:\n  - {{ path: duration_s, values: [0.5] }}\n"
+    );
+    let e = Study::from_yaml(&text, "dup.yaml", Path::new("."))
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("both fixed by `set:` (line 2) and varied (line 5)"),
+        "{e}"
+    );
+}
+
+/// D16: a sweep into a folder another live sweep writes is refused naming its
+/// process; the lock of a dead process is taken over, and released at the end.
+#[test]
+fn a_second_sweep_into_one_folder_is_refused_while_the_first_runs() {
+    let s = study("study: grid\nparameters:\n  - { path: blocks.pi.zero_hz, values: [2.0] }\n");
+    let out = dir("locked");
+    let mut holder = std::process::Command::new("sleep")
+        .arg("30")
+        .spawn()
+        .unwrap();
+    std::fs::write(
+        out.join(nanomotion::output::LOCK_FILE),
+        format!("{}\n", holder.id()),
+    )
+    .unwrap();
+    let opts = RunOptions {
+        jobs: 1,
+        ..Default::default()
+    };
+    let e = run_study(&s, &out, &opts).unwrap_err().to_string();
+    assert!(
+        e.contains(&format!("PID {}", holder.id())) && e.contains("another --out"),
+        "{e}"
+    );
+    assert!(!out.join("rows.jsonl").exists(), "wrote rows while locked");
+    holder.kill().unwrap();
+    holder.wait().unwrap();
+    let sum = run_study(&s, &out, &opts).unwrap();
+    assert_eq!(sum.computed, 1);
+    assert!(!out.join(nanomotion::output::LOCK_FILE).exists());
+    std::fs::remove_dir_all(&out).ok();
+}
+
+/// D12: a sweep does not write into a folder of the user's.
+#[test]
+fn a_sweep_refuses_a_folder_that_is_not_a_sweep() {
+    let s = study("study: grid\nparameters:\n  - { path: blocks.pi.zero_hz, values: [2.0] }\n");
+    let out = dir("foreign");
+    std::fs::write(out.join("notes.txt"), "mine").unwrap();
+    let e = run_study(&s, &out, &RunOptions::default())
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("notes.txt") && e.contains("another --out"),
+        "{e}"
+    );
+    std::fs::remove_dir_all(&out).ok();
+}
+
+/// D22: more jobs than cores are capped, with a note.
+#[test]
+fn jobs_beyond_the_cores_are_capped() {
+    let cores = std::thread::available_parallelism().map_or(1, usize::from);
+    let (n, note) = nanomotion::sweep::capped_jobs(100_000);
+    assert_eq!(n, cores);
+    assert!(note.unwrap().contains("--jobs 100000"));
+    assert_eq!(nanomotion::sweep::capped_jobs(1), (1, None));
+    assert_eq!(nanomotion::sweep::capped_jobs(0), (cores, None));
 }

@@ -117,6 +117,22 @@ pub fn expand(
             ));
         }
         let inc_origin = path.display().to_string();
+        // An empty file (a 0-byte `controller.yaml` left by a failed write) is
+        // not "no blocks": it is refused, naming the file.
+        if text.lines().all(|l| {
+            let l = l.trim();
+            l.is_empty() || l.starts_with('#')
+        }) {
+            return Err(at(
+                origin,
+                n,
+                what,
+                format!(
+                    "{inc_origin} is empty ({} bytes, no block entries): an included file holds a YAML list of block entries, `- name: …` (fix: write the file again, e.g. rerun the command that made it, or remove the include)",
+                    text.len()
+                ),
+            ));
+        }
         let inc_base = path
             .parent()
             .filter(|p| !p.as_os_str().is_empty())
@@ -227,6 +243,15 @@ log: [k.y]
         std::fs::write(d.join("sub/k.yaml"), "name: k\ntype: gain\n").unwrap();
         let e = GraphSpec::from_file(&g).unwrap_err().to_string();
         assert!(e.contains("list of block entries"), "{e}");
+        // An empty file (0 bytes, or comments only) is refused, naming it.
+        for empty in ["", "# nothing yet\n\n"] {
+            std::fs::write(d.join("sub/k.yaml"), empty).unwrap();
+            let e = GraphSpec::from_file(&g).unwrap_err().to_string();
+            assert!(
+                e.contains("g.yaml: line 7") && e.contains("k.yaml is empty"),
+                "{e}"
+            );
+        }
         // The graph including itself.
         std::fs::write(d.join("sub/k.yaml"), "- include: ../g.yaml\n").unwrap();
         let e = GraphSpec::from_file(&g).unwrap_err().to_string();

@@ -51,12 +51,12 @@ fn sweep_pending(
     let s = study(&path)?;
     let plan = s.plan();
     let (_store, done) = RowStore::open(&out, &plan, restart).map_err(sweep_err)?;
-    let mut finished = vec![false; plan.runs.len()];
+    let mut finished = vec![false; plan.len()];
     for r in &done {
         finished[r.index] = true;
     }
-    let todo = (0..plan.runs.len()).filter(|&i| !finished[i]).collect();
-    Ok((plan.runs.len(), todo, plan.study_hash))
+    let todo = (0..plan.len()).filter(|&i| !finished[i]).collect();
+    Ok((plan.len(), todo, plan.study_hash))
 }
 
 /// Run the plan's runs `indices` in this process on `jobs` threads (0: all
@@ -105,7 +105,7 @@ fn sweep_write<'py>(py: Python<'py>, path: PathBuf, out: PathBuf) -> PyResult<Bo
     let (_store, rows) = RowStore::open(&out, &plan, false).map_err(sweep_err)?;
     let files = sweep::write_results(&out, &s, &plan, &rows).map_err(sweep_err)?;
     let summary = sweep::Summary {
-        planned: plan.runs.len(),
+        planned: plan.len(),
         resumed: rows.len(),
         computed: 0,
         failed: rows.iter().filter(|r| r.error.is_some()).count(),
