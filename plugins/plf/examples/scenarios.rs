@@ -230,10 +230,10 @@ fn main() {
             pct(t.correct, t.records)
         );
     }
-    if let Some(p) = csv_path {
-        if let Err(e) = std::fs::write(&p, csv) {
-            eprintln!("error: cannot write {p}: {e}");
-            std::process::exit(1);
-        }
+    if let Some(p) = csv_path
+        && let Err(e) = std::fs::write(&p, csv)
+    {
+        eprintln!("error: cannot write {p}: {e}");
+        std::process::exit(1);
     }
 }

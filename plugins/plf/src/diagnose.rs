@@ -1026,7 +1026,9 @@ fn calibrate(
     if free.is_empty() {
         return Ok(None);
     }
-    let mut best: Option<(f64, GraphSpec, Vec<f64>, Vec<Vec<f64>>)> = None;
+    // (estimation cost, calibrated graph, σ of the parameters, residuals)
+    type Best = (f64, GraphSpec, Vec<f64>, Vec<Vec<f64>>);
+    let mut best: Option<Best> = None;
     for start in [1.0, 0.92, 1.08] {
         let mut start_spec = surgery::clone_spec(&spec)?;
         for b in start_spec.blocks.iter_mut() {
