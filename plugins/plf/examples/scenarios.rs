@@ -195,7 +195,7 @@ fn main() {
         pct(correct_cut, records)
     );
     println!(
-        "| nominal calibration kept (step 0) | {} ({calibrations} of {records}) |",
+        "| nominal calibration kept | {} ({calibrations} of {records}) |",
         pct(calibrations, records)
     );
     println!(
