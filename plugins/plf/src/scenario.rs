@@ -628,7 +628,7 @@ fn labels_from(rng: &mut Rng) -> (Vec<&'static str>, Family) {
     )
 }
 
-/// Draw scenario `seed` (any family; see [`Family::is_development`]).
+/// Draw scenario `seed` (either side of the split; see [`Family::split`]).
 pub fn draw(seed: u64) -> Result<Scenario, DataError> {
     let mut rng = scenario_rng(seed);
     let (hidden, family) = labels_from(&mut rng);
