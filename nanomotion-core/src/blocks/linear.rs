@@ -440,7 +440,7 @@ pub struct StateSpaceBlock {
     #[serde(default)]
     pub prewarp_hz: Option<f64>,
     /// Calibration gain g on the input: B, D ← g·B, g·D (default 1). Fitted by
-    /// `nanomotion diagnose`'s nominal calibration (see [`Tunable`]).
+    /// `nanomotion diagnose`'s nominal calibration (see [`crate::Tunable`]).
     #[serde(default = "unity", skip_serializing_if = "is_unity")]
     pub gain: f64,
     /// Calibration time scale λ of a continuous model: A, B ← λA, λB, i.e.
