@@ -22,6 +22,17 @@ fn text(o: &Output) -> String {
     )
 }
 
+/// `run` of the data-replay example on the record `csv`, writing no files.
+fn replay(csv: &Path) -> Output {
+    nm(&[
+        "run",
+        "examples/data_replay/model.yaml",
+        "--data",
+        csv.to_str().unwrap(),
+        "--no-files",
+    ])
+}
+
 fn scratch(name: &str) -> PathBuf {
     let d = std::env::temp_dir().join(format!("nm-hostile-data-{}-{name}", std::process::id()));
     let _ = std::fs::remove_dir_all(&d);
@@ -58,13 +69,7 @@ fn record_with(dir: &Path, name: &str, edit: impl Fn(usize, &mut Vec<String>)) -
 fn run_refuses_a_constant_measured_column() {
     let d = scratch("const");
     let csv = record_with(&d, "const_col.csv", |_, f| f[2] = "1e-6".into());
-    let o = nm(&[
-        "run",
-        "examples/data_replay/model.yaml",
-        "--data",
-        csv.to_str().unwrap(),
-        "--no-files",
-    ]);
+    let o = replay(&csv);
     let t = text(&o);
     assert_eq!(o.status.code(), Some(1), "{t}");
     assert!(
@@ -87,13 +92,7 @@ fn run_refuses_scores_that_overflow() {
             f[1] = "1e308".into();
         }
     });
-    let o = nm(&[
-        "run",
-        "examples/data_replay/model.yaml",
-        "--data",
-        csv.to_str().unwrap(),
-        "--no-files",
-    ]);
+    let o = replay(&csv);
     let t = text(&o);
     assert_eq!(o.status.code(), Some(1), "{t}");
     assert!(
@@ -319,20 +318,20 @@ fn scan_image_reads_multi_rate_runs_and_plain_names() {
 #[test]
 fn rc_check_takes_t_from_the_graph_and_check_prints_it() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let text = std::fs::read_to_string(root.join("examples/rc_standard.yaml"))
+    let graph = std::fs::read_to_string(root.join("examples/rc_standard.yaml"))
         .unwrap()
         .replace(
             "learning: { kind: zpetc, num: [0.22], den: [1.0, -0.8] }",
             "learning: { kind: identity }",
         );
-    assert!(text.contains("kind: identity"));
+    assert!(graph.contains("kind: identity"));
     let d = scratch("rc");
     let with_t = d.join("with_t.yaml");
-    std::fs::write(&with_t, &text).unwrap();
+    std::fs::write(&with_t, &graph).unwrap();
     let without_t = d.join("without_t.yaml");
     std::fs::write(
         &without_t,
-        text.replace(
+        graph.replace(
             "    t_model: { num: [0.2], den: [1.0, -0.8] }   # the true T, for rc-check\n",
             "",
         ),
@@ -358,7 +357,7 @@ fn rc_check_takes_t_from_the_graph_and_check_prints_it() {
     );
     // `check --print-loop` prints T to paste as `t_model:`: 0.2/(z − 0.8).
     let o = nm(&["check", "examples/rc_standard.yaml", "--print-loop"]);
-    let t = text_of(&o);
+    let t = text(&o);
     assert!(o.status.success(), "{t}");
     for key in ["    L: {", "    S: {", "    T: {", "      - block: rc"] {
         assert!(t.contains(key), "{key}: {t}");
@@ -386,8 +385,4 @@ fn rc_check_takes_t_from_the_graph_and_check_prints_it() {
         );
     }
     let _ = std::fs::remove_dir_all(&d);
-}
-
-fn text_of(o: &Output) -> String {
-    text(o)
 }

@@ -632,15 +632,10 @@ fn labels_from(rng: &mut Rng) -> (Vec<&'static str>, Family) {
 pub fn draw(seed: u64) -> Result<Scenario, DataError> {
     let mut rng = scenario_rng(seed);
     let (hidden, family) = labels_from(&mut rng);
-    let Family {
-        plant: plant_kind,
-        loop_kind,
-        excitation: excitation_kind,
-        noise: noise_kind,
-        nominal: nominal_kind,
-        rate_hz: fs,
-        unit,
-    } = family.clone();
+    let (plant_kind, loop_kind, excitation_kind) =
+        (family.plant, family.loop_kind, family.excitation);
+    let (noise_kind, nominal_kind, fs, unit) =
+        (family.noise, family.nominal, family.rate_hz, family.unit);
     let unit_scale = match unit {
         "um" => 1e6,
         "nm" => 1e9,
