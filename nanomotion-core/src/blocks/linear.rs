@@ -448,6 +448,17 @@ pub struct StateSpaceBlock {
     /// gain unchanged (default 1; must stay 1 for a discrete model).
     #[serde(default = "unity", skip_serializing_if = "is_unity")]
     pub frequency_scale: f64,
+    /// Calibration damping scale d of a continuous model: every complex pole
+    /// pair σ ± jω_d moves to d·σ ± jω_d (decay rate, so damping ratio, × d;
+    /// eigenvectors and residues kept, see [`lti::linalg::rescale_modes`])
+    /// (default 1; must stay 1 for a discrete model).
+    #[serde(default = "unity", skip_serializing_if = "is_unity")]
+    pub damping_scale: f64,
+    /// Calibration lag scale ℓ of a continuous model: every real pole p moves
+    /// to ℓ·p (an amplifier's or sensor's lag × 1/ℓ; eigenvectors and residues
+    /// kept) (default 1; must stay 1 for a discrete model).
+    #[serde(default = "unity", skip_serializing_if = "is_unity")]
+    pub lag_scale: f64,
     #[serde(skip)]
     core: Option<LinearCore>,
     /// The sample period the block was built for (re-realised by `set_params`).
@@ -483,6 +494,8 @@ impl StateSpaceBlock {
             prewarp_hz: None,
             gain: 1.0,
             frequency_scale: 1.0,
+            damping_scale: 1.0,
+            lag_scale: 1.0,
             core: None,
             built_dt: None,
         }
@@ -503,16 +516,27 @@ impl StateSpaceBlock {
             ));
         }
         check::positive("gain", self.gain)?;
-        check::positive("frequency_scale", self.frequency_scale)?;
-        if self.discrete && self.frequency_scale != 1.0 {
-            return Err(ParamError::new(
-                "frequency_scale",
-                format!("is {} on a discrete model", self.frequency_scale),
-                "remove it (a time scale applies to a continuous model only)",
-            ));
+        for (name, v) in self.continuous_scales() {
+            check::positive(name, v)?;
+            if self.discrete && v != 1.0 {
+                return Err(ParamError::new(
+                    name,
+                    format!("is {v} on a discrete model"),
+                    "remove it (a time, damping or lag scale applies to a continuous model only)",
+                ));
+            }
         }
         let lambda = self.frequency_scale;
-        let a = matrix_from_rows("a", &self.a, n, n)? * lambda;
+        let a_raw = matrix_from_rows("a", &self.a, n, n)?;
+        let a = lti::linalg::rescale_modes(&a_raw, self.damping_scale, self.lag_scale).ok_or_else(
+            || {
+                ParamError::new(
+                    "damping_scale",
+                    "A's modes cannot be moved (a repeated mode: A is not diagonalisable)",
+                    "keep damping_scale and lag_scale at 1 for this model",
+                )
+            },
+        )? * lambda;
         let b = matrix_from_rows("b", &self.b, n, m)? * (lambda * self.gain);
         let c = matrix_from_rows("c", &self.c, p, n)?;
         let d = if self.d.is_empty() {
@@ -537,6 +561,47 @@ impl StateSpaceBlock {
         self.core = Some(LinearCore::new(model, 1).map_err(|e| lti_to_param("a", e))?);
         self.built_dt = Some(dt);
         Ok(())
+    }
+
+    /// The calibration scales of a continuous model, by field name.
+    fn continuous_scales(&self) -> [(&'static str, f64); 3] {
+        [
+            ("frequency_scale", self.frequency_scale),
+            ("damping_scale", self.damping_scale),
+            ("lag_scale", self.lag_scale),
+        ]
+    }
+
+    /// The calibration parameters this model offers: the gain always; the
+    /// time scale of a continuous model; its damping scale when it has a
+    /// complex pole pair; its lag scale when it has real poles beside
+    /// complex ones (with real poles alone the time scale moves them).
+    fn calibration_names(&self) -> Vec<&'static str> {
+        let mut v = vec!["gain"];
+        if self.discrete {
+            return v;
+        }
+        v.push("frequency_scale");
+        let n = self.a.len();
+        if let Ok(a) = matrix_from_rows("a", &self.a, n, n) {
+            let kinds = lti::linalg::mode_kinds(&a);
+            if kinds.oscillatory {
+                v.push("damping_scale");
+                if kinds.lag {
+                    v.push("lag_scale");
+                }
+            }
+        }
+        v
+    }
+
+    fn calibration_slot(&mut self, name: &str) -> &mut f64 {
+        match name {
+            "frequency_scale" => &mut self.frequency_scale,
+            "damping_scale" => &mut self.damping_scale,
+            "lag_scale" => &mut self.lag_scale,
+            _ => &mut self.gain,
+        }
     }
 
     fn dims(&self) -> (usize, usize, usize) {
@@ -584,49 +649,51 @@ impl Block for StateSpaceBlock {
 }
 controller_impl!(StateSpaceBlock);
 
-/// The calibration of a plant model: `[gain]` for a discrete model,
-/// `[gain, frequency_scale]` for a continuous one (see the fields). A built
-/// block is re-realised at once (outside any tick: it allocates).
+/// The calibration of a plant model: `[gain]` for a discrete model; for a
+/// continuous one `[gain, frequency_scale]`, then `damping_scale` when it has
+/// a complex pole pair and `lag_scale` when it also has real poles (see the
+/// fields). A built block is re-realised at once (outside any tick: it
+/// allocates).
 impl crate::Tunable for StateSpaceBlock {
     fn param_names(&self) -> Vec<String> {
-        let mut v = vec!["gain".to_string()];
-        if !self.discrete {
-            v.push("frequency_scale".into());
-        }
-        v
+        self.calibration_names()
+            .into_iter()
+            .map(String::from)
+            .collect()
     }
     fn params(&self) -> Vec<f64> {
-        let mut v = vec![self.gain];
-        if !self.discrete {
-            v.push(self.frequency_scale);
-        }
-        v
+        let value = |n: &str| {
+            self.continuous_scales()
+                .iter()
+                .find(|(name, _)| *name == n)
+                .map_or(self.gain, |(_, v)| *v)
+        };
+        self.calibration_names().into_iter().map(value).collect()
     }
     fn set_params(&mut self, p: &[f64]) -> Result<(), ParamError> {
-        let want = if self.discrete { 1 } else { 2 };
-        if p.len() != want {
+        let names = self.calibration_names();
+        if p.len() != names.len() {
             return Err(ParamError::new(
                 "params",
                 format!("{} values given", p.len()),
-                if self.discrete {
-                    "give [gain]"
-                } else {
-                    "give [gain, frequency_scale]"
-                },
+                format!("give [{}]", names.join(", ")),
             ));
         }
-        let old = (self.gain, self.frequency_scale);
-        self.gain = p[0];
-        if !self.discrete {
-            self.frequency_scale = p[1];
+        let old: Vec<f64> = names.iter().map(|n| *self.calibration_slot(n)).collect();
+        for (n, &v) in names.iter().zip(p) {
+            *self.calibration_slot(n) = v;
         }
         let result = match self.built_dt {
             Some(dt) => self.realise(dt),
-            None => check::positive("gain", self.gain)
-                .and_then(|_| check::positive("frequency_scale", self.frequency_scale)),
+            None => names
+                .iter()
+                .zip(p)
+                .try_for_each(|(n, &v)| check::positive(n, v)),
         };
         if result.is_err() {
-            (self.gain, self.frequency_scale) = old;
+            for (n, &v) in names.iter().zip(&old) {
+                *self.calibration_slot(n) = v;
+            }
             if let Some(dt) = self.built_dt {
                 self.realise(dt)?;
             }
@@ -650,6 +717,8 @@ crate::submit_block_doc! {
             ParamDoc { name: "prewarp_hz", doc: "Tustin pre-warp frequency (Hz)", default: Some("none") },
             ParamDoc { name: "gain", doc: "calibration gain on the input (B, D ← g·B, g·D)", default: Some("1") },
             ParamDoc { name: "frequency_scale", doc: "calibration time scale of a continuous model (A, B ← λA, λB: frequencies × λ)", default: Some("1") },
+            ParamDoc { name: "damping_scale", doc: "calibration damping scale of a continuous model (complex poles σ ± jω_d → d·σ ± jω_d)", default: Some("1") },
+            ParamDoc { name: "lag_scale", doc: "calibration lag scale of a continuous model (real poles p → ℓ·p)", default: Some("1") },
         ],
         ports: "u[m] -> y[p]",
     }

@@ -367,6 +367,100 @@ pub fn split_conjugates(z: &[Complex<f64>], tol: f64) -> (Vec<f64>, Vec<Complex<
     (reals, pos)
 }
 
+/// What a real matrix's spectrum offers [`rescale_modes`]: oscillatory modes
+/// (complex pairs) and non-zero real poles (lags).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ModeKinds {
+    /// At least one complex pair.
+    pub oscillatory: bool,
+    /// At least one real eigenvalue away from zero.
+    pub lag: bool,
+}
+
+/// Whether an eigenvalue counts as a complex pair's member (|Im λ| above
+/// round-off of |λ|).
+fn is_oscillatory(l: Complex<f64>) -> bool {
+    l.im.abs() > 1e-9 * l.norm()
+}
+
+/// The kinds of modes of `a` (see [`ModeKinds`]).
+pub fn mode_kinds(a: &DMatrix<f64>) -> ModeKinds {
+    let ev = eigvals(a);
+    let scale = ev.iter().fold(0.0f64, |m, l| m.max(l.norm()));
+    ModeKinds {
+        oscillatory: ev.iter().any(|&l| is_oscillatory(l)),
+        lag: ev
+            .iter()
+            .any(|&l| !is_oscillatory(l) && l.re.abs() > 1e-9 * scale.max(f64::MIN_POSITIVE)),
+    }
+}
+
+/// `a` with its modes moved in the complex plane: every complex pair
+/// σ ± jω_d becomes `damping_scale`·σ ± jω_d (its decay rate, so its damping,
+/// scaled; the damped frequency kept) and every real eigenvalue p becomes
+/// `lag_scale`·p, the eigenvectors kept: A' = V f(Λ) V⁻¹. For a 2 × 2 block
+/// with a complex pair this is A + (d − 1)·σ·I. The calibration of a plant
+/// model whose damping or amplifier lag is a few per cent off. `None` when
+/// `a` is not diagonalisable to working accuracy (a repeated mode, a double
+/// integrator with a non-unit lag scale), when the scales are not positive and
+/// finite, or on non-finite entries.
+pub fn rescale_modes(a: &DMatrix<f64>, damping_scale: f64, lag_scale: f64) -> Option<DMatrix<f64>> {
+    let positive = |v: f64| v.is_finite() && v > 0.0;
+    if !a.is_square() || !positive(damping_scale) || !positive(lag_scale) {
+        return None;
+    }
+    if damping_scale == 1.0 && lag_scale == 1.0 {
+        return Some(a.clone());
+    }
+    let n = a.nrows();
+    let ev = eigvals(a);
+    if ev.iter().any(|l| !l.re.is_finite() || !l.im.is_finite()) {
+        return None;
+    }
+    let moved: Vec<Complex<f64>> = ev
+        .iter()
+        .map(|&l| {
+            if is_oscillatory(l) {
+                Complex::new(damping_scale * l.re, l.im)
+            } else {
+                Complex::new(lag_scale * l.re, 0.0)
+            }
+        })
+        .collect();
+    // Eigenvectors: the right singular vector of the smallest singular value
+    // of (A − λI).
+    let ac = a.map(|v| Complex::new(v, 0.0));
+    let mut v = DMatrix::<Complex<f64>>::zeros(n, n);
+    for (k, &l) in ev.iter().enumerate() {
+        let shifted = &ac - DMatrix::<Complex<f64>>::identity(n, n) * l;
+        let svd = shifted.svd(false, true);
+        let v_t = svd.v_t?;
+        let (imin, _) =
+            svd.singular_values
+                .iter()
+                .enumerate()
+                .fold(
+                    (0, f64::INFINITY),
+                    |b, (i, &s)| if s < b.1 { (i, s) } else { b },
+                );
+        for r in 0..n {
+            v[(r, k)] = v_t[(imin, r)].conj();
+        }
+    }
+    let v_inv = v.clone().try_inverse()?;
+    let norm = |m: &DMatrix<Complex<f64>>| m.iter().map(|z| z.norm()).fold(0.0, f64::max);
+    if !(norm(&v) * norm(&v_inv) < 1e8) {
+        return None;
+    }
+    let lambda = DMatrix::from_diagonal(&DVector::from_vec(moved));
+    let out = &v * lambda * v_inv;
+    let a_scale = a.amax().max(f64::MIN_POSITIVE);
+    if out.iter().any(|z| !(z.im.abs() <= 1e-8 * a_scale)) {
+        return None;
+    }
+    Some(out.map(|z| z.re))
+}
+
 /// Complex linear solve `M X = R` for a complex square `M`.
 pub fn solve_complex(
     m: DMatrix<Complex<f64>>,
@@ -381,6 +475,61 @@ mod tests {
 
     fn close(a: &DMatrix<f64>, b: &DMatrix<f64>, tol: f64) -> bool {
         (a - b).amax() <= tol * (1.0 + b.amax())
+    }
+
+    #[test]
+    fn rescale_modes_matches_the_closed_forms() {
+        // A 2 × 2 block with poles σ ± jω_d: f(A) = A + (d − 1)σI; a real
+        // pole p: ℓp. Mixed in one matrix behind a similarity T, the result
+        // must be T · blockdiag(closed forms) · T⁻¹.
+        for &(w, z, p, d, l) in &[
+            (10.0, 0.05, -3.0, 1.3, 0.8),
+            (2.0 * std::f64::consts::PI * 150.0, 0.01, -4000.0, 0.7, 1.1),
+            (1.0, 0.5, -0.2, 1.0, 2.0),
+        ] {
+            let sigma = -z * w;
+            let pair = DMatrix::from_row_slice(2, 2, &[0.0, 1.0, -w * w, -2.0 * z * w]);
+            let pair_moved = &pair + DMatrix::identity(2, 2) * ((d - 1.0) * sigma);
+            let mut blk = DMatrix::zeros(3, 3);
+            let mut want_blk = DMatrix::zeros(3, 3);
+            blk.view_mut((0, 0), (2, 2)).copy_from(&pair);
+            want_blk.view_mut((0, 0), (2, 2)).copy_from(&pair_moved);
+            blk[(2, 2)] = p;
+            want_blk[(2, 2)] = l * p;
+            let t = DMatrix::from_row_slice(3, 3, &[1.0, 0.3, -0.2, 0.1, 2.0, 0.5, -0.4, 0.2, 1.5]);
+            let t_inv = t.clone().try_inverse().unwrap();
+            let a = &t * &blk * &t_inv;
+            let want = &t * &want_blk * &t_inv;
+            let got = rescale_modes(&a, d, l).unwrap();
+            assert!(close(&got, &want, 1e-9), "{got} vs {want}");
+            assert_eq!(
+                mode_kinds(&a),
+                ModeKinds {
+                    oscillatory: true,
+                    lag: true
+                }
+            );
+        }
+        // Unit scales give A back exactly; a repeated mode (a Jordan block) is
+        // refused; an integrator (λ = 0) is not a lag.
+        let jordan = DMatrix::from_row_slice(2, 2, &[-1.0, 1.0, 0.0, -1.0]);
+        assert_eq!(rescale_modes(&jordan, 1.0, 1.0), Some(jordan.clone()));
+        assert_eq!(rescale_modes(&jordan, 1.0, 1.2), None);
+        let free_mass = DMatrix::from_row_slice(2, 2, &[0.0, 1.0, 0.0, -2.0]);
+        // 1/(s(s + 2)) with the residues kept and the pole at −2 moved to −3:
+        // 1/(2s) − 1/(2(s + 3)) = 1.5/(s(s + 3)), i.e. A' = [[0, 1.5], [0, −3]]
+        // with B = [0; 1], C = [1, 0].
+        let moved = rescale_modes(&free_mass, 1.0, 1.5).unwrap();
+        let want = DMatrix::from_row_slice(2, 2, &[0.0, 1.5, 0.0, -3.0]);
+        assert!(close(&moved, &want, 1e-12), "{moved}");
+        assert_eq!(
+            mode_kinds(&DMatrix::from_row_slice(1, 1, &[0.0])),
+            ModeKinds {
+                oscillatory: false,
+                lag: false
+            }
+        );
+        assert_eq!(rescale_modes(&free_mass, -1.0, 1.0), None);
     }
 
     #[test]

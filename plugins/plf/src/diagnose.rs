@@ -218,9 +218,11 @@ pub struct Alternative {
     pub experiment: String,
 }
 
-/// The nominal calibration: the nominal model's own parameters — the gain g
-/// and the time scale λ (every mode's frequency × λ) of each continuous
-/// `state_space` block. A nominal that is a few per cent off is a *nominal
+/// The nominal calibration: the nominal model's own parameters — the gain g,
+/// the time scale λ (every mode's frequency × λ), the damping scale d (every
+/// complex pair's decay rate × d) and the lag scale ℓ (every real pole × ℓ)
+/// of each continuous `state_space` block (d and ℓ where its spectrum has
+/// such modes). A nominal that is a few per cent off is a *nominal
 /// error*, not a missing effect: left alone, it is what a flexible effect
 /// block (a gain varying with position, a resonance) would be named for. At
 /// every step until it is taken, it competes with the best effect on the same
@@ -991,8 +993,9 @@ fn excess_cut(
     }
 }
 
-/// The nominal calibration (see [`Calibration`]): fit the gain and time scale
-/// of every continuous `state_space` block of the current model, from λ = 1
+/// The nominal calibration (see [`Calibration`]): fit the gain and the time,
+/// damping and lag scales of every continuous `state_space` block of the
+/// current model, from λ = 1
 /// and from λ = 1 ∓ 8 % (a lightly damped mode a few per cent off is a local
 /// minimum away). Returns the report (not yet judged), the calibrated model
 /// and its weighted held-out mean square; `None` when the model has nothing
