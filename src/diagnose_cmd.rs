@@ -4,7 +4,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use nanomotion::core::data::Dataset;
 use nanomotion::core::graph::GraphSpec;
 use nanomotion::output::{Manifest, OutputFolder, write_atomic};
-use nanomotion::plf::diagnose::{Options, PlotData, Report, diagnose_with_progress};
+use nanomotion::plf::diagnose::{Options, PlotData, Report, diagnose_records};
 use nanomotion::plot::{Figure, Scale, Series, draw_svg};
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
@@ -13,6 +13,8 @@ use std::time::{Duration, Instant};
 pub struct Args {
     pub model: PathBuf,
     pub data: PathBuf,
+    /// Held-out records (empty: the end of `data` is held out).
+    pub validation: Vec<PathBuf>,
     pub out: Option<PathBuf>,
     pub json: Option<PathBuf>,
     pub max_effects: usize,
@@ -24,7 +26,11 @@ pub struct Args {
 
 pub fn run(a: Args) -> Result<(), String> {
     let spec = GraphSpec::from_file(&a.model).map_err(|e| e.to_string())?;
-    let data = Dataset::from_file(&a.data).map_err(|e| e.to_string())?;
+    let mut records = vec![Dataset::from_file(&a.data).map_err(|e| e.to_string())?];
+    for v in &a.validation {
+        records.push(Dataset::from_file(v).map_err(|e| e.to_string())?);
+    }
+    let data = &records[0];
     let out = a.out.clone().unwrap_or_else(|| {
         PathBuf::from("out").join(format!(
             "diagnose_{}",
@@ -50,17 +56,30 @@ pub fn run(a: Args) -> Result<(), String> {
         effects: a.effects.clone(),
         ..Options::default()
     };
+    let held_out = if a.validation.is_empty() {
+        format!("last {:.0} % held out", 100.0 * a.holdout)
+    } else {
+        let names: Vec<String> = a
+            .validation
+            .iter()
+            .map(|v| v.display().to_string())
+            .collect();
+        format!(
+            "estimation only; held out: {} ({} samples)",
+            names.join(", "),
+            records[1..].iter().map(Dataset::len).sum::<usize>()
+        )
+    };
     say!(
-        "diagnosing {} against {} ({} samples at {} Hz; last {:.0} % held out)",
+        "diagnosing {} against {} ({} samples at {} Hz; {held_out})",
         a.model.display(),
         a.data.display(),
         data.len(),
         data.rate_hz(),
-        100.0 * a.holdout
     );
     let start = Instant::now();
     let mut bar: Option<ProgressBar> = None;
-    let report = diagnose_with_progress(&spec, &data, &opts, &mut |what, frac| {
+    let report = diagnose_records(&spec, &records, &opts, &mut |what, frac| {
         if bar.is_none() && start.elapsed() > Duration::from_millis(500) {
             let b = ProgressBar::new(1000);
             b.set_style(

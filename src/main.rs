@@ -211,6 +211,10 @@ enum Command {
         model: PathBuf,
         /// The measured record (CSV with a `t` or `t_s` column, or MATLAB v5 `.mat`).
         data: PathBuf,
+        /// Further records (same columns and rate, other excitations): DATA then
+        /// estimates every parameter and these are held out whole — an effect is
+        /// named only if it helps on them. Each record is simulated from rest.
+        validation: Vec<PathBuf>,
         /// Output folder (default out/diagnose_<model stem>).
         #[arg(long, short)]
         out: Option<PathBuf>,
@@ -220,7 +224,7 @@ enum Command {
         /// Name at most this many effects.
         #[arg(long, default_value_t = 3)]
         max_effects: usize,
-        /// Fraction of the record, at its end, held out for scoring.
+        /// Fraction of the record, at its end, held out for scoring (one record only).
         #[arg(long, default_value_t = 0.3)]
         holdout: f64,
         /// Override the graph's seed.
@@ -374,6 +378,7 @@ fn main() -> ExitCode {
         Command::Diagnose {
             model,
             data,
+            validation,
             out,
             json,
             max_effects,
@@ -384,6 +389,7 @@ fn main() -> ExitCode {
         } => diagnose_cmd::run(diagnose_cmd::Args {
             model,
             data,
+            validation,
             out,
             json,
             max_effects,

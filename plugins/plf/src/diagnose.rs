@@ -5,7 +5,10 @@
 //!
 //! Decisions, in the order they are taken:
 //! 1. The record is split in time: the first `1 − holdout` part estimates
-//!    parameters, the rest only scores them.
+//!    parameters, the rest only scores them. With several records
+//!    ([`diagnose_records`]) the first estimates and the others — with other
+//!    excitations, the benchmark convention — only score; each record is
+//!    simulated from rest on its own.
 //! 2. Every candidate (effect × site) is fitted on the estimation part
 //!    (Levenberg–Marquardt, several starts for the non-convex parameters such as
 //!    delays, periods and hysteresis rates), earlier effects held.
@@ -23,7 +26,9 @@
 use crate::PlfError;
 use crate::effects::creep::{Creep, CreepTerm};
 use crate::effects::resonance::UnmodeledResonance;
-use crate::fit::{BlockEvaluator, Evaluator, FreeParam, Problem, Scale, levenberg_marquardt};
+use crate::fit::{
+    BlockEvaluator, Evaluator, FreeParam, Problem, Records, Scale, levenberg_marquardt,
+};
 use crate::stats;
 use crate::surgery::{self, Channel, Site};
 use nanomotion_core::data::Dataset;
@@ -296,6 +301,9 @@ pub struct Report {
     pub stopped_because: String,
     /// The candidates of the step that named nothing (best first), if it came to one.
     pub rejected_candidates: Vec<Candidate>,
+    /// The records: the estimation record first, then the held-out ones (one
+    /// name when a single record is split in time).
+    pub records: Vec<String>,
     /// Samples used for estimation and held out.
     pub estimation_samples: usize,
     /// Held-out samples.
@@ -324,6 +332,16 @@ pub fn diagnose(spec: &GraphSpec, data: &Dataset, opts: &Options) -> Result<Repo
     diagnose_with_progress(spec, data, opts, &mut |_, _| {})
 }
 
+/// [`diagnose_with_progress`] on one record split in time (`opts.holdout`).
+pub fn diagnose_with_progress(
+    spec: &GraphSpec,
+    data: &Dataset,
+    opts: &Options,
+    progress: Progress<'_>,
+) -> Result<Report, PlfError> {
+    diagnose_records(spec, std::slice::from_ref(data), opts, progress)
+}
+
 /// The state of the model between steps.
 struct Current {
     /// The graph in its serde form (shareable between threads; blocks are not `Sync`).
@@ -335,7 +353,10 @@ struct Current {
 }
 
 struct Ctx<'a> {
+    /// The records end to end.
     data: &'a Arc<Dataset>,
+    /// The records, each simulated from rest.
+    records: &'a Records,
     channels: Vec<Channel>,
     n: usize,
     n_est: usize,
@@ -346,10 +367,14 @@ struct Ctx<'a> {
     weights: Vec<f64>,
 }
 
-/// [`diagnose`] with a progress callback.
-pub fn diagnose_with_progress(
+/// [`diagnose`] on several records with a progress callback: with one record,
+/// its last `opts.holdout` is held out; with more, `records[0]` estimates every
+/// parameter and the others (same columns and rate, other excitations) are
+/// held out whole and decide what is named — an effect must help on records
+/// it was not fitted on. Each record is simulated from rest.
+pub fn diagnose_records(
     spec: &GraphSpec,
-    data: &Dataset,
+    records: &[Dataset],
     opts: &Options,
     progress: Progress<'_>,
 ) -> Result<Report, PlfError> {
@@ -384,16 +409,33 @@ pub fn diagnose_with_progress(
             "the graph has no `compare:` entries; add e.g. `compare: [{ signal: stage.y, column: y }]`".into(),
         ));
     }
-    let n = data.len();
-    if n < 200 {
-        return Err(PlfError::Data(format!(
-            "{} has {n} samples; the workflow needs at least 200 to estimate and hold out",
-            data.origin()
-        )));
+    let split = records.len() == 1;
+    for (j, r) in records.iter().enumerate() {
+        let need = if split { 200 } else { 100 };
+        if r.len() < need {
+            return Err(PlfError::Data(format!(
+                "{} has {} samples; the workflow needs at least {need} {}",
+                r.origin(),
+                r.len(),
+                if split {
+                    "to estimate and hold out"
+                } else if j == 0 {
+                    "to estimate"
+                } else {
+                    "in a held-out record"
+                }
+            )));
+        }
     }
-    let data = Arc::new(data.clone());
+    let records = Records::concat(records)?;
+    let data = records.all.clone();
+    let n = data.len();
     let fs = data.rate_hz();
-    let n_est = ((1.0 - opts.holdout) * n as f64).round() as usize;
+    let n_est = if split {
+        ((1.0 - opts.holdout) * n as f64).round() as usize
+    } else {
+        records.parts[0].len()
+    };
     let mut nominal = surgery::clone_spec(spec)?;
     nominal.duration_s = n as f64 / fs;
     if let Some(s) = opts.seed {
@@ -403,6 +445,7 @@ pub fn diagnose_with_progress(
     check_columns(&data, &channels)?;
     let mut ctx = Ctx {
         data: &data,
+        records: &records,
         weights: vec![1.0; channels.len()],
         channels,
         n,
@@ -873,6 +916,11 @@ pub fn diagnose_with_progress(
         final_tests,
         stopped_because: stopped,
         rejected_candidates,
+        records: records
+            .parts
+            .iter()
+            .map(|p| p.origin().to_string())
+            .collect(),
         estimation_samples: n_est,
         holdout_samples: n - n_est,
         runs,
@@ -1044,7 +1092,7 @@ fn calibrate(
                     .map_err(|e| PlfError::Model(format!("block `{}`: {e}", b.name)))?;
             }
         }
-        let mut ev = Evaluator::new(surgery::clone_spec(&start_spec)?, ctx.data, &free, 0)?;
+        let mut ev = Evaluator::over(surgery::clone_spec(&start_spec)?, ctx.records, &free, 0)?;
         ev.set_weights(&ctx.weights);
         let z0 = vec![0.0; free.len()];
         let Some(fit) = levenberg_marquardt(&mut ev, &z0, ctx.n_est, 25) else {
@@ -1288,7 +1336,7 @@ fn evaluate_current(
             }
         }
     }
-    let mut ev = Evaluator::new(run_spec, ctx.data, &[], 0)?;
+    let mut ev = Evaluator::over(run_spec, ctx.records, &[], 0)?;
     *runs += 1;
     if !ev.run(&[], ctx.n) {
         return Err(PlfError::Model(
@@ -1315,7 +1363,7 @@ fn signal(ctx: &Ctx<'_>, cur: &Current, name: &str) -> Result<Vec<f64>, PlfError
     if !s.log.iter().any(|l| l == name) {
         s.log.push(name.to_string());
     }
-    let mut ev = Evaluator::new(s, ctx.data, &[], 0)?;
+    let mut ev = Evaluator::over(s, ctx.records, &[], 0)?;
     if !ev.run(&[], ctx.n) {
         return Err(PlfError::Model(
             "the model does not run on this data".into(),
@@ -1747,7 +1795,7 @@ fn without_memory(ctx: &Ctx<'_>, f: &Fitted) -> Option<String> {
             spec.log.push(name.clone());
         }
     }
-    let mut ev = Evaluator::new(spec, ctx.data, &[], 0).ok()?;
+    let mut ev = Evaluator::over(spec, ctx.records, &[], 0).ok()?;
     if !ev.run(&[], ctx.n) {
         return None;
     }
@@ -1789,7 +1837,7 @@ fn viscous_only(ctx: &Ctx<'_>, f: &Fitted) -> Option<String> {
     if !spec.log.contains(&input) {
         spec.log.push(input.clone());
     }
-    let mut ev = Evaluator::new(spec, ctx.data, &[], 0).ok()?;
+    let mut ev = Evaluator::over(spec, ctx.records, &[], 0).ok()?;
     if !ev.run(&[], ctx.n) {
         return None;
     }
@@ -2384,7 +2432,8 @@ fn fit_candidate(ctx: &Ctx<'_>, cur: &Current, c: &Cand) -> Result<Fitted, Strin
                 ctx.fs,
                 0,
             )
-            .map_err(|e| e.to_string())?;
+            .map_err(|e| e.to_string())?
+            .with_restarts(&ctx.records.starts());
             let z0 = vec![0.0; c.free.len()];
             let Some(fit) = levenberg_marquardt(&mut be, &z0, ctx.n_est, 30) else {
                 continue;
@@ -2410,9 +2459,9 @@ fn fit_candidate(ctx: &Ctx<'_>, cur: &Current, c: &Cand) -> Result<Fitted, Strin
             residual[i] = measured.iter().zip(&be.y).map(|(m, y)| m - y).collect();
             (fit.cost, fit.std, residual)
         } else {
-            let mut ev = Evaluator::new(
+            let mut ev = Evaluator::over(
                 surgery::clone_spec(&spec).map_err(|e| e.to_string())?,
-                ctx.data,
+                ctx.records,
                 &new_free,
                 0,
             )
@@ -2466,7 +2515,7 @@ fn fit_candidate(ctx: &Ctx<'_>, cur: &Current, c: &Cand) -> Result<Fitted, Strin
 /// Refit all effects' free parameters together on the full graph.
 fn joint_refit(ctx: &Ctx<'_>, win: &Fitted, runs: &mut usize) -> Result<Fitted, PlfError> {
     let mut spec = surgery::clone_spec(&win.spec)?;
-    let mut ev = Evaluator::new(surgery::clone_spec(&spec)?, ctx.data, &win.free, 0)?;
+    let mut ev = Evaluator::over(surgery::clone_spec(&spec)?, ctx.records, &win.free, 0)?;
     ev.set_weights(&ctx.weights);
     let z0 = vec![0.0; win.free.len()];
     let fit = levenberg_marquardt(&mut ev, &z0, ctx.n_est, 15)

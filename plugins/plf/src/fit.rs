@@ -17,6 +17,90 @@ use nanomotion_core::data::Dataset;
 use nanomotion_core::graph::GraphSpec;
 use std::sync::Arc;
 
+/// The measured data as one or more records of the same rate: `all` is their
+/// concatenation (sample `k` of the workflow indexes it), `parts` the records
+/// themselves. A graph is run on each record from rest — no state carries
+/// over from one record into the next — and the model outputs are laid end to
+/// end in the same order.
+#[derive(Debug, Clone)]
+pub struct Records {
+    /// The records end to end.
+    pub all: Arc<Dataset>,
+    /// The records, each run on its own.
+    pub parts: Vec<Arc<Dataset>>,
+}
+
+impl Records {
+    /// One record.
+    pub fn one(data: &Arc<Dataset>) -> Self {
+        Self {
+            all: data.clone(),
+            parts: vec![data.clone()],
+        }
+    }
+
+    /// Several records end to end. They must have the same sample rate; the
+    /// concatenation keeps the columns every record has.
+    pub fn concat(parts: &[Dataset]) -> Result<Self, PlfError> {
+        let first = parts
+            .first()
+            .ok_or_else(|| PlfError::Data("no record given".into()))?;
+        for p in &parts[1..] {
+            if (p.rate_hz() - first.rate_hz()).abs() > 1e-9 * first.rate_hz() {
+                return Err(PlfError::Data(format!(
+                    "{} is sampled at {} Hz but {} at {} Hz; give records of one rate (resample one of them)",
+                    p.origin(),
+                    p.rate_hz(),
+                    first.origin(),
+                    first.rate_hz()
+                )));
+            }
+        }
+        if parts.len() == 1 {
+            return Ok(Self::one(&Arc::new(first.clone())));
+        }
+        let names: Vec<String> = first
+            .names()
+            .iter()
+            .filter(|n| parts.iter().all(|p| p.column(n).is_some()))
+            .cloned()
+            .collect();
+        let columns: Vec<(String, Vec<f64>)> = names
+            .iter()
+            .map(|n| {
+                let v = parts
+                    .iter()
+                    .flat_map(|p| p.column(n).unwrap_or(&[]).iter().copied())
+                    .collect();
+                (n.clone(), v)
+            })
+            .collect();
+        let origin = parts
+            .iter()
+            .map(|p| p.origin().to_string())
+            .collect::<Vec<_>>()
+            .join(" + ");
+        let all = Dataset::from_columns(origin, first.rate_hz(), first.t0_s(), columns)
+            .map_err(|e| PlfError::Data(e.to_string()))?;
+        Ok(Self {
+            all: Arc::new(all),
+            parts: parts.iter().map(|p| Arc::new(p.clone())).collect(),
+        })
+    }
+
+    /// Sample index (in `all`) where each record starts.
+    pub fn starts(&self) -> Vec<usize> {
+        self.parts
+            .iter()
+            .scan(0, |at, p| {
+                let s = *at;
+                *at += p.len();
+                Some(s)
+            })
+            .collect()
+    }
+}
+
 /// How a fitted parameter is moved by the optimiser.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Scale {
@@ -80,6 +164,8 @@ pub struct BlockEvaluator {
     weight: f64,
     dt: f64,
     skip: usize,
+    /// Samples where a new record starts (the block restarts from rest).
+    restarts: Vec<usize>,
     u_buf: Vec<f64>,
     /// Output of the last run.
     pub y: Vec<f64>,
@@ -127,7 +213,15 @@ impl BlockEvaluator {
             weight,
             dt: 1.0 / fs_hz,
             skip,
+            restarts: Vec::new(),
         })
+    }
+
+    /// Restart the block from rest at these samples (where records of
+    /// [`Records`] meet).
+    pub fn with_restarts(mut self, starts: &[usize]) -> Self {
+        self.restarts = starts.iter().copied().filter(|&k| k > 0).collect();
+        self
     }
 
     fn free_scales(&self) -> Vec<(Scale, f64)> {
@@ -157,6 +251,9 @@ impl BlockEvaluator {
         let ft = self.block.direct_feedthrough();
         let mut out = [0.0];
         for k in 0..n {
+            if self.restarts.contains(&k) && self.block.build(&ctx).is_err() {
+                return false;
+            }
             for (j, col) in self.inputs.iter().enumerate() {
                 self.u_buf[j] = col[k];
             }
@@ -193,7 +290,10 @@ impl Problem for BlockEvaluator {
 
 /// A built graph with data, ready to be evaluated for many parameter vectors.
 pub struct Evaluator {
-    sched: Scheduler,
+    /// One built graph per record (see [`Records`]); the same blocks in each.
+    scheds: Vec<Scheduler>,
+    /// Sample (of the records end to end) where each record starts.
+    starts: Vec<usize>,
     /// (execution index of block, parameter index, scale, start value).
     free: Vec<(usize, usize, Scale, f64)>,
     /// The record (shared, not copied) and the measured column of each output.
@@ -218,6 +318,18 @@ impl Evaluator {
         free: &[FreeParam],
         skip: usize,
     ) -> Result<Self, PlfError> {
+        Self::over(spec, &Records::one(data), free, skip)
+    }
+
+    /// Build `spec` once per record of `records` and prepare to vary `free`;
+    /// sample `k` is sample `k` of the records end to end.
+    pub fn over(
+        spec: GraphSpec,
+        records: &Records,
+        free: &[FreeParam],
+        skip: usize,
+    ) -> Result<Self, PlfError> {
+        let data = &records.all;
         let base = spec.base_rate_hz;
         let ratio = base / data.rate_hz();
         let tps = ratio.round();
@@ -227,9 +339,25 @@ impl Evaluator {
                 data.rate_hz()
             )));
         }
-        let (sched, _) = spec
-            .build_with_data(data.clone())
-            .map_err(|e| PlfError::Model(e.to_string()))?;
+        let n_parts = records.parts.len();
+        let mut spec = Some(spec);
+        let mut scheds = Vec::with_capacity(n_parts);
+        for (j, part) in records.parts.iter().enumerate() {
+            let mut one = match (j + 1 == n_parts, spec.as_ref()) {
+                (false, Some(s)) => crate::surgery::clone_spec(s)?,
+                _ => spec
+                    .take()
+                    .expect("the graph is moved into the last record's run"),
+            };
+            if n_parts > 1 {
+                one.duration_s = part.len() as f64 / part.rate_hz();
+            }
+            let (sched, _) = one
+                .build_with_data(part.clone())
+                .map_err(|e| PlfError::Model(e.to_string()))?;
+            scheds.push(sched);
+        }
+        let sched = &scheds[0];
         let mut columns = Vec::new();
         let mut decim = Vec::new();
         let mut weight = Vec::new();
@@ -267,7 +395,8 @@ impl Evaluator {
             decim.push(mr as usize);
         }
         let mut me = Self {
-            sched,
+            scheds,
+            starts: records.starts(),
             free: Vec::new(),
             data: data.clone(),
             columns,
@@ -278,12 +407,10 @@ impl Evaluator {
             skip,
         };
         for f in free {
-            let bi = me
-                .sched
+            let bi = me.scheds[0]
                 .block_index(&f.block)
                 .ok_or_else(|| PlfError::Model(format!("no block `{}` to fit", f.block)))?;
-            let tun = me
-                .sched
+            let tun = me.scheds[0]
                 .block_at_mut(bi)
                 .and_then(|b| b.tunable_mut())
                 .ok_or_else(|| {
@@ -327,7 +454,7 @@ impl Evaluator {
     pub fn export(&self, z: &[f64], spec: &mut GraphSpec) -> Result<(), PlfError> {
         let theta = self.theta(z);
         for (k, &(bi, pi, _, _)) in self.free.iter().enumerate() {
-            let name = &self.sched.block_names()[bi];
+            let name = &self.scheds[0].block_names()[bi];
             let b = spec
                 .blocks
                 .iter_mut()
@@ -347,16 +474,21 @@ impl Evaluator {
         Ok(())
     }
 
-    /// A logged signal (`block.port`, width 1) of the last run at the data rate.
+    /// A logged signal (`block.port`, width 1) of the last run at the data
+    /// rate (the records end to end).
     pub fn log_series(&self, name: &str) -> Option<Vec<f64>> {
-        let (data, width, rate) = self.sched.log_view(name)?;
-        if width != 1 {
-            return None;
+        let mut out = Vec::new();
+        for sched in &self.scheds {
+            let (data, width, rate) = sched.log_view(name)?;
+            if width != 1 {
+                return None;
+            }
+            let m = (rate * self.ticks_per_sample as f64 / sched.base_rate_hz())
+                .round()
+                .max(1.0) as usize;
+            out.extend(data.iter().step_by(m).copied());
         }
-        let m = (rate * self.ticks_per_sample as f64 / self.sched.base_rate_hz())
-            .round()
-            .max(1.0) as usize;
-        Some(data.iter().step_by(m).copied().collect())
+        Some(out)
     }
 
     /// The measured column of output `i`.
@@ -382,14 +514,16 @@ impl Evaluator {
     /// Write the parameters for `z` into the blocks. `false` if a block refuses them.
     fn apply(&mut self, z: &[f64]) -> bool {
         let theta = theta_of(&self.free_scales(), z);
-        for (k, &(bi, pi, _, _)) in self.free.clone().iter().enumerate() {
-            let Some(t) = self.sched.block_at_mut(bi).and_then(|b| b.tunable_mut()) else {
-                return false;
-            };
-            let mut p = t.params();
-            p[pi] = theta[k];
-            if t.set_params(&p).is_err() {
-                return false;
+        for sched in self.scheds.iter_mut() {
+            for (k, &(bi, pi, _, _)) in self.free.iter().enumerate() {
+                let Some(t) = sched.block_at_mut(bi).and_then(|b| b.tunable_mut()) else {
+                    return false;
+                };
+                let mut p = t.params();
+                p[pi] = theta[k];
+                if t.set_params(&p).is_err() {
+                    return false;
+                }
             }
         }
         true
@@ -399,26 +533,55 @@ impl Evaluator {
     /// parameters were refused, the graph could not restart, or an output is not
     /// finite.
     pub fn run(&mut self, z: &[f64], n: usize) -> bool {
-        if !self.apply(z) || self.sched.reset().is_err() {
+        if !self.apply(z) {
             return false;
         }
-        self.sched
-            .step_n(n.min(self.n_total) as u64 * self.ticks_per_sample);
-        // A trial step may diverge: that is an answer ("reject this step"), not an
-        // error to locate, so only the compared logs are scanned (no replay, no
-        // warning).
-        (0..self.outputs()).all(|i| {
-            self.sched
-                .compare_log(i)
-                .is_some_and(|(log, _)| log.iter().all(|v| v.is_finite()))
-        })
+        let n = n.min(self.n_total);
+        let outputs = self.outputs();
+        for (j, sched) in self.scheds.iter_mut().enumerate() {
+            let start = self.starts[j];
+            // Records past `n` are not run (their logs are not read).
+            if start >= n {
+                continue;
+            }
+            if sched.reset().is_err() {
+                return false;
+            }
+            let end = self
+                .starts
+                .get(j + 1)
+                .copied()
+                .unwrap_or(self.n_total)
+                .min(n);
+            sched.step_n((end - start) as u64 * self.ticks_per_sample);
+            // A trial step may diverge: that is an answer ("reject this step"),
+            // not an error to locate, so only the compared logs are scanned (no
+            // replay, no warning).
+            let finite = (0..outputs).all(|i| {
+                sched
+                    .compare_log(i)
+                    .is_some_and(|(log, _)| log.iter().all(|v| v.is_finite()))
+            });
+            if !finite {
+                return false;
+            }
+        }
+        true
+    }
+
+    /// The record holding sample `k` and `k`'s index in it.
+    #[inline]
+    fn locate(&self, k: usize) -> (usize, usize) {
+        let j = self.starts.partition_point(|&s| s <= k).saturating_sub(1);
+        (j, k - self.starts[j])
     }
 
     /// The model output `i` at data sample `k` of the last run.
     #[inline]
     pub fn model(&self, i: usize, k: usize) -> f64 {
-        let (log, _) = self.sched.compare_log(i).expect("compare index");
-        log.get(k * self.decim[i]).copied().unwrap_or(f64::NAN)
+        let (j, local) = self.locate(k);
+        let (log, _) = self.scheds[j].compare_log(i).expect("compare index");
+        log.get(local * self.decim[i]).copied().unwrap_or(f64::NAN)
     }
 
     /// Residuals `measured − model` of output `i` over data samples `range`, from the last run.
@@ -449,20 +612,30 @@ impl Problem for Evaluator {
         }
         out.reserve(self.outputs() * n.saturating_sub(self.skip));
         for i in 0..self.outputs() {
-            // The log and the column looked up once per output, not per sample.
-            let (log, _) = self.sched.compare_log(i).expect("compare index");
+            // The logs and the column looked up once per output and record, not
+            // per sample.
             let measured = self
                 .data
                 .column(&self.columns[i])
                 .expect("a column checked when the evaluator was built");
             let (decim, weight) = (self.decim[i], self.weight[i]);
-            for (k, m) in measured.iter().enumerate().take(n).skip(self.skip) {
-                let model = log.get(k * decim).copied().unwrap_or(f64::NAN);
-                let v = (m - model) * weight;
-                if !v.is_finite() {
-                    return false;
+            for (j, sched) in self.scheds.iter().enumerate() {
+                let (log, _) = sched.compare_log(i).expect("compare index");
+                let start = self.starts[j];
+                let end = self
+                    .starts
+                    .get(j + 1)
+                    .copied()
+                    .unwrap_or(self.n_total)
+                    .min(n);
+                for k in start.max(self.skip)..end {
+                    let model = log.get((k - start) * decim).copied().unwrap_or(f64::NAN);
+                    let v = (measured[k] - model) * weight;
+                    if !v.is_finite() {
+                        return false;
+                    }
+                    out.push(v);
                 }
-                out.push(v);
             }
         }
         true
