@@ -1,0 +1,115 @@
+#!/usr/bin/env python3
+"""Summarise the first N records of a `scenarios` run from its per-record lines.
+
+    cargo run --release -p nanomotion-plf --example scenarios -- 300 2> run.log
+    python3 tools/scenario_table.py run.log [N] [--csv OLD.csv]
+
+The per-record lines (stderr) are what `scenarios` prints as it goes, so a run
+cut short still gives the table of its first N records — the same records, in
+the same order, as `scenarios -- N` (held-out seeds are drawn in seed order).
+The measures are the example's own: named correctly, padding, false alarms,
+precision/recall per effect, per-family rates. With `--csv OLD.csv` (a
+previous run's `--csv` output) the same first N seeds of that run are
+summarised beside it.
+"""
+import collections
+import csv
+import re
+import sys
+
+LINE = re.compile(
+    r"^\[(\d+)/\d+\] seed (\d+): Family \{ plant: \"(\w+)\", loop_kind: \"(\w+)\", "
+    r"excitation: \"(\w+)\", noise: \"(\w+)\", nominal: \"(\w+)\", rate_hz: ([\d.]+), "
+    r"unit: \"(\w+)\" \} hidden \[(.*?)\] found \[(.*?)\] cut (-?[\d.]+|NaN) %"
+)
+
+
+def names(s):
+    return [x.strip().strip('"') for x in s.split(",") if x.strip()]
+
+
+def from_log(path):
+    rows = []
+    for line in open(path, encoding="utf-8"):
+        m = LINE.match(line)
+        if m:
+            g = m.groups()
+            rows.append(dict(seed=int(g[1]), plant=g[2], loop=g[3], excitation=g[4],
+                             noise=g[5], nominal=g[6], hidden=names(g[9]),
+                             found=names(g[10]), cut=float(g[11])))
+    return rows
+
+
+def from_csv(path):
+    rows = []
+    for r in csv.DictReader(open(path, encoding="utf-8")):
+        rows.append(dict(seed=int(r["seed"]), plant=r["plant"], loop=r["loop"],
+                         excitation=r["excitation"], noise=r["noise"],
+                         nominal=r["nominal"],
+                         hidden=[] if r["hidden"] == "none" else r["hidden"].split("+"),
+                         found=[x for x in r["found"].split("+") if x],
+                         cut=float(r["holdout_cut_percent"])))
+    return rows
+
+
+def summary(rows):
+    pct = lambda a, b: "—" if b == 0 else f"{100 * a / b:.0f} %"
+    n = len(rows)
+    ok = lambda r: len(r["found"]) == len(r["hidden"]) and all(h in r["found"] for h in r["hidden"])
+    correct = sum(ok(r) for r in rows)
+    correct_cut = sum(ok(r) and (not r["hidden"] or r["cut"] >= 50) for r in rows)
+    eff = [r for r in rows if r["hidden"]]
+    clean = [r for r in rows if not r["hidden"]]
+    padded = sum(any(f not in r["hidden"] for f in r["found"]) for r in eff)
+    alarms = sum(bool(r["found"]) for r in clean)
+    out = {
+        "named correctly": f"{pct(correct, n)} ({correct} of {n})",
+        "named correctly, held-out cut ≥ 50 %": f"{pct(correct_cut, n)} ({correct_cut} of {n})",
+        "padding": f"{pct(padded, len(eff))} ({padded} of {len(eff)})",
+        "false alarms": f"{pct(alarms, len(clean))} ({alarms} of {len(clean)})",
+    }
+    per = collections.defaultdict(lambda: [0, 0, 0])
+    for r in rows:
+        for h in r["hidden"]:
+            per[h][0] += 1
+            per[h][2] += h in r["found"]
+        for f in r["found"]:
+            per[f][1] += 1
+    for e in sorted(per):
+        h, nm, both = per[e]
+        out[f"{e} precision / recall"] = f"{pct(both, nm)} / {pct(both, h)}"
+    for dim in ["nominal", "plant", "loop"]:
+        for v in sorted({r[dim] for r in rows}):
+            sub = [r for r in rows if r[dim] == v]
+            out[f"{dim} {v}"] = f"{pct(sum(ok(r) for r in sub), len(sub))} of {len(sub)}"
+    return out
+
+
+def main():
+    args = sys.argv[1:]
+    old = None
+    if "--csv" in args:
+        i = args.index("--csv")
+        old = args[i + 1]
+        del args[i:i + 2]
+    rows = from_log(args[0])
+    n = int(args[1]) if len(args) > 1 else len(rows)
+    rows = rows[:n]
+    new = summary(rows)
+    cols = [new]
+    if old:
+        seeds = [r["seed"] for r in rows]
+        by_seed = {r["seed"]: r for r in from_csv(old)}
+        missing = [s for s in seeds if s not in by_seed]
+        if missing:
+            sys.exit(f"{old} lacks seeds {missing[:5]}…: give the CSV of a run over the same records")
+        cols.append(summary([by_seed[s] for s in seeds]))
+    print(f"first {len(rows)} records (seeds {rows[0]['seed']}–{rows[-1]['seed']})\n")
+    print("| measure | this run |" + (" previous run |" if old else ""))
+    print("|---|---|" + ("---|" if old else ""))
+    for k in new:
+        print(f"| {k} | " + " | ".join(c.get(k, "—") for c in cols) + " |")
+
+
+if __name__ == "__main__":
+    main()
