@@ -13,7 +13,8 @@
 //! errors still name the file's own lines).
 
 use crate::error::GraphError;
-use crate::graph::{BlockSpec, MAX_GRAPH_FILE_BYTES, read_text_capped};
+use super::spec::{BlockSpec, MAX_GRAPH_FILE_BYTES};
+use crate::files::read_text_capped;
 use std::path::{Path, PathBuf};
 
 /// Deepest chain of nested includes.
