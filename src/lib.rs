@@ -62,7 +62,6 @@ pub use serde;
 /// ```
 pub use typetag;
 
-
 pub mod experiments;
 pub mod image_plot;
 pub mod output;

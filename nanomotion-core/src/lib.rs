@@ -58,10 +58,10 @@ pub mod yaml;
 /// nalgebra dependency of their own: `use nanomotion_core::nalgebra::DMatrix;`.
 pub use nalgebra;
 
+pub use block::MeasuredData;
 pub use block::{
     Block, BlockDoc, BuildContext, Linearisation, ParamDoc, Port, Role, Tick, Tunable,
 };
-pub use block::MeasuredData;
 pub use error::{GraphError, ParamError};
 pub use graph::{Graph, GraphSpec};
 pub use overrides::Override;

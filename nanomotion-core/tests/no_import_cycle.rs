@@ -283,9 +283,7 @@ fn scan(module: &ModPath, src: &str) -> Scan {
             if t.get(j).is_some_and(|x| x.0 == "pub") {
                 j += 1;
             }
-            if t.get(j).is_some_and(|x| x.0 == "mod")
-                && t.get(j + 2).is_some_and(|x| x.0 == ";")
-            {
+            if t.get(j).is_some_and(|x| x.0 == "mod") && t.get(j + 2).is_some_and(|x| x.0 == ";") {
                 out.test_children.push(t[j + 1].0.clone());
             }
             i = skip_item(&t, j);
@@ -313,8 +311,7 @@ fn scan(module: &ModPath, src: &str) -> Scan {
                 depth = depth.saturating_sub(1);
             }
             "crate" | "$crate" | "super"
-                if t.get(i + 1).is_some_and(|x| x.0 == "::")
-                    && !(i > 0 && t[i - 1].0 == "::") =>
+                if t.get(i + 1).is_some_and(|x| x.0 == "::") && !(i > 0 && t[i - 1].0 == "::") =>
             {
                 let here: ModPath = module
                     .iter()
@@ -501,12 +498,7 @@ fn levels(all: &[Edge]) -> BTreeMap<String, BTreeMap<(String, String), String>> 
                 .or_insert_with(|| evidence(e));
         }
         // Siblings under every common folder module.
-        let common = e
-            .from
-            .iter()
-            .zip(&e.to)
-            .take_while(|(x, y)| x == y)
-            .count();
+        let common = e.from.iter().zip(&e.to).take_while(|(x, y)| x == y).count();
         if common > 0 && e.from.len() > common && e.to.len() > common {
             let parent = e.from[..common].join("::");
             out.entry(format!("the submodules of `{parent}`"))
@@ -585,12 +577,17 @@ fn the_graph_runtime_is_layered() {
     let all = edges(&core_sources());
     let uses = |from: &str, to: &str| -> Option<String> {
         all.iter()
-            .find(|e| e.from.first().map(String::as_str) == Some(from)
-                && e.to.first().map(String::as_str) == Some(to))
+            .find(|e| {
+                e.from.first().map(String::as_str) == Some(from)
+                    && e.to.first().map(String::as_str) == Some(to)
+            })
             .map(|e| format!("{}:{} `{}`", e.file, e.line, e.text))
     };
     let forbidden = [
-        ("block", ["scheduler", "graph", "gate", "data", "include"].as_slice()),
+        (
+            "block",
+            ["scheduler", "graph", "gate", "data", "include"].as_slice(),
+        ),
         ("scheduler", &["graph", "gate", "data", "include"]),
         ("graph", &["gate", "data"]),
         ("gate", &["graph", "data", "include"]),
@@ -619,11 +616,20 @@ fn the_checker_finds_cycles_and_ignores_comments_strings_and_tests() {
             "a.rs",
             "// crate::b::X in a comment\nconst S: &str = \"crate::b::X\";\nconst R: &str = r#\"crate::b::Y\"#;\nfn f<'a>(c: char) -> bool { c == '\"' }\npub struct Thing;\n#[cfg(test)]\nmod tests { use crate::b::X; }\n",
         ),
-        file("b.rs", "use crate::{Thing, a::Thing as T};\npub struct X;\n"),
+        file(
+            "b.rs",
+            "use crate::{Thing, a::Thing as T};\npub struct X;\n",
+        ),
     ];
-    assert!(cycle_report(&clean).is_empty(), "{:?}", cycle_report(&clean));
+    assert!(
+        cycle_report(&clean).is_empty(),
+        "{:?}",
+        cycle_report(&clean)
+    );
     let mut knot = clean.to_vec();
-    knot[1].1.push_str("fn g() -> crate::b::X { crate::b::X }\n");
+    knot[1]
+        .1
+        .push_str("fn g() -> crate::b::X { crate::b::X }\n");
     let found = cycle_report(&knot);
     assert_eq!(found.len(), 1, "{found:?}");
     assert!(found[0].contains("a -> b -> a"), "{}", found[0]);

@@ -29,8 +29,8 @@ use crate::block::{Block, BuildContext, MeasuredData, Port};
 use crate::error::GraphError;
 use crate::rng::derive_seed;
 use crate::scheduler::{
-    Gather, LogChannel, Node, Parts, RATE_TRANSITION_PREFIX, RateTransition, ScoreAcc,
-    ScoreChannel, Scheduler,
+    Gather, LogChannel, Node, Parts, RATE_TRANSITION_PREFIX, RateTransition, Scheduler, ScoreAcc,
+    ScoreChannel,
 };
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
@@ -513,10 +513,7 @@ fn connect_one(
                 to_hz: pending[db].rate_hz,
             });
         }
-        (
-            rate_transition(pending, (sb, sp), db, index, c, report)?,
-            0,
-        )
+        (rate_transition(pending, (sb, sp), db, index, c, report)?, 0)
     } else {
         (sb, sp)
     };
@@ -833,10 +830,9 @@ impl<'a> Recorder<'a> {
         let period = self.layout.nodes[bi].period;
         let total_samples = n_ticks.div_ceil(period);
         // Samples kept in memory: the whole run, or one chunk when streamed.
-        let samples = self
-            .chunk_ticks
-            .map_or(total_samples, |c| c.min(n_ticks).div_ceil(period))
-            as usize;
+        let samples =
+            self.chunk_ticks
+                .map_or(total_samples, |c| c.min(n_ticks).div_ceil(period)) as usize;
         let bytes = samples.saturating_mul(width).saturating_mul(8);
         self.graph_bytes = self.graph_bytes.saturating_add(bytes);
         self.log_bytes = self.log_bytes.saturating_add(bytes);

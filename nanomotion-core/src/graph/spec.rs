@@ -227,7 +227,6 @@ impl GraphSpec {
         self
     }
 
-
     /// Whether the graph reads measured data: it has a `data_column` block or a
     /// `compare:` entry. Data given to a graph that does not would only change
     /// its duration.

@@ -3,11 +3,11 @@
 //! validated on, called by its `tests/walking_piezo.rs` and its `confusion`
 //! example. See that test for what each effect is in the truth.
 
+use crate::{FittedStage, FittedStageParams};
 use nanomotion_core::Plant;
 use nanomotion_core::data::Dataset;
 use nanomotion_core::rng::Rng;
 use std::f64::consts::PI;
-use crate::{FittedStage, FittedStageParams};
 
 /// Sample rate of the records (Hz).
 pub const RATE: f64 = 4000.0;
@@ -63,10 +63,7 @@ fn drive(rng: &mut Rng) -> Vec<f64> {
 }
 
 /// Simulate the stage on `f` with an input-side transform `input(k, f_k, x_k)`.
-fn simulate(
-    f: &[f64],
-    mut input: impl FnMut(usize, f64, f64) -> f64,
-) -> Result<Vec<f64>, String> {
+fn simulate(f: &[f64], mut input: impl FnMut(usize, f64, f64) -> f64) -> Result<Vec<f64>, String> {
     let mut stage =
         FittedStage::new(FittedStageParams::default(), 1.0 / RATE).map_err(|e| e.to_string())?;
     let mut x = Vec::with_capacity(f.len());

@@ -5,11 +5,11 @@
 //! `nanomotion reproduce sec_4_5`; the graphs are the repository's
 //! `examples/optimize_waveform/{model,data}.yaml`, compiled in.
 
-use std::ops::ControlFlow;
 use crate::WaveformShape;
 use crate::optimize::{
     Drive, ObjectiveKind, OptimizeConfig, Outcome, Phase, Prepared, optimize, real_stage,
 };
+use std::ops::ControlFlow;
 
 const MODEL_YAML: &str = include_str!("../../../../examples/optimize_waveform/model.yaml");
 const DATA_YAML: &str = include_str!("../../../../examples/optimize_waveform/data.yaml");
