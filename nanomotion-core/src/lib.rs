@@ -38,7 +38,7 @@ pub mod error;
 mod files;
 pub mod gate;
 pub mod graph;
-/// `- include: FILE` block entries (part of reading a graph: [`graph::include`]).
+/// `- include: FILE` block entries (part of reading a graph: [`graph::include`](mod@graph::include)).
 pub use graph::include;
 pub mod learning;
 pub mod lti;

@@ -1,5 +1,5 @@
 //! Reading a graph: YAML text or a file (bounded), `- include:` entries spliced
-//! first ([`include`](super::include)), errors located at their line, and "did you
+//! first ([`include`](mod@super::include)), errors located at their line, and "did you
 //! mean" for unknown block types and names.
 
 use super::include;
@@ -9,7 +9,7 @@ use crate::files::read_text_capped;
 
 impl GraphSpec {
     /// Parse a graph from YAML text; `origin` (file name) prefixes errors.
-    /// `- include: FILE` entries ([`crate::include`]) resolve against the
+    /// `- include: FILE` entries ([`crate::include`](mod@crate::include)) resolve against the
     /// working directory here, against the file's folder in [`GraphSpec::from_file`].
     pub fn from_yaml(text: &str, origin: &str) -> Result<Self, GraphError> {
         Self::from_yaml_in(text, origin, std::path::Path::new("."), Vec::new())

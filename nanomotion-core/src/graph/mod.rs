@@ -2,7 +2,7 @@
 //! and compilation into a [`Scheduler`](crate::scheduler::Scheduler).
 //!
 //! - `spec.rs`: the schema, the limits, the builder methods for graphs written in Rust;
-//! - [`include`]: `- include: FILE` block entries, spliced before parsing;
+//! - [`include`](mod@include): `- include: FILE` block entries, spliced before parsing;
 //! - `load.rs`: YAML text and files to a [`GraphSpec`], "did you mean";
 //! - `compile.rs`: [`GraphSpec::build`] and its variants, in named phases.
 //!
