@@ -4,7 +4,7 @@
 //! (and then says so). See `docs/stability-gate.md`.
 
 use nanomotion::core::Scheduler;
-use nanomotion::core::gate::{self, GateReport, Require};
+use nanomotion::core::gate::{self, FrontEnd, GateReport, Require};
 
 /// Analyse the loops of a built graph against its `require:` section.
 pub fn analyse(sched: &Scheduler, require: Option<&Require>) -> GateReport {
@@ -15,33 +15,14 @@ pub fn analyse(sched: &Scheduler, require: Option<&Require>) -> GateReport {
 
 /// `Err` with one line per failure (loop and bound), for `check`.
 pub fn verdict(report: &GateReport) -> Result<(), String> {
-    if report.passes() {
-        return Ok(());
-    }
-    Err(format!(
-        "the stability gate refuses the graph:\n  {}",
-        report.failures().join("\n  ")
-    ))
+    report.verdict()
 }
 
 /// For `run`: `Err` if the gate refuses and `allow` is false; with `allow`, the
-/// lines to print in the run's report.
+/// lines to print in the run's report (the library's rule and text, with the
+/// command line's spelling).
 pub fn before_run(report: &GateReport, allow: bool) -> Result<Vec<String>, String> {
-    let mut lines: Vec<String> = report.allowed();
-    if report.passes() {
-        return Ok(lines);
-    }
-    if !allow {
-        return Err(format!(
-            "the stability gate refuses the graph (see `nanomotion check`; fix the loop, or run anyway with --allow-unproven):\n  {}",
-            report.failures().join("\n  ")
-        ));
-    }
-    lines.push(
-        "the stability gate refused this graph; running anyway because of --allow-unproven:".into(),
-    );
-    lines.extend(report.failures().into_iter().map(|f| format!("  {f}")));
-    Ok(lines)
+    report.before_run(allow, &FrontEnd::CLI)
 }
 
 /// `check --print-loop`: for every analysed loop (its first schedule point) the

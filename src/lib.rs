@@ -62,10 +62,7 @@ pub use serde;
 /// ```
 pub use typetag;
 
-// Lets code shared with the examples (e.g. examples/directional_rc/sim.rs, compiled
-// into `thesis::ch7`) name this crate as `nanomotion::` from inside it.
-extern crate self as nanomotion;
-
+pub mod experiments;
 pub mod image_plot;
 pub mod output;
 pub mod plot;

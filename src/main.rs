@@ -574,7 +574,7 @@ fn run(args: RunArgs) -> Result<(), String> {
     // of the duration), except for `compare:`, which needs whole logs.
     let streamed = spec.compare.is_empty();
     let (mut sched, report) = match (&data, streamed) {
-        (d, true) => spec.build_streamed(d.clone()),
+        (d, true) => spec.build_streamed(d.clone().map(|d| d as _)),
         (Some(d), false) => spec.build_with_data(d.clone()),
         (None, false) => spec.build(),
     }

@@ -5,8 +5,7 @@
 //! (k = 2 below half of k = 1) and ends below plain RC on the rotated sample. The full 15-iteration table is printed by
 //! `cargo run --release --example directional_rc`.
 
-#[path = "../examples/directional_rc/sim.rs"]
-mod sim;
+use nanomotion::experiments::directional_rc as sim;
 
 #[test]
 fn drc_recovers_the_rotation_and_lets_rc_learn_the_topography() {

@@ -4,10 +4,10 @@
 //! Run: `cargo run --release --example directional_rc [ITERATIONS [FS_HZ [Q_CUTOFF_HZ|design [noiseless] [unquantized] [linear_z]]]]`
 //! or `cargo run --release --example directional_rc loop-check [FS_HZ [Q_CUTOFF_HZ|design [noiseless] [flat]]]`
 //! (defaults 15, 20 000, designed by (7.16);
-//! about a minute in release). See `sim.rs` for the set-up and
-//! docs/directional-rc.md for the figures and their reading.
+//! about a minute in release). See `nanomotion::experiments::directional_rc` for the
+//! set-up and docs/directional-rc.md for the figures and their reading.
 
-mod sim;
+use nanomotion::experiments::directional_rc as sim;
 
 fn main() {
     let arg = |i: usize| std::env::args().nth(i);

@@ -121,7 +121,7 @@ pub struct BuildContext {
     /// Measured data attached to the graph (`nanomotion run --data`,
     /// [`GraphSpec::build_with_data`](crate::graph::GraphSpec::build_with_data)),
     /// for blocks that play recorded signals.
-    pub data: Option<std::sync::Arc<crate::data::Dataset>>,
+    pub data: Option<std::sync::Arc<dyn MeasuredData>>,
     /// The folder relative file names in parameters resolve against (the graph
     /// file's folder); `None`: the working directory.
     pub base_dir: Option<std::path::PathBuf>,
@@ -160,10 +160,33 @@ impl BuildContext {
     }
 
     /// The same context with measured data attached.
-    pub fn with_data(mut self, data: Option<std::sync::Arc<crate::data::Dataset>>) -> Self {
+    pub fn with_data(mut self, data: Option<std::sync::Arc<dyn MeasuredData>>) -> Self {
         self.data = data;
         self
     }
+}
+
+/// Measured data as blocks and the graph compiler see it: named columns of
+/// equal length sampled at one rate. The data layer's
+/// [`Dataset`](crate::data::Dataset) implements it; the block contract needs no
+/// more than this, so it does not depend on how data are read.
+pub trait MeasuredData: Send + Sync + Debug {
+    /// Where the data came from (file name), for messages.
+    fn origin(&self) -> &str;
+    /// Sample rate (Hz).
+    fn rate_hz(&self) -> f64;
+    /// Number of samples per column.
+    fn len(&self) -> usize;
+    /// Whether there are no samples.
+    fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+    /// Duration len / rate (s).
+    fn duration_s(&self) -> f64;
+    /// Column names, in file order.
+    fn names(&self) -> &[String];
+    /// The samples of column `name`, if it exists.
+    fn column(&self, name: &str) -> Option<&[f64]>;
 }
 
 /// A block whose parameters can be read and changed as one vector between runs,
@@ -275,7 +298,7 @@ pub trait Block: Send + Debug {
     /// convergence criteria (5.5)/(5.9) with the T of the loop the block is in.
     /// The gate then analyses the loop with the block's output set to zero and
     /// checks the criterion on top. Valid after [`Block::build`].
-    fn learning(&self) -> Option<crate::gate::LearningModel> {
+    fn learning(&self) -> Option<crate::learning::LearningModel> {
         None
     }
     /// Heap memory (bytes) the block holds after [`Block::build`] beyond its ports:

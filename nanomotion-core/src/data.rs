@@ -227,7 +227,7 @@ impl Dataset {
 /// Read a text data file through a reader bounded by [`MAX_FILE_BYTES`] (a
 /// device such as `/dev/zero`, or a huge file, is an error, not an endless read).
 pub fn read_text_capped_data(path: &std::path::Path) -> std::io::Result<String> {
-    crate::graph::read_text_capped(path, MAX_FILE_BYTES)
+    crate::files::read_text_capped(path, MAX_FILE_BYTES)
 }
 
 /// A measured data set of the shared folder (`shared/data/…` beside the
@@ -1165,6 +1165,29 @@ impl Scores {
         [self.rms, self.max_abs, self.mean, self.fit_percent]
             .iter()
             .all(|v| v.is_finite())
+    }
+}
+
+/// What blocks and the graph compiler read of a data set
+/// ([`crate::block::MeasuredData`]): the same accessors.
+impl crate::block::MeasuredData for Dataset {
+    fn origin(&self) -> &str {
+        Dataset::origin(self)
+    }
+    fn rate_hz(&self) -> f64 {
+        Dataset::rate_hz(self)
+    }
+    fn len(&self) -> usize {
+        Dataset::len(self)
+    }
+    fn duration_s(&self) -> f64 {
+        Dataset::duration_s(self)
+    }
+    fn names(&self) -> &[String] {
+        Dataset::names(self)
+    }
+    fn column(&self, name: &str) -> Option<&[f64]> {
+        Dataset::column(self, name)
     }
 }
 

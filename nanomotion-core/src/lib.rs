@@ -13,6 +13,9 @@
 //!   block a typed Rust API usable without any graph;
 //! - [`graph`] and [`scheduler`]: YAML controller graphs, validated and compiled once
 //!   into a flat, allocation-free multi-rate tick loop;
+//! - [`gate`] (the stability gate) and [`data`] (measured data, `compare`): beside
+//!   the compiler, they read a built graph ([`Scheduler`]); [`learning`]: what a
+//!   learning block exposes to the gate and the criteria (5.5)/(5.9);
 //! - [`lti`]: discrete LTI toolkit (transfer functions, state space, Tustin/ZOH,
 //!   delays, frequency response, H∞ norm, FIR design, ZPETC);
 //! - [`analysis`]: Welch PSD/CPSD, cumulative PSD, FRF identification (open and
@@ -32,14 +35,18 @@ pub mod block;
 pub mod blocks;
 pub mod data;
 pub mod error;
+mod files;
 pub mod gate;
 pub mod graph;
-pub mod include;
+/// `- include: FILE` block entries (part of reading a graph: [`graph::include`](mod@graph::include)).
+pub use graph::include;
+pub mod learning;
 pub mod lti;
 #[cfg(feature = "mat")]
 mod mat5;
 pub mod models;
 pub mod overrides;
+mod require;
 pub mod rng;
 pub mod roles;
 pub mod scheduler;
@@ -51,6 +58,7 @@ pub mod yaml;
 /// nalgebra dependency of their own: `use nanomotion_core::nalgebra::DMatrix;`.
 pub use nalgebra;
 
+pub use block::MeasuredData;
 pub use block::{
     Block, BlockDoc, BuildContext, Linearisation, ParamDoc, Port, Role, Tick, Tunable,
 };

@@ -975,6 +975,10 @@ fn gather(list: &[Gather], signals: &[f64], inputs: &mut [f64]) {
     }
 }
 
+/// Prefix of the names of inserted rate transitions. It contains `:`, which user
+/// block names may not contain, so an inserted name can never be a user's name.
+pub const RATE_TRANSITION_PREFIX: &str = "rt:";
+
 /// Explicit rate transition: copies its input at its own rate. Running at a faster
 /// rate than its source it is a zero-order hold; at a slower rate, a decimator
 /// (plain sampling: filter first if aliasing matters). The loader inserts one for

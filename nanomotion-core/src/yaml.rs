@@ -18,7 +18,7 @@ pub fn from_str<T: DeserializeOwned>(text: &str, origin: &str) -> Result<T, Grap
         // Inside a map the parser buffers (a block entry, a tagged config), an
         // unknown field or a wrong-type value is reported at the map's first
         // line: name the field at its own line.
-        crate::graph::locate_field(
+        locate_field(
             GraphError::Parse {
                 origin: origin.to_string(),
                 message: plain_message(&e.to_string(), origin),
@@ -82,4 +82,138 @@ pub fn to_string<T: serde::Serialize>(value: &T) -> Result<String, GraphError> {
         origin: "serialisation".into(),
         message: e.to_string(),
     })
+}
+
+/// Where an unknown field is: (0-based line, 1-based column, what the parser
+/// said without its locations), searching from the reported line on.
+fn unknown_field_site(
+    message: &str,
+    text: &str,
+    first_line: usize,
+) -> Option<(usize, usize, String)> {
+    let pos = message.find("unknown field `")?;
+    let rest = &message[pos + "unknown field `".len()..];
+    let field = &rest[..rest.find('`')?];
+    let is_key_on = |line: &str| {
+        line.match_indices(&format!("{field}:")).any(|(i, _)| {
+            i == 0
+                || line[..i]
+                    .chars()
+                    .next_back()
+                    .is_some_and(|c| c == ' ' || c == '{' || c == ',' || c == '-' || c == '\t')
+        })
+    };
+    let (n, line) = text
+        .lines()
+        .enumerate()
+        .skip(first_line.saturating_sub(1))
+        .find(|(_, l)| is_key_on(l))?;
+    let first = message.lines().next().unwrap_or("");
+    let what = first[first.find("unknown field `").unwrap_or(0)..]
+        .split(" at line ")
+        .next()
+        .unwrap_or("")
+        .to_string();
+    let column = line
+        .match_indices(&format!("{field}:"))
+        .map(|(i, _)| i + 1)
+        .next()
+        .unwrap_or(1);
+    Some((n, column, what))
+}
+
+/// Where a value of the wrong type is (audit D21): inside a block the parser
+/// reports the entry's first line and the line after it, not the field; the
+/// field is the key between them whose value is the one the parser quotes
+/// (`invalid type: string "fast", expected f64`). Returns (0-based line,
+/// 1-based column of the key, the message naming the field).
+fn bad_value_site(message: &str, text: &str, first_line: usize) -> Option<(usize, usize, String)> {
+    let first = message.lines().next()?;
+    let from = first.find("invalid type: ")?;
+    let mut parts = first[from..].split(" at line ");
+    let what = parts.next()?;
+    let last_line = parts
+        .next()
+        .and_then(|r| r.split(|c: char| !c.is_ascii_digit()).next())
+        .and_then(|n| n.parse::<usize>().ok())
+        .filter(|&l| l >= first_line)
+        .unwrap_or(usize::MAX);
+    let unexpected = &what["invalid type: ".len()..];
+    let value = match unexpected.strip_prefix("string \"") {
+        Some(r) => r.split('"').next()?,
+        None => unexpected.split('`').nth(1)?,
+    };
+    for (n, line) in text
+        .lines()
+        .enumerate()
+        .skip(first_line.saturating_sub(1))
+        .take(last_line.saturating_sub(first_line.saturating_sub(1)))
+    {
+        for (i, _) in line.match_indices(':') {
+            let key_start = line[..i]
+                .rfind(|c: char| !(c.is_ascii_alphanumeric() || c == '_'))
+                .map_or(0, |k| k + 1);
+            let key = &line[key_start..i];
+            let token = line[i + 1..]
+                .split([',', '}', '#'])
+                .next()
+                .unwrap_or("")
+                .trim()
+                .trim_matches(|c| c == '"' || c == '\'');
+            if !key.is_empty() && token == value {
+                return Some((n, key_start + 1, format!("field `{key}`: {what}")));
+            }
+        }
+    }
+    None
+}
+
+/// Inside a block, the parser (typetag buffers the block's map) reports an
+/// unknown field or a value of the wrong type at the block's first line and "at
+/// line" of its last field. Find the line that really holds the key and say so,
+/// naming the field, with the text of that line.
+fn locate_field(e: GraphError, text: &str) -> GraphError {
+    let GraphError::Parse {
+        origin,
+        mut message,
+    } = e
+    else {
+        return e;
+    };
+    // The reported line: "line N column M" at the start of the message.
+    let first_line = message
+        .strip_prefix("line ")
+        .and_then(|r| r.split_whitespace().next())
+        .and_then(|n| n.parse::<usize>().ok())
+        .unwrap_or(1);
+    let Some((n, column, what)) = unknown_field_site(&message, text, first_line)
+        .or_else(|| bad_value_site(&message, text, first_line))
+    else {
+        return GraphError::Parse { origin, message };
+    };
+    // The message rebuilt at the typo's own line, with the lines around it.
+    let lines: Vec<&str> = text.lines().collect();
+    let width = (n + 2).to_string().len();
+    let mut out = format!(
+        "line {} column {column}: {what}\n{:width$}--> {origin}:{}:{column}\n{:width$} |\n",
+        n + 1,
+        "",
+        n + 1,
+        ""
+    );
+    let from = n.saturating_sub(1);
+    for (k, l) in lines.iter().enumerate().take(n + 1).skip(from) {
+        out.push_str(&format!("{:>width$} | {l}\n", k + 1));
+    }
+    out.push_str(&format!(
+        "{:width$} | {}^ {what}\n",
+        "",
+        " ".repeat(column - 1)
+    ));
+    if let Some(next) = lines.get(n + 1) {
+        out.push_str(&format!("{:>width$} | {next}\n", n + 2));
+    }
+    out.push_str(&format!("{:width$} |", ""));
+    message = out;
+    GraphError::Parse { origin, message }
 }

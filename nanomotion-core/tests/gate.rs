@@ -97,6 +97,44 @@ fn too_much_gain_is_refused_as_unstable() {
     assert_eq!(r.loops[0].points[0].nyquist.unwrap().implied_unstable, 1);
 }
 
+/// Issue 26: the rule before a run and its refusal live in the library, one
+/// text for the command line and the Python package, which differ only in how
+/// they spell the check and the escape hatch.
+#[test]
+fn the_refusal_before_a_run_is_one_text_for_every_front_end() {
+    use nanomotion_core::gate::FrontEnd;
+    let (_, bad) = build(&integrator_loop(2.5, 0, "+-", ""));
+    let failures = bad.failures().join("\n  ");
+    assert_eq!(
+        bad.verdict().unwrap_err(),
+        format!("the stability gate refuses the graph:\n  {failures}")
+    );
+    assert_eq!(
+        bad.before_run(false, &FrontEnd::CLI).unwrap_err(),
+        format!(
+            "the stability gate refuses the graph (see `nanomotion check`; fix the loop, or run anyway with --allow-unproven):\n  {failures}"
+        )
+    );
+    assert_eq!(
+        bad.before_run(false, &FrontEnd::PYTHON).unwrap_err(),
+        format!(
+            "the stability gate refuses the graph (see nanomotion.check; fix the loop, or run anyway with allow_unproven=True):\n  {failures}"
+        )
+    );
+    let lines = bad.before_run(true, &FrontEnd::PYTHON).unwrap();
+    assert_eq!(
+        lines[0],
+        "the stability gate refused this graph; running anyway because of allow_unproven=True:"
+    );
+    assert_eq!(lines.len(), 1 + bad.failures().len());
+    let (_, good) = build(&integrator_loop(0.5, 0, "+-", ""));
+    assert!(good.verdict().is_ok());
+    assert_eq!(
+        good.before_run(false, &FrontEnd::CLI).unwrap(),
+        Vec::<String>::new()
+    );
+}
+
 #[test]
 fn added_delay_beyond_the_delay_margin_is_refused() {
     let k = 0.2;

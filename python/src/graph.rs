@@ -9,7 +9,7 @@
 
 use crate::errors::{data_err, diagnose_err, gate_err, graph_err};
 use nanomotion::core::data::Dataset;
-use nanomotion::core::gate::{self, GateReport, Require};
+use nanomotion::core::gate::{self, FrontEnd, GateReport, Require};
 use nanomotion::core::graph::GraphSpec;
 use nanomotion::core::overrides::Override;
 use numpy::ndarray::Array2;
@@ -87,25 +87,12 @@ fn check_graph<'py>(
     Ok(d)
 }
 
-/// What the gate lets through, or the refusal (`nanomotion run`'s rule, with
-/// the Python spelling of the escape hatch).
+/// What the gate lets through, or the refusal (`nanomotion run`'s rule, from
+/// the library, with the Python spelling of the escape hatch).
 fn gate_before_run(report: &GateReport, allow: bool) -> PyResult<Vec<String>> {
-    let mut lines: Vec<String> = report.allowed();
-    if report.passes() {
-        return Ok(lines);
-    }
-    if !allow {
-        return Err(gate_err(format!(
-            "the stability gate refuses the graph (see nanomotion.check; fix the loop, or run anyway with allow_unproven=True):\n  {}",
-            report.failures().join("\n  ")
-        )));
-    }
-    lines.push(
-        "the stability gate refused this graph; running anyway because of allow_unproven=True:"
-            .into(),
-    );
-    lines.extend(report.failures().into_iter().map(|f| format!("  {f}")));
-    Ok(lines)
+    report
+        .before_run(allow, &FrontEnd::PYTHON)
+        .map_err(gate_err)
 }
 
 /// Options of a run besides the graph.

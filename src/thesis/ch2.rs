@@ -1,14 +1,13 @@
 //! Ch. 2 on the simulated walking piezo stage: Table 2.2 (jogging with
 //! non-overlapping vs overlapping tip trajectories) and Table 2.3 (point-to-point
 //! moves with and without feed-forward and gain scheduling), both with the 5 nm
-//! encoder in the loop. The computation is the walking-piezo example's
-//! `examples/common/tables.rs` (one file, run by the example and here).
+//! encoder in the loop. The computation is the walking-piezo plugin's
+//! [`walking_piezo::thesis::tables`] (run by its example `tables_2_2_2_3` too).
 //! Quick and full mode are the same runs (they take a few seconds).
 
 use super::{Mode, Report, ReproduceError, Row, Verdict};
 
-#[path = "../../plugins/walking-piezo/examples/common/tables.rs"]
-mod tables;
+use walking_piezo::thesis::tables;
 
 const COMMAND: &str = "cargo run --release -p nanomotion-walking-piezo --example tables_2_2_2_3";
 

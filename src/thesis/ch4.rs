@@ -1,12 +1,10 @@
 //! Ch. 4 on the simulated stage: the waveform optimisation of Sec. 4.5 (model-based
 //! (4.23)–(4.24), data-based (4.25)) validated as in Fig. 4.14. The computation is
-//! the walking-piezo example's `examples/common/sec45.rs` (one file, run by the
-//! example and here).
+//! the walking-piezo plugin's [`walking_piezo::thesis::sec45`] (run by its example
+//! `waveform_optimisation` too).
 
 use super::{Mode, Report, ReproduceError, Row, Verdict};
-
-#[path = "../../plugins/walking-piezo/examples/common/sec45.rs"]
-mod sec45;
+use walking_piezo::thesis::sec45;
 
 /// Budget factor, validation seeds and drive frequencies of a mode.
 fn plan(mode: Mode) -> (f64, Vec<u64>, Vec<f64>) {

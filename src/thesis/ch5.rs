@@ -2,16 +2,13 @@
 //! standard RC, high-order RC and DVRC) on the linear fitted stage (5.31) with an
 //! α-periodic take-over velocity dip, and on the nonlinear walking piezo stage
 //! (rough drive strip, design on the FRF-identified model). Needs two plugins
-//! (dvrc, walking-piezo), so it lives here; the computation is the dvrc plugin's
-//! shared harness `tests/common/table51*.rs` (one file each, run by its examples,
-//! its tests and here).
+//! (dvrc, walking-piezo), so it lives here; the computation is
+//! [`crate::experiments::table51`] and [`crate::experiments::table51_nonlinear`]
+//! (run by the dvrc plugin's examples and tests too).
 
 use super::{Mode, Report, ReproduceError, Row, Verdict};
 
-#[path = "../../plugins/dvrc/tests/common/table51.rs"]
-pub(crate) mod table51;
-#[path = "../../plugins/dvrc/tests/common/table51_nonlinear.rs"]
-pub(crate) mod table51_nonlinear;
+use crate::experiments::{table51, table51_nonlinear};
 
 /// Thesis Table 5.1 at 10 µm/s (nm): none, RC, high-order RC, DVRC.
 pub const THESIS_10UM: [f64; 4] = [109.0, 18.3, 13.7, 2.77];

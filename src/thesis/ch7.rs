@@ -1,18 +1,12 @@
 //! Sec. 7.4–7.5: directional repetitive control on the simulated AFM — the grating's
 //! rotation estimated from four lines (7.18)–(7.21), then RC along the actuator axes
 //! against DRC along the sample's (Table 7.3, Fig. 7.17(a)). The computation needs
-//! three plugins (afm-stage, dvrc, directional-rc), so it is the shared simulation of
-//! `examples/directional_rc/sim.rs`, compiled into this module.
+//! three plugins (afm-stage, dvrc, directional-rc), so it is the facade's
+//! [`crate::experiments::directional_rc`], which the example and its test run too.
 
 use super::{Mode, Report, ReproduceError, Row, Verdict, fail, sig};
 
-/// The Sec. 7.5 simulation shared with `cargo run --example directional_rc` and
-/// `tests/directional_rc_example.rs`.
-#[doc(hidden)]
-// Its docs are written for the example (links resolve against the example's imports).
-#[allow(rustdoc::broken_intra_doc_links)]
-#[path = "../../examples/directional_rc/sim.rs"]
-pub mod drc_sim;
+use crate::experiments::directional_rc as drc_sim;
 
 /// Title of the experiment.
 pub const TITLE: &str =

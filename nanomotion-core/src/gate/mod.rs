@@ -66,12 +66,13 @@
 //! ```
 
 mod assemble;
-pub mod learning;
 mod loops;
-mod require;
 
-pub use learning::{LearningCheck, LearningModel};
-pub use require::{Bounds, Require};
+/// The criteria of learning blocks; defined beside the block contract
+/// ([`crate::learning`]), since [`Block::learning`] returns its model.
+pub use crate::learning;
+pub use crate::learning::{LearningCheck, LearningModel};
+pub use crate::require::{Bounds, Require};
 
 use crate::block::{Block, Role};
 use crate::lti::{Complex, StateSpace, hinfnorm, stability_margins};
@@ -287,6 +288,67 @@ impl GateReport {
             })
             .collect()
     }
+
+    /// The verdict of a check (`nanomotion check`): `Err` with one line per
+    /// failure (loop and bound) when the gate refuses.
+    pub fn verdict(&self) -> Result<(), String> {
+        if self.passes() {
+            return Ok(());
+        }
+        Err(format!(
+            "the stability gate refuses the graph:\n  {}",
+            self.failures().join("\n  ")
+        ))
+    }
+
+    /// The rule before a run, one text for every front end: `Err` with the
+    /// refusal if the gate refuses and `allow` is false; else the lines to
+    /// print in the run's report (unproven loops allowed by `require:`, and,
+    /// with `allow`, the failures the run goes ahead despite). `front` spells
+    /// the check and the escape hatch the way the caller's users write them.
+    pub fn before_run(&self, allow: bool, front: &FrontEnd) -> Result<Vec<String>, String> {
+        let mut lines: Vec<String> = self.allowed();
+        if self.passes() {
+            return Ok(lines);
+        }
+        if !allow {
+            return Err(format!(
+                "the stability gate refuses the graph (see {}; fix the loop, or run anyway with {}):\n  {}",
+                front.check,
+                front.allow,
+                self.failures().join("\n  ")
+            ));
+        }
+        lines.push(format!(
+            "the stability gate refused this graph; running anyway because of {}:",
+            front.allow
+        ));
+        lines.extend(self.failures().into_iter().map(|f| format!("  {f}")));
+        Ok(lines)
+    }
+}
+
+/// How a front end (the CLI, the Python package) names the check and the
+/// escape hatch in the gate's refusal ([`GateReport::before_run`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct FrontEnd {
+    /// The command that shows the loops, e.g. ``"`nanomotion check`"``.
+    pub check: &'static str,
+    /// The option that runs anyway, e.g. `"--allow-unproven"`.
+    pub allow: &'static str,
+}
+
+impl FrontEnd {
+    /// The command line: `nanomotion check`, `--allow-unproven`.
+    pub const CLI: FrontEnd = FrontEnd {
+        check: "`nanomotion check`",
+        allow: "--allow-unproven",
+    };
+    /// The Python package: `nanomotion.check`, `allow_unproven=True`.
+    pub const PYTHON: FrontEnd = FrontEnd {
+        check: "nanomotion.check",
+        allow: "allow_unproven=True",
+    };
 }
 
 fn db(x: f64) -> f64 {
@@ -537,7 +599,7 @@ pub fn analyse(sched: &Scheduler, require: &Require) -> GateReport {
     let user = |i: usize| {
         !wiring[i]
             .name
-            .starts_with(crate::graph::RATE_TRANSITION_PREFIX)
+            .starts_with(crate::scheduler::RATE_TRANSITION_PREFIX)
     };
     for members in &comps {
         let blocks: Vec<String> = members

@@ -2,14 +2,13 @@
 //! fitted stage (5.31) with a take-over velocity dip periodic in the leg angle α
 //! (the stage sees f_α(1 − δ(α))), PI 50 Hz bandwidth at 4 kHz, L = ZPETC of T,
 //! one 101-tap Q for all RC variants designed for the largest delay spread of the
-//! experiments. The computation is `table51::linear_table` (shared with the test
+//! experiments. The computation is `nanomotion::experiments::table51::linear_table`
+//! (the facade: it needs walking-piezo too; shared with the test
 //! and with `nanomotion reproduce table_5_1`). See docs/repetitive-control.md.
 //!
 //! Run: `cargo run --release -p nanomotion-dvrc --example table_5_1`
 
-#[path = "../tests/common/table51.rs"]
-mod table51;
-use table51::*;
+use nanomotion::experiments::table51::*;
 
 fn main() {
     let quick = std::env::args().any(|a| a == "--quick");

@@ -12,11 +12,8 @@
 //!
 //! Run: `cargo run --release -p nanomotion-dvrc --example table_5_1_nonlinear`
 
-#[path = "../tests/common/table51.rs"]
-mod table51;
-#[path = "../tests/common/table51_nonlinear.rs"]
-mod table51_nonlinear;
 use dvrc::stability::rc_criterion;
+use nanomotion::experiments::{table51, table51_nonlinear};
 use nanomotion_core::LearningFilter;
 use nanomotion_core::analysis::{WelchOptions, psd_welch};
 use std::f64::consts::TAU;

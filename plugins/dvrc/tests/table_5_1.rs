@@ -3,8 +3,7 @@
 //! `examples/table_5_1.rs` for the full table and docs/repetitive-control.md for
 //! the discussion).
 
-mod common;
-use common::table51::*;
+use nanomotion::experiments::table51::*;
 
 #[test]
 fn uniform_alpha_rc_equals_dvrc_varying_rate_dvrc_adapts() {

@@ -2,11 +2,10 @@
 //! only robust shapes are asserted (see `examples/table_5_1_nonlinear.rs` for the
 //! full table and docs/repetitive-control.md for the discussion).
 
-mod common;
-use common::table51::{self, Rc, Setup, Velocity, setup};
-use common::table51_nonlinear::*;
 use dvrc::filters::Filter;
 use dvrc::stability::{criterion_curve, rc_criterion};
+use nanomotion::experiments::table51::{self, Rc, Setup, Velocity, setup};
+use nanomotion::experiments::table51_nonlinear::*;
 use nanomotion_core::blocks::control::Pi;
 use nanomotion_core::lti::{StateSpace, feedback, series};
 

@@ -16,8 +16,7 @@ use nanomotion_plf::generate;
 use std::collections::BTreeMap;
 use std::time::Instant;
 
-#[path = "../tests/support/walking_piezo.rs"]
-mod wp;
+use walking_piezo::records as wp;
 
 fn main() {
     let _ = std::any::type_name::<nanomotion_plf::effects::Effect>();
@@ -48,7 +47,7 @@ fn main() {
         let t0 = Instant::now();
         for seed in 1..=seeds {
             let (nominal_yaml, data, truth) = if walking {
-                let (data, truth) = wp::record(effect, seed);
+                let (data, truth) = wp::record(effect, seed).expect("walking-piezo record");
                 (wp::nominal_yaml(), data, truth)
             } else {
                 let rec = if effect == "axis_coupling" {

@@ -18,17 +18,15 @@
 //! at least half. (walking-piezo is a dev-dependency only: plugins never depend on
 //! each other.)
 
-#[path = "support/walking_piezo.rs"]
-mod wp;
-
 use nanomotion_core::graph::GraphSpec;
 use nanomotion_plf::diagnose::{Options, diagnose};
+use walking_piezo::records as wp;
 use wp::{nominal_yaml, record};
 
 fn check_named(hidden: &str, seed: u64) {
     let _ = std::any::type_name::<walking_piezo::FittedStageBlock>();
     let _ = std::any::type_name::<nanomotion_plf::effects::Effect>();
-    let (data, truth) = record(hidden, seed);
+    let (data, truth) = record(hidden, seed).unwrap();
     let spec = GraphSpec::from_yaml(&nominal_yaml(), "walking_piezo_nominal.yaml").unwrap();
     let opts = Options {
         max_effects: 2,

@@ -11,14 +11,12 @@
 //! Both graphs measure the stage through a 5 nm encoder (core `quantizer`, floor):
 //! the thesis's errors include its resolution, so the measured columns are the
 //! comparable ones; the true-position columns show what the quantisation hides.
-//! The computation is `common/tables.rs` (also run by `nanomotion reproduce`).
+//! The computation is [`walking_piezo::thesis::tables`] (also run by `nanomotion
+//! reproduce`).
 //!
 //! `cargo run --release -p nanomotion-walking-piezo --example tables_2_2_2_3`
 use gain_scheduling as _;
-use walking_piezo as _;
-
-#[path = "common/tables.rs"]
-mod tables;
+use walking_piezo::thesis::tables;
 
 fn main() -> Result<(), String> {
     println!("Table 2.2 style: max |e| (nm) when jogging, second half of 2 s");

@@ -13,9 +13,9 @@
 //!
 //! `cargo run --release -p nanomotion-walking-piezo --example waveform_optimisation`
 //! (optional argument: a budget factor, default 1; e.g. 0.2 for a quick look).
-//! The computation is `common/sec45.rs` (also run by `nanomotion reproduce`).
-#[path = "common/sec45.rs"]
-mod sec45;
+//! The computation is [`walking_piezo::thesis::sec45`] (also run by `nanomotion
+//! reproduce`).
+use walking_piezo::thesis::sec45;
 
 fn main() -> Result<(), String> {
     let factor: f64 = std::env::args()

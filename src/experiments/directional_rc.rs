@@ -1,5 +1,6 @@
-//! The Sec. 7.5 experiment on the simulated AFM (shared by `main.rs` and the facade
-//! test `tests/directional_rc_example.rs`): a grating rotated by α under the stage,
+//! The Sec. 7.5 experiment on the simulated AFM (run by the example
+//! `examples/directional_rc/main.rs`, the test `tests/directional_rc_example.rs` and
+//! `nanomotion reproduce sec_7_5`): a grating rotated by α under the stage,
 //! fast axis y ±25 µm at 25 µm/s (period 4 s), slow axis x at 125 nm/s, z held at
 //! constant deflection at f_s = 20 kHz, RC on z with N = 80 000 samples.
 //!
@@ -18,21 +19,19 @@
 //!   sample's axes and mapped by R(α̂) (7.17) (references, errors and controller
 //!   outputs through `FrameRotation`).
 
-#![allow(dead_code)]
-
-use nanomotion::afm_stage::control::IntegralLowPass;
-use nanomotion::afm_stage::experiments::{decentralised_controllers, design_gains};
-use nanomotion::afm_stage::stage::{AfmStage, N_OUTPUTS, Topography};
-use nanomotion::core::lti::{C2dMethod, StateSpace, TransferFunction, feedback, series};
-use nanomotion::core::nalgebra::DMatrix;
-use nanomotion::core::{Block, BuildContext, Controller, Plant};
-use nanomotion::directional_rc::estimate::{
+use crate::afm_stage::control::IntegralLowPass;
+use crate::afm_stage::experiments::{decentralised_controllers, design_gains};
+use crate::afm_stage::stage::{AfmStage, N_OUTPUTS, Topography};
+use crate::core::lti::{C2dMethod, StateSpace, TransferFunction, feedback, series};
+use crate::core::nalgebra::DMatrix;
+use crate::core::{Block, BuildContext, Controller, Plant};
+use crate::directional_rc::estimate::{
     EstimatorOptions, LineScan, RotationEstimate, estimate_rotation,
 };
-use nanomotion::directional_rc::frame::{Direction, FrameRotation};
-use nanomotion::dvrc::filters::FilterSpec;
-use nanomotion::dvrc::rc::RepetitiveControl;
-use nanomotion::dvrc::stability::RcCriterion;
+use crate::directional_rc::frame::{Direction, FrameRotation};
+use crate::dvrc::filters::FilterSpec;
+use crate::dvrc::rc::RepetitiveControl;
+use crate::dvrc::stability::RcCriterion;
 use std::f64::consts::{FRAC_PI_2, TAU};
 
 /// Fast-axis amplitude (m): ±25 µm.
@@ -177,9 +176,9 @@ pub struct Setup {
     /// L = ZPETC(T_z).
     pub l_spec: FilterSpec,
     /// L built.
-    pub l: nanomotion::dvrc::Filter,
+    pub l: crate::dvrc::Filter,
     /// Q design.
-    pub q: nanomotion::dvrc::stability::QDesign,
+    pub q: crate::dvrc::stability::QDesign,
     /// (7.16) at the z piezo's slope range.
     pub criterion_slopes: [RcCriterion; 2],
     /// RC period N (samples).
@@ -239,18 +238,18 @@ pub fn setup(cfg: &Config) -> Setup {
     let l = l_spec.build(dt).unwrap();
     let taps = cfg.q_taps;
     let n = (PERIOD_S / dt).round() as usize;
-    let q_built = |q: &nanomotion::dvrc::stability::QDesign| {
-        nanomotion::dvrc::Filter::fir(q.taps.clone(), (taps - 1) / 2, dt)
+    let q_built = |q: &crate::dvrc::stability::QDesign| {
+        crate::dvrc::Filter::fir(q.taps.clone(), (taps - 1) / 2, dt)
     };
     let q = match cfg.q_cutoff_hz {
-        None => nanomotion::dvrc::design_q_cutoff(&t, &l, taps, 0, 0.05).unwrap(),
+        None => crate::dvrc::design_q_cutoff(&t, &l, taps, 0, 0.05).unwrap(),
         Some(fc) => {
-            let h = nanomotion::core::lti::fir_lowpass(taps, fc, dt).unwrap();
-            let qf = nanomotion::dvrc::Filter::fir(h.clone(), (taps - 1) / 2, dt);
-            nanomotion::dvrc::stability::QDesign {
+            let h = crate::core::lti::fir_lowpass(taps, fc, dt).unwrap();
+            let qf = crate::dvrc::Filter::fir(h.clone(), (taps - 1) / 2, dt);
+            crate::dvrc::stability::QDesign {
                 cutoff_hz: fc,
                 taps: h,
-                criterion: nanomotion::dvrc::rc_criterion(&t, &l, &qf, n, n).unwrap(),
+                criterion: crate::dvrc::rc_criterion(&t, &l, &qf, n, n).unwrap(),
             }
         }
     };
@@ -260,7 +259,7 @@ pub fn setup(cfg: &Config) -> Setup {
     let hz = stage.hysteresis[2].trace;
     let criterion_slopes = [hz.c, hz.b].map(|g| {
         let tg = t_z(&stage, g, &kz_ss, dt);
-        nanomotion::dvrc::rc_criterion(&tg, &l, &q_built(&q), n, n).unwrap()
+        crate::dvrc::rc_criterion(&tg, &l, &q_built(&q), n, n).unwrap()
     });
     Setup {
         dt,
@@ -383,10 +382,10 @@ pub fn run(cfg: &Config) -> Outcome {
     let (mut ez_rec, mut w_rec) = (Vec::with_capacity(n), Vec::with_capacity(n));
     let (mut uz_acc, mut uz_rms) = (0.0, Vec::new());
     let hf = |x: &[f64]| {
-        let p = nanomotion::core::analysis::psd_welch(
+        let p = crate::core::analysis::psd_welch(
             x,
             1.0 / dt,
-            &nanomotion::core::analysis::WelchOptions::new(4096),
+            &crate::core::analysis::WelchOptions::new(4096),
         )
         .unwrap();
         let s: f64 = p
@@ -469,11 +468,11 @@ pub struct LoopCheck {
     /// Frequencies (Hz).
     pub f_hz: Vec<f64>,
     /// Measured T (complex) and its coherence.
-    pub t_meas: Vec<nanomotion::core::nalgebra::Complex<f64>>,
+    pub t_meas: Vec<crate::core::nalgebra::Complex<f64>>,
     /// Coherence of the estimate.
     pub coherence: Vec<f64>,
     /// Model T_z at the same frequencies.
-    pub t_model: Vec<nanomotion::core::nalgebra::Complex<f64>>,
+    pub t_model: Vec<crate::core::nalgebra::Complex<f64>>,
     /// |Q(1 − T L z^l)| with the measured T.
     pub crit_meas: Vec<f64>,
     /// The same with the model.
@@ -492,9 +491,9 @@ pub fn loop_check(
     segment: usize,
     flat: bool,
 ) -> LoopCheck {
-    use nanomotion::core::LearningFilter;
-    use nanomotion::core::analysis::{WelchOptions, frf_h1};
-    use nanomotion::core::nalgebra::Complex;
+    use crate::core::LearningFilter;
+    use crate::core::analysis::{WelchOptions, frf_h1};
+    use crate::core::nalgebra::Complex;
     let Setup {
         dt,
         mut stage,
@@ -518,7 +517,7 @@ pub fn loop_check(
     let mut kz = c[2].discrete(dt).unwrap();
     let to_a = FrameRotation::new(cfg.alpha_rad, Direction::ToActuator, 2);
     let to_s = FrameRotation::new(cfg.alpha_rad, Direction::ToSample, 2);
-    let mut rng = nanomotion::core::rng::Rng::new(cfg.seed ^ 0x5eed);
+    let mut rng = crate::core::rng::Rng::new(cfg.seed ^ 0x5eed);
     let mut y = [0.0; N_OUTPUTS];
     let (mut ux, mut uy, mut uz) = ([0.0], [0.0], [0.0]);
     let v0 = 50.0;
@@ -549,7 +548,7 @@ pub fn loop_check(
     }
     let fs = 1.0 / dt;
     let h = frf_h1(&ws, &es, fs, &WelchOptions::new(segment)).unwrap();
-    let qf = nanomotion::dvrc::Filter::fir(q.taps.clone(), (cfg.q_taps - 1) / 2, dt);
+    let qf = crate::dvrc::Filter::fir(q.taps.clone(), (cfg.q_taps - 1) / 2, dt);
     let lp = l.preview_samples() as f64;
     let crit = |tv: Complex<f64>, f: f64| {
         let w = TAU * f;

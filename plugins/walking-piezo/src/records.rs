@@ -1,16 +1,21 @@
 //! Records of the walking-piezo plant (Ch. 5 fitted model (5.31), 4 kHz) with one
-//! hidden effect, shared by `tests/walking_piezo.rs` and the `confusion` example.
-//! See `tests/walking_piezo.rs` for what each effect is in the truth.
+//! hidden effect: the truth the discrepancy workflow (the `plf` plugin) is
+//! validated on, called by its `tests/walking_piezo.rs` and its `confusion`
+//! example. See that test for what each effect is in the truth.
 
+use crate::{FittedStage, FittedStageParams};
 use nanomotion_core::Plant;
 use nanomotion_core::data::Dataset;
 use nanomotion_core::rng::Rng;
 use std::f64::consts::PI;
-use walking_piezo::{FittedStage, FittedStageParams};
 
+/// Sample rate of the records (Hz).
 pub const RATE: f64 = 4000.0;
+/// Samples per record (3 s).
 pub const N: usize = 12_000;
 
+/// The nominal graph (the fitted stage driven by the record's `f_alpha`,
+/// compared with its `x`).
 pub fn nominal_yaml() -> String {
     format!(
         "title: walking piezo stage, fitted model (5.31), nominal\nbase_rate_hz: {RATE}\nduration_s: {}\nblocks:\n  - {{ name: drive, type: data_column, column: f_alpha }}\n  - {{ name: stage, type: walking_piezo_fitted }}\nconnections:\n  - {{ from: drive.y, to: stage.f_alpha }}\ncompare:\n  - {{ signal: stage.x_s, column: x }}\n",
@@ -58,8 +63,9 @@ fn drive(rng: &mut Rng) -> Vec<f64> {
 }
 
 /// Simulate the stage on `f` with an input-side transform `input(k, f_k, x_k)`.
-fn simulate(f: &[f64], mut input: impl FnMut(usize, f64, f64) -> f64) -> Vec<f64> {
-    let mut stage = FittedStage::new(FittedStageParams::default(), 1.0 / RATE).unwrap();
+fn simulate(f: &[f64], mut input: impl FnMut(usize, f64, f64) -> f64) -> Result<Vec<f64>, String> {
+    let mut stage =
+        FittedStage::new(FittedStageParams::default(), 1.0 / RATE).map_err(|e| e.to_string())?;
     let mut x = Vec::with_capacity(f.len());
     let mut y = [0.0];
     for (k, &fk) in f.iter().enumerate() {
@@ -67,14 +73,15 @@ fn simulate(f: &[f64], mut input: impl FnMut(usize, f64, f64) -> f64) -> Vec<f64
         x.push(y[0]);
         stage.advance(&[input(k, fk, y[0])]);
     }
-    x
+    Ok(x)
 }
 
-/// A record with `hidden` in the truth, seeded; returns (data, truth in words).
-pub fn record(hidden: &str, seed: u64) -> (Dataset, String) {
+/// A record with `hidden` (one of [`EFFECTS`]) in the truth, seeded; returns
+/// (data, truth in words). An unknown effect is an error listing the known ones.
+pub fn record(hidden: &str, seed: u64) -> Result<(Dataset, String), String> {
     let mut rng = Rng::new(seed ^ 0x3a1c_0f5e);
     let f = drive(&mut rng);
-    let nominal = simulate(&f, |_, fk, _| fk);
+    let nominal = simulate(&f, |_, fk, _| fk)?;
     let (lo, hi) = nominal
         .iter()
         .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
@@ -87,14 +94,14 @@ pub fn record(hidden: &str, seed: u64) -> (Dataset, String) {
         "position_dependent_gain" => {
             let g = rng.uniform_in(0.15, 0.3) * sign(&mut rng);
             (
-                simulate(&f, |_, fk, xk| fk * (1.0 + g * (xk - mid) / half)),
+                simulate(&f, |_, fk, xk| fk * (1.0 + g * (xk - mid) / half))?,
                 format!("step size × (1 + {g:.3}·(x − x̄)/{half:.3e} m)"),
             )
         }
         "time_delay" => {
             let d = 2 + (rng.uniform() * 5.0) as usize;
             (
-                simulate(&f, |k, _, _| if k >= d { f[k - d] } else { f[0] }),
+                simulate(&f, |k, _, _| if k >= d { f[k - d] } else { f[0] })?,
                 format!("{d} extra samples of delay"),
             )
         }
@@ -102,7 +109,7 @@ pub fn record(hidden: &str, seed: u64) -> (Dataset, String) {
             let peak = f.iter().fold(0.0f64, |m, v| m.max(v.abs()));
             let lim = rng.uniform_in(0.6, 0.8) * peak;
             (
-                simulate(&f, |_, fk, _| fk.clamp(-lim, lim)),
+                simulate(&f, |_, fk, _| fk.clamp(-lim, lim))?,
                 format!("drive frequency limited to ±{lim:.1} Hz"),
             )
         }
@@ -143,7 +150,12 @@ pub fn record(hidden: &str, seed: u64) -> (Dataset, String) {
                 format!("drift {b:.2e} m/s"),
             )
         }
-        other => panic!("no walking-piezo truth for {other}"),
+        other => {
+            return Err(format!(
+                "no walking-piezo truth for `{other}`; the effects are: {}",
+                EFFECTS.join(", ")
+            ));
+        }
     };
     let sigma = 2e-9; // encoder/interferometer noise, 2 nm rms
     let y: Vec<f64> = x.iter().map(|v| v + sigma * rng.normal()).collect();
@@ -153,13 +165,12 @@ pub fn record(hidden: &str, seed: u64) -> (Dataset, String) {
         0.0,
         vec![("f_alpha".into(), f), ("x".into(), y)],
     )
-    .unwrap();
-    (data, truth)
+    .map_err(|e| e.to_string())?;
+    Ok((data, truth))
 }
 
 /// The effects the walking-piezo records can hide (the `confusion` example
 /// iterates over them; the tests name each).
-#[allow(dead_code)]
 pub const EFFECTS: [&str; 6] = [
     "position_dependent_gain",
     "time_delay",

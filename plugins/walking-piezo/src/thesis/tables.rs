@@ -1,13 +1,12 @@
 //! Table 2.2 and Table 2.3 of Merry (2009) on the simulated stage, from the YAML
 //! example graphs `examples/walking_piezo_jogging.yaml` and
-//! `examples/walking_piezo_ff_gs.yaml` (repository root). Shared by the example
-//! `tables_2_2_2_3` and by `nanomotion reproduce table_2_2 table_2_3` (the root
-//! crate includes this file); the caller must link the `gain-scheduling` plugin
-//! (the FF + GS graph uses its `gain_scheduled` block).
+//! `examples/walking_piezo_ff_gs.yaml` (repository root, compiled in). Called by
+//! the example `tables_2_2_2_3` and by `nanomotion reproduce table_2_2 table_2_3`;
+//! the caller must link the `gain-scheduling` plugin (the FF + GS graph uses its
+//! `gain_scheduled` block; without it [`table_2_3`] is an error saying so).
 //!
 //! Both graphs measure the stage through a 5 nm encoder (core `quantizer`,
 //! floor): the thesis's errors include its resolution.
-#![allow(dead_code)]
 
 use nanomotion_core::graph::GraphSpec;
 

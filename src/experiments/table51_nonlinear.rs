@@ -9,8 +9,8 @@
 //! (Fig. 2.8), fit a parametric model ([`identify`]), design the 50 Hz PI, L and
 //! Q on that model ([`design`]), with [m, M] from the delays N(α) seen in runs
 //! without RC (Fig. 5.7, [`period_range`]).
-//! Shared by `tests/table_5_1_nonlinear.rs` and `examples/table_5_1_nonlinear.rs`.
-#![allow(dead_code)]
+//! Run by the dvrc plugin's `tests/table_5_1_nonlinear.rs` and
+//! `examples/table_5_1_nonlinear.rs`, and by `nanomotion reproduce table_5_1_nonlinear`.
 
 use super::table51::{Rc, RcUnderTest, Setup, Velocity};
 use dvrc::filters::Filter;

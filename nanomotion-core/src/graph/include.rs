@@ -12,8 +12,9 @@
 //! blocks moves the parser's line numbers of later lines by k − 1; connection
 //! errors still name the file's own lines).
 
+use super::spec::{BlockSpec, MAX_GRAPH_FILE_BYTES};
 use crate::error::GraphError;
-use crate::graph::{BlockSpec, MAX_GRAPH_FILE_BYTES, read_text_capped};
+use crate::files::read_text_capped;
 use std::path::{Path, PathBuf};
 
 /// Deepest chain of nested includes.

@@ -1,15 +1,15 @@
 //! Sec. 4.5 / Fig. 4.14 of Merry (2009) on the simulated stage: the three
 //! waveform optimisations (model-based (4.23)–(4.24) with δy = −0.5 µm and
 //! −0.05 µm, data-based (4.25)) and the Fig. 4.14-style validation on the
-//! perturbed stage. Shared by the example `waveform_optimisation` and by
-//! `nanomotion reproduce sec_4_5` (the root crate includes this file).
-#![allow(dead_code)]
+//! perturbed stage. Called by the example `waveform_optimisation` and by
+//! `nanomotion reproduce sec_4_5`; the graphs are the repository's
+//! `examples/optimize_waveform/{model,data}.yaml`, compiled in.
 
-use std::ops::ControlFlow;
-use walking_piezo::WaveformShape;
-use walking_piezo::optimize::{
+use crate::WaveformShape;
+use crate::optimize::{
     Drive, ObjectiveKind, OptimizeConfig, Outcome, Phase, Prepared, optimize, real_stage,
 };
+use std::ops::ControlFlow;
 
 const MODEL_YAML: &str = include_str!("../../../../examples/optimize_waveform/model.yaml");
 const DATA_YAML: &str = include_str!("../../../../examples/optimize_waveform/data.yaml");

@@ -1,7 +1,7 @@
 //! Table 5.1-style experiment on the *linear* fitted stage (5.31) with a ripple
 //! periodic in the leg angle (Fig. 5.6(b)): x_s = G(z) f_α + d(α), α = 2π ∫ f_α dt.
-//! Shared by `tests/table_5_1.rs` and `examples/table_5_1.rs`.
-#![allow(dead_code)]
+//! Run by the dvrc plugin's `tests/table_5_1.rs` and `examples/table_5_1.rs`, and by
+//! `nanomotion reproduce table_5_1`.
 
 use dvrc::filters::Filter;
 use dvrc::rc::MemoryLoop;

@@ -1,0 +1,254 @@
+//! The schema of a graph file ([`GraphSpec`] and its parts), the limits a graph
+//! must keep, and the builder methods for graphs written in Rust. Reading YAML is
+//! in `load.rs`, compiling to a [`Scheduler`](crate::scheduler::Scheduler) in
+//! `compile.rs`.
+
+use crate::block::Block;
+use crate::require::Require;
+use crate::scheduler::Scheduler;
+use serde::{Deserialize, Serialize};
+
+/// One block of a graph: instance name, optional rate, and the block itself
+/// (its `type:` and parameters, flattened into the same YAML map).
+#[derive(Debug, Serialize, Deserialize)]
+pub struct BlockSpec {
+    /// Unique instance name: ASCII letters, digits, `_`, `-` (no `.`, which separates
+    /// block and port, and no `:`, reserved for inserted blocks).
+    pub name: String,
+    /// Rate in Hz; must divide the base rate. Default: the base rate.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rate_hz: Option<f64>,
+    /// The block: `type:` tag and its parameters.
+    #[serde(flatten)]
+    pub block: Box<dyn Block>,
+}
+
+/// A connection from an output port to an input port (`block.port`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Connection {
+    /// Source, `block.port` of an output.
+    pub from: String,
+    /// Destination, `block.port` of an input.
+    pub to: String,
+}
+
+/// An error signal to score (rms, max, ... after the run).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ScoreSpec {
+    /// The signal, `block.port` of an output.
+    pub signal: String,
+    /// Ignore samples before this time (s), to skip start-up transients.
+    #[serde(default)]
+    pub from_s: f64,
+}
+
+/// A model output paired with a measured column (`nanomotion run --data`,
+/// `nanomotion diagnose`): the residual is `measured − model`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CompareSpec {
+    /// The model signal, `block.port` of an output of width 1.
+    pub signal: String,
+    /// The measured column of the data file.
+    pub column: String,
+}
+
+/// A whole graph as written in YAML.
+#[derive(Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct GraphSpec {
+    /// Optional title, shown in reports and plots.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub title: Option<String>,
+    /// Base tick rate (Hz): every block's rate must divide it.
+    pub base_rate_hz: f64,
+    /// Simulated duration (s). May be left out of a graph that reads measured
+    /// data ([`GraphSpec::reads_data`]): it is then the data's length. Left out,
+    /// it reads as NaN until the graph is built with its data.
+    #[serde(
+        default = "duration_from_data",
+        skip_serializing_if = "duration_absent"
+    )]
+    pub duration_s: f64,
+    /// Seed of all random blocks (each block derives its own stream from it and its
+    /// name).
+    #[serde(default)]
+    pub seed: u64,
+    /// Reject connections between different rates instead of inserting rate
+    /// transitions.
+    #[serde(default)]
+    pub strict_rates: bool,
+    /// The blocks.
+    pub blocks: Vec<BlockSpec>,
+    /// The connections.
+    #[serde(default)]
+    pub connections: Vec<Connection>,
+    /// Output ports to record (`block.port`).
+    #[serde(default)]
+    pub log: Vec<String>,
+    /// Error signals to score.
+    #[serde(default)]
+    pub score: Vec<ScoreSpec>,
+    /// Model outputs to compare with measured columns (needs data: `--data`).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub compare: Vec<CompareSpec>,
+    /// Stability requirements on the feedback loops (`require:`), checked by the
+    /// stability gate ([`crate::gate`]) before the graph runs.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub require: Option<Require>,
+    /// Where each connection is in the file (origin, 1-based lines), when it
+    /// was read from YAML in block style; connection errors then name the line.
+    #[serde(skip)]
+    pub connection_lines: Option<(String, Vec<usize>)>,
+    /// Units of signals (`block.port: unit`), setting or overriding what the
+    /// blocks declare; shown in CSV headers, `metrics.json` and plots.
+    #[serde(default, skip_serializing_if = "std::collections::BTreeMap::is_empty")]
+    pub units: std::collections::BTreeMap<String, String>,
+    /// The folder relative file names in block parameters (`calibration_file`)
+    /// are resolved against: the graph file's folder when read with
+    /// [`GraphSpec::from_file`], else the working directory. Not part of the YAML.
+    #[serde(skip)]
+    pub base_dir: Option<std::path::PathBuf>,
+}
+
+/// `duration_s` left out: NaN until the data's length replaces it.
+fn duration_from_data() -> f64 {
+    f64::NAN
+}
+
+fn duration_absent(d: &f64) -> bool {
+    d.is_nan()
+}
+
+/// What the loader did on its own initiative, for the user to see.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct BuildReport {
+    /// Rate transitions inserted between blocks of different rates, one line each.
+    pub rate_transitions: Vec<String>,
+    /// Execution order (block names) of the output phase.
+    pub order: Vec<String>,
+}
+
+/// Alias kept for readability: a built graph is a [`Scheduler`].
+pub type Graph = Scheduler;
+
+/// Maximum number of base ticks a graph may ask for (keeps memory and time sane).
+pub const MAX_TICKS: f64 = 2.0e9;
+
+/// Lowest base rate and block rate (Hz): 1 mHz.
+pub const MIN_RATE_HZ: f64 = 1e-3;
+/// Highest base rate (Hz): 1 GHz.
+pub const MAX_RATE_HZ: f64 = 1e9;
+
+/// Base ticks a streamed log holds between two hand-overs to the sink
+/// ([`GraphSpec::build_streamed`]): 2^16. A log of width w at period p keeps
+/// ⌈2^16 / p⌉ · w values (at most 512 KiB per value of width).
+pub const LOG_CHUNK_TICKS: u64 = 1 << 16;
+
+/// Most memory a built graph may hold, estimated at build (bytes): 4 GiB. The
+/// estimate adds the signal and input buffers, every log (samples × width × 8
+/// bytes, reserved for the whole run, or for [`LOG_CHUNK_TICKS`] when streamed)
+/// and each block's
+/// [`Block::memory_bytes`]; a graph above it is refused with the breakdown.
+pub const MAX_GRAPH_BYTES: usize = 4 << 30;
+
+/// Longest block name, in characters (ASCII).
+pub const MAX_BLOCK_NAME_CHARS: usize = 100;
+
+/// Longest `title`, in characters.
+pub const MAX_TITLE_CHARS: usize = 200;
+
+impl GraphSpec {
+    /// An empty graph at `base_rate_hz` running for `duration_s`, for building graphs
+    /// from Rust.
+    pub fn new(base_rate_hz: f64, duration_s: f64) -> Self {
+        Self {
+            title: None,
+            base_rate_hz,
+            duration_s,
+            seed: 0,
+            strict_rates: false,
+            blocks: Vec::new(),
+            connections: Vec::new(),
+            log: Vec::new(),
+            score: Vec::new(),
+            compare: Vec::new(),
+            require: None,
+            units: std::collections::BTreeMap::new(),
+            connection_lines: None,
+            base_dir: None,
+        }
+    }
+
+    /// Score error signal `signal` (`block.port`), ignoring samples before
+    /// `from_s` seconds.
+    pub fn score(&mut self, signal: &str, from_s: f64) -> &mut Self {
+        self.score.push(ScoreSpec {
+            signal: signal.to_string(),
+            from_s,
+        });
+        self
+    }
+
+    /// Add a block running at the base rate.
+    pub fn add(&mut self, name: &str, block: impl Block + 'static) -> &mut Self {
+        self.blocks.push(BlockSpec {
+            name: name.to_string(),
+            rate_hz: None,
+            block: Box::new(block),
+        });
+        self
+    }
+
+    /// Add a block running at `rate_hz`.
+    pub fn add_at(&mut self, name: &str, rate_hz: f64, block: impl Block + 'static) -> &mut Self {
+        self.blocks.push(BlockSpec {
+            name: name.to_string(),
+            rate_hz: Some(rate_hz),
+            block: Box::new(block),
+        });
+        self
+    }
+
+    /// Connect output `from` (`block.port`) to input `to`.
+    pub fn connect(&mut self, from: &str, to: &str) -> &mut Self {
+        self.connections.push(Connection {
+            from: from.to_string(),
+            to: to.to_string(),
+        });
+        self
+    }
+
+    /// Record output `signal` (`block.port`).
+    pub fn log(&mut self, signal: &str) -> &mut Self {
+        self.log.push(signal.to_string());
+        self
+    }
+
+    /// Whether the graph reads measured data: it has a `data_column` block or a
+    /// `compare:` entry. Data given to a graph that does not would only change
+    /// its duration.
+    pub fn reads_data(&self) -> bool {
+        !self.compare.is_empty()
+            || self
+                .blocks
+                .iter()
+                .any(|b| b.block.typetag_name() == "data_column")
+    }
+}
+
+/// Largest graph file [`GraphSpec::from_file`] reads: 64 MiB.
+pub const MAX_GRAPH_FILE_BYTES: u64 = 64 << 20;
+
+/// The documented block-name rule: non-empty, ASCII letters, digits, `_` and `-`
+/// only (`.` separates block and port; `:` is reserved for inserted blocks such as
+/// rate transitions, so they can never collide with a user's block).
+pub fn valid_block_name(name: &str) -> bool {
+    !name.is_empty()
+        && name.len() <= MAX_BLOCK_NAME_CHARS
+        && name
+            .chars()
+            .all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-')
+}

@@ -1,2 +1,0 @@
-pub mod table51;
-pub mod table51_nonlinear;
