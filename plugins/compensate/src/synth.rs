@@ -1,0 +1,611 @@
+//! One compensator per named effect, from the fitted effect block's parameters
+//! and the user's loop.
+//!
+//! | effect | compensator | block | place |
+//! |---|---|---|---|
+//! | `hysteresis` (Coleman–Hodgdon on the drive) | exact inverse, Lambert W (6.6) | `hysteresis_inverse` | before the actuator |
+//! | `repetitive_disturbance` periodic in time | standard RC (5.1), L = ZPETC(T), FIR Q of the largest cut-off keeping (5.5) | `repetitive_control` | on the error before the controller (Fig. 5.1) |
+//! | `friction` | the fitted friction of the reference's velocity, subtracted | `friction` | added at the plant input |
+//! | `unmodeled_resonance` | its inverse R⁻¹ (poles ↔ zeros): a notch | `unmodeled_resonance` | before the plant |
+//! | `position_dependent_gain` | gain scheduling (2.13) on 1/g(position) | `gain_scheduled` | before the plant |
+//! | `axis_coupling` (on the measurement) | static decoupling −c | `axis_coupling` | in the measurement path |
+//! | the rest | none; the report says what it limits | — | — |
+
+use crate::named::{Placement, Where, source_of, split};
+use crate::{CompError, LoopInfo, NotCompensated, Options, connect, reference_of};
+use dvrc::filters::FilterSpec;
+use dvrc::stability::{design_q_cutoff, rc_criterion};
+use nanomotion_core::LearningFilter;
+use nanomotion_core::Role;
+use nanomotion_core::graph::GraphSpec;
+use nanomotion_plf::surgery::{self, Site};
+use serde_json::{Value, json};
+use std::collections::BTreeMap;
+
+/// How a compensator enters a graph (names of the user's controller graph).
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) enum Edit {
+    /// In series just before the plant-side input `to`, nearest the controller.
+    Before { to: String },
+    /// Reads `reads`; its output is subtracted at the plant input `to`.
+    SubtractAt { to: String, reads: String },
+    /// In the measurement path after `signal`; port `s` reads `s`.
+    Sensor { signal: String, s: Vec<String> },
+    /// Learning on the error (Fig. 5.1): `e` ← error, error + `w` → `controller_input`.
+    Learning {
+        error: String,
+        controller_input: String,
+    },
+    /// Before `to`, its `sigma` reading `sigma`.
+    Scheduled { to: String, sigma: String },
+}
+
+/// A synthesised compensator.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Compensator {
+    /// The effect.
+    pub effect: String,
+    /// Block name, `comp_<effect>`.
+    pub name: String,
+    /// The block (`type:` and parameters).
+    pub block: Value,
+    /// What and why.
+    pub why: String,
+    /// Where, in words.
+    pub place: String,
+    /// Design figures.
+    pub design: BTreeMap<String, f64>,
+    /// A caveat.
+    pub note: Option<String>,
+    pub(crate) edit: Edit,
+}
+
+/// A compensator, or why there is none.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Outcome {
+    /// Insert this.
+    Compensator(Compensator),
+    /// No compensation, and what the effect limits.
+    None(NotCompensated),
+}
+
+impl Compensator {
+    /// Its `type:`.
+    pub fn type_name(&self) -> String {
+        self.block
+            .get("type")
+            .and_then(Value::as_str)
+            .unwrap_or("")
+            .to_string()
+    }
+
+    /// Insert into `spec` (the user's loop, with or without the effects);
+    /// `controller` is the user's graph the names refer to.
+    pub(crate) fn apply(
+        &self,
+        spec: &mut GraphSpec,
+        controller: &GraphSpec,
+        opts: &Options,
+    ) -> Result<(), CompError> {
+        let no_place = |problem: String| CompError::NoPlace {
+            graph: opts.controller_name.clone(),
+            effect: self.effect.clone(),
+            problem,
+            fix: "keep the plant's input and the error signal as in the graph compensated".into(),
+        };
+        let block =
+            surgery::block_from_json(self.block.clone()).map_err(|e| CompError::Design {
+                effect: self.effect.clone(),
+                problem: e.to_string(),
+            })?;
+        let from = |to: &str| -> Result<String, CompError> {
+            source_of(controller, to)
+                .map(str::to_string)
+                .ok_or_else(|| no_place(format!("has no connection into `{to}`")))
+        };
+        let insert =
+            |spec: &mut GraphSpec, block, site: &Site, s: &[String]| -> Result<String, CompError> {
+                surgery::insert(spec, &self.name, block, site, s, None)
+                    .map_err(|e| no_place(e.to_string()))
+            };
+        match &self.edit {
+            Edit::Before { to } => {
+                let site = Site::Input {
+                    from: from(to)?,
+                    to: to.clone(),
+                };
+                insert(spec, block, &site, &[])?;
+            }
+            Edit::Scheduled { to, sigma } => {
+                let site = Site::Input {
+                    from: from(to)?,
+                    to: to.clone(),
+                };
+                let name = insert(spec, block, &site, &[])?;
+                connect(spec, sigma.clone(), format!("{name}.sigma"));
+            }
+            Edit::SubtractAt { to, reads } => {
+                let site = Site::Feedback {
+                    from: from(to)?,
+                    to: to.clone(),
+                    position: reads.clone(),
+                };
+                let name = insert(spec, block, &site, &[])?;
+                let sum = spec
+                    .connections
+                    .iter()
+                    .find(|c| c.from == format!("{name}.y"))
+                    .map(|c| split(&c.to).0.to_string())
+                    .ok_or_else(|| no_place("the inserted sum is missing".into()))?;
+                let minus = surgery::block_from_json(json!({"type": "sum", "signs": "+-"}))
+                    .map_err(|e| no_place(e.to_string()))?;
+                if let Some(b) = spec.blocks.iter_mut().find(|b| b.name == sum) {
+                    b.block = minus;
+                }
+            }
+            Edit::Sensor { signal, s } => {
+                let site = Site::Sensor {
+                    compare: 0,
+                    signal: signal.clone(),
+                };
+                insert(spec, block, &site, s)?;
+            }
+            Edit::Learning {
+                error,
+                controller_input,
+            } => {
+                let rate = surgery::rate_of(spec, split(controller_input).0);
+                let name = surgery::fresh_name(spec, &self.name);
+                let sum = surgery::fresh_name(spec, &format!("{name}_sum"));
+                let plus = surgery::block_from_json(json!({"type": "sum", "signs": "++"}))
+                    .map_err(|e| no_place(e.to_string()))?;
+                let k = spec
+                    .connections
+                    .iter()
+                    .position(|c| c.from == *error && c.to == *controller_input)
+                    .ok_or_else(|| {
+                        no_place(format!(
+                            "has no connection {error} -> {controller_input} to put the learning on"
+                        ))
+                    })?;
+                spec.connections[k].from = format!("{sum}.y");
+                for (n, b) in [(name.clone(), block), (sum.clone(), plus)] {
+                    spec.blocks.push(nanomotion_core::graph::BlockSpec {
+                        name: n,
+                        rate_hz: rate,
+                        block: b,
+                    });
+                }
+                connect(spec, error.clone(), format!("{sum}.in0"));
+                connect(spec, format!("{name}.w"), format!("{sum}.in1"));
+                connect(spec, error.clone(), format!("{name}.e"));
+            }
+        }
+        Ok(())
+    }
+}
+
+fn num(params: &Value, key: &str) -> f64 {
+    params.get(key).and_then(Value::as_f64).unwrap_or(f64::NAN)
+}
+
+fn none(effect: &str, reason: String, figures: &[(&str, f64)]) -> Outcome {
+    Outcome::None(NotCompensated {
+        effect: effect.to_string(),
+        reason,
+        figures: figures
+            .iter()
+            .filter(|(_, v)| v.is_finite())
+            .map(|(k, v)| (k.to_string(), *v))
+            .collect(),
+    })
+}
+
+/// The compensator of one named effect (`params`: its fitted block as JSON;
+/// `placement`: where it enters the augmented model).
+pub(crate) fn synthesise(
+    e: &crate::NamedEffect,
+    params: &Value,
+    placement: &Placement,
+    controller: &GraphSpec,
+    info: &LoopInfo,
+    opts: &Options,
+) -> Result<Outcome, CompError> {
+    let name = format!("comp_{}", e.effect);
+    let ty = params.get("type").and_then(Value::as_str).unwrap_or("");
+    let make = |block: Value,
+                why: &str,
+                place: String,
+                design: &[(&str, f64)],
+                note: Option<String>,
+                edit: Edit| {
+        Outcome::Compensator(Compensator {
+            effect: e.effect.clone(),
+            name: name.clone(),
+            block,
+            why: why.to_string(),
+            place,
+            design: design.iter().map(|(k, v)| (k.to_string(), *v)).collect(),
+            note,
+            edit,
+        })
+    };
+    Ok(match (e.effect.as_str(), &placement.place) {
+        ("hysteresis", Where::Input { to }) if ty == "hysteresis" => {
+            let mut block = json!({
+                "type": "hysteresis_inverse",
+                "alpha": num(params, "alpha"),
+                "b": num(params, "b"),
+                "c": num(params, "c"),
+            });
+            if let Some(r) = params.get("retrace") {
+                block["retrace"] = r.clone();
+            }
+            make(
+                block,
+                "exact inverse of the fitted Coleman–Hodgdon hysteresis (Lambert W, (6.6)), so the feedback drives a linear actuator",
+                format!("before the actuator, on the connection into {to}"),
+                &[
+                    ("alpha", num(params, "alpha")),
+                    ("b", num(params, "b")),
+                    ("c", num(params, "c")),
+                ],
+                None,
+                Edit::Before { to: to.clone() },
+            )
+        }
+        ("hysteresis", _) => none(
+            &e.effect,
+            format!(
+                "no compensator in this version for a `{ty}` hysteresis {}: the inverse is synthesised for a Coleman–Hodgdon loop on the drive",
+                if matches!(placement.place, Where::Input { .. }) {
+                    "on the drive"
+                } else {
+                    "inside the loop (a restoring force)"
+                }
+            ),
+            &[],
+        ),
+        ("repetitive_disturbance", _) => {
+            if params.get("variable").and_then(Value::as_str) == Some("signal") {
+                return Ok(none(
+                    &e.effect,
+                    format!(
+                        "periodic in {} (period {:.4e} in its unit), not in time: it needs delay-varying RC (5.7)–(5.8) on that signal, not synthesised in this version",
+                        placement.s.first().map_or("a signal", String::as_str),
+                        num(params, "period")
+                    ),
+                    &[("period", num(params, "period"))],
+                ));
+            }
+            repetitive(e, params, controller, info, opts, &name)?
+        }
+        ("friction", Where::Feedback { to, .. }) => {
+            let r = reference_of(controller, info, &opts.controller_name, &e.effect)?;
+            let mut block = params.clone();
+            block["type"] = json!("friction");
+            make(
+                block,
+                "feed-forward of the fitted friction at the reference's velocity (backward difference of the reference), subtracted from the drive",
+                format!("subtracted at {to}, computed from the reference {r}"),
+                &[
+                    ("coulomb", num(params, "coulomb")),
+                    ("viscous", num(params, "viscous")),
+                ],
+                Some("a loop with integral action already removes a constant friction force; the feed-forward acts at the reversals".into()),
+                Edit::SubtractAt {
+                    to: to.clone(),
+                    reads: r,
+                },
+            )
+        }
+        ("unmodeled_resonance", place) => {
+            let to = match place {
+                Where::Input { to } | Where::Feedback { to, .. } => to.clone(),
+                Where::Output { signal } => plant_input(controller, signal, &e.effect, opts)?,
+            };
+            let (fp, zp, fz, zz) = (
+                num(params, "f_pole_hz"),
+                num(params, "zeta_pole"),
+                num(params, "f_zero_hz"),
+                num(params, "zeta_zero"),
+            );
+            make(
+                json!({"type": "unmodeled_resonance", "f_pole_hz": fz, "zeta_pole": zz, "f_zero_hz": fp, "zeta_zero": zp}),
+                "notch: the inverse of the fitted pole–zero pair (its zeros on the resonance's poles), unity DC gain",
+                format!("before the plant, on the connection into {to}"),
+                &[
+                    ("notch_hz", fp),
+                    ("notch_zeta", zp),
+                    ("pole_hz", fz),
+                    ("pole_zeta", zz),
+                ],
+                None,
+                Edit::Before { to },
+            )
+        }
+        ("position_dependent_gain", Where::Input { to })
+            if params.get("variable").and_then(Value::as_str) != Some("input")
+                && placement.s.len() == 1 =>
+        {
+            let (x, gain) = inverse_gain_table(params).ok_or_else(|| CompError::Design {
+                effect: e.effect.clone(),
+                problem: "the fitted gain is not positive around its centre: no schedule 1/g"
+                    .into(),
+            })?;
+            let (lo, hi) = (x[0], x[x.len() - 1]);
+            make(
+                json!({"type": "gain_scheduled", "controller": {"type": "gain", "k": 1.0},
+                       "schedule": {"laws": [{"kind": "table", "x": x, "gain": gain}]}}),
+                "gain scheduling (2.13): the drive times 1/g(position) of the fitted gain, so the loop gain does not move with position",
+                format!(
+                    "before the plant, on the connection into {to}, scheduled on {}",
+                    placement.s[0]
+                ),
+                &[("table_from", lo), ("table_to", hi)],
+                None,
+                Edit::Scheduled {
+                    to: to.clone(),
+                    sigma: placement.s[0].clone(),
+                },
+            )
+        }
+        ("axis_coupling", Where::Output { signal }) => {
+            let c: Vec<f64> = params
+                .get("coupling")
+                .and_then(Value::as_array)
+                .map(|v| v.iter().filter_map(Value::as_f64).map(|x| -x).collect())
+                .unwrap_or_default();
+            make(
+                json!({"type": "axis_coupling", "coupling": c}),
+                "static decoupling: the fitted coupling of the other axes subtracted from the measurement",
+                format!(
+                    "in the measurement path after {signal}, reading {}",
+                    placement.s.join(", ")
+                ),
+                &[],
+                None,
+                Edit::Sensor {
+                    signal: signal.clone(),
+                    s: placement.s.clone(),
+                },
+            )
+        }
+        ("quantization", _) => {
+            let lsb = num(params, "lsb");
+            none(
+                &e.effect,
+                format!(
+                    "no compensation: the feedback acts on the rounded position, so rounding to {lsb:.3e} limits the error to about lsb/√12 = {:.3e} rms (a finer sensor, or an estimator between counts, e.g. time-stamping (Ch. 8), is what helps)",
+                    lsb / 12f64.sqrt()
+                ),
+                &[("lsb", lsb), ("rms_floor", lsb / 12f64.sqrt())],
+            )
+        }
+        ("time_delay", _) => none(
+            &e.effect,
+            format!(
+                "no compensator in this version: a delay of {:.3e} s costs ω·{:.3e} rad of phase; re-tune the loop for it (or a Smith predictor)",
+                num(params, "delay_s"),
+                num(params, "delay_s")
+            ),
+            &[("delay_s", num(params, "delay_s"))],
+        ),
+        (other, place) => none(
+            other,
+            format!(
+                "no compensator in this version for `{other}` {} (drift/creep feed-forward, anti-windup, backlash inverse and slit tables are not synthesised yet)",
+                match place {
+                    Where::Input { to } => format!("on the drive into {to}"),
+                    Where::Feedback { to, .. } => format!("inside the loop at {to}"),
+                    Where::Output { signal } => format!("on the measured {signal}"),
+                }
+            ),
+            &[],
+        ),
+    })
+}
+
+/// 1/g on 65 points over centre ± 2·scale of a fitted `position_dependent_gain`
+/// (`None` when g ≤ 0 there).
+fn inverse_gain_table(params: &Value) -> Option<(Vec<f64>, Vec<f64>)> {
+    let centre = params.get("center").and_then(Value::as_f64).unwrap_or(0.0);
+    let scale = params.get("scale").and_then(Value::as_f64).unwrap_or(1.0);
+    let g0 = params.get("g0").and_then(Value::as_f64).unwrap_or(0.0);
+    let coeffs: Vec<f64> = params
+        .get("coeffs")?
+        .as_array()?
+        .iter()
+        .filter_map(Value::as_f64)
+        .collect();
+    let g = |s: f64| {
+        let x = (s - centre) / scale;
+        1.0 + g0 + coeffs.iter().rev().fold(0.0, |acc, c| (acc + c) * x)
+    };
+    let n = 65;
+    let xs: Vec<f64> = (0..n)
+        .map(|i| centre + scale * (-2.0 + 4.0 * i as f64 / (n - 1) as f64))
+        .collect();
+    let gains: Vec<f64> = xs.iter().map(|&s| 1.0 / g(s)).collect();
+    gains
+        .iter()
+        .all(|k| k.is_finite() && *k > 0.0)
+        .then_some((xs, gains))
+}
+
+/// The plant input upstream of the measured `signal`: walk up through single-input
+/// blocks (sensors, demux) to a block with the plant role, and take the
+/// connection into it.
+fn plant_input(
+    controller: &GraphSpec,
+    signal: &str,
+    effect: &str,
+    opts: &Options,
+) -> Result<String, CompError> {
+    let role = |name: &str| {
+        controller
+            .blocks
+            .iter()
+            .find(|b| b.name == name)
+            .map(|b| b.block.role())
+    };
+    let mut b = split(signal).0.to_string();
+    for _ in 0..8 {
+        let into: Vec<&str> = controller
+            .connections
+            .iter()
+            .filter(|c| split(&c.to).0 == b)
+            .map(|c| c.to.as_str())
+            .collect();
+        if role(&b) == Some(Role::Plant) && !into.is_empty() {
+            return Ok(into[0].to_string());
+        }
+        match into.as_slice() {
+            [one] => {
+                b = split(source_of(controller, one).unwrap_or(""))
+                    .0
+                    .to_string();
+            }
+            _ => break,
+        }
+    }
+    Err(CompError::NoPlace {
+        graph: opts.controller_name.clone(),
+        effect: effect.to_string(),
+        problem: format!("no plant (a block with the plant role) upstream of `{signal}`"),
+        fix: "measure the plant's output through single-input blocks (sensor, demux)".into(),
+    })
+}
+
+/// Standard RC (5.1) on a disturbance periodic in time: N from the fitted period
+/// at the controller's rate, L = ZPETC of the loop's T (from the stability gate's
+/// loop model of the user's graph), Q the FIR low-pass with the largest cut-off
+/// that keeps (5.5) with 10 % margin, and (5.5) evaluated for the report.
+fn repetitive(
+    e: &crate::NamedEffect,
+    params: &Value,
+    controller: &GraphSpec,
+    info: &LoopInfo,
+    opts: &Options,
+    name: &str,
+) -> Result<Outcome, CompError> {
+    let design_err = |problem: String| CompError::Design {
+        effect: e.effect.clone(),
+        problem,
+    };
+    // The controller reading the error.
+    let ctrl_in = controller
+        .connections
+        .iter()
+        .find(|c| {
+            c.from == info.error
+                && controller
+                    .blocks
+                    .iter()
+                    .any(|b| b.name == split(&c.to).0 && b.block.role() == Role::Controller)
+        })
+        .map(|c| c.to.clone())
+        .ok_or_else(|| CompError::NoPlace {
+            graph: opts.controller_name.clone(),
+            effect: e.effect.clone(),
+            problem: format!(
+                "no controller reads the scored error `{}`: repetitive control adds its output to the error before the feedback controller (Fig. 5.1)",
+                info.error
+            ),
+            fix: "score the error signal that feeds the controller".into(),
+        })?;
+    let rate = surgery::rate_of(controller, split(&ctrl_in).0).unwrap_or(controller.base_rate_hz);
+    let dt = 1.0 / rate;
+    let period = num(params, "period");
+    let exact = period * rate;
+    let n = exact.round();
+    if !(n >= 8.0 && n <= 1e7) {
+        return Err(design_err(format!(
+            "the period {period:e} s is {exact:.1} samples at the controller's {rate} Hz: repetitive control needs 8 to 10⁷"
+        )));
+    }
+    let n = n as usize;
+    // T of the loop, as the stability gate sees it with the RC's output removed.
+    let mut trial = crate::clone(controller, &opts.controller_name)?;
+    let trial_comp = Compensator {
+        effect: e.effect.clone(),
+        name: name.to_string(),
+        block: json!({"type": "repetitive_control", "n": n}),
+        why: String::new(),
+        place: String::new(),
+        design: BTreeMap::new(),
+        note: None,
+        edit: Edit::Learning {
+            error: info.error.clone(),
+            controller_input: ctrl_in.clone(),
+        },
+    };
+    trial_comp.apply(&mut trial, controller, opts)?;
+    let ts = dvrc::check::graph_loop_ts(trial).map_err(design_err)?;
+    let t = ts.get(name).ok_or_else(|| {
+        design_err(format!(
+            "the stability gate found no loop T(z) for `{name}` (is the loop linear? `nanomotion check --print-loop` shows it)"
+        ))
+    })?;
+    let tf = t.to_tf().map_err(|e| design_err(format!("T(z): {e}")))?;
+    let learning = FilterSpec::Zpetc {
+        num: tf.num.clone(),
+        den: tf.den.clone(),
+    };
+    let l = learning
+        .build_named("learning", dt)
+        .map_err(|e| design_err(format!("L = ZPETC(T): {e}")))?;
+    let taps = 31usize.min(if n % 2 == 0 { n - 1 } else { n - 2 });
+    let qd = design_q_cutoff(t, &l, taps, 0, 0.1).map_err(|e| design_err(format!("Q: {e}")))?;
+    let robustness = FilterSpec::FirLowpass {
+        taps,
+        cutoff_hz: qd.cutoff_hz,
+    };
+    let q = robustness
+        .build_named("robustness", dt)
+        .map_err(|e| design_err(format!("Q: {e}")))?;
+    let c = rc_criterion(t, &l, &q, n, n).map_err(|e| design_err(format!("(5.5): {e}")))?;
+    if !c.holds() {
+        return Err(design_err(format!(
+            "criterion (5.5) fails with the designed Q: ‖Q(1 − T L z^l)‖∞ = {:.3} ≥ 1",
+            c.hinf
+        )));
+    }
+    let block = json!({
+        "type": "repetitive_control",
+        "n": n,
+        "learning": serde_json::to_value(&learning).unwrap_or(Value::Null),
+        "robustness": serde_json::to_value(&robustness).unwrap_or(Value::Null),
+    });
+    let off = exact - n as f64;
+    Ok(Outcome::Compensator(Compensator {
+        effect: e.effect.clone(),
+        name: name.to_string(),
+        block,
+        why: "standard repetitive control (5.1): memory of one period N, L = ZPETC of the loop's T, Q the FIR low-pass with the largest cut-off keeping (5.5)".into(),
+        place: format!("on the error {} before {} (Fig. 5.1)", info.error, ctrl_in),
+        design: [
+            ("n", n as f64),
+            ("period_s", period),
+            ("period_samples", exact),
+            ("q_taps", taps as f64),
+            ("q_cutoff_hz", qd.cutoff_hz),
+            ("criterion_5_5_hinf", c.hinf),
+            ("criterion_5_5_bound", c.bound),
+            ("criterion_5_5_peak_hz", c.peak_hz),
+            ("l_preview", l.preview_samples() as f64),
+        ]
+        .into_iter()
+        .map(|(k, v)| (k.to_string(), v))
+        .collect(),
+        note: (off.abs() > 0.05).then(|| {
+            format!(
+                "the period is {exact:.2} samples; N = {n} leaves {off:+.2} samples per period, which the memory cannot learn exactly"
+            )
+        }),
+        edit: Edit::Learning {
+            error: info.error.clone(),
+            controller_input: ctrl_in,
+        },
+    }))
+}
