@@ -31,8 +31,9 @@ use serde::{Deserialize, Serialize};
 
 /// `hysteresis_inverse`: u = H⁻¹(w) for the Coleman–Hodgdon operator H with
 /// parameters `alpha`, `b`, `c` (and `retrace` for decreasing input), the same
-/// fields as the plf `hysteresis` effect block. Input `w` (the output the actuator
-/// should produce), output `u` (the input to give it). A wanted output the branch
+/// fields as the plf `hysteresis` effect block. Input `u`: the output w the
+/// actuator should produce; output `y`: the input to give it (the ports of an
+/// effect block, so graph surgery places it like one). A wanted output the branch
 /// cannot reach (a non-monotone branch: the state far off the anhysteretic line)
 /// holds the last input and is counted on output `state`.
 #[derive(Debug, Clone, Serialize, Deserialize)]
@@ -173,10 +174,10 @@ impl HysteresisInverse {
 #[typetag::serde(name = "hysteresis_inverse")]
 impl Block for HysteresisInverse {
     fn inputs(&self) -> Vec<Port> {
-        vec![Port::new("w", 1)]
+        vec![Port::new("u", 1)]
     }
     fn outputs(&self) -> Vec<Port> {
-        vec![Port::new("u", 1), Port::new("state", 1)]
+        vec![Port::new("y", 1), Port::new("state", 1)]
     }
     fn build(&mut self, _ctx: &BuildContext) -> Result<(), ParamError> {
         for (prefix, p) in [("", Some(self.trace())), ("retrace.", self.retrace)] {
@@ -235,7 +236,7 @@ nanomotion_core::submit_block_doc! {
             ParamDoc { name: "c", doc: "c ([y]/[u]) > 0, slope right after a reversal", default: None },
             ParamDoc { name: "retrace", doc: "{alpha, b, c} for decreasing input (asymmetric operator)", default: Some("= trace") },
         ],
-        ports: "w (wanted output) -> u (input to give the operator), state (unreachable samples so far)",
+        ports: "u (wanted output w) -> y (input to give the operator), state (unreachable samples so far)",
     }
 }
 

@@ -25,8 +25,13 @@ use std::collections::BTreeMap;
 /// How a compensator enters a graph (names of the user's controller graph).
 #[derive(Debug, Clone, PartialEq)]
 pub(crate) enum Edit {
-    /// In series just before the plant-side input `to`, nearest the controller.
-    Before { to: String },
+    /// In series just before the plant-side input `to`, nearest the controller;
+    /// with `ff`, a feed-forward block reading `ff.0` (port `r` → `v`) is added
+    /// to its input.
+    Before {
+        to: String,
+        ff: Option<(String, Value)>,
+    },
     /// Reads `reads`; its output is subtracted at the plant input `to`.
     SubtractAt { to: String, reads: String },
     /// In the measurement path after `signal`; port `s` reads `s`.
@@ -109,12 +114,38 @@ impl Compensator {
                     .map_err(|e| no_place(e.to_string()))
             };
         match &self.edit {
-            Edit::Before { to } => {
+            Edit::Before { to, ff } => {
                 let site = Site::Input {
                     from: from(to)?,
                     to: to.clone(),
                 };
-                insert(spec, block, &site, &[])?;
+                let name = insert(spec, block, &site, &[])?;
+                if let Some((reads, ff)) = ff {
+                    let rate = surgery::rate_of(spec, &name);
+                    let ff_name = surgery::fresh_name(spec, &format!("{name}_ff"));
+                    let sum = surgery::fresh_name(spec, &format!("{name}_sum"));
+                    let k = spec
+                        .connections
+                        .iter()
+                        .position(|c| c.to == format!("{name}.u"))
+                        .ok_or_else(|| no_place("the inserted block has no input".into()))?;
+                    spec.connections[k].to = format!("{sum}.in0");
+                    let blocks = [
+                        (ff_name.clone(), ff.clone()),
+                        (sum.clone(), json!({"type": "sum", "signs": "++"})),
+                    ];
+                    for (n, b) in blocks {
+                        let b = surgery::block_from_json(b).map_err(|e| no_place(e.to_string()))?;
+                        spec.blocks.push(nanomotion_core::graph::BlockSpec {
+                            name: n,
+                            rate_hz: rate,
+                            block: b,
+                        });
+                    }
+                    connect(spec, reads.clone(), format!("{ff_name}.r"));
+                    connect(spec, format!("{ff_name}.v"), format!("{sum}.in1"));
+                    connect(spec, format!("{sum}.y"), format!("{name}.u"));
+                }
             }
             Edit::Scheduled { to, sigma } => {
                 let site = Site::Input {
@@ -241,17 +272,35 @@ pub(crate) fn synthesise(
             if let Some(r) = params.get("retrace") {
                 block["retrace"] = r.clone();
             }
+            let mut design = vec![
+                ("alpha", num(params, "alpha")),
+                ("b", num(params, "b")),
+                ("c", num(params, "c")),
+            ];
+            // The feed-forward of (6.6) maps the reference to the drive through
+            // the inverse: H⁻¹(r/G₀ + feedback), G₀ the nominal's static gain.
+            let (ff, note) = match static_feedforward(controller, to, info, opts, &e.effect)? {
+                Ok((r, g0, y0)) => {
+                    design.push(("static_gain", g0));
+                    design.push(("static_offset", y0));
+                    let ff = json!({"type": "position_feedforward",
+                                    "gain_v_per_um": 1e-6 / g0, "offset_v": -y0 / g0});
+                    (Some((r, ff)), None)
+                }
+                Err(why) => (
+                    None,
+                    Some(format!(
+                        "no reference feed-forward: {why}; the inverse linearises the actuator for the feedback only"
+                    )),
+                ),
+            };
             make(
                 block,
-                "exact inverse of the fitted Coleman–Hodgdon hysteresis (Lambert W, (6.6)), so the feedback drives a linear actuator",
+                "inverse hysteresis feed-forward (6.6): the exact inverse of the fitted Coleman–Hodgdon loop (Lambert W) before the actuator, fed with the reference through the nominal's static gain plus the feedback",
                 format!("before the actuator, on the connection into {to}"),
-                &[
-                    ("alpha", num(params, "alpha")),
-                    ("b", num(params, "b")),
-                    ("c", num(params, "c")),
-                ],
-                None,
-                Edit::Before { to: to.clone() },
+                &design,
+                note,
+                Edit::Before { to: to.clone(), ff },
             )
         }
         ("hysteresis", _) => none(
@@ -321,7 +370,7 @@ pub(crate) fn synthesise(
                     ("pole_zeta", zz),
                 ],
                 None,
-                Edit::Before { to },
+                Edit::Before { to, ff: None },
             )
         }
         ("position_dependent_gain", Where::Input { to })
@@ -404,6 +453,61 @@ pub(crate) fn synthesise(
             &[],
         ),
     })
+}
+
+/// The reference and the nominal plant's static map y = G₀·u + y₀ from the
+/// plant-side input `to` to the measured position (the error sum's `in1`), by
+/// two open-loop runs of the user's graph with `to` held at 0 and at 1.
+/// `Ok(Err(why))` when there is none (the plant integrates, or does not settle).
+fn static_feedforward(
+    controller: &GraphSpec,
+    to: &str,
+    info: &LoopInfo,
+    opts: &Options,
+    effect: &str,
+) -> Result<Result<(String, f64, f64), String>, CompError> {
+    let r = reference_of(controller, info, &opts.controller_name, effect)?;
+    let eb = split(&info.error).0;
+    let Some(measured) = source_of(controller, &format!("{eb}.in1")).map(str::to_string) else {
+        return Ok(Err(format!("nothing feeds `{eb}.in1`")));
+    };
+    let probe = |v: f64| -> Result<(f64, f64), String> {
+        let mut g = surgery::clone_spec(controller).map_err(|e| e.to_string())?;
+        g.connections.retain(|c| c.to != to);
+        g.duration_s = g.duration_s.min(4.0);
+        let name = surgery::fresh_name(&g, "probe");
+        let b = surgery::block_from_json(json!({"type": "constant", "value": v}))
+            .map_err(|e| e.to_string())?;
+        g.blocks.push(nanomotion_core::graph::BlockSpec {
+            name: name.clone(),
+            rate_hz: surgery::rate_of(controller, split(to).0),
+            block: b,
+        });
+        connect(&mut g, format!("{name}.y"), to.to_string());
+        g.score.clear();
+        g.log = vec![measured.clone()];
+        let (mut s, _) = g.build().map_err(|e| e.to_string())?;
+        let run = s.run(|_| {});
+        let y = &run.logs.first().ok_or("no log")?.data;
+        let tenth = (y.len() / 10).max(1);
+        let mean = |x: &[f64]| x.iter().sum::<f64>() / x.len() as f64;
+        Ok((
+            mean(&y[y.len() - tenth..]),
+            mean(&y[y.len() - 2 * tenth..y.len() - tenth]),
+        ))
+    };
+    let ((y0, y0_prev), (y1, y1_prev)) = match (probe(0.0), probe(1.0)) {
+        (Ok(a), Ok(b)) => (a, b),
+        (Err(e), _) | (_, Err(e)) => return Ok(Err(format!("the static probe failed ({e})"))),
+    };
+    let g0 = y1 - y0;
+    let settled = ((y1 - y1_prev) - (y0 - y0_prev)).abs() < 0.01 * g0.abs();
+    if !(g0.is_finite() && g0 != 0.0 && settled) {
+        return Ok(Err(format!(
+            "the nominal plant from {to} to {measured} has no static gain (it integrates or does not settle)"
+        )));
+    }
+    Ok(Ok((r, g0, y0)))
 }
 
 /// 1/g on 65 points over centre ± 2·scale of a fitted `position_dependent_gain`

@@ -78,7 +78,12 @@ fn a_disturbance_periodic_in_time_is_cut_by_repetitive_control() {
     )
     .unwrap();
     let rep = diagnose(&nominal, &data, &diagnose::Options::default()).unwrap();
-    assert_eq!(rep.found, vec!["repetitive_disturbance".to_string()], "{}", rep.stopped_because);
+    assert_eq!(
+        rep.found,
+        vec!["repetitive_disturbance".to_string()],
+        "{}",
+        rep.stopped_because
+    );
     let augmented = rep.augmented.as_ref().unwrap();
 
     // Compensate the user's loop.
@@ -114,10 +119,18 @@ fn a_disturbance_periodic_in_time_is_cut_by_repetitive_control() {
             c.from = "y.y".into();
         }
         g.connect("stage.y", "y.in0");
-        let y = surgery::block_from_json(serde_json::json!({"type": "sum", "signs": "+++"})).unwrap();
-        g.blocks.push(nanomotion_core::graph::BlockSpec { name: "y".into(), rate_hz: None, block: y });
+        let y =
+            surgery::block_from_json(serde_json::json!({"type": "sum", "signs": "+++"})).unwrap();
+        g.blocks.push(nanomotion_core::graph::BlockSpec {
+            name: "y".into(),
+            rate_hz: None,
+            block: y,
+        });
         let mut extra = GraphSpec::from_yaml(
-            &format!("base_rate_hz: {RATE}\nduration_s: 1\nblocks:\n{}", disturbance_blocks()),
+            &format!(
+                "base_rate_hz: {RATE}\nduration_s: 1\nblocks:\n{}",
+                disturbance_blocks()
+            ),
             "d.yaml",
         )
         .unwrap();
@@ -129,7 +142,11 @@ fn a_disturbance_periodic_in_time_is_cut_by_repetitive_control() {
     let after = on_truth(&out.compensated);
     eprintln!("truth: {before:.3e} -> {after:.3e}");
     // The fitted disturbance reproduces the true one in the loop (within 5 %).
-    assert!((r.before.rms / before - 1.0).abs() < 0.05, "{:e} vs {before:e}", r.before.rms);
+    assert!(
+        (r.before.rms / before - 1.0).abs() < 0.05,
+        "{:e} vs {before:e}",
+        r.before.rms
+    );
     // Without compensation the disturbance passes through S of the loop: the
     // rms over the scored window is of the disturbance's order times |S|, well
     // above zero; RC removes at least 80 % of it.
