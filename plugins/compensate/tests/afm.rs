@@ -9,64 +9,39 @@
 mod support;
 
 use nanomotion_compensate::{Options, compensate, named};
+use nanomotion_core::data::Dataset;
 use nanomotion_core::graph::GraphSpec;
 use nanomotion_plf::diagnose::{self, diagnose};
 use nanomotion_plf::surgery;
-use std::f64::consts::PI;
-use support::*;
+use support::score_rms;
 
-const RATE: f64 = 1000.0;
-/// The stage with its hysteresis made linear (c = b on every axis).
-const LINEAR: &str = ", hysteresis: [{ trace: { alpha: 0.03, b: 1.0, c: 1.0 }, retrace: { alpha: 0.03, b: 1.0, c: 1.0 } }, { trace: { alpha: 0.03, b: 0.98, c: 0.98 }, retrace: { alpha: 0.03, b: 0.98, c: 0.98 } }, { trace: { alpha: 0.03, b: 0.2, c: 0.2 }, retrace: { alpha: 0.03, b: 0.2, c: 0.2 } }]";
-
-fn open_loop(hysteresis: &str, n: usize) -> String {
-    format!(
-        "base_rate_hz: {RATE}\nduration_s: {}\nseed: 5\nblocks:\n  - {{ name: drive, type: data_column, column: u }}\n  - {{ name: v_yz, type: constant, value: 50.0, width: 2 }}\n  - {{ name: mux, type: mux, widths: [1, 2] }}\n  - {{ name: stage, type: afm_stage, initial_v: [50.0, 50.0, 50.0]{hysteresis} }}\n  - {{ name: split, type: demux, widths: [1, 2] }}\nconnections:\n  - {{ from: drive.y, to: mux.in0 }}\n  - {{ from: v_yz.y, to: mux.in1 }}\n  - {{ from: mux.y, to: stage.v }}\n  - {{ from: stage.pos, to: split.u }}\ncompare:\n  - {{ signal: split.y0, column: y }}\n",
-        n as f64 / RATE
-    )
-}
-
-/// The x loop of Sec. 6.5 (6.5): k/s and a 60 Hz low-pass, k = 1.44e8 V/(m·s),
-/// tracking a ±15 µm triangular scan at 0.25 Hz (7.5 µm/s); scored over the
-/// second scan period.
-fn closed_loop(hysteresis: &str) -> String {
-    format!(
-        "title: AFM x scan, feedback only\nbase_rate_hz: {RATE}\nduration_s: 8.0\nseed: 6\nrequire:\n  allow_unproven: \"afm_stage has no linear model; the x loop follows (6.5)\"\nblocks:\n  - {{ name: ref, type: triangular_scan, amplitude: 15.0e-6, frequency_hz: 0.25, offset: 48.77e-6 }}\n  - {{ name: err, type: sum, signs: \"+-\" }}\n  - {{ name: integral, type: pid, kp: 0.0, ki: 1.44e8 }}\n  - {{ name: lowpass, type: low_pass, cutoff_hz: 60.0, order: 1 }}\n  - {{ name: v_yz, type: constant, value: 50.0, width: 2 }}\n  - {{ name: mux, type: mux, widths: [1, 2] }}\n  - {{ name: stage, type: afm_stage, initial_v: [48.8, 50.0, 50.0]{hysteresis} }}\n  - {{ name: split, type: demux, widths: [1, 2] }}\nconnections:\n  - {{ from: ref.y, to: err.in0 }}\n  - {{ from: split.y0, to: err.in1 }}\n  - {{ from: err.y, to: integral.e }}\n  - {{ from: integral.u, to: lowpass.u }}\n  - {{ from: lowpass.y, to: mux.in0 }}\n  - {{ from: v_yz.y, to: mux.in1 }}\n  - {{ from: mux.y, to: stage.v }}\n  - {{ from: stage.pos, to: split.u }}\nscore:\n  - {{ signal: err.y, from_s: 4.0 }}\n"
-    )
+/// examples/compensate/ (the files `nanomotion compensate` is shown on).
+fn example(file: &str) -> std::path::PathBuf {
+    std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../examples/compensate")
+        .join(file)
 }
 
 /// `spec` with its stage block replaced by the stage with its own hysteresis.
 fn on_truth(spec: &GraphSpec) -> GraphSpec {
     let mut g = surgery::clone_spec(spec).unwrap();
-    let truth = GraphSpec::from_yaml(&closed_loop(""), "truth.yaml").unwrap();
-    let stage = truth
-        .blocks
-        .into_iter()
-        .find(|b| b.name == "stage")
-        .unwrap();
+    let truth = GraphSpec::from_yaml(
+        "base_rate_hz: 1000\nduration_s: 1\nblocks:\n  - { name: stage, type: afm_stage, initial_v: [48.8, 50.0, 50.0] }\n",
+        "truth.yaml",
+    )
+    .unwrap();
     let slot = g.blocks.iter_mut().find(|b| b.name == "stage").unwrap();
-    *slot = stage;
+    *slot = truth.blocks.into_iter().next().unwrap();
     g
 }
 
 #[test]
 fn afm_hysteresis_is_cut_by_the_inverse_before_the_actuator() {
     let _ = std::any::type_name::<afm_stage::stage::AfmStage>();
-    let n = 8000;
-    // Drive: 50 V ± 20 V strokes at 0.25 Hz and 0.7 Hz, plus a little 5–40 Hz content.
-    let u: Vec<f64> = (0..n)
-        .map(|k| {
-            let t = k as f64 / RATE;
-            50.0 + 14.0 * (2.0 * PI * 0.25 * t).sin()
-                + 6.0 * (2.0 * PI * 0.7 * t + 1.0).sin()
-                + 0.5 * (2.0 * PI * 13.0 * t).sin()
-                + 0.3 * (2.0 * PI * 37.0 * t + 0.4).sin()
-        })
-        .collect();
-    // The stage's own interferometer noise (Table 6.1) is in the simulated record.
-    let y = simulate_record(&open_loop("", n), &u, RATE, "split.y0", 0.0, 1);
-    let data = dataset(RATE, u, y);
-    let nominal = GraphSpec::from_yaml(&open_loop(LINEAR, n), "nominal.yaml").unwrap();
+    // The record (generated from the stage with its own hysteresis by the
+    // facade's tests/compensate_example.rs) and the nominal model.
+    let data = Dataset::from_file(example("record.csv")).unwrap();
+    let nominal = GraphSpec::from_file(example("model.yaml")).unwrap();
     // Only hysteresis is tried, to keep the test fast (`--effects hysteresis`);
     // plf's own AFM test shows it is named first among all candidates.
     let opts = diagnose::Options {
@@ -78,7 +53,7 @@ fn afm_hysteresis_is_cut_by_the_inverse_before_the_actuator() {
     assert_eq!(rep.found, vec!["hysteresis".to_string()]);
     let augmented = rep.augmented.as_ref().unwrap();
 
-    let controller = GraphSpec::from_yaml(&closed_loop(LINEAR), "controller.yaml").unwrap();
+    let controller = GraphSpec::from_file(example("controller.yaml")).unwrap();
     let out = compensate(
         augmented,
         &controller,
