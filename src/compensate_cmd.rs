@@ -137,29 +137,39 @@ fn print(o: &Outcome) {
         r.from_s
     );
     say!(
-        "  {:<24} {:<22} {:>12} {:>12} {:>8}  kept",
+        "  {:<24} {:<22} {:>12} {:>12} {:>8} {:>13}  kept",
         "effect",
         "compensator",
         "rms",
         "max |e|",
-        "rms cut"
+        "rms cut",
+        "effects' cut"
     );
     say!(
-        "  {:<24} {:<22} {:>12.4e} {:>12.4e} {:>8}",
-        "(none)",
-        "feedback only",
+        "  {:<24} {:<22} {:>12.4e} {:>12.4e}",
+        "(nominal plant)",
+        "your loop",
+        r.nominal.rms,
+        r.nominal.max_abs
+    );
+    say!(
+        "  {:<24} {:<22} {:>12.4e} {:>12.4e} {:>8} {:>13}",
+        "(augmented plant)",
+        "your loop",
         r.before.rms,
         r.before.max_abs,
+        "—",
         "—"
     );
     for c in &r.compensators {
         say!(
-            "  {:<24} {:<22} {:>12.4e} {:>12.4e} {:>7.1}%  {}",
+            "  {:<24} {:<22} {:>12.4e} {:>12.4e} {:>7.1}% {:>12.1}%  {}",
             c.effect,
             c.type_name,
             c.alone.rms,
             c.alone.max_abs,
             c.cut_percent,
+            c.effect_error_cut_percent,
             if c.kept { "yes" } else { "no" }
         );
     }
@@ -181,6 +191,11 @@ fn print(o: &Outcome) {
         r.before.max_abs,
         r.after.max_abs,
         r.max_cut_percent
+    );
+    say!(
+        "  (effects' cut: of the error the effects cause, e − e on the nominal plant: {:.4e} before, {:.4e} compensated)",
+        r.effect_error_before,
+        r.effect_error_after
     );
     for c in &r.compensators {
         say!("\n{} ({}): {}", c.block, c.effect, c.why);

@@ -147,6 +147,9 @@ pub struct CompensatorReport {
     pub alone: ErrorStats,
     /// Cut of the rms with it alone (%).
     pub cut_percent: f64,
+    /// Cut (%) of the error the effects cause (e − e of the loop without
+    /// them, rms over the scored window) with it alone.
+    pub effect_error_cut_percent: f64,
     /// Whether it is in the compensated graph.
     pub kept: bool,
     /// Why it was dropped, or a caveat.
@@ -182,8 +185,15 @@ pub struct Report {
     pub from_s: f64,
     /// The effects named, in order.
     pub effects: Vec<NamedEffect>,
+    /// The user's loop as it is (on the nominal plant, no effects).
+    pub nominal: ErrorStats,
     /// The loop on the augmented model without compensation.
     pub before: ErrorStats,
+    /// rms of the error the effects cause, e − e_nominal, over the scored
+    /// window: before, and with the kept compensators.
+    pub effect_error_before: f64,
+    /// The same with the kept compensators.
+    pub effect_error_after: f64,
     /// One per compensator, in the order of the effects.
     pub compensators: Vec<CompensatorReport>,
     /// All compensators together (`None` when fewer than two).
@@ -272,6 +282,9 @@ pub fn compensate(
         }
     }
     let before = simulate(&validation, &info, "the loop on the augmented model")?;
+    let nominal = simulate(&base, &info, "the loop on the nominal plant")?;
+    let excess = |t: &Trial| effect_error(t, &nominal, info.from_s);
+    let excess_before = excess(&before);
     let mut reports = Vec::new();
     let mut alone_traces = Vec::new();
     for c in &comps {
@@ -289,6 +302,7 @@ pub fn compensate(
             design: c.design.clone(),
             alone: t.stats,
             cut_percent: cut,
+            effect_error_cut_percent: 100.0 * (1.0 - excess(&t) / excess_before),
             kept: helps || opts.keep,
             note: match (helps, opts.keep) {
                 (true, _) => c.note.clone(),
@@ -337,7 +351,10 @@ pub fn compensate(
         error_signal: info.error.clone(),
         from_s: info.from_s,
         effects: effects.to_vec(),
+        nominal: nominal.stats,
         before: before.stats,
+        effect_error_before: excess_before,
+        effect_error_after: excess(&after),
         compensators: reports,
         all,
         after: after.stats,
@@ -578,6 +595,18 @@ fn simulate(spec: &GraphSpec, info: &LoopInfo, variant: &str) -> Result<Trial, C
         t,
         e: log.data.clone(),
     })
+}
+
+/// rms over t ≥ `from_s` of the difference of two error traces.
+fn effect_error(t: &Trial, nominal: &Trial, from_s: f64) -> f64 {
+    let (mut sum, mut n) = (0.0, 0usize);
+    for ((time, e), e0) in t.t.iter().zip(&t.e).zip(&nominal.e) {
+        if *time >= from_s {
+            sum += (e - e0) * (e - e0);
+            n += 1;
+        }
+    }
+    (sum / n.max(1) as f64).sqrt()
 }
 
 fn gate(

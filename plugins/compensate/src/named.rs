@@ -208,9 +208,18 @@ pub(crate) fn locate(
                 s,
             });
         }
+        // The sum another effect added at the plant input passes the drive on.
+        let helper_sum = |b: &str| {
+            effect_blocks
+                .iter()
+                .any(|n| b.starts_with(&format!("{n}_sum")))
+        };
         match dests.as_slice() {
             [] => return Err(place_err("its output `y` feeds nothing".into())),
             [one] if is_effect(split(one).0) && split(one).1 == "u" => {
+                at = format!("{}.y", split(one).0);
+            }
+            [one] if helper_sum(split(one).0) && split(one).1 == "in0" => {
                 at = format!("{}.y", split(one).0);
             }
             [one] => {

@@ -385,7 +385,7 @@ pub(crate) fn synthesise(
             let (lo, hi) = (x[0], x[x.len() - 1]);
             make(
                 json!({"type": "gain_scheduled", "controller": {"type": "gain", "k": 1.0},
-                       "schedule": {"laws": [{"kind": "table", "x": x, "gain": gain}]}}),
+                       "schedule": [{"kind": "table", "x": x, "gain": gain}]}),
                 "gain scheduling (2.13): the drive times 1/g(position) of the fitted gain, so the loop gain does not move with position",
                 format!(
                     "before the plant, on the connection into {to}, scheduled on {}",
@@ -561,7 +561,11 @@ fn plant_input(
             .filter(|c| split(&c.to).0 == b)
             .map(|c| c.to.as_str())
             .collect();
-        if role(&b) == Some(Role::Plant) && !into.is_empty() {
+        // The plant: a block with the plant role, or the one the controller drives.
+        let driven = into.len() == 1
+            && source_of(controller, into[0])
+                .is_some_and(|src| role(split(src).0) == Some(Role::Controller));
+        if (role(&b) == Some(Role::Plant) || driven) && !into.is_empty() {
             return Ok(into[0].to_string());
         }
         match into.as_slice() {
@@ -576,7 +580,9 @@ fn plant_input(
     Err(CompError::NoPlace {
         graph: opts.controller_name.clone(),
         effect: effect.to_string(),
-        problem: format!("no plant (a block with the plant role) upstream of `{signal}`"),
+        problem: format!(
+            "no plant (a block with the plant role, or driven by a controller) upstream of `{signal}`"
+        ),
         fix: "measure the plant's output through single-input blocks (sensor, demux)".into(),
     })
 }
