@@ -276,6 +276,21 @@ mod tests {
         }
     }
 
+    /// Real-time discipline: no allocation per tick.
+    #[test]
+    fn ticks_do_not_allocate() {
+        let mut inv = HysteresisInverse::new(0.03, 1.0, 0.7);
+        inv.build(&BuildContext::new("inv", 1e-3, 0)).unwrap();
+        let mut y = [0.0; 2];
+        let info = allocation_counter::measure(|| {
+            for k in 0..10_000u64 {
+                let w = 30.0 * (k as f64 * 1e-3).sin();
+                inv.output(Tick::new(k, 1e-3), &[w], &mut y);
+            }
+        });
+        assert_eq!(info.count_total, 0, "{info:?}");
+    }
+
     #[test]
     fn a_non_positive_slope_is_refused_by_name() {
         let mut inv = HysteresisInverse::new(0.03, 1.0, -0.1);

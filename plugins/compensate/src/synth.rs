@@ -629,7 +629,7 @@ fn repetitive(
     let period = num(params, "period");
     let exact = period * rate;
     let n = exact.round();
-    if !(n >= 8.0 && n <= 1e7) {
+    if !(8.0..=1e7).contains(&n) {
         return Err(design_err(format!(
             "the period {period:e} s is {exact:.1} samples at the controller's {rate} Hz: repetitive control needs 8 to 10⁷"
         )));
@@ -665,7 +665,7 @@ fn repetitive(
     let l = learning
         .build_named("learning", dt)
         .map_err(|e| design_err(format!("L = ZPETC(T): {e}")))?;
-    let taps = 31usize.min(if n % 2 == 0 { n - 1 } else { n - 2 });
+    let taps = 31usize.min(if n.is_multiple_of(2) { n - 1 } else { n - 2 });
     let qd = design_q_cutoff(t, &l, taps, 0, 0.1).map_err(|e| design_err(format!("Q: {e}")))?;
     let robustness = FilterSpec::FirLowpass {
         taps,

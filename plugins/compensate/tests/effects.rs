@@ -162,10 +162,8 @@ fn a_position_dependent_gain_gets_gain_scheduling() {
     assert!(c.design["table_from"] < centre && centre < c.design["table_to"]);
     let g0 = p.get("g0").copied().unwrap_or(0.0);
     let with = |k: &Value| k.as_f64().unwrap();
-    let block = &out.report.compensators[0];
-    let _ = block;
-    let comp = if c.kept { Some(&out.compensated) } else { None };
-    if let Some(g) = comp {
+    if c.kept {
+        let g = &out.compensated;
         let b = g
             .blocks
             .iter()
