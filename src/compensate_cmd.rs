@@ -224,6 +224,9 @@ fn print(o: &Outcome) {
     }
 }
 
+/// A trace (time, error) to the (x, y) of a plot.
+type Transform<'a> = dyn Fn(&[f64], &[f64]) -> (Vec<f64>, Vec<f64>) + 'a;
+
 /// Write the files into `out` (the staging folder).
 fn write(out: &Path, o: &Outcome, a: &Args) -> Result<(), String> {
     let io = |p: &Path| {
@@ -249,7 +252,7 @@ fn write(out: &Path, o: &Outcome, a: &Args) -> Result<(), String> {
     let json = serde_json::to_string_pretty(&o.report).map_err(|e| e.to_string())?;
     let path = out.join("report.json");
     std::fs::write(&path, json).map_err(io(&path))?;
-    let series = |f: &dyn Fn(&[f64], &[f64]) -> (Vec<f64>, Vec<f64>)| -> Vec<Series> {
+    let series = |f: &Transform<'_>| -> Vec<Series> {
         o.traces
             .iter()
             .map(|(label, t, e)| {
