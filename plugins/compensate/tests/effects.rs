@@ -211,3 +211,112 @@ fn quantization_is_stated_with_the_floor_it_sets() {
     assert_eq!(out.compensated.blocks.len(), 4);
     assert_eq!(r.after, r.before);
 }
+
+#[test]
+fn a_coupling_on_the_measurement_is_decoupled() {
+    let rec = generate::two_axis("axis_coupling", 1, 8000).unwrap();
+    let nominal = GraphSpec::from_yaml(&rec.nominal_yaml, "nominal.yaml").unwrap();
+    let rep = diagnose(&nominal, &rec.data, &diagnose::Options::default()).unwrap();
+    assert_eq!(
+        rep.found.first().map(String::as_str),
+        Some("axis_coupling"),
+        "{}",
+        rec.truth
+    );
+    // Two PID loops: x holds a set-point, y tracks a 5 Hz sine; x is scored.
+    let loop_for = |axis: &str, reference: &str| {
+        let stage = nominal
+            .blocks
+            .iter()
+            .find(|b| b.name == format!("stage_{axis}"))
+            .unwrap();
+        let mut g = controller(&surgery::block_to_json(stage.block.as_ref()), reference);
+        // Every block gets the axis suffix (the stage already has it).
+        let name = |b: &str| {
+            if b.starts_with("stage") {
+                b.to_string()
+            } else {
+                format!("{b}_{axis}")
+            }
+        };
+        let signal = |sig: &str| {
+            let (b, p) = sig.split_once('.').unwrap();
+            format!("{}.{p}", name(if b == "stage" { &stage.name } else { b }))
+        };
+        for b in &mut g.blocks {
+            b.name = if b.name == "stage" {
+                stage.name.clone()
+            } else {
+                name(&b.name)
+            };
+        }
+        for c in &mut g.connections {
+            c.from = signal(&c.from);
+            c.to = signal(&c.to);
+        }
+        for sc in &mut g.score {
+            sc.signal = signal(&sc.signal);
+        }
+        g
+    };
+    let mut two = loop_for("x", "type: constant, value: 1.0e-6");
+    let y = loop_for("y", "type: sinusoid, amplitude: 1.0e-6, frequency_hz: 5.0");
+    two.blocks.extend(y.blocks);
+    two.connections.extend(y.connections);
+    let out = compensate(
+        rep.augmented.as_ref().unwrap(),
+        &two,
+        &named::from_report(&rep),
+        &Options::default(),
+    )
+    .unwrap();
+    eprintln!(
+        "{}: {}",
+        rec.truth,
+        serde_json::to_string_pretty(&out.report).unwrap()
+    );
+    let c = &out.report.compensators[0];
+    assert_eq!(c.type_name, "axis_coupling");
+    // The decoupling is minus the fitted coupling, read from the other axis.
+    let fitted = rep.steps[0].final_params.values().next().copied().unwrap();
+    let b = out
+        .compensated
+        .blocks
+        .iter()
+        .find(|b| b.name == "comp_axis_coupling")
+        .unwrap();
+    let coupling = surgery::block_to_json(b.block.as_ref())["coupling"][0]
+        .as_f64()
+        .unwrap();
+    assert_eq!(coupling, -fitted);
+    // ... and minus the true coupling κ of the generator (`y = x1 + κ·x2`) within 5 %.
+    let kappa: f64 = rec
+        .truth
+        .trim_start_matches("y = x1 + ")
+        .trim_end_matches("·x2")
+        .parse()
+        .unwrap();
+    assert!(
+        (coupling + kappa).abs() < 0.05 * kappa.abs(),
+        "{coupling} vs κ = {kappa}"
+    );
+    assert!(connected(
+        &out.compensated,
+        "stage_y.y",
+        "comp_axis_coupling.s"
+    ));
+    assert!(connected(
+        &out.compensated,
+        "stage_x.y",
+        "comp_axis_coupling.u"
+    ));
+    assert!(connected(
+        &out.compensated,
+        "comp_axis_coupling.y",
+        "err_x.in1"
+    ));
+    // The x loop's measured error is then the nominal one (the set-point held):
+    // the coupled motion of y is gone from it.
+    assert!(out.report.cut_percent > 90.0, "{}", out.report.cut_percent);
+    assert!(out.report.after.rms < 0.1 * out.report.before.rms);
+}
