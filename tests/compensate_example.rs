@@ -181,5 +181,76 @@ fn example_is_generated_diagnosed_and_compensated_from_the_command_line() {
         stderr.contains("plf_nothing") && stderr.contains("fix:"),
         "{stderr}"
     );
+    // An effect name outside the vocabulary: no compensator exists for it.
+    std::fs::write(
+        &wrong_report,
+        r#"{"steps": [{"effect": "wobble", "block": {"name": "plf_hysteresis", "type": "hysteresis"}, "site": ""}]}"#,
+    )
+    .unwrap();
+    let (ok, _, stderr) = cli(&[
+        "compensate",
+        &aug,
+        "examples/compensate/controller.yaml",
+        "--report",
+        &wr,
+        "--out",
+        &b,
+    ]);
+    assert!(!ok);
+    assert!(
+        stderr.contains("wobble")
+            && stderr.contains("fix:")
+            && stderr.contains("hysteresis, friction"),
+        "{stderr}"
+    );
+    // A reference that is not a block map.
+    let not_block = wrong.join("ref.yaml");
+    std::fs::write(&not_block, "amplitude: 1.0e-5\n").unwrap();
+    let nb = not_block.display().to_string();
+    let (ok, _, stderr) = cli(&[
+        "compensate",
+        &aug,
+        "examples/compensate/controller.yaml",
+        "--reference",
+        &nb,
+        "--out",
+        &b,
+    ]);
+    assert!(!ok);
+    assert!(
+        stderr.contains("ref.yaml") && stderr.contains("fix:"),
+        "{stderr}"
+    );
     assert!(!bad.exists(), "a refused command left {b}");
+
+    // Validation on another reference (a third of the stroke): the report's
+    // loop is judged on it; the written graph keeps the user's reference.
+    let slow = wrong.join("slow.yaml");
+    std::fs::write(
+        &slow,
+        "{ type: triangular_scan, amplitude: 5.0e-6, frequency_hz: 0.25, offset: 48.77e-6 }\n",
+    )
+    .unwrap();
+    let sl = slow.display().to_string();
+    let other = scratch("compensate_example_reference");
+    let ot = other.display().to_string();
+    let (ok, stdout, stderr) = cli(&[
+        "compensate",
+        &aug,
+        "examples/compensate/controller.yaml",
+        "--reference",
+        &sl,
+        "--out",
+        &ot,
+    ]);
+    assert!(ok, "{stdout}\n{stderr}");
+    let r2: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(other.join("report.json")).unwrap()).unwrap();
+    assert_ne!(r2["before"]["rms"], report["before"]["rms"]);
+    let kept = GraphSpec::from_file(other.join("compensated.yaml")).unwrap();
+    let r = kept.blocks.iter().find(|b| b.name == "ref").unwrap();
+    assert_eq!(
+        nanomotion::plf::surgery::block_to_json(r.block.as_ref())["amplitude"],
+        15.0e-6
+    );
 }

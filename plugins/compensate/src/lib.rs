@@ -254,6 +254,19 @@ pub fn compensate(
             fix: "run `nanomotion diagnose` on a record and give its model_augmented.yaml and report.json".into(),
         });
     }
+    if let Some(e) = effects
+        .iter()
+        .find(|e| nanomotion_plf::effects::Effect::from_name(&e.effect).is_none())
+    {
+        return Err(CompError::Input {
+            place: format!("the report: effect `{}` (block `{}`)", e.effect, e.block),
+            problem: "is not a name of the diagnosis's vocabulary, so it has no compensator".into(),
+            fix: format!(
+                "give the report `nanomotion diagnose` wrote; the names are {}",
+                nanomotion_plf::diagnose::vocabulary().join(", ")
+            ),
+        });
+    }
     let info = LoopInfo {
         error: score.signal.clone(),
         from_s: score.from_s,
