@@ -36,10 +36,12 @@ pub(crate) enum Edit {
     SubtractAt { to: String, reads: String },
     /// In the measurement path after `signal`; port `s` reads `s`.
     Sensor { signal: String, s: Vec<String> },
-    /// Learning on the error (Fig. 5.1): `e` ← error, error + `w` → `controller_input`.
+    /// Learning on the error (Fig. 5.1): `e` ← error, error + `w` → `controller_input`;
+    /// DVRC's `alpha` ← `alpha`.
     Learning {
         error: String,
         controller_input: String,
+        alpha: Option<String>,
     },
     /// Before `to`, its `sigma` reading `sigma`.
     Scheduled { to: String, sigma: String },
@@ -184,6 +186,7 @@ impl Compensator {
             Edit::Learning {
                 error,
                 controller_input,
+                alpha,
             } => {
                 let rate = surgery::rate_of(spec, split(controller_input).0);
                 let name = surgery::fresh_name(spec, &self.name);
@@ -210,6 +213,9 @@ impl Compensator {
                 connect(spec, error.clone(), format!("{sum}.in0"));
                 connect(spec, format!("{name}.w"), format!("{sum}.in1"));
                 connect(spec, error.clone(), format!("{name}.e"));
+                if let Some(a) = alpha {
+                    connect(spec, a.clone(), format!("{name}.alpha"));
+                }
             }
         }
         Ok(())
@@ -317,17 +323,19 @@ pub(crate) fn synthesise(
         ),
         ("repetitive_disturbance", _) => {
             if params.get("variable").and_then(Value::as_str) == Some("signal") {
-                return Ok(none(
-                    &e.effect,
-                    format!(
-                        "periodic in {} (period {:.4e} in its unit), not in time: it needs delay-varying RC (5.7)–(5.8) on that signal, not synthesised in this version",
-                        placement.s.first().map_or("a signal", String::as_str),
-                        num(params, "period")
+                match placement.s.first() {
+                    Some(alpha) => {
+                        delay_varying(e, params, alpha, controller, info, opts, &name)?
+                    }
+                    None => none(
+                        &e.effect,
+                        "periodic in a signal the augmented model does not wire: no delay-varying RC".into(),
+                        &[("period", num(params, "period"))],
                     ),
-                    &[("period", num(params, "period"))],
-                ));
+                }
+            } else {
+                repetitive(e, params, controller, info, opts, &name)?
             }
-            repetitive(e, params, controller, info, opts, &name)?
         }
         ("friction", Where::Feedback { to, .. }) => {
             let r = reference_of(controller, info, &opts.controller_name, &e.effect)?;
@@ -587,34 +595,31 @@ fn plant_input(
     })
 }
 
-/// Standard RC (5.1) on a disturbance periodic in time: N from the fitted period
-/// at the controller's rate, L = ZPETC of the loop's T (from the stability gate's
-/// loop model of the user's graph), Q the FIR low-pass with the largest cut-off
-/// that keeps (5.5) with 10 % margin, and (5.5) evaluated for the report.
-fn repetitive(
+/// The controller input fed by the scored error (where RC adds its output).
+fn controller_input(
     e: &crate::NamedEffect,
-    params: &Value,
     controller: &GraphSpec,
     info: &LoopInfo,
     opts: &Options,
-    name: &str,
-) -> Result<Outcome, CompError> {
-    let design_err = |problem: String| CompError::Design {
-        effect: e.effect.clone(),
-        problem,
-    };
-    // The controller reading the error.
-    let ctrl_in = controller
+) -> Result<String, CompError> {
+    // The reader with the controller role, or the only reader (a plain gain).
+    let readers: Vec<&str> = controller
         .connections
         .iter()
-        .find(|c| {
-            c.from == info.error
-                && controller
-                    .blocks
-                    .iter()
-                    .any(|b| b.name == split(&c.to).0 && b.block.role() == Role::Controller)
-        })
-        .map(|c| c.to.clone())
+        .filter(|c| c.from == info.error)
+        .map(|c| c.to.as_str())
+        .collect();
+    let is_controller = |to: &&&str| {
+        controller
+            .blocks
+            .iter()
+            .any(|b| b.name == split(to).0 && b.block.role() == Role::Controller)
+    };
+    readers
+        .iter()
+        .find(is_controller)
+        .or(if readers.len() == 1 { readers.first() } else { None })
+        .map(|to| to.to_string())
         .ok_or_else(|| CompError::NoPlace {
             graph: opts.controller_name.clone(),
             effect: e.effect.clone(),
@@ -623,38 +628,41 @@ fn repetitive(
                 info.error
             ),
             fix: "score the error signal that feeds the controller".into(),
-        })?;
-    let rate = surgery::rate_of(controller, split(&ctrl_in).0).unwrap_or(controller.base_rate_hz);
-    let dt = 1.0 / rate;
-    let period = num(params, "period");
-    let exact = period * rate;
-    let n = exact.round();
-    if !(8.0..=1e7).contains(&n) {
-        return Err(design_err(format!(
-            "the period {period:e} s is {exact:.1} samples at the controller's {rate} Hz: repetitive control needs 8 to 10⁷"
-        )));
-    }
-    let n = n as usize;
-    // T of the loop, as the stability gate sees it with the RC's output removed.
-    let mut trial = crate::clone(controller, &opts.controller_name)?;
-    let trial_comp = Compensator {
-        effect: e.effect.clone(),
-        name: name.to_string(),
-        block: json!({"type": "repetitive_control", "n": n}),
-        why: String::new(),
-        place: String::new(),
-        design: BTreeMap::new(),
-        note: None,
-        edit: Edit::Learning {
-            error: info.error.clone(),
-            controller_input: ctrl_in.clone(),
-        },
+        })
+}
+
+/// A learning block's design from the loop: L = ZPETC(T) of the loop's T (the
+/// stability gate's model of the user's graph with the block's output removed),
+/// Q the FIR of the largest cut-off keeping (5.5)/(5.9) for delays
+/// [n_min, n_max] with 10 % margin, and the criterion.
+struct LearningDesign {
+    learning: FilterSpec,
+    robustness: FilterSpec,
+    taps: usize,
+    cutoff_hz: f64,
+    criterion: dvrc::stability::RcCriterion,
+    preview: usize,
+}
+
+fn design_learning(
+    trial: &Compensator,
+    controller: &GraphSpec,
+    opts: &Options,
+    dt: f64,
+    n_min: usize,
+    n_max: usize,
+) -> Result<LearningDesign, CompError> {
+    let design_err = |problem: String| CompError::Design {
+        effect: trial.effect.clone(),
+        problem,
     };
-    trial_comp.apply(&mut trial, controller, opts)?;
-    let ts = dvrc::check::graph_loop_ts(trial).map_err(design_err)?;
-    let t = ts.get(name).ok_or_else(|| {
+    let mut g = crate::clone(controller, &opts.controller_name)?;
+    trial.apply(&mut g, controller, opts)?;
+    let ts = dvrc::check::graph_loop_ts(g).map_err(design_err)?;
+    let t = ts.get(&trial.name).ok_or_else(|| {
         design_err(format!(
-            "the stability gate found no loop T(z) for `{name}` (is the loop linear? `nanomotion check --print-loop` shows it)"
+            "the stability gate found no loop T(z) for `{}` (is the loop linear? `nanomotion check --print-loop` shows it)",
+            trial.name
         ))
     })?;
     let tf = t.to_tf().map_err(|e| design_err(format!("T(z): {e}")))?;
@@ -665,8 +673,13 @@ fn repetitive(
     let l = learning
         .build_named("learning", dt)
         .map_err(|e| design_err(format!("L = ZPETC(T): {e}")))?;
-    let taps = 31usize.min(if n.is_multiple_of(2) { n - 1 } else { n - 2 });
-    let qd = design_q_cutoff(t, &l, taps, 0, 0.1).map_err(|e| design_err(format!("Q: {e}")))?;
+    let taps = 31usize.min(if n_min.is_multiple_of(2) {
+        n_min - 1
+    } else {
+        n_min - 2
+    });
+    let qd = design_q_cutoff(t, &l, taps, n_max - n_min, 0.1)
+        .map_err(|e| design_err(format!("Q: {e}")))?;
     let robustness = FilterSpec::FirLowpass {
         taps,
         cutoff_hz: qd.cutoff_hz,
@@ -674,48 +687,226 @@ fn repetitive(
     let q = robustness
         .build_named("robustness", dt)
         .map_err(|e| design_err(format!("Q: {e}")))?;
-    let c = rc_criterion(t, &l, &q, n, n).map_err(|e| design_err(format!("(5.5): {e}")))?;
+    let c =
+        rc_criterion(t, &l, &q, n_min, n_max).map_err(|e| design_err(format!("criterion: {e}")))?;
     if !c.holds() {
         return Err(design_err(format!(
-            "criterion (5.5) fails with the designed Q: ‖Q(1 − T L z^l)‖∞ = {:.3} ≥ 1",
-            c.hinf
+            "criterion {} fails with the designed Q: ‖Q(1 − T L z^l)‖∞ = {:.3} ≥ {:.3}",
+            if n_min == n_max { "(5.5)" } else { "(5.9)" },
+            c.hinf,
+            c.bound
         )));
     }
+    Ok(LearningDesign {
+        learning,
+        robustness,
+        taps,
+        cutoff_hz: qd.cutoff_hz,
+        criterion: c,
+        preview: l.preview_samples(),
+    })
+}
+
+fn learning_figures(d: &LearningDesign, tag: &str) -> Vec<(String, f64)> {
+    vec![
+        ("q_taps".into(), d.taps as f64),
+        ("q_cutoff_hz".into(), d.cutoff_hz),
+        (format!("criterion_{tag}_hinf"), d.criterion.hinf),
+        (format!("criterion_{tag}_bound"), d.criterion.bound),
+        (format!("criterion_{tag}_peak_hz"), d.criterion.peak_hz),
+        ("l_preview".into(), d.preview as f64),
+    ]
+}
+
+/// Standard RC (5.1) on a disturbance periodic in time: N from the fitted period
+/// at the controller's rate, L and Q from [`design_learning`], (5.5) reported.
+fn repetitive(
+    e: &crate::NamedEffect,
+    params: &Value,
+    controller: &GraphSpec,
+    info: &LoopInfo,
+    opts: &Options,
+    name: &str,
+) -> Result<Outcome, CompError> {
+    let ctrl_in = controller_input(e, controller, info, opts)?;
+    let rate = surgery::rate_of(controller, split(&ctrl_in).0).unwrap_or(controller.base_rate_hz);
+    let dt = 1.0 / rate;
+    let period = num(params, "period");
+    let exact = period * rate;
+    let n = exact.round();
+    if !(8.0..=1e7).contains(&n) {
+        return Err(CompError::Design {
+            effect: e.effect.clone(),
+            problem: format!(
+                "the period {period:e} s is {exact:.1} samples at the controller's {rate} Hz: repetitive control needs 8 to 10⁷"
+            ),
+        });
+    }
+    let n = n as usize;
+    let edit = Edit::Learning {
+        error: info.error.clone(),
+        controller_input: ctrl_in.clone(),
+        alpha: None,
+    };
+    let trial = Compensator {
+        effect: e.effect.clone(),
+        name: name.to_string(),
+        block: json!({"type": "repetitive_control", "n": n}),
+        why: String::new(),
+        place: String::new(),
+        design: BTreeMap::new(),
+        note: None,
+        edit: edit.clone(),
+    };
+    let d = design_learning(&trial, controller, opts, dt, n, n)?;
     let block = json!({
         "type": "repetitive_control",
         "n": n,
-        "learning": serde_json::to_value(&learning).unwrap_or(Value::Null),
-        "robustness": serde_json::to_value(&robustness).unwrap_or(Value::Null),
+        "learning": serde_json::to_value(&d.learning).unwrap_or(Value::Null),
+        "robustness": serde_json::to_value(&d.robustness).unwrap_or(Value::Null),
     });
     let off = exact - n as f64;
+    let mut design: BTreeMap<String, f64> = [
+        ("n".to_string(), n as f64),
+        ("period_s".to_string(), period),
+        ("period_samples".to_string(), exact),
+    ]
+    .into_iter()
+    .collect();
+    design.extend(learning_figures(&d, "5_5"));
     Ok(Outcome::Compensator(Compensator {
         effect: e.effect.clone(),
         name: name.to_string(),
         block,
         why: "standard repetitive control (5.1): memory of one period N, L = ZPETC of the loop's T, Q the FIR low-pass with the largest cut-off keeping (5.5)".into(),
         place: format!("on the error {} before {} (Fig. 5.1)", info.error, ctrl_in),
-        design: [
-            ("n", n as f64),
-            ("period_s", period),
-            ("period_samples", exact),
-            ("q_taps", taps as f64),
-            ("q_cutoff_hz", qd.cutoff_hz),
-            ("criterion_5_5_hinf", c.hinf),
-            ("criterion_5_5_bound", c.bound),
-            ("criterion_5_5_peak_hz", c.peak_hz),
-            ("l_preview", l.preview_samples() as f64),
-        ]
-        .into_iter()
-        .map(|(k, v)| (k.to_string(), v))
-        .collect(),
+        design,
         note: (off.abs() > 0.05).then(|| {
             format!(
                 "the period is {exact:.2} samples; N = {n} leaves {off:+.2} samples per period, which the memory cannot learn exactly"
             )
         }),
-        edit: Edit::Learning {
-            error: info.error.clone(),
-            controller_input: ctrl_in,
-        },
+        edit,
+    }))
+}
+
+/// Delay-varying RC (5.7)–(5.8) on a disturbance periodic in a signal (the
+/// position): α = that signal, P_α the fitted period, the delay range [m, M]
+/// from the user's loop simulated on the nominal plant (how many controller
+/// samples the signal takes to advance one period over the scored window), L and
+/// Q from [`design_learning`] with (5.9) for that range.
+fn delay_varying(
+    e: &crate::NamedEffect,
+    params: &Value,
+    alpha: &str,
+    controller: &GraphSpec,
+    info: &LoopInfo,
+    opts: &Options,
+    name: &str,
+) -> Result<Outcome, CompError> {
+    let design_err = |problem: String| CompError::Design {
+        effect: e.effect.clone(),
+        problem,
+    };
+    if !crate::has_block(controller, split(alpha).0) {
+        return Err(CompError::NoPlace {
+            graph: opts.controller_name.clone(),
+            effect: e.effect.clone(),
+            problem: format!(
+                "has no block `{}` for the signal `{alpha}` the disturbance is periodic in",
+                split(alpha).0
+            ),
+            fix: "name the plant's position as in the model you diagnosed".into(),
+        });
+    }
+    let ctrl_in = controller_input(e, controller, info, opts)?;
+    let rate = surgery::rate_of(controller, split(&ctrl_in).0).unwrap_or(controller.base_rate_hz);
+    let period = num(params, "period");
+    // The signal over the scored window of the user's loop.
+    let mut g = crate::clone(controller, &opts.controller_name)?;
+    g.log = vec![alpha.to_string()];
+    g.score.clear();
+    let (mut sched, _) = g.build().map_err(|e| design_err(e.to_string()))?;
+    let run = sched.run(|_| {});
+    let log = run
+        .logs
+        .first()
+        .ok_or_else(|| design_err("no log".into()))?;
+    let from = (info.from_s * log.rate_hz).ceil() as usize;
+    let x = log.data.get(from..).unwrap_or(&[]);
+    if period.is_nan() || period <= 0.0 || x.len() < 2 || x[x.len() - 1] - x[0] < 2.0 * period {
+        return Err(design_err(format!(
+            "`{alpha}` advances {:.3e} over the scored window, less than two periods ({:.3e}): delay-varying RC needs the signal to move forward through the period",
+            x.last().zip(x.first()).map_or(0.0, |(b, a)| b - a),
+            2.0 * period
+        )));
+    }
+    // Delay (in samples of the log) back to where the signal was one period lower.
+    let (mut lo, mut hi) = (f64::INFINITY, 0.0f64);
+    let mut j = 0usize;
+    for k in 0..x.len() {
+        while j + 1 < k && x[j + 1] <= x[k] - period {
+            j += 1;
+        }
+        if x[j] <= x[k] - period {
+            lo = lo.min((k - j) as f64);
+            hi = hi.max((k - j) as f64);
+        }
+    }
+    if x.windows(2).any(|w| w[1] < w[0]) {
+        return Err(design_err(format!(
+            "`{alpha}` moves backwards in the scored window: the delay-varying memory follows a signal that only advances (DVRC, (5.7))"
+        )));
+    }
+    let scale = rate / log.rate_hz;
+    let n_min = ((lo * scale).floor() as usize).saturating_sub(1);
+    let n_max = (hi * scale).ceil() as usize + 1;
+    if n_min < 8 || n_max > 10_000_000 {
+        return Err(design_err(format!(
+            "the delay ranges over [{n_min}, {n_max}] samples: delay-varying RC needs 8 to 10⁷"
+        )));
+    }
+    let edit = Edit::Learning {
+        error: info.error.clone(),
+        controller_input: ctrl_in.clone(),
+        alpha: Some(alpha.to_string()),
+    };
+    let base = json!({"type": "dvrc", "period_alpha": period, "n_min": n_min, "n_max": n_max});
+    let trial = Compensator {
+        effect: e.effect.clone(),
+        name: name.to_string(),
+        block: base.clone(),
+        why: String::new(),
+        place: String::new(),
+        design: BTreeMap::new(),
+        note: None,
+        edit: edit.clone(),
+    };
+    let d = design_learning(&trial, controller, opts, 1.0 / rate, n_min, n_max)?;
+    let mut block = base;
+    block["learning"] = serde_json::to_value(&d.learning).unwrap_or(Value::Null);
+    block["robustness"] = serde_json::to_value(&d.robustness).unwrap_or(Value::Null);
+    let mut design: BTreeMap<String, f64> = [
+        ("period".to_string(), period),
+        ("n_min".to_string(), n_min as f64),
+        ("n_max".to_string(), n_max as f64),
+    ]
+    .into_iter()
+    .collect();
+    design.extend(learning_figures(&d, "5_9"));
+    Ok(Outcome::Compensator(Compensator {
+        effect: e.effect.clone(),
+        name: name.to_string(),
+        block,
+        why: format!(
+            "delay-varying repetitive control (5.7)–(5.8) on {alpha}: the memory delay N_k follows the signal over one period, L = ZPETC of the loop's T, Q the FIR low-pass with the largest cut-off keeping (5.9)"
+        ),
+        place: format!(
+            "on the error {} before {} (Fig. 5.1), α = {alpha}",
+            info.error, ctrl_in
+        ),
+        design,
+        note: None,
+        edit,
     }))
 }
