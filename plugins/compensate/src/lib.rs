@@ -11,10 +11,13 @@
 //! first `score:` entry is the tracking error). [`compensate`] then
 //!
 //! 1. synthesises one compensator per effect ([`synth`]), from the thesis where
-//!    it has one: the exact inverse of the fitted Coleman–Hodgdon hysteresis
-//!    before the actuator ((6.6), [`inverse`]); standard repetitive control (5.1)
-//!    with L = ZPETC(T) of the loop's own T and the FIR Q of the largest cut-off
-//!    that keeps (5.5), the criterion reported; friction feed-forward from the
+//!    it has one: the inverse hysteresis feed-forward (6.6) before the actuator
+//!    (the exact Lambert-W inverse of the fitted Coleman–Hodgdon loop,
+//!    [`inverse`], fed with the reference through the nominal's static gain and
+//!    the feedback); standard repetitive control (5.1) — or delay-varying RC
+//!    (5.7)–(5.8) for a disturbance periodic in the position — with L =
+//!    ZPETC(T) of the loop's own T and the FIR Q of the largest cut-off that
+//!    keeps (5.5)/(5.9), the criterion reported; friction feed-forward from the
 //!    reference velocity; the inverse of a fitted pole–zero pair (a notch); gain
 //!    scheduling (2.13) on 1/g of a position-dependent gain; static decoupling;
 //!    and for the rest a stated "no compensation: this is what it limits";
