@@ -10,6 +10,7 @@
 //! | `unmodeled_resonance` | its inverse R⁻¹ (poles ↔ zeros): a notch | `unmodeled_resonance` | before the plant |
 //! | `position_dependent_gain` | gain scheduling (2.13) on 1/g(position) | `gain_scheduled` | before the plant |
 //! | `axis_coupling` (on the measurement) | static decoupling −c | `axis_coupling` | in the measurement path |
+//! | `creep` (on the drive) | its exact discrete inverse (creep feed-forward) | `state_space` | before the actuator |
 //! | the rest | none; the report says what it limits | — | — |
 
 use crate::named::{Placement, Where, source_of, split};
@@ -429,6 +430,34 @@ pub(crate) fn synthesise(
                 },
             )
         }
+        ("creep", Where::Input { to }) => {
+            let terms: Vec<(f64, f64)> = params
+                .get("terms")
+                .and_then(Value::as_array)
+                .map(|v| {
+                    v.iter()
+                        .map(|t| (num(t, "gain"), num(t, "tau_s")))
+                        .collect()
+                })
+                .unwrap_or_default();
+            let dt =
+                1.0 / surgery::rate_of(controller, split(to).0).unwrap_or(controller.base_rate_hz);
+            match creep_inverse(&terms, dt) {
+                Some(block) => make(
+                    block,
+                    "creep feed-forward: the exact inverse of the fitted creep (the sum of first-order lags, discretised as the effect block is), so the drive's creep cancels",
+                    format!("before the actuator, on the connection into {to}"),
+                    &[("dc_gain", 1.0 / (1.0 + terms.iter().map(|t| t.0).sum::<f64>()))],
+                    Some("starts at rest, as the creep block does at a first input of 0".into()),
+                    Edit::Before { to: to.clone(), ff: None },
+                ),
+                None => none(
+                    &e.effect,
+                    "no compensation: the inverse of the fitted creep is unstable (a negative creep gain)".into(),
+                    &[],
+                ),
+            }
+        }
         ("quantization", _) => {
             let lsb = num(params, "lsb");
             none(
@@ -517,6 +546,41 @@ fn static_feedforward(
         )));
     }
     Ok(Ok((r, g0, y0)))
+}
+
+/// The exact discrete inverse of the `creep` block (terms (k_i, τ_i), ZOH at
+/// `dt`): with a_i = e^{−dt/τ_i}, the creep is x⁺ = a x + (1 − a)u, y = u + kᵀx,
+/// so u = w − kᵀx and x⁺ = (diag a − (1 − a)kᵀ)x + (1 − a)w. `None` when that
+/// is unstable or a term is not finite.
+fn creep_inverse(terms: &[(f64, f64)], dt: f64) -> Option<Value> {
+    let n = terms.len();
+    if n == 0
+        || terms
+            .iter()
+            .any(|(k, t)| !(k.is_finite() && t.is_finite() && *t > 0.0))
+    {
+        return None;
+    }
+    let a: Vec<f64> = terms.iter().map(|(_, t)| (-dt / t).exp()).collect();
+    let rows: Vec<Vec<f64>> = (0..n)
+        .map(|i| {
+            (0..n)
+                .map(|j| if i == j { a[i] } else { 0.0 } - (1.0 - a[i]) * terms[j].0)
+                .collect()
+        })
+        .collect();
+    let m = nalgebra::DMatrix::from_fn(n, n, |i, j| rows[i][j]);
+    if m.complex_eigenvalues().iter().any(|z| z.norm() >= 1.0) {
+        return None;
+    }
+    Some(json!({
+        "type": "state_space",
+        "a": rows,
+        "b": a.iter().map(|ai| vec![1.0 - ai]).collect::<Vec<_>>(),
+        "c": [terms.iter().map(|t| -t.0).collect::<Vec<_>>()],
+        "d": [[1.0]],
+        "discrete": true,
+    }))
 }
 
 /// 1/g on 65 points over centre ± 2·scale of a fitted `position_dependent_gain`
