@@ -469,15 +469,40 @@ pub(crate) fn synthesise(
                 &[("lsb", lsb), ("rms_floor", lsb / 12f64.sqrt())],
             )
         }
-        ("time_delay", _) => none(
-            &e.effect,
-            format!(
-                "no compensator in this version: a delay of {:.3e} s costs ω·{:.3e} rad of phase; re-tune the loop for it (or a Smith predictor)",
-                num(params, "delay_s"),
-                num(params, "delay_s")
-            ),
-            &[("delay_s", num(params, "delay_s"))],
-        ),
+        ("time_delay", _) => {
+            let d = num(params, "delay_s");
+            match loop_margins(controller) {
+                Some((pm, dm, fc)) => {
+                    let left = pm - 360.0 * fc * d;
+                    none(
+                        &e.effect,
+                        format!(
+                            "no compensator in this version (re-tune the loop for it, or a Smith predictor): the delay of {d:.3e} s costs 360°·f_c·d = {:.1}° of your loop's {pm:.1}° phase margin at its {fc:.2} Hz crossover, leaving {left:.1}° (delay margin {dm:.3e} s{})",
+                            360.0 * fc * d,
+                            if d >= dm {
+                                ": the loop is unstable with it"
+                            } else {
+                                ""
+                            }
+                        ),
+                        &[
+                            ("delay_s", d),
+                            ("phase_margin_deg", pm),
+                            ("crossover_hz", fc),
+                            ("delay_margin_s", dm),
+                            ("phase_margin_left_deg", left),
+                        ],
+                    )
+                }
+                None => none(
+                    &e.effect,
+                    format!(
+                        "no compensator in this version: a delay of {d:.3e} s costs 360°·f·d of phase at frequency f; re-tune the loop for it (or a Smith predictor)"
+                    ),
+                    &[("delay_s", d)],
+                ),
+            }
+        }
         (other, place) => none(
             other,
             format!(
@@ -546,6 +571,22 @@ fn static_feedforward(
         )));
     }
     Ok(Ok((r, g0, y0)))
+}
+
+/// Phase margin (°), delay margin (s) and gain crossover (Hz) of the first SISO
+/// loop of `controller` the stability gate analyses, if any.
+fn loop_margins(controller: &GraphSpec) -> Option<(f64, f64, f64)> {
+    let g = surgery::clone_spec(controller).ok()?;
+    let require = g.require.clone().unwrap_or_default();
+    let (sched, _) = g.build().ok()?;
+    let report = nanomotion_core::gate::analyse(&sched, &require);
+    report
+        .loops
+        .iter()
+        .flat_map(|l| l.points.first())
+        .find_map(|p| p.margins.as_ref())
+        .filter(|m| m.gain_crossover_hz.is_finite())
+        .map(|m| (m.phase_margin_deg, m.delay_margin_s, m.gain_crossover_hz))
 }
 
 /// The exact discrete inverse of the `creep` block (terms (k_i, τ_i), ZOH at

@@ -96,3 +96,38 @@ fn the_inverse_on_a_small_loop_cuts_the_error_and_passes_the_gate() {
     assert!(r.gate.passes);
     assert!(r.after.rms < r.before.rms);
 }
+
+#[test]
+fn a_time_delay_is_stated_with_the_phase_margin_it_takes() {
+    let aug = GraphSpec::from_yaml(
+        "base_rate_hz: 1000\nduration_s: 1\nblocks:\n  - { name: drive, type: data_column, column: u }\n  - { name: stage, type: state_space, a: [[0.0, 1.0], [-1000.0, -10.0]], b: [[0.0], [1000.0]], c: [[1.0, 0.0]], discretisation: zoh }\n  - { name: plf_time_delay, type: time_delay, max_delay_s: 0.01, delay_s: 0.002 }\nconnections:\n  - { from: drive.y, to: plf_time_delay.u }\n  - { from: plf_time_delay.y, to: stage.u }\ncompare:\n  - { signal: stage.y, column: y }\n",
+        "model_augmented.yaml",
+    )
+    .unwrap();
+    let out = compensate(
+        &aug,
+        &controller("score:\n  - { signal: err.y, from_s: 0.5 }\n"),
+        &named::from_graph(&aug),
+        &Options::default(),
+    )
+    .unwrap();
+    let n = &out.report.not_compensated[0];
+    assert_eq!(n.effect, "time_delay");
+    assert!(n.reason.starts_with("no compensator"), "{}", n.reason);
+    let f = &n.figures;
+    assert_eq!(f["delay_s"], 0.002);
+    // The gate's delay margin is PM/ω_c: the phase margin over 360° per cycle of
+    // the crossover; the delay takes 360°·f_c·d of it.
+    assert!(
+        (f["delay_margin_s"] - f["phase_margin_deg"] / (360.0 * f["crossover_hz"])).abs()
+            < 1e-9 * f["delay_margin_s"],
+        "{f:?}"
+    );
+    assert!(
+        (f["phase_margin_left_deg"] - (f["phase_margin_deg"] - 360.0 * f["crossover_hz"] * 0.002))
+            .abs()
+            < 1e-9,
+        "{f:?}"
+    );
+    assert!(out.report.compensators.is_empty());
+}
