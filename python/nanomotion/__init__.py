@@ -8,7 +8,8 @@ The Rust library behind the ``nanomotion`` command, in-process:
 
 - graphs: :func:`load`, :func:`check` (the stability gate), :func:`run`
   (overrides by dotted path, seed, duration, measured data; signals as numpy
-  arrays, scores), :func:`diagnose` (name what a model misses);
+  arrays, scores), :func:`diagnose` (name what a model misses),
+  :func:`compensate` (compensate what it named in a controller graph);
 - studies: :func:`sweep` over a SWEEP.yaml, on local cores or on Ray;
 - analysis: :func:`psd_welch`, :func:`cumulative_psd`, :func:`frf_h1`,
   :class:`Lti` (frequency response, poles, H∞ norm, margins);
