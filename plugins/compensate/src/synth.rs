@@ -503,6 +503,28 @@ pub(crate) fn synthesise(
                 ),
             }
         }
+        ("saturation", Where::Input { to }) => {
+            let (lo, hi) = (num(params, "lower"), num(params, "upper"));
+            let share = clipped_share(controller, to, info.from_s, lo, hi);
+            none(
+                &e.effect,
+                format!(
+                    "no compensator in this version (anti-windup: give your controller the output limits [{lo:.4e}, {hi:.4e}]): {}",
+                    match share {
+                        Some(p) => format!(
+                            "your loop on the nominal plant asks for more than the limits {:.1} % of the scored window",
+                            100.0 * p
+                        ),
+                        None => "the command into the limits could not be simulated".into(),
+                    }
+                ),
+                &[
+                    ("lower", lo),
+                    ("upper", hi),
+                    ("clipped_share", share.unwrap_or(f64::NAN)),
+                ],
+            )
+        }
         (other, place) => none(
             other,
             format!(
@@ -587,6 +609,21 @@ fn loop_margins(controller: &GraphSpec) -> Option<(f64, f64, f64)> {
         .find_map(|p| p.margins.as_ref())
         .filter(|m| m.gain_crossover_hz.is_finite())
         .map(|m| (m.phase_margin_deg, m.delay_margin_s, m.gain_crossover_hz))
+}
+
+/// Share of the samples from `from_s` on where the command into `to` lies
+/// outside [lo, hi], in the user's loop on the nominal plant.
+fn clipped_share(controller: &GraphSpec, to: &str, from_s: f64, lo: f64, hi: f64) -> Option<f64> {
+    let command = source_of(controller, to)?.to_string();
+    let mut g = surgery::clone_spec(controller).ok()?;
+    g.log = vec![command];
+    g.score.clear();
+    let (mut sched, _) = g.build().ok()?;
+    let run = sched.run(|_| {});
+    let log = run.logs.first()?;
+    let from = (from_s * log.rate_hz).ceil() as usize;
+    let u = log.data.get(from..)?;
+    (!u.is_empty()).then(|| u.iter().filter(|&&v| v < lo || v > hi).count() as f64 / u.len() as f64)
 }
 
 /// The exact discrete inverse of the `creep` block (terms (k_i, τ_i), ZOH at
