@@ -33,10 +33,12 @@
 //! (docs/ARCHITECTURE.md): the compensators are theirs (afm-stage's Lambert-W
 //! branch inverse, dvrc's RC, Q design and criterion).
 
+pub mod backlash;
 pub mod inverse;
 pub mod named;
 pub mod synth;
 
+pub use backlash::BacklashInverse;
 pub use inverse::HysteresisInverse;
 pub use named::NamedEffect;
 

@@ -10,6 +10,7 @@
 //! | `unmodeled_resonance` | its inverse R⁻¹ (poles ↔ zeros): a notch | `unmodeled_resonance` | before the plant |
 //! | `position_dependent_gain` | gain scheduling (2.13) on 1/g(position) | `gain_scheduled` | before the plant |
 //! | `axis_coupling` (on the measurement) | static decoupling −c | `axis_coupling` | in the measurement path |
+//! | `backlash` (on the drive) | its inverse: ± half the play by the direction | `backlash_inverse` | before the actuator |
 //! | `creep` (on the drive) | its exact discrete inverse (creep feed-forward) | `state_space` | before the actuator |
 //! | the rest | none; the report says what it limits | — | — |
 
@@ -458,6 +459,17 @@ pub(crate) fn synthesise(
                 ),
             }
         }
+        ("backlash", Where::Input { to }) => make(
+            json!({"type": "backlash_inverse", "width": num(params, "width")}),
+            "backlash inverse: the wanted drive ± half the fitted play by its direction, so the play is taken up at every reversal",
+            format!("before the actuator, on the connection into {to}"),
+            &[("width", num(params, "width"))],
+            Some("the drive jumps by the full play at each reversal".into()),
+            Edit::Before {
+                to: to.clone(),
+                ff: None,
+            },
+        ),
         ("quantization", _) => {
             let lsb = num(params, "lsb");
             none(

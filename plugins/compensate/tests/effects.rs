@@ -375,3 +375,20 @@ fn creep_gets_its_inverse_as_a_feed_forward() {
         "{c:?}"
     );
 }
+
+#[test]
+fn backlash_gets_its_inverse_before_the_actuator() {
+    let (rep, out) = case_with(
+        "backlash",
+        1,
+        "type: sinusoid, amplitude: 1.0e-6, frequency_hz: 2.0",
+        true,
+    );
+    let c = &out.report.compensators[0];
+    assert_eq!(c.type_name, "backlash_inverse");
+    assert_eq!(c.design["width"], rep.steps[0].final_params["width"]);
+    assert!(connected(&out.compensated, "pid.u", "comp_backlash.u"));
+    assert!(connected(&out.compensated, "comp_backlash.y", "stage.u"));
+    // The error the play adds to the loop is mostly removed.
+    assert!(c.effect_error_cut_percent > 50.0, "{c:?}");
+}
