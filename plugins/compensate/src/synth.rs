@@ -7,6 +7,7 @@
 //! | `repetitive_disturbance` periodic in time | standard RC (5.1), L = ZPETC(T), FIR Q of the largest cut-off keeping (5.5) | `repetitive_control` | on the error before the controller (Fig. 5.1) |
 //! | `repetitive_disturbance` periodic in a signal | delay-varying RC (5.7)–(5.8), α = the signal, [m, M] from the loop's motion, (5.9) | `dvrc` | as RC, `alpha` ← the signal |
 //! | `friction` | the fitted friction of the reference's velocity, subtracted | `friction` | added at the plant input |
+//! | `hysteresis` inside the loop (a restoring force of the position) | the fitted force at the reference, subtracted | `bouc_wen` / `hysteresis` | added at the plant input |
 //! | `unmodeled_resonance` | its inverse R⁻¹ (poles ↔ zeros): a notch | `unmodeled_resonance` | before the plant |
 //! | `position_dependent_gain` | gain scheduling (2.13) on 1/g(position) | `gain_scheduled` | before the plant |
 //! | `axis_coupling` (on the measurement) | static decoupling −c | `axis_coupling` | in the measurement path |
@@ -310,6 +311,23 @@ pub(crate) fn synthesise(
                 &design,
                 note,
                 Edit::Before { to: to.clone(), ff },
+            )
+        }
+        ("hysteresis", Where::Feedback { to, .. }) => {
+            // A hysteretic restoring force of the position (Bouc–Wen or
+            // Coleman–Hodgdon inside the loop): the fitted force at the
+            // reference, subtracted, as for friction.
+            let r = reference_of(controller, info, &opts.controller_name, &e.effect)?;
+            make(
+                params.clone(),
+                "feed-forward of the fitted hysteretic force at the reference position, subtracted from the drive (the force cancels while the stage tracks)",
+                format!("subtracted at {to}, computed from the reference {r}"),
+                &[],
+                None,
+                Edit::SubtractAt {
+                    to: to.clone(),
+                    reads: r,
+                },
             )
         }
         ("hysteresis", _) => none(
