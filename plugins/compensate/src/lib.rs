@@ -17,10 +17,13 @@
 //!    the feedback); standard repetitive control (5.1) — or delay-varying RC
 //!    (5.7)–(5.8) for a disturbance periodic in the position — with L =
 //!    ZPETC(T) of the loop's own T and the FIR Q of the largest cut-off that
-//!    keeps (5.5)/(5.9), the criterion reported; friction feed-forward from the
-//!    reference velocity; the inverse of a fitted pole–zero pair (a notch); gain
-//!    scheduling (2.13) on 1/g of a position-dependent gain; static decoupling;
-//!    and for the rest a stated "no compensation: this is what it limits";
+//!    keeps (5.5)/(5.9), the criterion reported; friction (and a hysteretic
+//!    restoring force) feed-forward from the reference; the exact inverses of
+//!    fitted creep and backlash ([`backlash`]); the inverse of a fitted
+//!    pole–zero pair (a notch); gain scheduling (2.13) on 1/g of a
+//!    position-dependent gain; static decoupling; and for the rest a stated "no
+//!    compensation: this is what it limits" with its figure (a quantiser's
+//!    lsb/√12, a delay's phase at the crossover, how often a saturation clips);
 //! 2. **validates** on the augmented model: the user's loop with the fitted
 //!    effects transplanted where the diagnosis put them (the plant as
 //!    diagnosed), simulated before, with each compensator alone and with all;
