@@ -24,6 +24,7 @@ pub use afm_stage;
 pub use dvrc;
 pub use gain_scheduling;
 pub use hots;
+pub use nanomotion_compensate as compensate;
 pub use nanomotion_core as core;
 pub use nanomotion_core::{Block, GraphSpec, Scheduler};
 pub use nanomotion_directional_rc as directional_rc;
@@ -84,4 +85,5 @@ pub fn link_plugins() {
     let _ = std::any::type_name::<plf::effects::Hysteresis>();
     let _ = std::any::type_name::<directional_rc::FrameRotation>();
     let _ = std::any::type_name::<mimo::MimoController>();
+    let _ = std::any::type_name::<compensate::HysteresisInverse>();
 }

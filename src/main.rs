@@ -17,6 +17,7 @@ macro_rules! tell {
     };
 }
 
+mod compensate_cmd;
 mod diagnose_cmd;
 mod gate_cmd;
 mod optimize_cmd;
@@ -237,6 +238,7 @@ enum Command {
         #[arg(long)]
         force: bool,
     },
+    Compensate(compensate_cmd::Args),
     /// Heat maps of a scan from a run folder (`signals.csv`): for each `--image
     /// NAME=H,V,VALUE` an SVG `NAME.svg` of VALUE (nm, mean removed; a leading `-`
     /// flips its sign) over the plane (H, V) in µm, e.g. the topography and the
@@ -398,6 +400,7 @@ fn main() -> ExitCode {
             effects,
             force,
         }),
+        Command::Compensate(a) => compensate_cmd::run(a),
         Command::ScanImage {
             run_dir,
             images,

@@ -8,7 +8,8 @@ The Rust library behind the ``nanomotion`` command, in-process:
 
 - graphs: :func:`load`, :func:`check` (the stability gate), :func:`run`
   (overrides by dotted path, seed, duration, measured data; signals as numpy
-  arrays, scores), :func:`diagnose` (name what a model misses);
+  arrays, scores), :func:`diagnose` (name what a model misses),
+  :func:`compensate` (compensate what it named in a controller graph);
 - studies: :func:`sweep` over a SWEEP.yaml, on local cores or on Ray;
 - analysis: :func:`psd_welch`, :func:`cumulative_psd`, :func:`frf_h1`,
   :class:`Lti` (frequency response, poles, H∞ norm, margins);
@@ -75,7 +76,9 @@ __all__ = [
     "SweepError",
     "SweepSummary",
     "TimestampEstimator",
+    "CompensateResult",
     "check",
+    "compensate",
     "cumulative_psd",
     "diagnose",
     "frf_h1",
@@ -154,6 +157,20 @@ class DiagnoseResult:
     def found(self) -> list[str]:
         """The effects named, in order."""
         return list(self.report.get("found", []))
+
+
+@dataclass(frozen=True)
+class CompensateResult:
+    """``nanomotion compensate``'s result: the JSON report as a dict (the CLI's
+    ``report.json``) and the compensated graph's YAML (``compensated.yaml``)."""
+
+    report: dict[str, Any]
+    compensated_yaml: str
+
+    @property
+    def kept(self) -> list[str]:
+        """The compensator blocks in the compensated graph."""
+        return [c["block"] for c in self.report.get("compensators", []) if c["kept"]]
 
 
 class Graph:
@@ -269,6 +286,18 @@ def diagnose(model: PathLike, data: PathLike, *, max_effects: int = 3, holdout: 
     js, yaml = _nm.diagnose_graph(os.fspath(model), os.fspath(data), max_effects=max_effects,
                                   holdout=holdout, seed=seed, effects=list(effects))
     return DiagnoseResult(report=json.loads(js), augmented_yaml=yaml)
+
+
+def compensate(augmented: PathLike, controller: PathLike, *, report: PathLike | None = None,
+               reference: PathLike | None = None, keep: bool = False) -> CompensateResult:
+    """Compensate the effects a diagnosis named (``model_augmented.yaml`` and its
+    ``report.json``) in a controller graph, validated on the augmented model
+    (``nanomotion compensate``; docs/compensate.md)."""
+    js, yaml = _nm.compensate_graph(
+        os.fspath(augmented), os.fspath(controller),
+        report=None if report is None else os.fspath(report),
+        reference=None if reference is None else os.fspath(reference), keep=keep)
+    return CompensateResult(report=json.loads(js), compensated_yaml=yaml)
 
 
 def timestamp_track(t: np.ndarray, x: np.ndarray, v: np.ndarray, a: np.ndarray | None = None, *,

@@ -46,6 +46,13 @@ def diagnose_graph(
     seed: int | None = None,
     effects: list[str] = ...,
 ) -> tuple[str, str | None]: ...
+def compensate_graph(
+    augmented: _Path,
+    controller: _Path,
+    report: _Path | None = None,
+    reference: _Path | None = None,
+    keep: bool = False,
+) -> tuple[str, str]: ...
 def psd_welch(
     x: _F64, fs_hz: float, segment_len: int = 1024, overlap: float = 0.5, window: str = "hann", detrend: str = "mean"
 ) -> tuple[_F64, _F64]:

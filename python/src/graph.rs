@@ -327,10 +327,65 @@ fn diagnose_graph(
     Ok((json, yaml))
 }
 
+/// `nanomotion compensate` without files: the report as JSON text (the CLI's
+/// `report.json`) and the compensated graph as YAML (`compensated.yaml`).
+#[pyfunction]
+#[pyo3(signature = (augmented, controller, report=None, reference=None, keep=false))]
+fn compensate_graph(
+    py: Python<'_>,
+    augmented: PathBuf,
+    controller: PathBuf,
+    report: Option<PathBuf>,
+    reference: Option<PathBuf>,
+    keep: bool,
+) -> PyResult<(String, String)> {
+    use nanomotion::compensate::{Options, compensate, named};
+    let aug = GraphSpec::from_file(&augmented).map_err(graph_err)?;
+    let ctl = GraphSpec::from_file(&controller).map_err(graph_err)?;
+    let read = |p: &PathBuf| {
+        std::fs::read_to_string(p)
+            .map_err(|e| diagnose_err(format!("{}: cannot read it ({e})", p.display())))
+    };
+    let report = report.or_else(|| {
+        let beside = augmented.with_file_name("report.json");
+        beside.is_file().then_some(beside)
+    });
+    let effects = match &report {
+        Some(p) => {
+            named::from_report_json(&read(p)?, &p.display().to_string()).map_err(diagnose_err)?
+        }
+        None => named::from_graph(&aug),
+    };
+    let reference = match &reference {
+        Some(p) => Some(
+            nanomotion::core::yaml::from_str::<serde_json::Value>(
+                &read(p)?,
+                &p.display().to_string(),
+            )
+            .map_err(graph_err)?,
+        ),
+        None => None,
+    };
+    let opts = Options {
+        keep,
+        reference,
+        augmented_name: augmented.display().to_string(),
+        controller_name: controller.display().to_string(),
+        ..Options::default()
+    };
+    let out = py
+        .detach(move || compensate(&aug, &ctl, &effects, &opts))
+        .map_err(diagnose_err)?;
+    let json = serde_json::to_string(&out.report).map_err(diagnose_err)?;
+    let yaml = nanomotion::core::yaml::to_string(&out.compensated).map_err(diagnose_err)?;
+    Ok((json, yaml))
+}
+
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(load_graph, m)?)?;
     m.add_function(wrap_pyfunction!(check_graph, m)?)?;
     m.add_function(wrap_pyfunction!(run_graph, m)?)?;
     m.add_function(wrap_pyfunction!(diagnose_graph, m)?)?;
+    m.add_function(wrap_pyfunction!(compensate_graph, m)?)?;
     Ok(())
 }

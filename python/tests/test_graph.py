@@ -158,3 +158,20 @@ def test_dotted_path_overrides_change_the_result_as_predicted(root):
     assert g2.seed == 7 and g2.duration_s == 0.6
     with pytest.raises(nm.GraphError, match="did you mean `blocks.pi.kp`"):
         nm.run(root / "examples/quickstart.yaml", {"blocks.pi.kpp": 1.0})
+
+
+def test_compensate_inverts_the_named_hysteresis(root, tmp_path):
+    d = nm.diagnose(root / "examples/compensate/model.yaml", root / "examples/compensate/record.csv",
+                    max_effects=1, effects=["hysteresis"])
+    assert d.found == ["hysteresis"]
+    aug = tmp_path / "model_augmented.yaml"
+    aug.write_text(d.augmented_yaml)
+    (tmp_path / "report.json").write_text(json.dumps(d.report))
+    c = nm.compensate(aug, root / "examples/compensate/controller.yaml")
+    assert c.kept == ["comp_hysteresis"]
+    assert "hysteresis_inverse" in c.compensated_yaml
+    r = c.report
+    assert r["cut_percent"] == pytest.approx(100 * (1 - r["after"]["rms"] / r["before"]["rms"]))
+    assert r["cut_percent"] > 80
+    with pytest.raises(nm.DiagnoseError, match="mux.in0"):
+        nm.compensate(aug, root / "examples/quickstart.yaml")

@@ -1,0 +1,137 @@
+//! `backlash_inverse`: the inverse of the play operator, placed before the
+//! actuator so that the backlash the diagnosis named cancels.
+//!
+//! The plf `backlash` block (play of width w, starting at y = u₀) follows its
+//! input only once the input has moved w/2 past its output. Its exact inverse
+//! for a wanted output w_k: start at u₀ = w₀; then u = w + w/2 while the wanted
+//! output rises, u = w − w/2 while it falls, and the last u while it holds — a
+//! jump of the full width at every reversal. The pair is the identity (tested).
+
+use nanomotion_core::block::{Linearisation, check};
+use nanomotion_core::lti::StateSpace;
+use nanomotion_core::{Block, BlockDoc, BuildContext, ParamDoc, ParamError, Port, Role, Tick};
+use serde::{Deserialize, Serialize};
+
+/// `backlash_inverse`: u = P⁻¹(w) for the play operator P of total width
+/// `width`. Input `u` (the wanted output), output `y` (the input to give the
+/// play), the ports of an effect block.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct BacklashInverse {
+    /// Total play w (unit of the signal), ≥ 0.
+    pub width: f64,
+    /// (last wanted output, last input given), after the first sample.
+    #[serde(skip)]
+    last: Option<(f64, f64)>,
+}
+
+impl BacklashInverse {
+    /// The inverse of a play of total width `width`.
+    pub fn new(width: f64) -> Self {
+        Self { width, last: None }
+    }
+
+    /// One sample. No allocation.
+    pub fn step(&mut self, w: f64) -> f64 {
+        if !w.is_finite() {
+            return self.last.map_or(0.0, |(_, u)| u);
+        }
+        let h = 0.5 * self.width;
+        let u = match self.last {
+            None => w,
+            Some((prev, u)) if w == prev => u,
+            Some((prev, _)) if w > prev => w + h,
+            Some(_) => w - h,
+        };
+        self.last = Some((w, u));
+        u
+    }
+}
+
+#[typetag::serde(name = "backlash_inverse")]
+impl Block for BacklashInverse {
+    fn inputs(&self) -> Vec<Port> {
+        vec![Port::new("u", 1)]
+    }
+    fn outputs(&self) -> Vec<Port> {
+        vec![Port::new("y", 1)]
+    }
+    fn build(&mut self, _ctx: &BuildContext) -> Result<(), ParamError> {
+        check::non_negative("width", self.width)?;
+        check::finite("width", self.width)?;
+        self.last = None;
+        Ok(())
+    }
+    fn output(&mut self, _tick: Tick, u: &[f64], y: &mut [f64]) {
+        y[0] = self.step(u[0]);
+    }
+    /// Gain 1 between the jumps at the reversals.
+    fn linearisation(&self) -> Option<Linearisation> {
+        Some(Linearisation::single(
+            StateSpace::gain(nalgebra::DMatrix::identity(1, 1), None),
+            format!(
+                "backlash inverse judged as gain 1 (it adds ±{} at the reversals)",
+                0.5 * self.width
+            ),
+        ))
+    }
+    fn role(&self) -> Role {
+        Role::Controller
+    }
+}
+
+nanomotion_core::submit_block_doc! {
+    BlockDoc {
+        type_name: "backlash_inverse",
+        role: Role::Controller,
+        summary: "inverse of the play operator (backlash) of width w: the wanted output ± w/2 by its direction, held while it holds; before the actuator",
+        params: &[
+            ParamDoc { name: "width", doc: "total play w (unit of the signal), ≥ 0", default: None },
+        ],
+        ports: "u (wanted output) -> y (input to give the play)",
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nanomotion_plf::effects::Backlash;
+
+    /// P(P⁻¹(w)) = w with the plf `backlash` block (the operator the diagnosis
+    /// fits), for a wanted output with reversals and holds.
+    #[test]
+    fn the_inverse_cancels_the_play() {
+        let ctx = BuildContext::new("b", 1e-3, 0);
+        let mut inv = BacklashInverse::new(0.4);
+        inv.build(&ctx).unwrap();
+        let mut play = Backlash::new(0.4);
+        play.build(&ctx).unwrap();
+        let mut worst: f64 = 0.0;
+        for k in 0..5000u64 {
+            let t = k as f64 * 1e-3;
+            let w = (2.0 * std::f64::consts::PI * 0.7 * t)
+                .sin()
+                .clamp(-0.8, 0.8)
+                + 0.2 * (2.0 * std::f64::consts::PI * 3.1 * t).sin();
+            let mut u = [0.0];
+            inv.output(Tick::new(k, 1e-3), &[w], &mut u);
+            let mut y = [0.0];
+            play.output(Tick::new(k, 1e-3), &u, &mut y);
+            worst = worst.max((y[0] - w).abs());
+        }
+        assert!(worst < 1e-12, "{worst:e}");
+    }
+
+    #[test]
+    fn ticks_do_not_allocate() {
+        let mut inv = BacklashInverse::new(0.1);
+        inv.build(&BuildContext::new("b", 1e-3, 0)).unwrap();
+        let mut y = [0.0];
+        let info = allocation_counter::measure(|| {
+            for k in 0..10_000u64 {
+                inv.output(Tick::new(k, 1e-3), &[(k as f64 * 1e-2).sin()], &mut y);
+            }
+        });
+        assert_eq!(info.count_total, 0);
+    }
+}

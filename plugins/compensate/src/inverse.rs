@@ -1,0 +1,300 @@
+//! `hysteresis_inverse`: the exact inverse of the Coleman–Hodgdon operator, placed
+//! before the actuator so that the hysteresis the diagnosis named cancels.
+//!
+//! Along a monotone piece of the input the Coleman–Hodgdon model (6.3) has the
+//! closed form (the core's [`ColemanHodgdon::step`]) from its last turning point
+//! (u₀, y₀), with k = (b − c)/α:
+//!
+//! ```text
+//! increasing u:  y(u) = b·u − k + (y₀ − b·u₀ + k)·e^{−α(u − u₀)}
+//! decreasing u:  y(u) = b·u + k + (y₀ − b·u₀ − k)·e^{+α(u − u₀)}
+//! ```
+//!
+//! Both are of the form y = p₁u + p₂e^{s(u − u_ref)} + p₄ that afm-stage's
+//! [`Branch`] inverts exactly with the Lambert W function (6.6). The thesis applies
+//! (6.6) to the steady loop between fixed turning voltages (a periodic scan); here
+//! the branch is re-anchored at every reversal of the wanted output, so any
+//! wanted output w(t) is inverted: the block keeps the operator's state (its last
+//! input and output), starts a new branch from it when w reverses, and outputs
+//! u = branch⁻¹(w). Fed into a Coleman–Hodgdon operator with the same parameters
+//! (started, as the plf effect block is, on the anhysteretic line), the pair is
+//! the identity to rounding (tested).
+//!
+//! [`ColemanHodgdon::step`]: nanomotion_core::models::hysteresis::ColemanHodgdon::step
+
+use afm_stage::hysteresis::Branch;
+use nanomotion_core::block::{Linearisation, check};
+use nanomotion_core::lti::StateSpace;
+use nanomotion_core::models::hysteresis::{ChParams, Direction};
+use nanomotion_core::{Block, BlockDoc, BuildContext, ParamDoc, ParamError, Port, Role, Tick};
+use serde::{Deserialize, Serialize};
+
+/// `hysteresis_inverse`: u = H⁻¹(w) for the Coleman–Hodgdon operator H with
+/// parameters `alpha`, `b`, `c` (and `retrace` for decreasing input), the same
+/// fields as the plf `hysteresis` effect block. Input `u`: the output w the
+/// actuator should produce; output `y`: the input to give it (the ports of an
+/// effect block, so graph surgery places it like one). A wanted output the branch
+/// cannot reach (a non-monotone branch: the state far off the anhysteretic line)
+/// holds the last input and is counted on output `state`.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct HysteresisInverse {
+    /// α (1/\[u\]) > 0.
+    pub alpha: f64,
+    /// b (\[y\]/\[u\]) > 0: slope of the anhysteretic line.
+    pub b: f64,
+    /// c (\[y\]/\[u\]) > 0: slope right after a reversal.
+    pub c: f64,
+    /// Parameters for decreasing input (default: the trace set).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub retrace: Option<ChParams>,
+    #[serde(skip)]
+    state: Option<State>,
+}
+
+#[derive(Debug, Clone, Copy)]
+struct State {
+    /// Last input u and output y of the operator being inverted.
+    u: f64,
+    y: f64,
+    /// Branch in use and its direction.
+    branch: Option<(Direction, Branch)>,
+    /// Wanted outputs that could not be reached.
+    unreachable: u64,
+}
+
+impl HysteresisInverse {
+    /// The inverse of the symmetric operator (α, b, c).
+    pub fn new(alpha: f64, b: f64, c: f64) -> Self {
+        Self {
+            alpha,
+            b,
+            c,
+            retrace: None,
+            state: None,
+        }
+    }
+
+    /// The inverse of an asymmetric operator.
+    pub fn with_retrace(mut self, retrace: ChParams) -> Self {
+        self.retrace = Some(retrace);
+        self
+    }
+
+    fn trace(&self) -> ChParams {
+        ChParams::new(self.alpha, self.b, self.c)
+    }
+
+    fn params(&self, dir: Direction) -> ChParams {
+        match dir {
+            Direction::Trace => self.trace(),
+            Direction::Retrace => self.retrace.unwrap_or(self.trace()),
+        }
+    }
+
+    /// The branch of direction `dir` through the turning point (u₀, y₀).
+    fn branch(p: ChParams, dir: Direction, u0: f64, y0: f64) -> Branch {
+        let k = (p.b - p.c) / p.alpha;
+        let (p2, s, p4) = match dir {
+            Direction::Trace => (y0 - p.b * u0 + k, -p.alpha, -k),
+            Direction::Retrace => (y0 - p.b * u0 - k, p.alpha, k),
+        };
+        Branch {
+            dir,
+            p1: p.b,
+            p2,
+            s,
+            v_ref: u0,
+            p4,
+            v_m: u0,
+            v_max: u0,
+        }
+    }
+
+    /// One sample: the input that makes the operator output `w`. No allocation.
+    pub fn step(&mut self, w: f64) -> f64 {
+        let b = self.b;
+        let Some(st) = self.state.as_mut() else {
+            return 0.0;
+        };
+        if !w.is_finite() {
+            st.unreachable += 1;
+            return st.u;
+        }
+        if st.branch.is_none() && st.unreachable == 0 && st.u.is_nan() {
+            // First sample: start on the anhysteretic line, as the operator does.
+            st.u = w / b;
+            st.y = w;
+            return st.u;
+        }
+        let dw = w - st.y;
+        if dw == 0.0 {
+            return st.u;
+        }
+        let dir = if dw > 0.0 {
+            Direction::Trace
+        } else {
+            Direction::Retrace
+        };
+        let branch = match st.branch {
+            Some((d, br)) if d == dir => br,
+            _ => {
+                let p = match dir {
+                    Direction::Trace => ChParams::new(self.alpha, self.b, self.c),
+                    Direction::Retrace => self
+                        .retrace
+                        .unwrap_or(ChParams::new(self.alpha, self.b, self.c)),
+                };
+                let br = Self::branch(p, dir, st.u, st.y);
+                st.branch = Some((dir, br));
+                br
+            }
+        };
+        let u = branch.inverse(w);
+        // The branch must move the input the same way as the output (slope > 0).
+        let moves_right = match dir {
+            Direction::Trace => u >= st.u,
+            Direction::Retrace => u <= st.u,
+        };
+        if !u.is_finite() || !moves_right {
+            st.unreachable += 1;
+            return st.u;
+        }
+        st.u = u;
+        st.y = w;
+        u
+    }
+
+    /// Wanted outputs that could not be reached so far.
+    pub fn unreachable_count(&self) -> u64 {
+        self.state.map_or(0, |s| s.unreachable)
+    }
+}
+
+#[typetag::serde(name = "hysteresis_inverse")]
+impl Block for HysteresisInverse {
+    fn inputs(&self) -> Vec<Port> {
+        vec![Port::new("u", 1)]
+    }
+    fn outputs(&self) -> Vec<Port> {
+        vec![Port::new("y", 1), Port::new("state", 1)]
+    }
+    fn build(&mut self, _ctx: &BuildContext) -> Result<(), ParamError> {
+        for (prefix, p) in [("", Some(self.trace())), ("retrace.", self.retrace)] {
+            let Some(p) = p else { continue };
+            p.validate(prefix)?;
+            check::positive(&format!("{prefix}b"), p.b)?;
+            check::positive(&format!("{prefix}c"), p.c)?;
+        }
+        self.state = Some(State {
+            u: f64::NAN,
+            y: 0.0,
+            branch: None,
+            unreachable: 0,
+        });
+        Ok(())
+    }
+    fn output(&mut self, _tick: Tick, u: &[f64], y: &mut [f64]) {
+        y[0] = self.step(u[0]);
+        y[1] = self.unreachable_count() as f64;
+    }
+    /// Small-signal gains of the inverse: 1/c right after a reversal and 1/b
+    /// on the anhysteretic line (per direction), the two ends of its slope.
+    fn linearisation(&self) -> Option<Linearisation> {
+        let mut points = Vec::new();
+        for dir in [Direction::Trace, Direction::Retrace] {
+            if dir == Direction::Retrace && self.retrace.is_none() {
+                continue;
+            }
+            let p = self.params(dir);
+            for (label, slope) in [("after a reversal", p.c), ("on the line", p.b)] {
+                let g = nalgebra::DMatrix::from_row_slice(2, 1, &[1.0 / slope, 0.0]);
+                points.push((
+                    format!("{} {label}: gain 1/{slope:.4e}", dir.as_str()),
+                    StateSpace::gain(g, None),
+                ));
+            }
+        }
+        Some(Linearisation {
+            points,
+            note: "inverse hysteresis judged at the two ends of its small-signal gain (1/c after a reversal, 1/b on the anhysteretic line)".into(),
+        })
+    }
+    fn role(&self) -> Role {
+        Role::Controller
+    }
+}
+
+nanomotion_core::submit_block_doc! {
+    BlockDoc {
+        type_name: "hysteresis_inverse",
+        role: Role::Controller,
+        summary: "exact inverse of the Coleman–Hodgdon operator (6.3) by the Lambert-W branch inverse (6.6), re-anchored at every reversal of the wanted output; before the actuator",
+        params: &[
+            ParamDoc { name: "alpha", doc: "α (1/[u]) > 0 of the operator to invert", default: None },
+            ParamDoc { name: "b", doc: "b ([y]/[u]) > 0, anhysteretic slope", default: None },
+            ParamDoc { name: "c", doc: "c ([y]/[u]) > 0, slope right after a reversal", default: None },
+            ParamDoc { name: "retrace", doc: "{alpha, b, c} for decreasing input (asymmetric operator)", default: Some("= trace") },
+        ],
+        ports: "u (wanted output w) -> y (input to give the operator), state (unreachable samples so far)",
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nanomotion_core::models::hysteresis::ColemanHodgdon;
+
+    /// H(H⁻¹(w)) = w for a wanted output with reversals at many amplitudes,
+    /// symmetric and asymmetric, with the operator integrated by the core's exact
+    /// stepper (an independent implementation of the same model).
+    #[test]
+    fn the_inverse_cancels_the_operator() {
+        let trace = ChParams::new(0.03, 1.0, 0.7);
+        for retrace in [None, Some(ChParams::new(0.045, 0.93, 0.72))] {
+            let mut inv = HysteresisInverse::new(trace.alpha, trace.b, trace.c);
+            if let Some(r) = retrace {
+                inv = inv.with_retrace(r);
+            }
+            inv.build(&BuildContext::new("inv", 1e-3, 0)).unwrap();
+            let mut h = ColemanHodgdon::new(trace, retrace.unwrap_or(trace)).unwrap();
+            let mut worst: f64 = 0.0;
+            for k in 0..20_000 {
+                let t = k as f64 * 1e-3;
+                let w = 40.0
+                    + 15.0 * (2.0 * std::f64::consts::PI * 0.3 * t).sin()
+                    + 4.0 * (2.0 * std::f64::consts::PI * 2.1 * t).sin();
+                let u = inv.step(w);
+                if k == 0 {
+                    h.reset(trace.b * u, u);
+                }
+                let y = h.step(u);
+                worst = worst.max((y - w).abs());
+            }
+            assert!(worst < 1e-9, "max |H(H⁻¹(w)) − w| = {worst:e}");
+            assert_eq!(inv.unreachable_count(), 0);
+        }
+    }
+
+    /// Real-time discipline: no allocation per tick.
+    #[test]
+    fn ticks_do_not_allocate() {
+        let mut inv = HysteresisInverse::new(0.03, 1.0, 0.7);
+        inv.build(&BuildContext::new("inv", 1e-3, 0)).unwrap();
+        let mut y = [0.0; 2];
+        let info = allocation_counter::measure(|| {
+            for k in 0..10_000u64 {
+                let w = 30.0 * (k as f64 * 1e-3).sin();
+                inv.output(Tick::new(k, 1e-3), &[w], &mut y);
+            }
+        });
+        assert_eq!(info.count_total, 0, "{info:?}");
+    }
+
+    #[test]
+    fn a_non_positive_slope_is_refused_by_name() {
+        let mut inv = HysteresisInverse::new(0.03, 1.0, -0.1);
+        let e = inv.build(&BuildContext::new("inv", 1e-3, 0)).unwrap_err();
+        assert_eq!(e.field, "c");
+    }
+}

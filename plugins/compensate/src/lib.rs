@@ -1,0 +1,676 @@
+//! # nanomotion-compensate — from a named effect to its compensation
+//!
+//! The last two steps of the thesis's design loop (Merry 2009, Fig. 1.1):
+//! *compensate* the performance-limiting factor that `nanomotion diagnose`
+//! ([`nanomotion_plf`]) named, and *validate* that the tracking error shrinks.
+//!
+//! Input: the augmented model the diagnosis wrote (the nominal graph plus one
+//! fitted effect block per named effect, `model_augmented.yaml`), the effects it
+//! named ([`named`]: its `report.json`, or the `plf_*` blocks of the model), and
+//! the user's closed-loop graph (reference, controller, the nominal plant; its
+//! first `score:` entry is the tracking error). [`compensate`] then
+//!
+//! 1. synthesises one compensator per effect ([`synth`]), from the thesis where
+//!    it has one: the inverse hysteresis feed-forward (6.6) before the actuator
+//!    (the exact Lambert-W inverse of the fitted Coleman–Hodgdon loop,
+//!    [`inverse`], fed with the reference through the nominal's static gain and
+//!    the feedback); standard repetitive control (5.1) — or delay-varying RC
+//!    (5.7)–(5.8) for a disturbance periodic in the position — with L =
+//!    ZPETC(T) of the loop's own T and the FIR Q of the largest cut-off that
+//!    keeps (5.5)/(5.9), the criterion reported; friction (and a hysteretic
+//!    restoring force) feed-forward from the reference; the exact inverses of
+//!    fitted creep and backlash ([`backlash`]); the inverse of a fitted
+//!    pole–zero pair (a notch); gain scheduling (2.13) on 1/g of a
+//!    position-dependent gain; static decoupling; and for the rest a stated "no
+//!    compensation: this is what it limits" with its figure (a quantiser's
+//!    lsb/√12, a delay's phase at the crossover, how often a saturation clips);
+//! 2. **validates** on the augmented model: the user's loop with the fitted
+//!    effects transplanted where the diagnosis put them (the plant as
+//!    diagnosed), simulated before, with each compensator alone and with all;
+//!    a compensator that does not cut the tracking error's rms is dropped
+//!    (unless [`Options::keep`]);
+//! 3. returns the user's graph with the kept compensators (`comp_<effect>`
+//!    blocks), which the stability gate ([`nanomotion_core::gate`]) must pass.
+//!
+//! This crate is the one plugin allowed to depend on other plugins
+//! (docs/ARCHITECTURE.md): the compensators are theirs (afm-stage's Lambert-W
+//! branch inverse, dvrc's RC, Q design and criterion).
+
+pub mod backlash;
+pub mod inverse;
+pub mod named;
+pub mod synth;
+
+pub use backlash::BacklashInverse;
+pub use inverse::HysteresisInverse;
+pub use named::NamedEffect;
+
+use named::{Where, locate, source_of, split};
+use nanomotion_core::graph::{Connection, GraphSpec};
+use nanomotion_plf::surgery::{self, Site};
+use serde::Serialize;
+use std::collections::BTreeMap;
+
+/// What can go wrong, each naming the place and the fix.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum CompError {
+    /// An input file or its content cannot be used.
+    #[error("{place}: {problem}; fix: {fix}")]
+    Input {
+        /// File (and field or block).
+        place: String,
+        /// What is wrong.
+        problem: String,
+        /// How to fix it.
+        fix: String,
+    },
+    /// The controller graph lacks the place a compensator (or an effect) goes.
+    #[error("{graph}: {problem} (needed for `{effect}`); fix: {fix}")]
+    NoPlace {
+        /// The controller graph.
+        graph: String,
+        /// The effect being placed or compensated.
+        effect: String,
+        /// What is missing.
+        problem: String,
+        /// How to fix it.
+        fix: String,
+    },
+    /// A design step failed.
+    #[error("designing the compensator of `{effect}`: {problem}")]
+    Design {
+        /// The effect.
+        effect: String,
+        /// What failed.
+        problem: String,
+    },
+    /// A loop could not be built or simulated.
+    #[error("simulating {variant}: {problem}")]
+    Simulation {
+        /// Which loop (before, with `comp_x`, ...).
+        variant: String,
+        /// What failed.
+        problem: String,
+    },
+    /// The stability gate refuses the compensated graph.
+    #[error("the stability gate refuses the compensated graph: {0}")]
+    Gate(String),
+}
+
+/// Options of [`compensate`].
+#[derive(Debug, Clone)]
+pub struct Options {
+    /// Keep compensators that do not cut the error (default false: dropped).
+    pub keep: bool,
+    /// Validate on this reference instead of the graph's own: a block map
+    /// (`{type: …, …}`) that replaces the block feeding the error sum's `in0`.
+    pub reference: Option<serde_json::Value>,
+    /// The augmented model's name in messages.
+    pub augmented_name: String,
+    /// The controller graph's name in messages.
+    pub controller_name: String,
+    /// Least relative rms cut (of the loop without it) a compensator must give
+    /// to be kept (default 0.01).
+    pub min_cut: f64,
+}
+
+impl Default for Options {
+    fn default() -> Self {
+        Self {
+            keep: false,
+            reference: None,
+            augmented_name: "the augmented model".into(),
+            controller_name: "the controller graph".into(),
+            min_cut: 0.01,
+        }
+    }
+}
+
+/// rms and largest |e| of the tracking error over the scored window.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct ErrorStats {
+    /// Root mean square.
+    pub rms: f64,
+    /// Largest absolute value.
+    pub max_abs: f64,
+}
+
+/// One synthesised compensator and what it did.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct CompensatorReport {
+    /// The effect it compensates.
+    pub effect: String,
+    /// Its block in the compensated graph (`comp_<effect>`).
+    pub block: String,
+    /// Its block type.
+    #[serde(rename = "type")]
+    pub type_name: String,
+    /// What it is and why, in one line.
+    pub why: String,
+    /// Where it goes.
+    pub place: String,
+    /// Design figures (criterion values, frequencies, ...).
+    pub design: BTreeMap<String, f64>,
+    /// The tracking error with this compensator alone.
+    pub alone: ErrorStats,
+    /// Cut of the rms with it alone (%).
+    pub cut_percent: f64,
+    /// Cut (%) of the error the effects cause (e − e of the loop without
+    /// them, rms over the scored window) with it alone.
+    pub effect_error_cut_percent: f64,
+    /// Whether it is in the compensated graph.
+    pub kept: bool,
+    /// Why it was dropped, or a caveat.
+    pub note: Option<String>,
+}
+
+/// An effect left without a compensator, and what it limits.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct NotCompensated {
+    /// The effect.
+    pub effect: String,
+    /// Why, and what it limits.
+    pub reason: String,
+    /// The figure it limits (name → value), if there is one.
+    pub figures: BTreeMap<String, f64>,
+}
+
+/// The stability gate's verdict on the compensated graph.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct GateSummary {
+    /// Whether it passes.
+    pub passes: bool,
+    /// Loops judged with a `require:` allowance, and failures.
+    pub lines: Vec<String>,
+}
+
+/// What [`compensate`] did.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Report {
+    /// The scored tracking error.
+    pub error_signal: String,
+    /// Samples before this time are not scored (s).
+    pub from_s: f64,
+    /// The effects named, in order.
+    pub effects: Vec<NamedEffect>,
+    /// The user's loop as it is (on the nominal plant, no effects).
+    pub nominal: ErrorStats,
+    /// The loop on the augmented model without compensation.
+    pub before: ErrorStats,
+    /// rms of the error the effects cause, e − e_nominal, over the scored
+    /// window: before, and with the kept compensators.
+    pub effect_error_before: f64,
+    /// The same with the kept compensators.
+    pub effect_error_after: f64,
+    /// One per compensator, in the order of the effects.
+    pub compensators: Vec<CompensatorReport>,
+    /// All compensators together (`None` when fewer than two).
+    pub all: Option<ErrorStats>,
+    /// The kept compensators together (the compensated graph on the augmented model).
+    pub after: ErrorStats,
+    /// Cut of the rms from `before` to `after` (%).
+    pub cut_percent: f64,
+    /// Cut of the largest |e| (%).
+    pub max_cut_percent: f64,
+    /// Effects without a compensator.
+    pub not_compensated: Vec<NotCompensated>,
+    /// The gate's verdict on the compensated graph.
+    pub gate: GateSummary,
+}
+
+/// A tracking-error trace for plots: (label, time (s), error).
+pub type Trace = (String, Vec<f64>, Vec<f64>);
+
+/// The result of [`compensate`].
+#[derive(Debug)]
+pub struct Outcome {
+    /// The user's graph with the kept compensators.
+    pub compensated: GraphSpec,
+    /// The report.
+    pub report: Report,
+    /// The error before and after, on the augmented model.
+    pub traces: Vec<Trace>,
+}
+
+/// The loop a compensator acts on: names in the user's controller graph.
+#[derive(Debug, Clone)]
+pub(crate) struct LoopInfo {
+    /// The scored tracking error `block.port`.
+    pub error: String,
+    /// Its `from_s`.
+    pub from_s: f64,
+}
+
+/// Synthesise, validate and insert compensators for `effects`, named in
+/// `augmented` (the diagnosis's model), into `controller` (the user's loop on
+/// the nominal plant). See the [crate documentation](crate).
+pub fn compensate(
+    augmented: &GraphSpec,
+    controller: &GraphSpec,
+    effects: &[NamedEffect],
+    opts: &Options,
+) -> Result<Outcome, CompError> {
+    let score = controller.score.first().ok_or_else(|| CompError::Input {
+        place: format!("{}: `score:`", opts.controller_name),
+        problem: "is empty, so there is no tracking error to cut".into(),
+        fix: "score the tracking error, e.g. `score: [{signal: err.y, from_s: 0.5}]`".into(),
+    })?;
+    if effects.is_empty() {
+        return Err(CompError::Input {
+            place: opts.augmented_name.clone(),
+            problem: "names no effect (the diagnosis found none), so there is nothing to compensate".into(),
+            fix: "run `nanomotion diagnose` on a record and give its model_augmented.yaml and report.json".into(),
+        });
+    }
+    if let Some(e) = effects
+        .iter()
+        .find(|e| nanomotion_plf::effects::Effect::from_name(&e.effect).is_none())
+    {
+        return Err(CompError::Input {
+            place: format!("the report: effect `{}` (block `{}`)", e.effect, e.block),
+            problem: "is not a name of the diagnosis's vocabulary, so it has no compensator".into(),
+            fix: format!(
+                "give the report `nanomotion diagnose` wrote; the names are {}",
+                nanomotion_plf::diagnose::vocabulary().join(", ")
+            ),
+        });
+    }
+    let info = LoopInfo {
+        error: score.signal.clone(),
+        from_s: score.from_s,
+    };
+    // The loop on the plant as diagnosed.
+    let mut base = clone(controller, &opts.controller_name)?;
+    if let Some(r) = &opts.reference {
+        replace_reference(&mut base, &info, r, opts)?;
+    }
+    let validation = transplant(&base, augmented, effects, opts)?;
+    // One compensator per effect.
+    let mut comps = Vec::new();
+    let mut not_compensated = Vec::new();
+    for e in effects {
+        let block = augmented
+            .blocks
+            .iter()
+            .find(|b| b.name == e.block)
+            .expect("located above");
+        let params = surgery::block_to_json(block.block.as_ref());
+        let effect_blocks: Vec<String> = effects.iter().map(|e| e.block.clone()).collect();
+        let placement = locate(augmented, e, &effect_blocks, &opts.augmented_name)?;
+        match synth::synthesise(e, &params, &placement, controller, &info, opts)? {
+            synth::Outcome::Compensator(c) => comps.push(c),
+            synth::Outcome::None(n) => not_compensated.push(n),
+        }
+    }
+    let before = simulate(&validation, &info, "the loop on the augmented model")?;
+    let nominal = simulate(&base, &info, "the loop on the nominal plant")?;
+    let excess = |t: &Trial| effect_error(t, &nominal, info.from_s);
+    let excess_before = excess(&before);
+    let mut reports = Vec::new();
+    let mut alone_traces = Vec::new();
+    for c in &comps {
+        let mut g = clone(&validation, "the validation loop")?;
+        c.apply(&mut g, controller, opts)?;
+        let t = simulate(&g, &info, &format!("the loop with `{}` alone", c.name))?;
+        let cut = 100.0 * (1.0 - t.stats.rms / before.stats.rms);
+        let helps = t.stats.rms < (1.0 - opts.min_cut) * before.stats.rms;
+        reports.push(CompensatorReport {
+            effect: c.effect.clone(),
+            block: c.name.clone(),
+            type_name: c.type_name(),
+            why: c.why.clone(),
+            place: c.place.clone(),
+            design: c.design.clone(),
+            alone: t.stats,
+            cut_percent: cut,
+            effect_error_cut_percent: 100.0 * (1.0 - excess(&t) / excess_before),
+            kept: helps || opts.keep,
+            note: match (helps, opts.keep) {
+                (true, _) => c.note.clone(),
+                (false, true) => Some(format!(
+                    "kept because of --keep although it does not cut the rms by {:.0} %",
+                    100.0 * opts.min_cut
+                )),
+                (false, false) => Some(format!(
+                    "dropped: alone it does not cut the rms by {:.0} % ({:.3e} -> {:.3e}); keep it with --keep",
+                    100.0 * opts.min_cut,
+                    before.stats.rms,
+                    t.stats.rms
+                )),
+            },
+        });
+        alone_traces.push((format!("with {} alone", c.name), t.t, t.e));
+    }
+    let all = if comps.len() > 1 {
+        let mut g = clone(&validation, "the validation loop")?;
+        for c in &comps {
+            c.apply(&mut g, controller, opts)?;
+        }
+        Some(simulate(&g, &info, "the loop with every compensator")?.stats)
+    } else {
+        None
+    };
+    let kept: Vec<&synth::Compensator> = comps
+        .iter()
+        .zip(&reports)
+        .filter(|(_, r)| r.kept)
+        .map(|(c, _)| c)
+        .collect();
+    let mut final_loop = clone(&validation, "the validation loop")?;
+    let mut compensated = clone(controller, &opts.controller_name)?;
+    for c in &kept {
+        c.apply(&mut final_loop, controller, opts)?;
+        c.apply(&mut compensated, controller, opts)?;
+    }
+    let after = if kept.is_empty() {
+        before.clone()
+    } else {
+        simulate(&final_loop, &info, "the compensated loop")?
+    };
+    let gate = gate(&compensated, controller, opts)?;
+    let report = Report {
+        error_signal: info.error.clone(),
+        from_s: info.from_s,
+        effects: effects.to_vec(),
+        nominal: nominal.stats,
+        before: before.stats,
+        effect_error_before: excess_before,
+        effect_error_after: excess(&after),
+        compensators: reports,
+        all,
+        after: after.stats,
+        cut_percent: 100.0 * (1.0 - after.stats.rms / before.stats.rms),
+        max_cut_percent: 100.0 * (1.0 - after.stats.max_abs / before.stats.max_abs),
+        not_compensated,
+        gate,
+    };
+    let mut traces = vec![("before".to_string(), before.t, before.e)];
+    if kept.len() != 1 || alone_traces.len() != 1 {
+        traces.push(("compensated".to_string(), after.t, after.e));
+    }
+    traces.extend(alone_traces);
+    Ok(Outcome {
+        compensated,
+        report,
+        traces,
+    })
+}
+
+/// A deep copy of a graph.
+pub(crate) fn clone(spec: &GraphSpec, name: &str) -> Result<GraphSpec, CompError> {
+    surgery::clone_spec(spec).map_err(|e| CompError::Input {
+        place: name.to_string(),
+        problem: e.to_string(),
+        fix: "give a graph that `nanomotion check` accepts".into(),
+    })
+}
+
+pub(crate) fn has_block(spec: &GraphSpec, name: &str) -> bool {
+    spec.blocks.iter().any(|b| b.name == name)
+}
+
+/// The block feeding the error sum's `in0` (the reference), or why not.
+pub(crate) fn reference_of(
+    spec: &GraphSpec,
+    info: &LoopInfo,
+    graph: &str,
+    effect: &str,
+) -> Result<String, CompError> {
+    let (eb, _) = split(&info.error);
+    let is_error_sum = spec.blocks.iter().any(|b| {
+        b.name == eb
+            && surgery::block_to_json(b.block.as_ref())
+                .get("signs")
+                .and_then(|s| s.as_str())
+                .is_some_and(|s| s.starts_with("+-"))
+    });
+    let src = source_of(spec, &format!("{eb}.in0"));
+    match (is_error_sum, src) {
+        (true, Some(r)) => Ok(r.to_string()),
+        _ => Err(CompError::NoPlace {
+            graph: graph.to_string(),
+            effect: effect.to_string(),
+            problem: format!(
+                "the scored error `{}` is not a `sum` with `signs: \"+-\"` fed by the reference on `in0`",
+                info.error
+            ),
+            fix: "score the error sum r − y (reference on in0, measured position on in1)".into(),
+        }),
+    }
+}
+
+fn replace_reference(
+    spec: &mut GraphSpec,
+    info: &LoopInfo,
+    block: &serde_json::Value,
+    opts: &Options,
+) -> Result<(), CompError> {
+    let r = reference_of(spec, info, &opts.controller_name, "--reference")?;
+    let name = split(&r).0.to_string();
+    let new = surgery::block_from_json(block.clone()).map_err(|e| CompError::Input {
+        place: "--reference".into(),
+        problem: e.to_string(),
+        fix: "give one block map, e.g. `{type: triangular_scan, amplitude: 1.0e-5, frequency_hz: 1.0}`".into(),
+    })?;
+    let b = spec
+        .blocks
+        .iter_mut()
+        .find(|b| b.name == name)
+        .expect("the reference's block exists");
+    b.block = new;
+    Ok(())
+}
+
+/// The user's loop with every named effect inserted where the diagnosis put it.
+fn transplant(
+    controller: &GraphSpec,
+    aug: &GraphSpec,
+    effects: &[NamedEffect],
+    opts: &Options,
+) -> Result<GraphSpec, CompError> {
+    let mut g = clone(controller, &opts.controller_name)?;
+    let effect_blocks: Vec<String> = effects.iter().map(|e| e.block.clone()).collect();
+    let mut renamed: BTreeMap<String, String> = BTreeMap::new();
+    let map = |sig: &str, renamed: &BTreeMap<String, String>| -> String {
+        let (b, p) = split(sig);
+        match renamed.get(b) {
+            Some(n) => format!("{n}.{p}"),
+            None => sig.to_string(),
+        }
+    };
+    let no_place = |effect: &str, problem: String, fix: String| CompError::NoPlace {
+        graph: opts.controller_name.clone(),
+        effect: effect.to_string(),
+        problem,
+        fix,
+    };
+    for e in effects {
+        let p = locate(aug, e, &effect_blocks, &opts.augmented_name)?;
+        let spec = aug
+            .blocks
+            .iter()
+            .find(|b| b.name == e.block)
+            .expect("located");
+        let block = surgery::block_from_json(surgery::block_to_json(spec.block.as_ref())).map_err(
+            |err| CompError::Input {
+                place: format!("{}: block `{}`", opts.augmented_name, e.block),
+                problem: err.to_string(),
+                fix: "give the model_augmented.yaml that `nanomotion diagnose` wrote".into(),
+            },
+        )?;
+        let need = |sig: &str| -> Result<(), CompError> {
+            if has_block(&g, split(sig).0) {
+                Ok(())
+            } else {
+                Err(no_place(
+                    &e.effect,
+                    format!(
+                        "has no block `{}`, whose signal `{sig}` the effect's block `{}` reads in {}",
+                        split(sig).0,
+                        e.block,
+                        opts.augmented_name
+                    ),
+                    "name the plant and its signals in the controller graph as in the model you diagnosed".into(),
+                ))
+            }
+        };
+        let site = match &p.place {
+            Where::Input { to } => {
+                let from = source_of(controller, to).ok_or_else(|| {
+                    no_place(
+                        &e.effect,
+                        format!(
+                            "has no connection into `{to}`, where `{}` enters {}",
+                            e.block, opts.augmented_name
+                        ),
+                        format!("drive the plant through `{to}` as in the model you diagnosed"),
+                    )
+                })?;
+                Site::Input {
+                    from: from.to_string(),
+                    to: to.clone(),
+                }
+            }
+            Where::Feedback { to, position } => {
+                let from = source_of(controller, to).ok_or_else(|| {
+                    no_place(
+                        &e.effect,
+                        format!(
+                            "has no connection into `{to}`, where `{}` adds its force in {}",
+                            e.block, opts.augmented_name
+                        ),
+                        format!("drive the plant through `{to}` as in the model you diagnosed"),
+                    )
+                })?;
+                need(position)?;
+                Site::Feedback {
+                    from: from.to_string(),
+                    to: to.clone(),
+                    position: map(position, &renamed),
+                }
+            }
+            Where::Output { signal } => {
+                let signal = map(signal, &renamed);
+                need(&signal)?;
+                Site::Sensor { compare: 0, signal }
+            }
+        };
+        let s: Vec<String> = p.s.iter().map(|x| map(x, &renamed)).collect();
+        for x in &s {
+            need(x)?;
+        }
+        let name = surgery::insert(&mut g, &e.block, block, &site, &s, None).map_err(|err| {
+            no_place(
+                &e.effect,
+                err.to_string(),
+                "the controller graph must contain the place the diagnosis named".into(),
+            )
+        })?;
+        renamed.insert(e.block.clone(), name);
+    }
+    Ok(g)
+}
+
+/// One simulated loop: the error statistics and the trace.
+#[derive(Debug, Clone)]
+struct Trial {
+    stats: ErrorStats,
+    t: Vec<f64>,
+    e: Vec<f64>,
+}
+
+fn simulate(spec: &GraphSpec, info: &LoopInfo, variant: &str) -> Result<Trial, CompError> {
+    let sim = |problem: String| CompError::Simulation {
+        variant: variant.to_string(),
+        problem,
+    };
+    let mut g = clone(spec, variant)?;
+    if g.reads_data() {
+        return Err(sim(
+            "the controller graph reads measured data (`data_column`); give a closed loop with its own reference".into(),
+        ));
+    }
+    g.score.truncate(1);
+    let (mut sched, _) = g.build().map_err(|e| sim(e.to_string()))?;
+    let run = sched.run(|_| {});
+    let score = run.scores.first().ok_or_else(|| sim("no score".into()))?;
+    if !(score.rms.is_finite() && score.max_abs.is_finite()) || score.samples == 0 {
+        return Err(sim(format!(
+            "the tracking error `{}` is not finite (rms {}): the loop diverged",
+            info.error, score.rms
+        )));
+    }
+    let log = run
+        .logs
+        .iter()
+        .find(|l| l.name == info.error)
+        .ok_or_else(|| sim(format!("`{}` was not logged", info.error)))?;
+    let t: Vec<f64> = (0..log.data.len())
+        .map(|k| k as f64 / log.rate_hz)
+        .collect();
+    Ok(Trial {
+        stats: ErrorStats {
+            rms: score.rms,
+            max_abs: score.max_abs,
+        },
+        t,
+        e: log.data.clone(),
+    })
+}
+
+/// rms over t ≥ `from_s` of the difference of two error traces.
+fn effect_error(t: &Trial, nominal: &Trial, from_s: f64) -> f64 {
+    let (mut sum, mut n) = (0.0, 0usize);
+    for ((time, e), e0) in t.t.iter().zip(&t.e).zip(&nominal.e) {
+        if *time >= from_s {
+            sum += (e - e0) * (e - e0);
+            n += 1;
+        }
+    }
+    (sum / n.max(1) as f64).sqrt()
+}
+
+fn gate(
+    compensated: &GraphSpec,
+    controller: &GraphSpec,
+    opts: &Options,
+) -> Result<GateSummary, CompError> {
+    let judge = |spec: &GraphSpec| -> Result<nanomotion_core::gate::GateReport, String> {
+        let g = surgery::clone_spec(spec).map_err(|e| e.to_string())?;
+        let require = g.require.clone().unwrap_or_default();
+        let (sched, _) = g.build().map_err(|e| e.to_string())?;
+        Ok(nanomotion_core::gate::analyse(&sched, &require))
+    };
+    let after = judge(compensated).map_err(|e| CompError::Simulation {
+        variant: "the compensated graph".into(),
+        problem: e,
+    })?;
+    if !after.passes() {
+        let before_passes = judge(controller).map(|r| r.passes()).unwrap_or(false);
+        return Err(CompError::Gate(format!(
+            "{}{}",
+            after.failures().join("; "),
+            if before_passes {
+                String::new()
+            } else {
+                format!(
+                    " ({} itself does not pass the gate: fix it first, `nanomotion check`)",
+                    opts.controller_name
+                )
+            }
+        )));
+    }
+    Ok(GateSummary {
+        passes: true,
+        lines: after.allowed(),
+    })
+}
+
+/// Connect `from` to `to` (helper for edits).
+pub(crate) fn connect(spec: &mut GraphSpec, from: String, to: String) {
+    spec.connections.push(Connection { from, to });
+}
+
+// Blocks the compensators name by `type:` (gain scheduling) register through
+// the linker: reference the crate so they are never missing.
+use gain_scheduling as _;

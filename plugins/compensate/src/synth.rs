@@ -1,0 +1,1085 @@
+//! One compensator per named effect, from the fitted effect block's parameters
+//! and the user's loop.
+//!
+//! | effect | compensator | block | place |
+//! |---|---|---|---|
+//! | `hysteresis` (Coleman–Hodgdon on the drive) | inverse feed-forward (6.6): H⁻¹(r/G₀ + feedback), Lambert W | `hysteresis_inverse` (+ `position_feedforward`) | before the actuator |
+//! | `repetitive_disturbance` periodic in time | standard RC (5.1), L = ZPETC(T), FIR Q of the largest cut-off keeping (5.5) | `repetitive_control` | on the error before the controller (Fig. 5.1) |
+//! | `repetitive_disturbance` periodic in a signal | delay-varying RC (5.7)–(5.8), α = the signal, [m, M] from the loop's motion, (5.9) | `dvrc` | as RC, `alpha` ← the signal |
+//! | `friction` | the fitted friction of the reference's velocity, subtracted | `friction` | added at the plant input |
+//! | `hysteresis` inside the loop (a restoring force of the position) | the fitted force at the reference, subtracted | `bouc_wen` / `hysteresis` | added at the plant input |
+//! | `unmodeled_resonance` | its inverse R⁻¹ (poles ↔ zeros): a notch | `unmodeled_resonance` | before the plant |
+//! | `position_dependent_gain` | gain scheduling (2.13) on 1/g(position) | `gain_scheduled` | before the plant |
+//! | `axis_coupling` (on the measurement) | static decoupling −c | `axis_coupling` | in the measurement path |
+//! | `backlash` (on the drive) | its inverse: ± half the play by the direction | `backlash_inverse` | before the actuator |
+//! | `creep` (on the drive) | its exact discrete inverse (creep feed-forward) | `state_space` | before the actuator |
+//! | the rest | none; the report says what it limits | — | — |
+
+use crate::named::{Placement, Where, source_of, split};
+use crate::{CompError, LoopInfo, NotCompensated, Options, connect, reference_of};
+use dvrc::filters::FilterSpec;
+use dvrc::stability::{design_q_cutoff, rc_criterion};
+use nanomotion_core::LearningFilter;
+use nanomotion_core::Role;
+use nanomotion_core::graph::GraphSpec;
+use nanomotion_plf::surgery::{self, Site};
+use serde_json::{Value, json};
+use std::collections::BTreeMap;
+
+/// How a compensator enters a graph (names of the user's controller graph).
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) enum Edit {
+    /// In series just before the plant-side input `to`, nearest the controller;
+    /// with `ff`, a feed-forward block reading `ff.0` (port `r` → `v`) is added
+    /// to its input.
+    Before {
+        to: String,
+        ff: Option<(String, Value)>,
+    },
+    /// Reads `reads`; its output is subtracted at the plant input `to`.
+    SubtractAt { to: String, reads: String },
+    /// In the measurement path after `signal`; port `s` reads `s`.
+    Sensor { signal: String, s: Vec<String> },
+    /// Learning on the error (Fig. 5.1): `e` ← error, error + `w` → `controller_input`;
+    /// DVRC's `alpha` ← `alpha`.
+    Learning {
+        error: String,
+        controller_input: String,
+        alpha: Option<String>,
+    },
+    /// Before `to`, its `sigma` reading `sigma`.
+    Scheduled { to: String, sigma: String },
+}
+
+/// A synthesised compensator.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Compensator {
+    /// The effect.
+    pub effect: String,
+    /// Block name, `comp_<effect>`.
+    pub name: String,
+    /// The block (`type:` and parameters).
+    pub block: Value,
+    /// What and why.
+    pub why: String,
+    /// Where, in words.
+    pub place: String,
+    /// Design figures.
+    pub design: BTreeMap<String, f64>,
+    /// A caveat.
+    pub note: Option<String>,
+    pub(crate) edit: Edit,
+}
+
+/// A compensator, or why there is none.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Outcome {
+    /// Insert this.
+    Compensator(Compensator),
+    /// No compensation, and what the effect limits.
+    None(NotCompensated),
+}
+
+impl Compensator {
+    /// Its `type:`.
+    pub fn type_name(&self) -> String {
+        self.block
+            .get("type")
+            .and_then(Value::as_str)
+            .unwrap_or("")
+            .to_string()
+    }
+
+    /// Insert into `spec` (the user's loop, with or without the effects);
+    /// `controller` is the user's graph the names refer to.
+    pub(crate) fn apply(
+        &self,
+        spec: &mut GraphSpec,
+        controller: &GraphSpec,
+        opts: &Options,
+    ) -> Result<(), CompError> {
+        let no_place = |problem: String| CompError::NoPlace {
+            graph: opts.controller_name.clone(),
+            effect: self.effect.clone(),
+            problem,
+            fix: "keep the plant's input and the error signal as in the graph compensated".into(),
+        };
+        let block =
+            surgery::block_from_json(self.block.clone()).map_err(|e| CompError::Design {
+                effect: self.effect.clone(),
+                problem: e.to_string(),
+            })?;
+        let from = |to: &str| -> Result<String, CompError> {
+            source_of(controller, to)
+                .map(str::to_string)
+                .ok_or_else(|| no_place(format!("has no connection into `{to}`")))
+        };
+        let insert =
+            |spec: &mut GraphSpec, block, site: &Site, s: &[String]| -> Result<String, CompError> {
+                surgery::insert(spec, &self.name, block, site, s, None)
+                    .map_err(|e| no_place(e.to_string()))
+            };
+        match &self.edit {
+            Edit::Before { to, ff } => {
+                let site = Site::Input {
+                    from: from(to)?,
+                    to: to.clone(),
+                };
+                let name = insert(spec, block, &site, &[])?;
+                if let Some((reads, ff)) = ff {
+                    let rate = surgery::rate_of(spec, &name);
+                    let ff_name = surgery::fresh_name(spec, &format!("{name}_ff"));
+                    let sum = surgery::fresh_name(spec, &format!("{name}_sum"));
+                    let k = spec
+                        .connections
+                        .iter()
+                        .position(|c| c.to == format!("{name}.u"))
+                        .ok_or_else(|| no_place("the inserted block has no input".into()))?;
+                    spec.connections[k].to = format!("{sum}.in0");
+                    let blocks = [
+                        (ff_name.clone(), ff.clone()),
+                        (sum.clone(), json!({"type": "sum", "signs": "++"})),
+                    ];
+                    for (n, b) in blocks {
+                        let b = surgery::block_from_json(b).map_err(|e| no_place(e.to_string()))?;
+                        spec.blocks.push(nanomotion_core::graph::BlockSpec {
+                            name: n,
+                            rate_hz: rate,
+                            block: b,
+                        });
+                    }
+                    connect(spec, reads.clone(), format!("{ff_name}.r"));
+                    connect(spec, format!("{ff_name}.v"), format!("{sum}.in1"));
+                    connect(spec, format!("{sum}.y"), format!("{name}.u"));
+                }
+            }
+            Edit::Scheduled { to, sigma } => {
+                let site = Site::Input {
+                    from: from(to)?,
+                    to: to.clone(),
+                };
+                let name = insert(spec, block, &site, &[])?;
+                connect(spec, sigma.clone(), format!("{name}.sigma"));
+            }
+            Edit::SubtractAt { to, reads } => {
+                let site = Site::Feedback {
+                    from: from(to)?,
+                    to: to.clone(),
+                    position: reads.clone(),
+                };
+                let name = insert(spec, block, &site, &[])?;
+                let sum = spec
+                    .connections
+                    .iter()
+                    .find(|c| c.from == format!("{name}.y"))
+                    .map(|c| split(&c.to).0.to_string())
+                    .ok_or_else(|| no_place("the inserted sum is missing".into()))?;
+                let minus = surgery::block_from_json(json!({"type": "sum", "signs": "+-"}))
+                    .map_err(|e| no_place(e.to_string()))?;
+                if let Some(b) = spec.blocks.iter_mut().find(|b| b.name == sum) {
+                    b.block = minus;
+                }
+            }
+            Edit::Sensor { signal, s } => {
+                let site = Site::Sensor {
+                    compare: 0,
+                    signal: signal.clone(),
+                };
+                insert(spec, block, &site, s)?;
+            }
+            Edit::Learning {
+                error,
+                controller_input,
+                alpha,
+            } => {
+                let rate = surgery::rate_of(spec, split(controller_input).0);
+                let name = surgery::fresh_name(spec, &self.name);
+                let sum = surgery::fresh_name(spec, &format!("{name}_sum"));
+                let plus = surgery::block_from_json(json!({"type": "sum", "signs": "++"}))
+                    .map_err(|e| no_place(e.to_string()))?;
+                let k = spec
+                    .connections
+                    .iter()
+                    .position(|c| c.from == *error && c.to == *controller_input)
+                    .ok_or_else(|| {
+                        no_place(format!(
+                            "has no connection {error} -> {controller_input} to put the learning on"
+                        ))
+                    })?;
+                spec.connections[k].from = format!("{sum}.y");
+                for (n, b) in [(name.clone(), block), (sum.clone(), plus)] {
+                    spec.blocks.push(nanomotion_core::graph::BlockSpec {
+                        name: n,
+                        rate_hz: rate,
+                        block: b,
+                    });
+                }
+                connect(spec, error.clone(), format!("{sum}.in0"));
+                connect(spec, format!("{name}.w"), format!("{sum}.in1"));
+                connect(spec, error.clone(), format!("{name}.e"));
+                if let Some(a) = alpha {
+                    connect(spec, a.clone(), format!("{name}.alpha"));
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+fn num(params: &Value, key: &str) -> f64 {
+    params.get(key).and_then(Value::as_f64).unwrap_or(f64::NAN)
+}
+
+fn none(effect: &str, reason: String, figures: &[(&str, f64)]) -> Outcome {
+    Outcome::None(NotCompensated {
+        effect: effect.to_string(),
+        reason,
+        figures: figures
+            .iter()
+            .filter(|(_, v)| v.is_finite())
+            .map(|(k, v)| (k.to_string(), *v))
+            .collect(),
+    })
+}
+
+/// The compensator of one named effect (`params`: its fitted block as JSON;
+/// `placement`: where it enters the augmented model).
+pub(crate) fn synthesise(
+    e: &crate::NamedEffect,
+    params: &Value,
+    placement: &Placement,
+    controller: &GraphSpec,
+    info: &LoopInfo,
+    opts: &Options,
+) -> Result<Outcome, CompError> {
+    let name = format!("comp_{}", e.effect);
+    let ty = params.get("type").and_then(Value::as_str).unwrap_or("");
+    let make = |block: Value,
+                why: &str,
+                place: String,
+                design: &[(&str, f64)],
+                note: Option<String>,
+                edit: Edit| {
+        Outcome::Compensator(Compensator {
+            effect: e.effect.clone(),
+            name: name.clone(),
+            block,
+            why: why.to_string(),
+            place,
+            design: design.iter().map(|(k, v)| (k.to_string(), *v)).collect(),
+            note,
+            edit,
+        })
+    };
+    Ok(match (e.effect.as_str(), &placement.place) {
+        ("hysteresis", Where::Input { to }) if ty == "hysteresis" => {
+            let mut block = json!({
+                "type": "hysteresis_inverse",
+                "alpha": num(params, "alpha"),
+                "b": num(params, "b"),
+                "c": num(params, "c"),
+            });
+            if let Some(r) = params.get("retrace") {
+                block["retrace"] = r.clone();
+            }
+            let mut design = vec![
+                ("alpha", num(params, "alpha")),
+                ("b", num(params, "b")),
+                ("c", num(params, "c")),
+            ];
+            // The feed-forward of (6.6) maps the reference to the drive through
+            // the inverse: H⁻¹(r/G₀ + feedback), G₀ the nominal's static gain.
+            let (ff, note) = match static_feedforward(controller, to, info, opts, &e.effect)? {
+                Ok((r, g0, y0)) => {
+                    design.push(("static_gain", g0));
+                    design.push(("static_offset", y0));
+                    let ff = json!({"type": "position_feedforward",
+                                    "gain_v_per_um": 1e-6 / g0, "offset_v": -y0 / g0});
+                    (Some((r, ff)), None)
+                }
+                Err(why) => (
+                    None,
+                    Some(format!(
+                        "no reference feed-forward: {why}; the inverse linearises the actuator for the feedback only"
+                    )),
+                ),
+            };
+            make(
+                block,
+                "inverse hysteresis feed-forward (6.6): the exact inverse of the fitted Coleman–Hodgdon loop (Lambert W) before the actuator, fed with the reference through the nominal's static gain plus the feedback",
+                format!("before the actuator, on the connection into {to}"),
+                &design,
+                note,
+                Edit::Before { to: to.clone(), ff },
+            )
+        }
+        ("hysteresis", Where::Feedback { to, .. }) => {
+            // A hysteretic restoring force of the position (Bouc–Wen or
+            // Coleman–Hodgdon inside the loop): the fitted force at the
+            // reference, subtracted, as for friction.
+            let r = reference_of(controller, info, &opts.controller_name, &e.effect)?;
+            make(
+                params.clone(),
+                "feed-forward of the fitted hysteretic force at the reference position, subtracted from the drive (the force cancels while the stage tracks)",
+                format!("subtracted at {to}, computed from the reference {r}"),
+                &[],
+                None,
+                Edit::SubtractAt {
+                    to: to.clone(),
+                    reads: r,
+                },
+            )
+        }
+        ("hysteresis", _) => none(
+            &e.effect,
+            format!(
+                "no compensator in this version for a `{ty}` hysteresis {}: the inverse is synthesised for a Coleman–Hodgdon loop on the drive",
+                if matches!(placement.place, Where::Input { .. }) {
+                    "on the drive"
+                } else {
+                    "inside the loop (a restoring force)"
+                }
+            ),
+            &[],
+        ),
+        ("repetitive_disturbance", _) => {
+            if params.get("variable").and_then(Value::as_str) == Some("signal") {
+                match placement.s.first() {
+                    Some(alpha) => {
+                        delay_varying(e, params, alpha, controller, info, opts, &name)?
+                    }
+                    None => none(
+                        &e.effect,
+                        "periodic in a signal the augmented model does not wire: no delay-varying RC".into(),
+                        &[("period", num(params, "period"))],
+                    ),
+                }
+            } else {
+                repetitive(e, params, controller, info, opts, &name)?
+            }
+        }
+        ("friction", Where::Feedback { to, .. }) => {
+            let r = reference_of(controller, info, &opts.controller_name, &e.effect)?;
+            let mut block = params.clone();
+            block["type"] = json!("friction");
+            make(
+                block,
+                "feed-forward of the fitted friction at the reference's velocity (backward difference of the reference), subtracted from the drive",
+                format!("subtracted at {to}, computed from the reference {r}"),
+                &[
+                    ("coulomb", num(params, "coulomb")),
+                    ("viscous", num(params, "viscous")),
+                ],
+                Some("a loop with integral action already removes a constant friction force; the feed-forward acts at the reversals".into()),
+                Edit::SubtractAt {
+                    to: to.clone(),
+                    reads: r,
+                },
+            )
+        }
+        ("unmodeled_resonance", place) => {
+            let to = match place {
+                Where::Input { to } | Where::Feedback { to, .. } => to.clone(),
+                Where::Output { signal } => plant_input(controller, signal, &e.effect, opts)?,
+            };
+            let (fp, zp, fz, zz) = (
+                num(params, "f_pole_hz"),
+                num(params, "zeta_pole"),
+                num(params, "f_zero_hz"),
+                num(params, "zeta_zero"),
+            );
+            make(
+                json!({"type": "unmodeled_resonance", "f_pole_hz": fz, "zeta_pole": zz, "f_zero_hz": fp, "zeta_zero": zp}),
+                "notch: the inverse of the fitted pole–zero pair (its zeros on the resonance's poles), unity DC gain",
+                format!("before the plant, on the connection into {to}"),
+                &[
+                    ("notch_hz", fp),
+                    ("notch_zeta", zp),
+                    ("pole_hz", fz),
+                    ("pole_zeta", zz),
+                ],
+                None,
+                Edit::Before { to, ff: None },
+            )
+        }
+        ("position_dependent_gain", Where::Input { to })
+            if params.get("variable").and_then(Value::as_str) != Some("input")
+                && placement.s.len() == 1 =>
+        {
+            let (x, gain) = inverse_gain_table(params).ok_or_else(|| CompError::Design {
+                effect: e.effect.clone(),
+                problem: "the fitted gain is not positive around its centre: no schedule 1/g"
+                    .into(),
+            })?;
+            let (lo, hi) = (x[0], x[x.len() - 1]);
+            make(
+                json!({"type": "gain_scheduled", "controller": {"type": "gain", "k": 1.0},
+                       "schedule": [{"kind": "table", "x": x, "gain": gain}]}),
+                "gain scheduling (2.13): the drive times 1/g(position) of the fitted gain, so the loop gain does not move with position",
+                format!(
+                    "before the plant, on the connection into {to}, scheduled on {}",
+                    placement.s[0]
+                ),
+                &[("table_from", lo), ("table_to", hi)],
+                None,
+                Edit::Scheduled {
+                    to: to.clone(),
+                    sigma: placement.s[0].clone(),
+                },
+            )
+        }
+        ("axis_coupling", Where::Output { signal }) => {
+            let c: Vec<f64> = params
+                .get("coupling")
+                .and_then(Value::as_array)
+                .map(|v| v.iter().filter_map(Value::as_f64).map(|x| -x).collect())
+                .unwrap_or_default();
+            make(
+                json!({"type": "axis_coupling", "coupling": c}),
+                "static decoupling: the fitted coupling of the other axes subtracted from the measurement",
+                format!(
+                    "in the measurement path after {signal}, reading {}",
+                    placement.s.join(", ")
+                ),
+                &[],
+                None,
+                Edit::Sensor {
+                    signal: signal.clone(),
+                    s: placement.s.clone(),
+                },
+            )
+        }
+        ("creep", Where::Input { to }) => {
+            let terms: Vec<(f64, f64)> = params
+                .get("terms")
+                .and_then(Value::as_array)
+                .map(|v| {
+                    v.iter()
+                        .map(|t| (num(t, "gain"), num(t, "tau_s")))
+                        .collect()
+                })
+                .unwrap_or_default();
+            let dt =
+                1.0 / surgery::rate_of(controller, split(to).0).unwrap_or(controller.base_rate_hz);
+            match creep_inverse(&terms, dt) {
+                Some(block) => make(
+                    block,
+                    "creep feed-forward: the exact inverse of the fitted creep (the sum of first-order lags, discretised as the effect block is), so the drive's creep cancels",
+                    format!("before the actuator, on the connection into {to}"),
+                    &[("dc_gain", 1.0 / (1.0 + terms.iter().map(|t| t.0).sum::<f64>()))],
+                    Some("starts at rest, as the creep block does at a first input of 0".into()),
+                    Edit::Before { to: to.clone(), ff: None },
+                ),
+                None => none(
+                    &e.effect,
+                    "no compensation: the inverse of the fitted creep is unstable (a negative creep gain)".into(),
+                    &[],
+                ),
+            }
+        }
+        ("backlash", Where::Input { to }) => make(
+            json!({"type": "backlash_inverse", "width": num(params, "width")}),
+            "backlash inverse: the wanted drive ± half the fitted play by its direction, so the play is taken up at every reversal",
+            format!("before the actuator, on the connection into {to}"),
+            &[("width", num(params, "width"))],
+            Some("the drive jumps by the full play at each reversal".into()),
+            Edit::Before {
+                to: to.clone(),
+                ff: None,
+            },
+        ),
+        ("quantization", _) => {
+            let lsb = num(params, "lsb");
+            none(
+                &e.effect,
+                format!(
+                    "no compensation: the feedback acts on the rounded position, so rounding to {lsb:.3e} limits the error to about lsb/√12 = {:.3e} rms (a finer sensor, or an estimator between counts, e.g. time-stamping (Ch. 8), is what helps)",
+                    lsb / 12f64.sqrt()
+                ),
+                &[("lsb", lsb), ("rms_floor", lsb / 12f64.sqrt())],
+            )
+        }
+        ("time_delay", _) => {
+            let d = num(params, "delay_s");
+            match loop_margins(controller) {
+                Some((pm, dm, fc)) => {
+                    let left = pm - 360.0 * fc * d;
+                    none(
+                        &e.effect,
+                        format!(
+                            "no compensator in this version (re-tune the loop for it, or a Smith predictor): the delay of {d:.3e} s costs 360°·f_c·d = {:.1}° of your loop's {pm:.1}° phase margin at its {fc:.2} Hz crossover, leaving {left:.1}° (delay margin {dm:.3e} s{})",
+                            360.0 * fc * d,
+                            if d >= dm {
+                                ": the loop is unstable with it"
+                            } else {
+                                ""
+                            }
+                        ),
+                        &[
+                            ("delay_s", d),
+                            ("phase_margin_deg", pm),
+                            ("crossover_hz", fc),
+                            ("delay_margin_s", dm),
+                            ("phase_margin_left_deg", left),
+                        ],
+                    )
+                }
+                None => none(
+                    &e.effect,
+                    format!(
+                        "no compensator in this version: a delay of {d:.3e} s costs 360°·f·d of phase at frequency f; re-tune the loop for it (or a Smith predictor)"
+                    ),
+                    &[("delay_s", d)],
+                ),
+            }
+        }
+        ("saturation", Where::Input { to }) => {
+            let (lo, hi) = (num(params, "lower"), num(params, "upper"));
+            let share = clipped_share(controller, to, info.from_s, lo, hi);
+            none(
+                &e.effect,
+                format!(
+                    "no compensator in this version (anti-windup: give your controller the output limits [{lo:.4e}, {hi:.4e}]): {}",
+                    match share {
+                        Some(p) => format!(
+                            "your loop on the nominal plant asks for more than the limits {:.1} % of the scored window",
+                            100.0 * p
+                        ),
+                        None => "the command into the limits could not be simulated".into(),
+                    }
+                ),
+                &[
+                    ("lower", lo),
+                    ("upper", hi),
+                    ("clipped_share", share.unwrap_or(f64::NAN)),
+                ],
+            )
+        }
+        (other, place) => none(
+            other,
+            format!(
+                "no compensator in this version for `{other}` {} (drift/creep feed-forward, anti-windup, backlash inverse and slit tables are not synthesised yet)",
+                match place {
+                    Where::Input { to } => format!("on the drive into {to}"),
+                    Where::Feedback { to, .. } => format!("inside the loop at {to}"),
+                    Where::Output { signal } => format!("on the measured {signal}"),
+                }
+            ),
+            &[],
+        ),
+    })
+}
+
+/// The reference and the nominal plant's static map y = G₀·u + y₀ from the
+/// plant-side input `to` to the measured position (the error sum's `in1`), by
+/// two open-loop runs of the user's graph with `to` held at 0 and at 1.
+/// `Ok(Err(why))` when there is none (the plant integrates, or does not settle).
+fn static_feedforward(
+    controller: &GraphSpec,
+    to: &str,
+    info: &LoopInfo,
+    opts: &Options,
+    effect: &str,
+) -> Result<Result<(String, f64, f64), String>, CompError> {
+    let r = reference_of(controller, info, &opts.controller_name, effect)?;
+    let eb = split(&info.error).0;
+    let Some(measured) = source_of(controller, &format!("{eb}.in1")).map(str::to_string) else {
+        return Ok(Err(format!("nothing feeds `{eb}.in1`")));
+    };
+    let probe = |v: f64| -> Result<(f64, f64), String> {
+        let mut g = surgery::clone_spec(controller).map_err(|e| e.to_string())?;
+        g.connections.retain(|c| c.to != to);
+        g.duration_s = g.duration_s.min(4.0);
+        let name = surgery::fresh_name(&g, "probe");
+        let b = surgery::block_from_json(json!({"type": "constant", "value": v}))
+            .map_err(|e| e.to_string())?;
+        g.blocks.push(nanomotion_core::graph::BlockSpec {
+            name: name.clone(),
+            rate_hz: surgery::rate_of(controller, split(to).0),
+            block: b,
+        });
+        connect(&mut g, format!("{name}.y"), to.to_string());
+        g.score.clear();
+        g.log = vec![measured.clone()];
+        let (mut s, _) = g.build().map_err(|e| e.to_string())?;
+        let run = s.run(|_| {});
+        let y = &run.logs.first().ok_or("no log")?.data;
+        let tenth = (y.len() / 10).max(1);
+        let mean = |x: &[f64]| x.iter().sum::<f64>() / x.len() as f64;
+        Ok((
+            mean(&y[y.len() - tenth..]),
+            mean(&y[y.len() - 2 * tenth..y.len() - tenth]),
+        ))
+    };
+    let ((y0, y0_prev), (y1, y1_prev)) = match (probe(0.0), probe(1.0)) {
+        (Ok(a), Ok(b)) => (a, b),
+        (Err(e), _) | (_, Err(e)) => return Ok(Err(format!("the static probe failed ({e})"))),
+    };
+    let g0 = y1 - y0;
+    let settled = ((y1 - y1_prev) - (y0 - y0_prev)).abs() < 0.01 * g0.abs();
+    if !(g0.is_finite() && g0 != 0.0 && settled) {
+        return Ok(Err(format!(
+            "the nominal plant from {to} to {measured} has no static gain (it integrates or does not settle)"
+        )));
+    }
+    Ok(Ok((r, g0, y0)))
+}
+
+/// Phase margin (°), delay margin (s) and gain crossover (Hz) of the first SISO
+/// loop of `controller` the stability gate analyses, if any.
+fn loop_margins(controller: &GraphSpec) -> Option<(f64, f64, f64)> {
+    let g = surgery::clone_spec(controller).ok()?;
+    let require = g.require.clone().unwrap_or_default();
+    let (sched, _) = g.build().ok()?;
+    let report = nanomotion_core::gate::analyse(&sched, &require);
+    report
+        .loops
+        .iter()
+        .flat_map(|l| l.points.first())
+        .find_map(|p| p.margins.as_ref())
+        .filter(|m| m.gain_crossover_hz.is_finite())
+        .map(|m| (m.phase_margin_deg, m.delay_margin_s, m.gain_crossover_hz))
+}
+
+/// Share of the samples from `from_s` on where the command into `to` lies
+/// outside [lo, hi], in the user's loop on the nominal plant.
+fn clipped_share(controller: &GraphSpec, to: &str, from_s: f64, lo: f64, hi: f64) -> Option<f64> {
+    let command = source_of(controller, to)?.to_string();
+    let mut g = surgery::clone_spec(controller).ok()?;
+    g.log = vec![command];
+    g.score.clear();
+    let (mut sched, _) = g.build().ok()?;
+    let run = sched.run(|_| {});
+    let log = run.logs.first()?;
+    let from = (from_s * log.rate_hz).ceil() as usize;
+    let u = log.data.get(from..)?;
+    (!u.is_empty()).then(|| u.iter().filter(|&&v| v < lo || v > hi).count() as f64 / u.len() as f64)
+}
+
+/// The exact discrete inverse of the `creep` block (terms (k_i, τ_i), ZOH at
+/// `dt`): with a_i = e^{−dt/τ_i}, the creep is x⁺ = a x + (1 − a)u, y = u + kᵀx,
+/// so u = w − kᵀx and x⁺ = (diag a − (1 − a)kᵀ)x + (1 − a)w. `None` when that
+/// is unstable or a term is not finite.
+fn creep_inverse(terms: &[(f64, f64)], dt: f64) -> Option<Value> {
+    let n = terms.len();
+    if n == 0
+        || terms
+            .iter()
+            .any(|(k, t)| !(k.is_finite() && t.is_finite() && *t > 0.0))
+    {
+        return None;
+    }
+    let a: Vec<f64> = terms.iter().map(|(_, t)| (-dt / t).exp()).collect();
+    let rows: Vec<Vec<f64>> = (0..n)
+        .map(|i| {
+            (0..n)
+                .map(|j| if i == j { a[i] } else { 0.0 } - (1.0 - a[i]) * terms[j].0)
+                .collect()
+        })
+        .collect();
+    let m = nalgebra::DMatrix::from_fn(n, n, |i, j| rows[i][j]);
+    if m.complex_eigenvalues().iter().any(|z| z.norm() >= 1.0) {
+        return None;
+    }
+    Some(json!({
+        "type": "state_space",
+        "a": rows,
+        "b": a.iter().map(|ai| vec![1.0 - ai]).collect::<Vec<_>>(),
+        "c": [terms.iter().map(|t| -t.0).collect::<Vec<_>>()],
+        "d": [[1.0]],
+        "discrete": true,
+    }))
+}
+
+/// 1/g on 65 points over centre ± 2·scale of a fitted `position_dependent_gain`
+/// (`None` when g ≤ 0 there).
+fn inverse_gain_table(params: &Value) -> Option<(Vec<f64>, Vec<f64>)> {
+    let centre = params.get("center").and_then(Value::as_f64).unwrap_or(0.0);
+    let scale = params.get("scale").and_then(Value::as_f64).unwrap_or(1.0);
+    let g0 = params.get("g0").and_then(Value::as_f64).unwrap_or(0.0);
+    let coeffs: Vec<f64> = params
+        .get("coeffs")?
+        .as_array()?
+        .iter()
+        .filter_map(Value::as_f64)
+        .collect();
+    let g = |s: f64| {
+        let x = (s - centre) / scale;
+        1.0 + g0 + coeffs.iter().rev().fold(0.0, |acc, c| (acc + c) * x)
+    };
+    let n = 65;
+    let xs: Vec<f64> = (0..n)
+        .map(|i| centre + scale * (-2.0 + 4.0 * i as f64 / (n - 1) as f64))
+        .collect();
+    let gains: Vec<f64> = xs.iter().map(|&s| 1.0 / g(s)).collect();
+    gains
+        .iter()
+        .all(|k| k.is_finite() && *k > 0.0)
+        .then_some((xs, gains))
+}
+
+/// The plant input upstream of the measured `signal`: walk up through single-input
+/// blocks (sensors, demux) to a block with the plant role, and take the
+/// connection into it.
+fn plant_input(
+    controller: &GraphSpec,
+    signal: &str,
+    effect: &str,
+    opts: &Options,
+) -> Result<String, CompError> {
+    let role = |name: &str| {
+        controller
+            .blocks
+            .iter()
+            .find(|b| b.name == name)
+            .map(|b| b.block.role())
+    };
+    let mut b = split(signal).0.to_string();
+    for _ in 0..8 {
+        let into: Vec<&str> = controller
+            .connections
+            .iter()
+            .filter(|c| split(&c.to).0 == b)
+            .map(|c| c.to.as_str())
+            .collect();
+        // The plant: a block with the plant role, or the one the controller drives.
+        let driven = into.len() == 1
+            && source_of(controller, into[0])
+                .is_some_and(|src| role(split(src).0) == Some(Role::Controller));
+        if (role(&b) == Some(Role::Plant) || driven) && !into.is_empty() {
+            return Ok(into[0].to_string());
+        }
+        match into.as_slice() {
+            [one] => {
+                b = split(source_of(controller, one).unwrap_or(""))
+                    .0
+                    .to_string();
+            }
+            _ => break,
+        }
+    }
+    Err(CompError::NoPlace {
+        graph: opts.controller_name.clone(),
+        effect: effect.to_string(),
+        problem: format!(
+            "no plant (a block with the plant role, or driven by a controller) upstream of `{signal}`"
+        ),
+        fix: "measure the plant's output through single-input blocks (sensor, demux)".into(),
+    })
+}
+
+/// The controller input fed by the scored error (where RC adds its output).
+fn controller_input(
+    e: &crate::NamedEffect,
+    controller: &GraphSpec,
+    info: &LoopInfo,
+    opts: &Options,
+) -> Result<String, CompError> {
+    // The reader with the controller role, or the only reader (a plain gain).
+    let readers: Vec<&str> = controller
+        .connections
+        .iter()
+        .filter(|c| c.from == info.error)
+        .map(|c| c.to.as_str())
+        .collect();
+    let is_controller = |to: &&&str| {
+        controller
+            .blocks
+            .iter()
+            .any(|b| b.name == split(to).0 && b.block.role() == Role::Controller)
+    };
+    readers
+        .iter()
+        .find(is_controller)
+        .or(if readers.len() == 1 { readers.first() } else { None })
+        .map(|to| to.to_string())
+        .ok_or_else(|| CompError::NoPlace {
+            graph: opts.controller_name.clone(),
+            effect: e.effect.clone(),
+            problem: format!(
+                "no controller reads the scored error `{}`: repetitive control adds its output to the error before the feedback controller (Fig. 5.1)",
+                info.error
+            ),
+            fix: "score the error signal that feeds the controller".into(),
+        })
+}
+
+/// A learning block's design from the loop: L = ZPETC(T) of the loop's T (the
+/// stability gate's model of the user's graph with the block's output removed),
+/// Q the FIR of the largest cut-off keeping (5.5)/(5.9) for delays
+/// [n_min, n_max] with 10 % margin, and the criterion.
+struct LearningDesign {
+    learning: FilterSpec,
+    robustness: FilterSpec,
+    taps: usize,
+    cutoff_hz: f64,
+    criterion: dvrc::stability::RcCriterion,
+    preview: usize,
+}
+
+fn design_learning(
+    trial: &Compensator,
+    controller: &GraphSpec,
+    opts: &Options,
+    dt: f64,
+    n_min: usize,
+    n_max: usize,
+) -> Result<LearningDesign, CompError> {
+    let design_err = |problem: String| CompError::Design {
+        effect: trial.effect.clone(),
+        problem,
+    };
+    let mut g = crate::clone(controller, &opts.controller_name)?;
+    trial.apply(&mut g, controller, opts)?;
+    let ts = dvrc::check::graph_loop_ts(g).map_err(design_err)?;
+    let t = ts.get(&trial.name).ok_or_else(|| {
+        design_err(format!(
+            "the stability gate found no loop T(z) for `{}` (is the loop linear? `nanomotion check --print-loop` shows it)",
+            trial.name
+        ))
+    })?;
+    let tf = t.to_tf().map_err(|e| design_err(format!("T(z): {e}")))?;
+    let learning = FilterSpec::Zpetc {
+        num: tf.num.clone(),
+        den: tf.den.clone(),
+    };
+    let l = learning
+        .build_named("learning", dt)
+        .map_err(|e| design_err(format!("L = ZPETC(T): {e}")))?;
+    let taps = 31usize.min(if n_min.is_multiple_of(2) {
+        n_min - 1
+    } else {
+        n_min - 2
+    });
+    let qd = design_q_cutoff(t, &l, taps, n_max - n_min, 0.1)
+        .map_err(|e| design_err(format!("Q: {e}")))?;
+    let robustness = FilterSpec::FirLowpass {
+        taps,
+        cutoff_hz: qd.cutoff_hz,
+    };
+    let q = robustness
+        .build_named("robustness", dt)
+        .map_err(|e| design_err(format!("Q: {e}")))?;
+    let c =
+        rc_criterion(t, &l, &q, n_min, n_max).map_err(|e| design_err(format!("criterion: {e}")))?;
+    if !c.holds() {
+        return Err(design_err(format!(
+            "criterion {} fails with the designed Q: ‖Q(1 − T L z^l)‖∞ = {:.3} ≥ {:.3}",
+            if n_min == n_max { "(5.5)" } else { "(5.9)" },
+            c.hinf,
+            c.bound
+        )));
+    }
+    Ok(LearningDesign {
+        learning,
+        robustness,
+        taps,
+        cutoff_hz: qd.cutoff_hz,
+        criterion: c,
+        preview: l.preview_samples(),
+    })
+}
+
+fn learning_figures(d: &LearningDesign, tag: &str) -> Vec<(String, f64)> {
+    vec![
+        ("q_taps".into(), d.taps as f64),
+        ("q_cutoff_hz".into(), d.cutoff_hz),
+        (format!("criterion_{tag}_hinf"), d.criterion.hinf),
+        (format!("criterion_{tag}_bound"), d.criterion.bound),
+        (format!("criterion_{tag}_peak_hz"), d.criterion.peak_hz),
+        ("l_preview".into(), d.preview as f64),
+    ]
+}
+
+/// Standard RC (5.1) on a disturbance periodic in time: N from the fitted period
+/// at the controller's rate, L and Q from [`design_learning`], (5.5) reported.
+fn repetitive(
+    e: &crate::NamedEffect,
+    params: &Value,
+    controller: &GraphSpec,
+    info: &LoopInfo,
+    opts: &Options,
+    name: &str,
+) -> Result<Outcome, CompError> {
+    let ctrl_in = controller_input(e, controller, info, opts)?;
+    let rate = surgery::rate_of(controller, split(&ctrl_in).0).unwrap_or(controller.base_rate_hz);
+    let dt = 1.0 / rate;
+    let period = num(params, "period");
+    let exact = period * rate;
+    let n = exact.round();
+    if !(8.0..=1e7).contains(&n) {
+        return Err(CompError::Design {
+            effect: e.effect.clone(),
+            problem: format!(
+                "the period {period:e} s is {exact:.1} samples at the controller's {rate} Hz: repetitive control needs 8 to 10⁷"
+            ),
+        });
+    }
+    let n = n as usize;
+    let edit = Edit::Learning {
+        error: info.error.clone(),
+        controller_input: ctrl_in.clone(),
+        alpha: None,
+    };
+    let trial = Compensator {
+        effect: e.effect.clone(),
+        name: name.to_string(),
+        block: json!({"type": "repetitive_control", "n": n}),
+        why: String::new(),
+        place: String::new(),
+        design: BTreeMap::new(),
+        note: None,
+        edit: edit.clone(),
+    };
+    let d = design_learning(&trial, controller, opts, dt, n, n)?;
+    let block = json!({
+        "type": "repetitive_control",
+        "n": n,
+        "learning": serde_json::to_value(&d.learning).unwrap_or(Value::Null),
+        "robustness": serde_json::to_value(&d.robustness).unwrap_or(Value::Null),
+    });
+    let off = exact - n as f64;
+    let mut design: BTreeMap<String, f64> = [
+        ("n".to_string(), n as f64),
+        ("period_s".to_string(), period),
+        ("period_samples".to_string(), exact),
+    ]
+    .into_iter()
+    .collect();
+    design.extend(learning_figures(&d, "5_5"));
+    Ok(Outcome::Compensator(Compensator {
+        effect: e.effect.clone(),
+        name: name.to_string(),
+        block,
+        why: "standard repetitive control (5.1): memory of one period N, L = ZPETC of the loop's T, Q the FIR low-pass with the largest cut-off keeping (5.5)".into(),
+        place: format!("on the error {} before {} (Fig. 5.1)", info.error, ctrl_in),
+        design,
+        note: (off.abs() > 0.05).then(|| {
+            format!(
+                "the period is {exact:.2} samples; N = {n} leaves {off:+.2} samples per period, which the memory cannot learn exactly"
+            )
+        }),
+        edit,
+    }))
+}
+
+/// Delay-varying RC (5.7)–(5.8) on a disturbance periodic in a signal (the
+/// position): α = that signal, P_α the fitted period, the delay range [m, M]
+/// from the user's loop simulated on the nominal plant (how many controller
+/// samples the signal takes to advance one period over the scored window), L and
+/// Q from [`design_learning`] with (5.9) for that range.
+fn delay_varying(
+    e: &crate::NamedEffect,
+    params: &Value,
+    alpha: &str,
+    controller: &GraphSpec,
+    info: &LoopInfo,
+    opts: &Options,
+    name: &str,
+) -> Result<Outcome, CompError> {
+    let design_err = |problem: String| CompError::Design {
+        effect: e.effect.clone(),
+        problem,
+    };
+    if !crate::has_block(controller, split(alpha).0) {
+        return Err(CompError::NoPlace {
+            graph: opts.controller_name.clone(),
+            effect: e.effect.clone(),
+            problem: format!(
+                "has no block `{}` for the signal `{alpha}` the disturbance is periodic in",
+                split(alpha).0
+            ),
+            fix: "name the plant's position as in the model you diagnosed".into(),
+        });
+    }
+    let ctrl_in = controller_input(e, controller, info, opts)?;
+    let rate = surgery::rate_of(controller, split(&ctrl_in).0).unwrap_or(controller.base_rate_hz);
+    let period = num(params, "period");
+    // The signal over the scored window of the user's loop.
+    let mut g = crate::clone(controller, &opts.controller_name)?;
+    g.log = vec![alpha.to_string()];
+    g.score.clear();
+    let (mut sched, _) = g.build().map_err(|e| design_err(e.to_string()))?;
+    let run = sched.run(|_| {});
+    let log = run
+        .logs
+        .first()
+        .ok_or_else(|| design_err("no log".into()))?;
+    let from = (info.from_s * log.rate_hz).ceil() as usize;
+    let x = log.data.get(from..).unwrap_or(&[]);
+    if period.is_nan() || period <= 0.0 || x.len() < 2 || x[x.len() - 1] - x[0] < 2.0 * period {
+        return Err(design_err(format!(
+            "`{alpha}` advances {:.3e} over the scored window, less than two periods ({:.3e}): delay-varying RC needs the signal to move forward through the period",
+            x.last().zip(x.first()).map_or(0.0, |(b, a)| b - a),
+            2.0 * period
+        )));
+    }
+    // Delay (in samples of the log) back to where the signal was one period lower.
+    let (mut lo, mut hi) = (f64::INFINITY, 0.0f64);
+    let mut j = 0usize;
+    for k in 0..x.len() {
+        while j + 1 < k && x[j + 1] <= x[k] - period {
+            j += 1;
+        }
+        if x[j] <= x[k] - period {
+            lo = lo.min((k - j) as f64);
+            hi = hi.max((k - j) as f64);
+        }
+    }
+    if x.windows(2).any(|w| w[1] < w[0]) {
+        return Err(design_err(format!(
+            "`{alpha}` moves backwards in the scored window: the delay-varying memory follows a signal that only advances (DVRC, (5.7))"
+        )));
+    }
+    let scale = rate / log.rate_hz;
+    let n_min = ((lo * scale).floor() as usize).saturating_sub(1);
+    let n_max = (hi * scale).ceil() as usize + 1;
+    if n_min < 8 || n_max > 10_000_000 {
+        return Err(design_err(format!(
+            "the delay ranges over [{n_min}, {n_max}] samples: delay-varying RC needs 8 to 10⁷"
+        )));
+    }
+    let edit = Edit::Learning {
+        error: info.error.clone(),
+        controller_input: ctrl_in.clone(),
+        alpha: Some(alpha.to_string()),
+    };
+    let base = json!({"type": "dvrc", "period_alpha": period, "n_min": n_min, "n_max": n_max});
+    let trial = Compensator {
+        effect: e.effect.clone(),
+        name: name.to_string(),
+        block: base.clone(),
+        why: String::new(),
+        place: String::new(),
+        design: BTreeMap::new(),
+        note: None,
+        edit: edit.clone(),
+    };
+    let d = design_learning(&trial, controller, opts, 1.0 / rate, n_min, n_max)?;
+    let mut block = base;
+    block["learning"] = serde_json::to_value(&d.learning).unwrap_or(Value::Null);
+    block["robustness"] = serde_json::to_value(&d.robustness).unwrap_or(Value::Null);
+    let mut design: BTreeMap<String, f64> = [
+        ("period".to_string(), period),
+        ("n_min".to_string(), n_min as f64),
+        ("n_max".to_string(), n_max as f64),
+    ]
+    .into_iter()
+    .collect();
+    design.extend(learning_figures(&d, "5_9"));
+    Ok(Outcome::Compensator(Compensator {
+        effect: e.effect.clone(),
+        name: name.to_string(),
+        block,
+        why: format!(
+            "delay-varying repetitive control (5.7)–(5.8) on {alpha}: the memory delay N_k follows the signal over one period, L = ZPETC of the loop's T, Q the FIR low-pass with the largest cut-off keeping (5.9)"
+        ),
+        place: format!(
+            "on the error {} before {} (Fig. 5.1), α = {alpha}",
+            info.error, ctrl_in
+        ),
+        design,
+        note: None,
+        edit,
+    }))
+}
