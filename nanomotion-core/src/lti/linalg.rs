@@ -449,13 +449,17 @@ pub fn rescale_modes(a: &DMatrix<f64>, damping_scale: f64, lag_scale: f64) -> Op
     }
     let v_inv = v.clone().try_inverse()?;
     let norm = |m: &DMatrix<Complex<f64>>| m.iter().map(|z| z.norm()).fold(0.0, f64::max);
-    if !(norm(&v) * norm(&v_inv) < 1e8) {
+    let condition = norm(&v) * norm(&v_inv);
+    if condition.is_nan() || condition >= 1e8 {
         return None;
     }
     let lambda = DMatrix::from_diagonal(&DVector::from_vec(moved));
     let out = &v * lambda * v_inv;
     let a_scale = a.amax().max(f64::MIN_POSITIVE);
-    if out.iter().any(|z| !(z.im.abs() <= 1e-8 * a_scale)) {
+    if out
+        .iter()
+        .any(|z| z.im.is_nan() || z.im.abs() > 1e-8 * a_scale)
+    {
         return None;
     }
     Some(out.map(|z| z.re))

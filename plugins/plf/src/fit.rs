@@ -628,9 +628,10 @@ impl Problem for Evaluator {
                     .copied()
                     .unwrap_or(self.n_total)
                     .min(n);
-                for k in start.max(self.skip)..end {
+                let first = start.max(self.skip);
+                for (k, m) in measured.iter().enumerate().take(end).skip(first) {
                     let model = log.get((k - start) * decim).copied().unwrap_or(f64::NAN);
-                    let v = (measured[k] - model) * weight;
+                    let v = (m - model) * weight;
                     if !v.is_finite() {
                         return false;
                     }
