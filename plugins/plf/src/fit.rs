@@ -101,6 +101,12 @@ impl Records {
     }
 }
 
+/// Where record `j` of records starting at `starts` (of `total` samples in
+/// all) ends, cut at the first `n` samples.
+fn record_end(starts: &[usize], j: usize, total: usize, n: usize) -> usize {
+    starts.get(j + 1).copied().unwrap_or(total).min(n)
+}
+
 /// How a fitted parameter is moved by the optimiser.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Scale {
@@ -547,12 +553,7 @@ impl Evaluator {
             if sched.reset().is_err() {
                 return false;
             }
-            let end = self
-                .starts
-                .get(j + 1)
-                .copied()
-                .unwrap_or(self.n_total)
-                .min(n);
+            let end = record_end(&self.starts, j, self.n_total, n);
             sched.step_n((end - start) as u64 * self.ticks_per_sample);
             // A trial step may diverge: that is an answer ("reject this step"),
             // not an error to locate, so only the compared logs are scanned (no
@@ -622,12 +623,7 @@ impl Problem for Evaluator {
             for (j, sched) in self.scheds.iter().enumerate() {
                 let (log, _) = sched.compare_log(i).expect("compare index");
                 let start = self.starts[j];
-                let end = self
-                    .starts
-                    .get(j + 1)
-                    .copied()
-                    .unwrap_or(self.n_total)
-                    .min(n);
+                let end = record_end(&self.starts, j, self.n_total, n);
                 let first = start.max(self.skip);
                 for (k, m) in measured.iter().enumerate().take(end).skip(first) {
                     let model = log.get((k - start) * decim).copied().unwrap_or(f64::NAN);
