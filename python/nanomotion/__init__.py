@@ -280,11 +280,15 @@ def run(graph: PathLike | Graph, overrides: Mapping[str, Any] | None = None, *,
 
 
 def diagnose(model: PathLike, data: PathLike, *, max_effects: int = 3, holdout: float = 0.3,
-             seed: int | None = None, effects: Sequence[str] = ()) -> DiagnoseResult:
+             seed: int | None = None, effects: Sequence[str] = (),
+             validation: Sequence[PathLike] = ()) -> DiagnoseResult:
     """Name what a model graph misses against a measured record, fit it, and
-    return the report and the augmented graph (``nanomotion diagnose``)."""
+    return the report and the augmented graph (``nanomotion diagnose``). With
+    ``validation`` records, ``data`` estimates and they decide (each record
+    simulated from rest); without, the last ``holdout`` of ``data`` decides."""
     js, yaml = _nm.diagnose_graph(os.fspath(model), os.fspath(data), max_effects=max_effects,
-                                  holdout=holdout, seed=seed, effects=list(effects))
+                                  holdout=holdout, seed=seed, effects=list(effects),
+                                  validation=[os.fspath(v) for v in validation])
     return DiagnoseResult(report=json.loads(js), augmented_yaml=yaml)
 
 

@@ -45,6 +45,7 @@ def diagnose_graph(
     holdout: float = 0.3,
     seed: int | None = None,
     effects: list[str] = ...,
+    validation: list[_Path] = ...,
 ) -> tuple[str, str | None]: ...
 def compensate_graph(
     augmented: _Path,

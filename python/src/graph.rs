@@ -297,7 +297,8 @@ fn load_graph<'py>(
 /// `report.json`) and the augmented graph as YAML (`model_augmented.yaml`),
 /// or None when no effect was found.
 #[pyfunction]
-#[pyo3(signature = (model, data, max_effects=3, holdout=0.3, seed=None, effects=Vec::new()))]
+#[pyo3(signature = (model, data, max_effects=3, holdout=0.3, seed=None, effects=Vec::new(), validation=Vec::new()))]
+#[allow(clippy::too_many_arguments)]
 fn diagnose_graph(
     py: Python<'_>,
     model: PathBuf,
@@ -306,9 +307,13 @@ fn diagnose_graph(
     holdout: f64,
     seed: Option<u64>,
     effects: Vec<String>,
+    validation: Vec<PathBuf>,
 ) -> PyResult<(String, Option<String>)> {
     let spec = GraphSpec::from_file(&model).map_err(graph_err)?;
-    let data = Dataset::from_file(&data).map_err(data_err)?;
+    let mut records = vec![Dataset::from_file(&data).map_err(data_err)?];
+    for v in &validation {
+        records.push(Dataset::from_file(v).map_err(data_err)?);
+    }
     let opts = nanomotion::plf::diagnose::Options {
         max_effects,
         holdout,
@@ -317,7 +322,9 @@ fn diagnose_graph(
         ..Default::default()
     };
     let report = py
-        .detach(move || nanomotion::plf::diagnose::diagnose(&spec, &data, &opts))
+        .detach(move || {
+            nanomotion::plf::diagnose::diagnose_records(&spec, &records, &opts, &mut |_, _| {})
+        })
         .map_err(diagnose_err)?;
     let json = serde_json::to_string(&report).map_err(diagnose_err)?;
     let yaml = match &report.augmented {

@@ -140,6 +140,24 @@ def test_diagnose_names_the_hidden_hysteresis(root):
         nm.diagnose(root / "examples/diagnose/model.yaml", root / "examples/diagnose/record.csv", holdout=0.95)
 
 
+def test_diagnose_decides_on_a_record_it_did_not_fit(root, tmp_path):
+    # The record's first 70 % estimates, its last 30 % — as a record of its own,
+    # simulated from rest — decides.
+    lines = (root / "examples/diagnose/record.csv").read_text().splitlines()
+    head = [ln for ln in lines if ln.startswith("#")]
+    header, rows = lines[len(head)], lines[len(head) + 1:]
+    cut = int(0.7 * len(rows))
+    est, val = tmp_path / "est.csv", tmp_path / "val.csv"
+    est.write_text("\n".join(head + [header] + rows[:cut]) + "\n")
+    val.write_text("\n".join(head + [header] + rows[cut:]) + "\n")
+    d = nm.diagnose(root / "examples/diagnose/model.yaml", est, validation=[val],
+                    max_effects=1, effects=["hysteresis", "time_delay"])
+    assert d.found == ["hysteresis"]
+    assert len(d.report["records"]) == 2
+    assert d.report["estimation_samples"] == cut
+    assert d.report["holdout_samples"] == len(rows) - cut
+
+
 def test_dotted_path_overrides_change_the_result_as_predicted(root):
     g = nm.Graph(yaml=GAIN_GRAPH.format(gain=3.0))
     r = nm.run(g, {"blocks.k.k": 5.0, "blocks.c.value": -0.25, "duration_s": 0.005})
