@@ -2,7 +2,7 @@
 """Summarise the first N records of a `scenarios` run from its per-record lines.
 
     cargo run --release -p nanomotion-plf --example scenarios -- 300 2> run.log
-    python3 tools/scenario_table.py run.log [N] [--csv OLD.csv]
+    python3 tools/scenario_table.py run.log [N] [--csv OLD.csv] [--visibility VIS.csv]
 
 The per-record lines (stderr) are what `scenarios` prints as it goes, so a run
 cut short still gives the table of its first N records — the same records, in
@@ -10,7 +10,10 @@ the same order, as `scenarios -- N` (held-out seeds are drawn in seed order).
 The measures are the example's own: named correctly, padding, false alarms,
 precision/recall per effect, per-family rates. With `--csv OLD.csv` (a
 previous run's `--csv` output) the same first N seeds of that run are
-summarised beside it.
+summarised beside it. With `--visibility VIS.csv` (the output of `scenarios
+-- N --visibility-only`: what each record's hidden effects change over its
+noise) recall and the rate named correctly are also given on the records
+whose effects stand out of the noise (visibility ≥ 1), and on the others.
 """
 import collections
 import csv
@@ -85,9 +88,36 @@ def summary(rows):
     return out
 
 
+def visible_split(rows, vis):
+    """Named correctly and per-effect recall on records with effects above the
+    noise (visibility ≥ 1) and below it."""
+    pct = lambda a, b: "—" if b == 0 else f"{100 * a / b:.0f} %"
+    ok = lambda r: len(r["found"]) == len(r["hidden"]) and all(h in r["found"] for h in r["hidden"])
+    eff = [r for r in rows if r["hidden"]]
+    above = [r for r in eff if vis[r["seed"]] >= 1.0]
+    below = [r for r in eff if vis[r["seed"]] < 1.0]
+    print(f"\nrecords with an effect: {len(above)} with visibility ≥ 1, {len(below)} below\n")
+    print("| measure | visibility ≥ 1 | below 1 |\n|---|---|---|")
+    print(f"| named correctly | {pct(sum(map(ok, above)), len(above))} ({sum(map(ok, above))} of {len(above)}) "
+          f"| {pct(sum(map(ok, below)), len(below))} ({sum(map(ok, below))} of {len(below)}) |")
+    effects = sorted({h for r in eff for h in r["hidden"]})
+    for e in effects:
+        cells = []
+        for group in (above, below):
+            hid = [r for r in group if e in r["hidden"]]
+            got = sum(e in r["found"] for r in hid)
+            cells.append(f"{pct(got, len(hid))} ({got} of {len(hid)})")
+        print(f"| {e} recall | {cells[0]} | {cells[1]} |")
+
+
 def main():
     args = sys.argv[1:]
     old = None
+    vis_path = None
+    if "--visibility" in args:
+        i = args.index("--visibility")
+        vis_path = args[i + 1]
+        del args[i:i + 2]
     if "--csv" in args:
         i = args.index("--csv")
         old = args[i + 1]
@@ -109,6 +139,12 @@ def main():
     print("|---|---|" + ("---|" if old else ""))
     for k in new:
         print(f"| {k} | " + " | ".join(c.get(k, "—") for c in cols) + " |")
+    if vis_path:
+        vis = {int(r["seed"]): float(r["visibility"]) for r in csv.DictReader(open(vis_path))}
+        missing = [r["seed"] for r in rows if r["seed"] not in vis]
+        if missing:
+            sys.exit(f"{vis_path} lacks seeds {missing[:5]}…: run --visibility-only over the same records")
+        visible_split(rows, vis)
 
 
 if __name__ == "__main__":

@@ -4,12 +4,15 @@
 //! quotes its output:
 //!
 //! ```text
-//! cargo run --release -p nanomotion-plf --example scenarios -- [COUNT] [--tune] [--csv FILE]
+//! cargo run --release -p nanomotion-plf --example scenarios -- [COUNT] [--tune] [--csv FILE] [--visibility-only]
 //! ```
 //!
 //! COUNT held-out records (default 300) from seed 0 on; `--tune` takes the
 //! tuning split instead (the only records the workflow may be tuned on).
-//! `--csv` writes one row per record.
+//! `--csv` writes one row per record. `--visibility-only` runs no diagnosis:
+//! it prints `seed,visibility` of the same records ([`scenario::visibility`]:
+//! what the hidden effects change over the noise), for
+//! `tools/scenario_table.py --visibility`.
 //!
 //! Scoring: a record is *named correctly* when every hidden effect is named and
 //! nothing else (an effect-free record: nothing named); *padding* is a named
@@ -35,6 +38,7 @@ fn main() {
     let _ = std::any::type_name::<nanomotion_plf::effects::Effect>();
     let args: Vec<String> = std::env::args().skip(1).collect();
     let tune = args.iter().any(|a| a == "--tune");
+    let visibility_only = args.iter().any(|a| a == "--visibility-only");
     let csv_path = args
         .iter()
         .position(|a| a == "--csv")
@@ -56,6 +60,20 @@ fn main() {
         let (hidden, family) = scenario::labels(seed);
         seed += 1;
         if (family.split() == scenario::Split::Tune) != tune {
+            continue;
+        }
+        if visibility_only {
+            // A seed that cannot be drawn is skipped, as below: the same records.
+            match scenario::visibility(seed - 1) {
+                Ok(v) => {
+                    if records == 0 {
+                        println!("seed,visibility");
+                    }
+                    println!("{},{v:.3}", seed - 1);
+                    records += 1;
+                }
+                Err(e) => eprintln!("seed {}: {e}", seed - 1),
+            }
             continue;
         }
         let s = match scenario::draw(seed - 1) {
@@ -168,6 +186,9 @@ fn main() {
             if calibrated { ", calibrated" } else { "" }
         );
         let _ = std::io::stderr().flush();
+    }
+    if visibility_only {
+        return;
     }
     let pct = |a: usize, b: usize| {
         if b == 0 {

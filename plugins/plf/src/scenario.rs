@@ -630,6 +630,19 @@ fn labels_from(rng: &mut Rng) -> (Vec<&'static str>, Family) {
 
 /// Draw scenario `seed` (either side of the split; see [`Family::split`]).
 pub fn draw(seed: u64) -> Result<Scenario, DataError> {
+    draw_with(seed, false).map(|(s, _)| s)
+}
+
+/// How visible the hidden effects of scenario `seed` are: the rms of what they
+/// change in the compared signals (the position; in a closed loop also the
+/// drive, whichever shows more) over the rms of the noise in the same signal,
+/// from the same record simulated without the effects, with and without its
+/// noise. Below about 1 an effect hides in the noise (`None`-free records: 0).
+pub fn visibility(seed: u64) -> Result<f64, DataError> {
+    draw_with(seed, true).map(|(_, v)| v.unwrap_or(0.0))
+}
+
+fn draw_with(seed: u64, with_visibility: bool) -> Result<(Scenario, Option<f64>), DataError> {
     let mut rng = scenario_rng(seed);
     let (hidden, family) = labels_from(&mut rng);
     let (plant_kind, loop_kind, excitation_kind) =
@@ -670,15 +683,6 @@ pub fn draw(seed: u64) -> Result<Scenario, DataError> {
         .iter()
         .map(|e| (*e, draw_form(&mut rng, e, fs, t_len, f0)))
         .collect();
-    let extra: Vec<(f64, f64, f64)> = forms
-        .iter()
-        .filter_map(|(_, f)| match f {
-            Form::AttachedMass { mu, fr, zr } => Some((*mu, 2.0 * PI * fr, *zr)),
-            _ => None,
-        })
-        .collect();
-    let (a, b, c) = plant.matrices(&extra);
-    let dim = a.len();
     // The nominal model: the same structure with parameters off by ≤ 3 or 10 %.
     let err = match nominal_kind {
         "near" => 0.03,
@@ -747,216 +751,265 @@ pub fn draw(seed: u64) -> Result<Scenario, DataError> {
     } else {
         (vec![g * (kp + kd * fs), -g * kd * fs], vec![1.0, 0.0])
     };
-    // Simulate.
+    // Simulate (a closure: the effect-free runs of `visibility` share it).
     let oversample = ((200_000.0 / fs).round() as usize).clamp(4, 40);
     let dt = 1.0 / (fs * oversample as f64);
-    let mut s = vec![0.0; dim];
-    let mut u_data = Vec::with_capacity(n);
-    let mut y_data = Vec::with_capacity(n);
-    let mut ctrl_e = [0.0f64; 3];
-    let mut ctrl_u = [0.0f64; 2];
-    let mut hist: Vec<f64> = Vec::new(); // the drive at fine steps (delays)
-    let mut plays = [0.0f64; 8];
-    let mut z_bw = 0.0f64;
-    let mut prev_in = 0.0;
-    let mut play = 0.0f64;
-    let mut creep = [0.0f64; 8];
-    let creep_tau: Vec<f64> = (0..8)
-        .map(|i| 10f64.powf(-2.0 + 3.5 * i as f64 / 7.0))
-        .collect();
-    let mut fric_z = 0.0;
-    for k in 0..n {
-        let t = k as f64 / fs;
-        // Measure at t_k.
-        let x = c.iter().zip(&s).map(|(ci, si)| ci * si).sum::<f64>();
-        let mut ym = x;
-        for (_, f) in &forms {
-            ym = match f {
-                Form::ThermalDrift { d, tau, offset } => ym + offset + d * (1.0 - (-t / tau).exp()),
-                Form::RampDrift { offset, rate } => ym + offset + rate * t,
-                Form::Rounding { q } => q * (ym / q).round(),
-                Form::Slits { q, errors } => {
-                    let i = (ym / q).round();
-                    q * i + errors[(i as i64).rem_euclid(errors.len() as i64) as usize]
+    let simulate = |forms_in: &[(&str, Form)],
+                    noise_gain: f64|
+     -> Result<(Vec<f64>, Vec<f64>), DataError> {
+        let forms: Vec<(&str, Form)> = forms_in.to_vec();
+        let extra: Vec<(f64, f64, f64)> = forms
+            .iter()
+            .filter_map(|(_, f)| match f {
+                Form::AttachedMass { mu, fr, zr } => Some((*mu, 2.0 * PI * fr, *zr)),
+                _ => None,
+            })
+            .collect();
+        let (a, b, c) = plant.matrices(&extra);
+        let dim = a.len();
+        let mut s = vec![0.0; dim];
+        let mut u_data = Vec::with_capacity(n);
+        let mut y_data = Vec::with_capacity(n);
+        let mut ctrl_e = [0.0f64; 3];
+        let mut ctrl_u = [0.0f64; 2];
+        let mut hist: Vec<f64> = Vec::new(); // the drive at fine steps (delays)
+        let mut plays = [0.0f64; 8];
+        let mut z_bw = 0.0f64;
+        let mut prev_in = 0.0;
+        let mut play = 0.0f64;
+        let mut creep = [0.0f64; 8];
+        let creep_tau: Vec<f64> = (0..8)
+            .map(|i| 10f64.powf(-2.0 + 3.5 * i as f64 / 7.0))
+            .collect();
+        let mut fric_z = 0.0;
+        for k in 0..n {
+            let t = k as f64 / fs;
+            // Measure at t_k.
+            let x = c.iter().zip(&s).map(|(ci, si)| ci * si).sum::<f64>();
+            let mut ym = x;
+            for (_, f) in &forms {
+                ym = match f {
+                    Form::ThermalDrift { d, tau, offset } => {
+                        ym + offset + d * (1.0 - (-t / tau).exp())
+                    }
+                    Form::RampDrift { offset, rate } => ym + offset + rate * t,
+                    Form::Rounding { q } => q * (ym / q).round(),
+                    Form::Slits { q, errors } => {
+                        let i = (ym / q).round();
+                        q * i + errors[(i as i64).rem_euclid(errors.len() as i64) as usize]
+                    }
+                    _ => ym,
+                };
+            }
+            let y_meas = y_scale * (ym + noise_gain * sigma * meas_noise[k]);
+            y_data.push(y_meas);
+            // The drive (data units).
+            let u = if closed {
+                let e = y_scale * r[k] - y_meas;
+                ctrl_e = [e, ctrl_e[0], ctrl_e[1]];
+                let mut u = num.iter().zip(&ctrl_e).map(|(b, e)| b * e).sum::<f64>();
+                if den.len() == 3 {
+                    u -= den[1] * ctrl_u[0];
                 }
-                _ => ym,
+                ctrl_u = [u, ctrl_u[0]];
+                u
+            } else {
+                u_scale * r[k]
             };
-        }
-        let y_meas = y_scale * (ym + sigma * meas_noise[k]);
-        y_data.push(y_meas);
-        // The drive (data units).
-        let u = if closed {
-            let e = y_scale * r[k] - y_meas;
-            ctrl_e = [e, ctrl_e[0], ctrl_e[1]];
-            let mut u = num.iter().zip(&ctrl_e).map(|(b, e)| b * e).sum::<f64>();
-            if den.len() == 3 {
-                u -= den[1] * ctrl_u[0];
-            }
-            ctrl_u = [u, ctrl_u[0]];
-            u
-        } else {
-            u_scale * r[k]
-        };
-        u_data.push(u);
-        let un = u / u_scale;
-        for _ in 0..oversample {
-            // Input-side effects in series, on the normalised drive.
-            let mut f = un;
-            let du = f - prev_in;
-            prev_in = f;
-            for (_, form) in &forms {
-                f = match form {
-                    Form::PrandtlIshlinskii { h, r, w } => {
-                        let mut y = 0.0;
-                        for i in 0..8 {
-                            plays[i] = plays[i].clamp(f - r[i], f + r[i]);
-                            y += w[i] * plays[i];
-                        }
-                        (1.0 - h) * f + h * y
-                    }
-                    Form::BoucWen2 { h, beta, gamma } => {
-                        // Explicit steps small enough for the loop's rate.
-                        let pieces = (beta.max(gamma.abs()) * du.abs() * z_bw.abs().max(1.0)
-                            / 0.05)
-                            .ceil()
-                            .clamp(1.0, 1e5);
-                        let d = du / pieces;
-                        for _ in 0..pieces as usize {
-                            z_bw +=
-                                d - beta * d.abs() * z_bw.abs() * z_bw - gamma * d * z_bw * z_bw;
-                        }
-                        (1.0 - h) * f + h * z_bw
-                    }
-                    Form::LogCreep { gamma } => {
-                        let mut y = f;
-                        for i in 0..8 {
-                            creep[i] += (f - creep[i]) * (1.0 - (-dt / creep_tau[i]).exp());
-                            y += gamma / 8.0 * creep[i];
-                        }
-                        y
-                    }
-                    Form::Delay { d0, a, f: fd } => {
-                        hist.push(f);
-                        let d = (d0 + a * (2.0 * PI * fd * t).sin()) * oversample as f64;
-                        let pos = hist.len() as f64 - 1.0 - d;
-                        if pos <= 0.0 {
-                            hist[0]
-                        } else {
-                            let i = pos.floor() as usize;
-                            let fr = pos - i as f64;
-                            let v = hist[i] * (1.0 - fr) + hist[(i + 1).min(hist.len() - 1)] * fr;
-                            if hist.len() > 64 * oversample {
-                                hist.drain(..hist.len() - 32 * oversample);
-                            }
-                            v
-                        }
-                    }
-                    Form::Saturation { lo, hi, soft } => {
-                        if *soft {
-                            let (m, h) = (0.5 * (hi + lo), 0.5 * (hi - lo));
-                            m + h * ((f - m) / h).tanh()
-                        } else {
-                            f.clamp(*lo, *hi)
-                        }
-                    }
-                    Form::Play { w } => {
-                        play = play.clamp(f - w / 2.0, f + w / 2.0);
-                        play
-                    }
-                    Form::PositionGain { g1, g2 } => {
-                        let x = s[0];
-                        f * (1.0 + g1 * x + g2 * x * x)
-                    }
-                    _ => f,
-                };
-            }
-            // The presliding state of Dahl and LuGre friction relaxes far faster
-            // than the mechanics: advanced exactly over the sub-step for the
-            // velocity at its start, dz/dt = λ(z_eq − z), then held.
-            let v0 = s.get(1).copied().unwrap_or(0.0);
-            for (_, form) in &forms {
-                let (z_eq, lambda) = match form {
-                    Form::Dahl { fc, sigma } => (fc * v0.signum(), sigma * v0.abs() / fc),
-                    Form::LuGre {
-                        fc,
-                        fs: fst,
-                        vs,
-                        s0,
-                    } => {
-                        let gv = fc + (fst - fc) * (-(v0 / vs).powi(2)).exp();
-                        (gv * v0.signum() / s0, s0 * v0.abs() / gv)
-                    }
-                    _ => continue,
-                };
-                fric_z = z_eq + (fric_z - z_eq) * (-lambda * dt).exp();
-            }
-            // RK4 on the linear states, the friction state held.
-            let z = fric_z;
-            let deriv = |st: &[f64]| -> Vec<f64> {
-                let (x, v) = (st[0], st.get(1).copied().unwrap_or(0.0));
-                let mut force = 0.0;
+            u_data.push(u);
+            let un = u / u_scale;
+            for _ in 0..oversample {
+                // Input-side effects in series, on the normalised drive.
+                let mut f = un;
+                let du = f - prev_in;
+                prev_in = f;
                 for (_, form) in &forms {
-                    match form {
-                        Form::Dahl { .. } => force -= z,
-                        Form::LuGre { s0, .. } => force -= s0 * z,
-                        Form::Stribeck {
+                    f = match form {
+                        Form::PrandtlIshlinskii { h, r, w } => {
+                            let mut y = 0.0;
+                            for i in 0..8 {
+                                plays[i] = plays[i].clamp(f - r[i], f + r[i]);
+                                y += w[i] * plays[i];
+                            }
+                            (1.0 - h) * f + h * y
+                        }
+                        Form::BoucWen2 { h, beta, gamma } => {
+                            // Explicit steps small enough for the loop's rate.
+                            let pieces = (beta.max(gamma.abs()) * du.abs() * z_bw.abs().max(1.0)
+                                / 0.05)
+                                .ceil()
+                                .clamp(1.0, 1e5);
+                            let d = du / pieces;
+                            for _ in 0..pieces as usize {
+                                z_bw += d
+                                    - beta * d.abs() * z_bw.abs() * z_bw
+                                    - gamma * d * z_bw * z_bw;
+                            }
+                            (1.0 - h) * f + h * z_bw
+                        }
+                        Form::LogCreep { gamma } => {
+                            let mut y = f;
+                            for i in 0..8 {
+                                creep[i] += (f - creep[i]) * (1.0 - (-dt / creep_tau[i]).exp());
+                                y += gamma / 8.0 * creep[i];
+                            }
+                            y
+                        }
+                        Form::Delay { d0, a, f: fd } => {
+                            hist.push(f);
+                            let d = (d0 + a * (2.0 * PI * fd * t).sin()) * oversample as f64;
+                            let pos = hist.len() as f64 - 1.0 - d;
+                            if pos <= 0.0 {
+                                hist[0]
+                            } else {
+                                let i = pos.floor() as usize;
+                                let fr = pos - i as f64;
+                                let v =
+                                    hist[i] * (1.0 - fr) + hist[(i + 1).min(hist.len() - 1)] * fr;
+                                if hist.len() > 64 * oversample {
+                                    hist.drain(..hist.len() - 32 * oversample);
+                                }
+                                v
+                            }
+                        }
+                        Form::Saturation { lo, hi, soft } => {
+                            if *soft {
+                                let (m, h) = (0.5 * (hi + lo), 0.5 * (hi - lo));
+                                m + h * ((f - m) / h).tanh()
+                            } else {
+                                f.clamp(*lo, *hi)
+                            }
+                        }
+                        Form::Play { w } => {
+                            play = play.clamp(f - w / 2.0, f + w / 2.0);
+                            play
+                        }
+                        Form::PositionGain { g1, g2 } => {
+                            let x = s[0];
+                            f * (1.0 + g1 * x + g2 * x * x)
+                        }
+                        _ => f,
+                    };
+                }
+                // The presliding state of Dahl and LuGre friction relaxes far faster
+                // than the mechanics: advanced exactly over the sub-step for the
+                // velocity at its start, dz/dt = λ(z_eq − z), then held.
+                let v0 = s.get(1).copied().unwrap_or(0.0);
+                for (_, form) in &forms {
+                    let (z_eq, lambda) = match form {
+                        Form::Dahl { fc, sigma } => (fc * v0.signum(), sigma * v0.abs() / fc),
+                        Form::LuGre {
                             fc,
                             fs: fst,
                             vs,
-                            fv,
-                            veps,
+                            s0,
                         } => {
-                            force -= (fc + (fst - fc) * (-(v / vs).powi(2)).exp())
-                                * (v / veps).tanh()
-                                + fv * v;
+                            let gv = fc + (fst - fc) * (-(v0 / vs).powi(2)).exp();
+                            (gv * v0.signum() / s0, s0 * v0.abs() / gv)
                         }
-                        Form::PeriodicForce {
-                            f: fp,
-                            amps,
-                            phases,
-                        } => {
-                            force += (0..3)
-                                .map(|h| {
-                                    amps[h] * (2.0 * PI * (h + 1) as f64 * fp * t + phases[h]).sin()
-                                })
-                                .sum::<f64>();
+                        _ => continue,
+                    };
+                    fric_z = z_eq + (fric_z - z_eq) * (-lambda * dt).exp();
+                }
+                // RK4 on the linear states, the friction state held.
+                let z = fric_z;
+                let deriv = |st: &[f64]| -> Vec<f64> {
+                    let (x, v) = (st[0], st.get(1).copied().unwrap_or(0.0));
+                    let mut force = 0.0;
+                    for (_, form) in &forms {
+                        match form {
+                            Form::Dahl { .. } => force -= z,
+                            Form::LuGre { s0, .. } => force -= s0 * z,
+                            Form::Stribeck {
+                                fc,
+                                fs: fst,
+                                vs,
+                                fv,
+                                veps,
+                            } => {
+                                force -= (fc + (fst - fc) * (-(v / vs).powi(2)).exp())
+                                    * (v / veps).tanh()
+                                    + fv * v;
+                            }
+                            Form::PeriodicForce {
+                                f: fp,
+                                amps,
+                                phases,
+                            } => {
+                                force += (0..3)
+                                    .map(|h| {
+                                        amps[h]
+                                            * (2.0 * PI * (h + 1) as f64 * fp * t + phases[h]).sin()
+                                    })
+                                    .sum::<f64>();
+                            }
+                            Form::Cogging { pitch, amp, phase } => {
+                                force += amp * (2.0 * PI * x / pitch + phase).sin()
+                            }
+                            _ => {}
                         }
-                        Form::Cogging { pitch, amp, phase } => {
-                            force += amp * (2.0 * PI * x / pitch + phase).sin()
-                        }
-                        _ => {}
                     }
+                    let mut d = vec![0.0; st.len()];
+                    for i in 0..st.len() {
+                        d[i] =
+                            a[i].iter().zip(st).map(|(aij, sj)| aij * sj).sum::<f64>() + b[i] * f;
+                    }
+                    if st.len() > 1 {
+                        d[1] += force / plant.m1();
+                    } else {
+                        d[0] += force * b[0];
+                    }
+                    d
+                };
+                let add = |p: &[f64], q: &[f64], h: f64| -> Vec<f64> {
+                    p.iter().zip(q).map(|(a, b)| a + h * b).collect()
+                };
+                let k1 = deriv(&s);
+                let k2 = deriv(&add(&s, &k1, 0.5 * dt));
+                let k3 = deriv(&add(&s, &k2, 0.5 * dt));
+                let k4 = deriv(&add(&s, &k3, dt));
+                for i in 0..dim {
+                    s[i] += dt / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
                 }
-                let mut d = vec![0.0; st.len()];
-                for i in 0..st.len() {
-                    d[i] = a[i].iter().zip(st).map(|(aij, sj)| aij * sj).sum::<f64>() + b[i] * f;
-                }
-                if st.len() > 1 {
-                    d[1] += force / plant.m1();
-                } else {
-                    d[0] += force * b[0];
-                }
-                d
-            };
-            let add = |p: &[f64], q: &[f64], h: f64| -> Vec<f64> {
-                p.iter().zip(q).map(|(a, b)| a + h * b).collect()
-            };
-            let k1 = deriv(&s);
-            let k2 = deriv(&add(&s, &k1, 0.5 * dt));
-            let k3 = deriv(&add(&s, &k2, 0.5 * dt));
-            let k4 = deriv(&add(&s, &k3, dt));
-            for i in 0..dim {
-                s[i] += dt / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
+            }
+            if !s.iter().all(|v| v.is_finite() && v.abs() < 1e6) {
+                return Err(DataError::new(
+                    "scenario",
+                    format!("scenario {seed} diverged at sample {k} ({plant:?}, {forms:?})"),
+                    "draw another seed",
+                ));
             }
         }
-        if !s.iter().all(|v| v.is_finite() && v.abs() < 1e6) {
-            return Err(DataError::new(
-                "scenario",
-                format!("scenario {seed} diverged at sample {k} ({plant:?}, {forms:?})"),
-                "draw another seed",
-            ));
+        Ok((u_data, y_data))
+    };
+    let (u_data, y_data) = simulate(&forms, 1.0)?;
+    let visibility = if with_visibility {
+        // The same record without its effects (slit errors: the encoder's
+        // rounding kept, as in the nominal), with and without the noise.
+        let effect_free: Vec<(&str, Form)> = forms
+            .iter()
+            .filter_map(|(e, f)| match f {
+                Form::Slits { q, .. } => Some((*e, Form::Rounding { q: *q })),
+                _ => None,
+            })
+            .collect();
+        let (u0, y0) = simulate(&effect_free, 1.0)?;
+        let (uq, yq) = simulate(&effect_free, 0.0)?;
+        let ratio = |with: &[f64], without: &[f64], quiet: &[f64]| {
+            let rms = |a: &[f64], b: &[f64]| {
+                (a.iter().zip(b).map(|(x, y)| (x - y) * (x - y)).sum::<f64>() / a.len() as f64)
+                    .sqrt()
+            };
+            rms(with, without) / rms(without, quiet).max(f64::MIN_POSITIVE)
+        };
+        let mut v = ratio(&y_data, &y0, &yq);
+        if closed {
+            v = v.max(ratio(&u_data, &u0, &uq));
         }
-    }
+        Some(v)
+    } else {
+        None
+    };
     // The nominal graph.
     let (na, nb, nc) = nom.matrices(&[]);
     let nb: Vec<Vec<f64>> = nb
@@ -1029,15 +1082,18 @@ pub fn draw(seed: u64) -> Result<Scenario, DataError> {
             .collect::<Vec<_>>()
             .join("; ")
     };
-    Ok(Scenario {
-        record: Record {
-            nominal_yaml,
-            data,
-            hidden: hidden.iter().map(|e| e.to_string()).collect(),
-            truth,
+    Ok((
+        Scenario {
+            record: Record {
+                nominal_yaml,
+                data,
+                hidden: hidden.iter().map(|e| e.to_string()).collect(),
+                truth,
+            },
+            family,
         },
-        family,
-    })
+        visibility,
+    ))
 }
 
 #[cfg(test)]
@@ -1067,6 +1123,21 @@ mod tests {
         }
         assert_eq!(plants.len(), 5, "{plants:?}");
         assert_eq!(loops.len(), 3, "{loops:?}");
+    }
+
+    #[test]
+    fn visibility_is_zero_without_an_effect_and_leaves_the_record_unchanged() {
+        // Effect-free: the record without its effects is the record itself,
+        // so what the effects change is exactly zero.
+        for seed in (0..40).filter(|&s| labels(s).0.is_empty()).take(3) {
+            assert_eq!(visibility(seed).unwrap(), 0.0, "seed {seed}");
+        }
+        // With effects: computing the visibility draws the same record.
+        let seed = (0..40).find(|&s| !labels(s).0.is_empty()).unwrap();
+        let (with, v) = draw_with(seed, true).unwrap();
+        let plain = draw(seed).unwrap();
+        assert_eq!(with.record.data.column("y"), plain.record.data.column("y"));
+        assert!(v.is_some_and(|v| v.is_finite() && v > 0.0), "{v:?}");
     }
 
     #[test]
