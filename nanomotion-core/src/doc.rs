@@ -73,6 +73,8 @@ use serde_json::{Map, Value, json};
 
 /// A parameter struct (or enum) described by `#[derive(Params)]`.
 pub trait Params {
+    /// Whether unknown fields are refused (`#[serde(deny_unknown_fields)]`).
+    const CLOSED: bool;
     /// Documentation and schema of every parameter, in declaration order.
     fn param_docs() -> Vec<ParamDoc>;
     /// Check the declared `#[param(…)]` bounds; the error names the field and the
@@ -349,7 +351,8 @@ pub fn graph_schema() -> Value {
         "required": ["include"],
         "additionalProperties": false,
     }));
-    let signal = json!({ "type": "string", "pattern": "^[^.]+\\.[^.]+$", "description": "`block.port`" });
+    let signal =
+        json!({ "type": "string", "pattern": "^[^.]+\\.[^.]+$", "description": "`block.port`" });
     let bounds = json!({
         "type": "object",
         "additionalProperties": false,
@@ -368,7 +371,8 @@ pub fn graph_schema() -> Value {
         "description": "per-loop bounds, keyed by the name of a block in the loop",
         "additionalProperties": bounds,
     });
-    require["description"] = json!("stability bounds on the feedback loops, checked before the graph runs");
+    require["description"] =
+        json!("stability bounds on the feedback loops, checked before the graph runs");
     json!({
         "$schema": "http://json-schema.org/draft-07/schema#",
         "title": "nanomotion graph",
@@ -549,7 +553,11 @@ pub mod __derive {
         };
         if let Some(o) = target.as_object_mut() {
             if let Some(lo) = min {
-                let key = if exclusive { "exclusiveMinimum" } else { "minimum" };
+                let key = if exclusive {
+                    "exclusiveMinimum"
+                } else {
+                    "minimum"
+                };
                 o.insert(key.into(), num(lo));
             }
             if let Some(hi) = max {

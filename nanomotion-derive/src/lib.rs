@@ -130,6 +130,7 @@ struct SerdeContainer {
     rename_all: Option<String>,
     tag: Option<String>,
     untagged: bool,
+    transparent: bool,
 }
 
 fn serde_container(attrs: &[Attribute]) -> syn::Result<SerdeContainer> {
@@ -143,6 +144,7 @@ fn serde_container(attrs: &[Attribute]) -> syn::Result<SerdeContainer> {
                     skip_meta(&meta)?;
                 }
                 "untagged" => c.untagged = true,
+                "transparent" => c.transparent = true,
                 "rename_all" if meta.input.peek(Token![=]) => {
                     let s: LitStr = meta.value()?.parse()?;
                     c.rename_all = Some(s.value());
@@ -348,11 +350,9 @@ fn last_ident(ty: &Type) -> Option<String> {
 fn is_dyn_block(ty: &Type) -> bool {
     match ty {
         Type::TraitObject(t) => t.bounds.iter().any(|b| match b {
-            syn::TypeParamBound::Trait(tb) => tb
-                .path
-                .segments
-                .last()
-                .is_some_and(|s| s.ident == "Block"),
+            syn::TypeParamBound::Trait(tb) => {
+                tb.path.segments.last().is_some_and(|s| s.ident == "Block")
+            }
             _ => false,
         }),
         _ => false,
@@ -403,7 +403,13 @@ fn schema_of(ty: &Type) -> TokenStream2 {
 }
 
 /// Code checking one bound on the value `access` (an expression of type `&T`).
-fn check_of(ty: &Type, access: TokenStream2, name: TokenStream2, b: &Bound, depth: usize) -> TokenStream2 {
+fn check_of(
+    ty: &Type,
+    access: TokenStream2,
+    name: TokenStream2,
+    b: &Bound,
+    depth: usize,
+) -> TokenStream2 {
     let c = quote!(::nanomotion_core::block::check);
     if let Some(inner) = generic_of(ty, "Option") {
         let v = format_ident!("__v{depth}");
@@ -443,12 +449,24 @@ fn schema_bound(b: &Bound) -> TokenStream2 {
     let d = quote!(::nanomotion_core::doc::__derive);
     match b {
         Bound::Finite => quote!(),
-        Bound::Positive => quote!(#d::bound(&mut __s, &mut __b, ::core::option::Option::Some(0.0), true, ::core::option::Option::None);),
-        Bound::NonNegative => quote!(#d::bound(&mut __s, &mut __b, ::core::option::Option::Some(0.0), false, ::core::option::Option::None);),
-        Bound::Range(lo, hi) => quote!(#d::bound(&mut __s, &mut __b, ::core::option::Option::Some((#lo) as f64), false, ::core::option::Option::Some((#hi) as f64));),
-        Bound::Width => quote!(#d::bound(&mut __s, &mut __b, ::core::option::Option::Some(1.0), false, ::core::option::Option::Some(::nanomotion_core::block::MAX_WIDTH as f64));),
-        Bound::Size(lo, hi) => quote!(#d::bound(&mut __s, &mut __b, ::core::option::Option::Some((#lo) as f64), false, ::core::option::Option::Some((#hi) as f64));),
-        Bound::AtLeastOne => quote!(#d::bound(&mut __s, &mut __b, ::core::option::Option::Some(1.0), false, ::core::option::Option::None);),
+        Bound::Positive => {
+            quote!(#d::bound(&mut __s, &mut __b, ::core::option::Option::Some(0.0), true, ::core::option::Option::None);)
+        }
+        Bound::NonNegative => {
+            quote!(#d::bound(&mut __s, &mut __b, ::core::option::Option::Some(0.0), false, ::core::option::Option::None);)
+        }
+        Bound::Range(lo, hi) => {
+            quote!(#d::bound(&mut __s, &mut __b, ::core::option::Option::Some((#lo) as f64), false, ::core::option::Option::Some((#hi) as f64));)
+        }
+        Bound::Width => {
+            quote!(#d::bound(&mut __s, &mut __b, ::core::option::Option::Some(1.0), false, ::core::option::Option::Some(::nanomotion_core::block::MAX_WIDTH as f64));)
+        }
+        Bound::Size(lo, hi) => {
+            quote!(#d::bound(&mut __s, &mut __b, ::core::option::Option::Some((#lo) as f64), false, ::core::option::Option::Some((#hi) as f64));)
+        }
+        Bound::AtLeastOne => {
+            quote!(#d::bound(&mut __s, &mut __b, ::core::option::Option::Some(1.0), false, ::core::option::Option::None);)
+        }
     }
 }
 
@@ -514,8 +532,12 @@ fn field_code(
     let is_option = generic_of(ty, "Option").is_some();
     let default_value = match (&sf.default, container.default, is_option) {
         (Some(DefaultKind::Path(p)), _, _) => quote!(#d::some_value(&#p())),
-        (Some(DefaultKind::Trait), _, _) => quote!(#d::some_value(&<#ty as ::core::default::Default>::default())),
-        (None, true, _) => quote!(#d::some_value(&<Self as ::core::default::Default>::default().#ident)),
+        (Some(DefaultKind::Trait), _, _) => {
+            quote!(#d::some_value(&<#ty as ::core::default::Default>::default()))
+        }
+        (None, true, _) => {
+            quote!(#d::some_value(&<Self as ::core::default::Default>::default().#ident))
+        }
         (None, false, true) => quote!(::core::option::Option::Some(#d::Value::Null)),
         (None, false, false) => quote!(::core::option::Option::None),
     };
@@ -553,9 +575,11 @@ fn field_code(
         if pa.nested {
             if let Some(inner) = generic_of(ty, "Option") {
                 let _ = inner;
-                check.extend(quote!(if let ::core::option::Option::Some(__v) = &self.#ident {
-                    #d::nested(#name, ::nanomotion_core::doc::Params::check_params(__v))?;
-                }));
+                check.extend(
+                    quote!(if let ::core::option::Option::Some(__v) = &self.#ident {
+                        #d::nested(#name, ::nanomotion_core::doc::Params::check_params(__v))?;
+                    }),
+                );
             } else {
                 check.extend(quote!(#d::nested(#name, ::nanomotion_core::doc::Params::check_params(&self.#ident))?;));
             }
@@ -575,6 +599,33 @@ fn expand(input: &DeriveInput) -> syn::Result<TokenStream2> {
     let block = block_attr(&input.attrs)?;
     let description = doc_text(&input.attrs);
 
+    let registration = match block {
+        Some(b) => {
+            if !input.generics.params.is_empty() {
+                return Err(syn::Error::new_spanned(
+                    &input.generics,
+                    "#[block] registers one concrete type: no generics",
+                ));
+            }
+            let tag = b.type_name.unwrap_or_default();
+            let role = b.role.expect("checked");
+            let ports = b.ports.unwrap_or_default();
+            let summary = summary_of(&input.attrs, &tag);
+            quote!(::nanomotion_core::__private::inventory::submit! {
+                ::nanomotion_core::BlockDoc {
+                    type_name: #tag,
+                    role: ::nanomotion_core::Role::#role,
+                    summary: #summary,
+                    ports: #ports,
+                    params: <#name as ::nanomotion_core::doc::Params>::param_docs,
+                    closed: <#name as ::nanomotion_core::doc::Params>::CLOSED,
+                }
+            })
+        }
+        None => quote!(),
+    };
+
+    let registration_placeholder = &registration;
     let (param_docs, checks, schema) = match &input.data {
         Data::Struct(s) => {
             let Fields::Named(named) = &s.fields else {
@@ -583,6 +634,36 @@ fn expand(input: &DeriveInput) -> syn::Result<TokenStream2> {
                     "#[derive(Params)] needs a struct with named fields",
                 ));
             };
+            if container.transparent {
+                // `#[serde(transparent)]`: the block is its one field's parameters
+                let Some(inner) = named
+                    .named
+                    .iter()
+                    .find(|f| serde_field(&f.attrs).map(|s| !s.skip).unwrap_or(false))
+                else {
+                    return Err(syn::Error::new_spanned(name, "transparent without a field"));
+                };
+                let ident = &inner.ident;
+                let ty = &inner.ty;
+                let p = quote!(::nanomotion_core::doc::Params);
+                let out = quote!(
+                    impl #impl_g #p for #name #ty_g #where_g {
+                        const CLOSED: bool = <#ty as #p>::CLOSED;
+                        fn param_docs() -> ::std::vec::Vec<::nanomotion_core::ParamDoc> {
+                            <#ty as #p>::param_docs()
+                        }
+                        fn check_params(&self) -> ::core::result::Result<(), ::nanomotion_core::ParamError> {
+                            #p::check_params(&self.#ident)
+                        }
+                    }
+                    impl #impl_g ::nanomotion_core::doc::ParamSchema for #name #ty_g #where_g {
+                        fn param_schema() -> #d::Value {
+                            <#ty as ::nanomotion_core::doc::ParamSchema>::param_schema()
+                        }
+                    }
+                );
+                return Ok(quote!(#out #registration_placeholder));
+            }
             let mut docs = Vec::new();
             let mut checks = Vec::new();
             for f in &named.named {
@@ -656,37 +737,10 @@ fn expand(input: &DeriveInput) -> syn::Result<TokenStream2> {
         }
     };
 
-    let registration = match block {
-        Some(b) => {
-            if !input.generics.params.is_empty() {
-                return Err(syn::Error::new_spanned(
-                    &input.generics,
-                    "#[block] registers one concrete type: no generics",
-                ));
-            }
-            let tag = b.type_name.unwrap_or_default();
-            let role = b.role.expect("checked");
-            let ports = b.ports.unwrap_or_default();
-            let summary = summary_of(&input.attrs, &tag);
-            let closed = container.deny_unknown_fields;
-            quote!(
-                ::nanomotion_core::__private::inventory::submit! {
-                    ::nanomotion_core::BlockDoc {
-                        type_name: #tag,
-                        role: ::nanomotion_core::Role::#role,
-                        summary: #summary,
-                        ports: #ports,
-                        params: <#name as ::nanomotion_core::doc::Params>::param_docs,
-                        closed: #closed,
-                    }
-                }
-            )
-        }
-        None => quote!(),
-    };
-
+    let closed = container.deny_unknown_fields;
     Ok(quote!(
         impl #impl_g ::nanomotion_core::doc::Params for #name #ty_g #where_g {
+            const CLOSED: bool = #closed;
             fn param_docs() -> ::std::vec::Vec<::nanomotion_core::ParamDoc> {
                 #param_docs
             }

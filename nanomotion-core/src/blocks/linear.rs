@@ -800,7 +800,10 @@ pub struct LeadLag {
     pub gain: f64,
     /// Tustin pre-warp frequency (Hz).
     #[serde(default)]
-    #[param(positive, default_doc = "√(zero_hz·pole_hz) if below Nyquist, else plain Tustin")]
+    #[param(
+        positive,
+        default_doc = "√(zero_hz·pole_hz) if below Nyquist, else plain Tustin"
+    )]
     pub prewarp_hz: Option<f64>,
     /// Number of independent channels.
     #[serde(default = "one")]

@@ -18,8 +18,8 @@
 //! ```
 
 use crate::block::check;
-use crate::lti::StateSpace;
 use crate::doc::Params;
+use crate::lti::StateSpace;
 use crate::{Block, BuildContext, ParamError, Port, Tick};
 use nalgebra::DMatrix;
 use serde::{Deserialize, Serialize};

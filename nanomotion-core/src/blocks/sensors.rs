@@ -17,9 +17,7 @@
 
 use crate::block::check;
 use crate::rng::Rng;
-use crate::{
-    Block, BuildContext, ParamError, Params, Port, Role, Sensor, Tick, Tunable,
-};
+use crate::{Block, BuildContext, ParamError, Params, Port, Role, Sensor, Tick, Tunable};
 use serde::{Deserialize, Serialize};
 
 /// Resolution of the metrological AFM's laser interferometers (m), Ch. 6.

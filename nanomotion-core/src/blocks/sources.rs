@@ -25,8 +25,8 @@
 //! ```
 
 use crate::block::check;
-use crate::rng::Rng;
 use crate::doc::Params;
+use crate::rng::Rng;
 use crate::{Block, BuildContext, ParamError, Port, Role, Source, Tick};
 use serde::{Deserialize, Serialize};
 use std::f64::consts::{PI, TAU};
