@@ -39,10 +39,9 @@
 //! naming the input; the graph block then holds the last valid value and counts a
 //! fault on its `faults` output.
 
+use nanomotion_core::Params;
 use nanomotion_core::block::check;
-use nanomotion_core::{
-    Actuator, Block, BlockDoc, BuildContext, ParamDoc, ParamError, Port, Role, Tick,
-};
+use nanomotion_core::{Actuator, Block, BuildContext, ParamError, Port, Role, Tick};
 use serde::{Deserialize, Serialize};
 use std::f64::consts::{FRAC_PI_2, PI, TAU};
 use thiserror::Error;
@@ -236,11 +235,14 @@ impl Default for WaveformShape {
 }
 
 /// Parameters of the driver (block `walking_piezo_driver`).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
 pub struct DriverParams {
     /// The waveform shape; default the asymmetric waveform with q = 1/3.
+    /// {kind: sinusoidal | asymmetric | asymmetric_fourier | rhombic | free}; overlap_q ∈
+    /// (0, 1) for the asymmetric ones; points_v: 4×8 V for free.
     #[serde(default)]
+    #[param(default_doc = "{kind: asymmetric, overlap_q: 1/3}")]
     pub shape: WaveformShape,
     /// Amplitude A (V) when no `amplitude` input is used; in [0, V_max]. Ā = 46 V.
     #[serde(default = "d_a")]
@@ -507,14 +509,19 @@ impl Actuator for WaveformDriver {
 // Graph block
 // ---------------------------------------------------------------------------
 
+/// `walking_piezo_driver`: walking-piezo driver (Sec. 2.4): f_α → α = 2π∫f_α dt and
+/// u1..u4 from sinusoidal (2.2), asymmetric (Sec. 2.4.1) or its Fourier fit (2.9),
+/// rhombic, or free (4.21)-(4.22) waveforms.
+///
 /// Graph block `walking_piezo_driver`.
 ///
 /// Inputs: `f_alpha` (1, Hz), then `amplitude` (1, V) if `amplitude_input`, then
 /// `phase` (1, rad) if `phase_input`. Outputs: `u` (4, V), `alpha` (1, rad),
 /// `faults` (1, cumulative count of refused samples: non-finite f_α, A or φ, or A
 /// outside [0, V_max]; the last valid f_α, A, φ are then used).
-#[derive(Debug, Clone, Default, Serialize, Deserialize)]
+#[derive(Debug, Clone, Default, Serialize, Deserialize, Params)]
 #[serde(transparent)]
+#[block(type_name = "walking_piezo_driver", role = Actuator, ports = "f_alpha (Hz) [, amplitude (V)] [, phase (rad)] -> u[4] (V), alpha (rad), faults")]
 pub struct WaveformDriverBlock {
     /// The parameters.
     pub params: DriverParams,
@@ -596,24 +603,6 @@ impl Block for WaveformDriverBlock {
     }
     fn role(&self) -> Role {
         Role::Actuator
-    }
-}
-
-nanomotion_core::submit_block_doc! {
-    BlockDoc {
-        type_name: "walking_piezo_driver",
-        role: Role::Actuator,
-        summary: "walking-piezo driver (Sec. 2.4): f_α → α = 2π∫f_α dt and u1..u4 from sinusoidal (2.2), asymmetric (Sec. 2.4.1) or its Fourier fit (2.9), rhombic, or free (4.21)-(4.22) waveforms",
-        params: &[
-            ParamDoc { name: "shape", doc: "{kind: sinusoidal | asymmetric | asymmetric_fourier | rhombic | free}; overlap_q ∈ (0,1) for the asymmetric ones; points_v: 4×8 V for free", default: Some("{kind: asymmetric, overlap_q: 1/3}") },
-            ParamDoc { name: "amplitude_v", doc: "amplitude A (V) without an amplitude input, in [0, voltage_max_v]", default: Some("46") },
-            ParamDoc { name: "phase_rad", doc: "phase φ (rad) of (2.2) without a phase input", default: Some("0") },
-            ParamDoc { name: "alpha0_rad", doc: "angle α at t = 0 (rad)", default: Some("0") },
-            ParamDoc { name: "voltage_max_v", doc: "amplifier range V_max (V)", default: Some("46") },
-            ParamDoc { name: "amplitude_input", doc: "add input `amplitude` (V) for A(t) (2.11)", default: Some("false") },
-            ParamDoc { name: "phase_input", doc: "add input `phase` (rad) for φ(t) (2.12)", default: Some("false") },
-        ],
-        ports: "f_alpha (Hz) [, amplitude (V)] [, phase (rad)] -> u[4] (V), alpha (rad), faults",
     }
 }
 
