@@ -30,12 +30,13 @@ use nanomotion_core::error::ParamError;
 use nanomotion_core::lti::{
     Complex, LtiError, SsStepper, StateSpace, TransferFunction, fir_lowpass, fir2ss, zpetc,
 };
+use nanomotion_core::Params;
 use serde::{Deserialize, Serialize};
 
 /// How a learning filter L(z) or robustness filter Q(z) is specified (YAML: a map
 /// with `kind:`). Discrete coefficients are in **descending powers of z** at the
 /// block's own rate.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Params)]
 #[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
 pub enum FilterSpec {
     /// L = Q = 1 (no filtering, no delay).
