@@ -24,7 +24,7 @@
 //! | `width` | [`check::width`](crate::block::check::width) | 1 to [`MAX_WIDTH`](crate::block::MAX_WIDTH) |
 //! | `size(lo, hi)` | [`check::size`](crate::block::check::size) | `minimum`, `maximum` |
 //! | `at_least_one` | [`check::at_least_one`](crate::block::check::at_least_one) | `minimum: 1` |
-//! | `at_most = other` | [`check::ordered`](crate::block::check::ordered) (this ≤ `other`) | — |
+//! | `at_most = other` | [`check::ordered`](crate::block::check::ordered) (this ≤ `other`), after every field's own bounds | — |
 //! | `nested` | the field's own [`Params::check_params`], field names prefixed `field.` | the field type's schema |
 //!
 //! A bound on an `Option<T>` applies when the value is present, on a `Vec<T>` to

@@ -506,6 +506,8 @@ fn rename(name: &str, rule: Option<&str>) -> String {
 struct FieldCode {
     doc: TokenStream2,
     check: TokenStream2,
+    /// `at_most` checks, run after every field's own bounds.
+    ordering: TokenStream2,
 }
 
 fn field_code(
@@ -564,13 +566,14 @@ fn field_code(
         #d::param(#name, #doc, #default_value, #default_doc, __s, __b, &[#(#aliases),*], #flatten)
     });
     let mut check = TokenStream2::new();
+    let mut ordering = TokenStream2::new();
     if with_checks {
         for b in &pa.bounds {
             check.extend(check_of(ty, quote!(&self.#ident), quote!(#name), b, 0));
         }
         if let Some(other) = &pa.at_most {
             let other_name = other.to_string();
-            check.extend(quote!(::nanomotion_core::block::check::ordered(#name, self.#ident, #other_name, self.#other)?;));
+            ordering = quote!(::nanomotion_core::block::check::ordered(#name, self.#ident, #other_name, self.#other)?;);
         }
         if pa.nested {
             if let Some(inner) = generic_of(ty, "Option") {
@@ -588,6 +591,7 @@ fn field_code(
     Ok(Some(FieldCode {
         doc: doc_code,
         check,
+        ordering,
     }))
 }
 
@@ -666,12 +670,15 @@ fn expand(input: &DeriveInput) -> syn::Result<TokenStream2> {
             }
             let mut docs = Vec::new();
             let mut checks = Vec::new();
+            let mut orderings = Vec::new();
             for f in &named.named {
                 if let Some(fc) = field_code(f, &container, true)? {
                     docs.push(fc.doc);
                     checks.push(fc.check);
+                    orderings.push(fc.ordering);
                 }
             }
+            checks.extend(orderings);
             let closed = container.deny_unknown_fields;
             (
                 quote!(::std::vec![#(#docs),*]),
