@@ -25,12 +25,12 @@
 
 use nalgebra::DMatrix;
 use nanomotion_core::LearningFilter;
+use nanomotion_core::Params;
 use nanomotion_core::block::check;
 use nanomotion_core::error::ParamError;
 use nanomotion_core::lti::{
     Complex, LtiError, SsStepper, StateSpace, TransferFunction, fir_lowpass, fir2ss, zpetc,
 };
-use nanomotion_core::Params;
 use serde::{Deserialize, Serialize};
 
 /// How a learning filter L(z) or robustness filter Q(z) is specified (YAML: a map

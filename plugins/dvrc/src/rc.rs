@@ -29,10 +29,10 @@
 
 use crate::delay::{AlphaDelay, VaryingDelay};
 use crate::filters::{Filter, FilterSpec};
+use nanomotion_core::Params;
 use nanomotion_core::block::{BuildContext, Port, Role, Tick, check};
 use nanomotion_core::error::ParamError;
 use nanomotion_core::{Block, Controller, LearningFilter};
-use nanomotion_core::Params;
 use serde::{Deserialize, Serialize};
 
 /// The memory loop of Fig. 5.1/5.2 with an externally chosen delay N_k per sample.
