@@ -145,17 +145,21 @@ pub fn design_pi(
 #[serde(deny_unknown_fields)]
 pub struct StepSizeFeedForward {
     /// v_max (m/s), the largest reference velocity of the move.
+    #[param(positive)]
     pub v_max_m_s: f64,
     /// A_min (V); thesis 23 V.
     #[serde(default = "d_amin")]
+    #[param(range(0.0, 46.0), at_most = amplitude_max_v)]
     pub amplitude_min_v: f64,
     /// A_max (V); thesis 46 V.
     #[serde(default = "d_amax")]
+    #[param(range(0.0, 46.0))]
     pub amplitude_max_v: f64,
     /// φ̄_min (rad), the smallest phase difference.
     /// φ = φ̄ − π/2.
     #[serde(default = "d_pmin")]
     #[param(default_doc = "π/4")]
+    #[param(at_most = phase_diff_max_rad)]
     pub phase_diff_min_rad: f64,
     /// φ̄_max (rad), the largest phase difference; thesis π/2.
     #[serde(default = "d_pmax")]
@@ -191,21 +195,7 @@ impl Default for StepSizeFeedForward {
 impl StepSizeFeedForward {
     /// Check the fields (typed errors naming them).
     pub fn validate(&self) -> Result<(), ParamError> {
-        check::positive("v_max_m_s", self.v_max_m_s)?;
-        check::in_range("amplitude_min_v", self.amplitude_min_v, 0.0, 46.0)?;
-        check::in_range("amplitude_max_v", self.amplitude_max_v, 0.0, 46.0)?;
-        check::ordered(
-            "amplitude_min_v",
-            self.amplitude_min_v,
-            "amplitude_max_v",
-            self.amplitude_max_v,
-        )?;
-        check::ordered(
-            "phase_diff_min_rad",
-            self.phase_diff_min_rad,
-            "phase_diff_max_rad",
-            self.phase_diff_max_rad,
-        )
+        self.check_params()
     }
     /// (A (V), φ (rad)) for the reference velocity `r_dot` (m/s); a non-finite
     /// `r_dot` gives the smallest step.

@@ -249,12 +249,15 @@ pub struct DriverParams {
     pub amplitude_v: f64,
     /// Phase φ (rad) of (2.2) when no `phase` input is used (φ = 0: largest step).
     #[serde(default)]
+    #[param(finite)]
     pub phase_rad: f64,
     /// Angle α at t = 0 (rad).
     #[serde(default)]
+    #[param(finite)]
     pub alpha0_rad: f64,
     /// Upper voltage limit V_max (V) of the amplifiers; thesis 46 V.
     #[serde(default = "d_a")]
+    #[param(positive)]
     pub voltage_max_v: f64,
     /// Add an input port `amplitude` (1, V) for A(t), e.g. from the feed-forward (2.11).
     #[serde(default)]
@@ -285,10 +288,9 @@ impl Default for DriverParams {
 impl DriverParams {
     /// Check every field (typed errors naming it).
     pub fn validate(&self) -> Result<(), ParamError> {
-        check::positive("voltage_max_v", self.voltage_max_v)?;
+        self.check_params()?;
+        // the upper bound is another field: checked here, after it
         check::in_range("amplitude_v", self.amplitude_v, 0.0, self.voltage_max_v)?;
-        check::finite("phase_rad", self.phase_rad)?;
-        check::finite("alpha0_rad", self.alpha0_rad)?;
         match &self.shape {
             WaveformShape::Asymmetric { overlap_q }
             | WaveformShape::AsymmetricFourier { overlap_q } => {
