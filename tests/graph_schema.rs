@@ -143,3 +143,30 @@ fn the_same_bound_refuses_the_value_when_the_block_is_built() {
     assert_eq!(e.field, "width");
     assert!(e.to_string().contains("[1, 1024]"), "{e}");
 }
+
+#[test]
+fn the_cli_writes_the_schema_as_json() {
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_nanomotion"))
+        .arg("schema")
+        .output()
+        .expect("binary runs");
+    assert!(o.status.success());
+    let s: Value = serde_json::from_slice(&o.stdout).expect("`nanomotion schema` prints JSON");
+    assert_eq!(s["$schema"], "http://json-schema.org/draft-07/schema#");
+    let types: Vec<&str> = s["definitions"]["block_entry"]["oneOf"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter_map(|b| b["properties"]["type"]["const"].as_str())
+        .collect();
+    for t in [
+        "pid",
+        "walking_piezo_stage",
+        "dvrc",
+        "hysteresis",
+        "mimo_controller",
+    ] {
+        assert!(types.contains(&t), "`{t}` missing from `nanomotion schema`");
+    }
+    jsonschema::draft7::new(&s).expect("a valid draft-7 schema");
+}
