@@ -20,9 +20,9 @@ pub const MIN_POLE_DAMPING: f64 = 1e-4;
 /// show in the data's band ([`UnmodeledResonance::implausible`]).
 pub const MIN_PEAK_DB: f64 = 1.0;
 
-/// `unmodeled_resonance`: PLF effect: pole–zero pair R(s) = (ω_p²/ω_z²)(s² + 2ζ_zω_z s
-/// + ω_z²)/(s² + 2ζ_pω_p s + ω_p²), unity DC gain, Tustin pre-warped at ω_p, one
-/// biquad; tunable all four.
+/// `unmodeled_resonance`: PLF effect: pole–zero pair
+/// R(s) = (ω_p²/ω_z²)(s² + 2ζ_zω_z s + ω_z²)/(s² + 2ζ_pω_p s + ω_p²), unity DC gain,
+/// Tustin pre-warped at ω_p, one biquad; tunable all four.
 ///
 /// ```text
 /// R(s) = (ω_p²/ω_z²) · (s² + 2ζ_z ω_z s + ω_z²) / (s² + 2ζ_p ω_p s + ω_p²)
