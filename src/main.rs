@@ -317,6 +317,9 @@ enum Command {
         /// Show only types whose name contains this text.
         filter: Option<String>,
     },
+    /// Print the JSON Schema of a graph file (every registered block type), for
+    /// editors: `nanomotion schema > graph.schema.json` (see docs/graph-format.md).
+    Schema,
 }
 
 fn main() -> ExitCode {
@@ -416,6 +419,9 @@ fn main() -> ExitCode {
             limit,
         } => sweep_cmd::sweep(&study, out, jobs, restart, limit),
         Command::Blocks { filter } => blocks(filter.as_deref()),
+        Command::Schema => serde_json::to_string_pretty(&nanomotion::core::doc::graph_schema())
+            .map(|text| say!("{text}"))
+            .map_err(|e| e.to_string()),
         Command::Reproduce {
             names,
             quick,
@@ -792,16 +798,7 @@ fn blocks(filter: Option<&str>) -> Result<(), String> {
     }
     for t in shown {
         match docs.iter().find(|d| d.type_name == t) {
-            Some(d) => {
-                say!("{} ({}): {}", d.type_name, d.role.as_str(), d.summary);
-                say!("    ports: {}", d.ports);
-                for p in d.params {
-                    match p.default {
-                        Some(def) => say!("    {:<22} {} [default {def}]", p.name, p.doc),
-                        None => say!("    {:<22} {}", p.name, p.doc),
-                    }
-                }
-            }
+            Some(d) => say!("{}", d.describe().trim_end()),
             None => say!("{t}: (no documentation registered)"),
         }
     }

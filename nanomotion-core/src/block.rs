@@ -357,62 +357,7 @@ impl Linearisation {
     }
 }
 
-/// Documentation of a parameter, for `nanomotion blocks`.
-#[derive(Debug, Clone, Copy)]
-pub struct ParamDoc {
-    /// Field name in YAML.
-    pub name: &'static str,
-    /// Unit and meaning, with the thesis symbol where one exists.
-    pub doc: &'static str,
-    /// Default, if the field is optional.
-    pub default: Option<&'static str>,
-}
-
-/// Documentation of a block type, registered with [`inventory`] next to the
-/// `typetag` registration so that `nanomotion blocks` can list it:
-///
-/// ```
-/// use nanomotion_core::{BlockDoc, ParamDoc, Role};
-/// nanomotion_core::submit_block_doc! {
-///     BlockDoc {
-///         type_name: "doc_example",
-///         role: Role::Math,
-///         summary: "an example",
-///         params: &[ParamDoc { name: "k", doc: "gain (-)", default: None }],
-///         ports: "u -> y",
-///     }
-/// }
-/// ```
-#[derive(Debug, Clone, Copy)]
-pub struct BlockDoc {
-    /// The `type:` tag.
-    pub type_name: &'static str,
-    /// The role of the block.
-    pub role: Role,
-    /// One line saying what it does.
-    pub summary: &'static str,
-    /// The parameters.
-    pub params: &'static [ParamDoc],
-    /// Port summary, e.g. `"u[n] -> y[n]"`.
-    pub ports: &'static str,
-}
-
-inventory::collect!(BlockDoc);
-
-/// Register a [`BlockDoc`].
-#[macro_export]
-macro_rules! submit_block_doc {
-    ($doc:expr) => {
-        $crate::__private::inventory::submit! { $doc }
-    };
-}
-
-/// All registered block documentation, sorted by type name.
-pub fn block_docs() -> Vec<&'static BlockDoc> {
-    let mut v: Vec<&'static BlockDoc> = inventory::iter::<BlockDoc>.into_iter().collect();
-    v.sort_by_key(|d| d.type_name);
-    v
-}
+pub use crate::doc::{BlockDoc, ParamDoc, block_docs};
 
 /// All block types registered with `typetag` (every linked crate), sorted.
 ///

@@ -8,6 +8,8 @@
 //! - [`block`]: the [`Block`] trait every graph block implements (registered with
 //!   `typetag`, so YAML names a block by `type:`), ports, build context and parameter
 //!   validation helpers;
+//! - [`doc`]: one declaration per block: `#[derive(Params)]` turns the parameter
+//!   struct into the block's documentation, JSON Schema and bound checks;
 //! - [`roles`]: the role traits [`Actuator`], [`Sensor`], [`Estimator`],
 //!   [`Controller`], [`LearningFilter`], [`Plant`] and [`Source`], which give every
 //!   block a typed Rust API usable without any graph;
@@ -34,6 +36,7 @@ pub mod analysis;
 pub mod block;
 pub mod blocks;
 pub mod data;
+pub mod doc;
 pub mod error;
 mod files;
 pub mod gate;
@@ -59,9 +62,13 @@ pub mod yaml;
 pub use nalgebra;
 
 pub use block::MeasuredData;
+// The derive (`nanomotion-derive`) names `::nanomotion_core` paths, in this crate too.
+extern crate self as nanomotion_core;
+
 pub use block::{
     Block, BlockDoc, BuildContext, Linearisation, ParamDoc, Port, Role, Tick, Tunable,
 };
+pub use doc::Params;
 pub use error::{GraphError, ParamError};
 pub use graph::{Graph, GraphSpec};
 pub use overrides::Override;
@@ -73,5 +80,6 @@ pub use scheduler::Scheduler;
 #[doc(hidden)]
 pub mod __private {
     pub use inventory;
+    pub use serde_json;
     pub use typetag;
 }

@@ -217,3 +217,15 @@ fn locate_field(e: GraphError, text: &str) -> GraphError {
     message = out;
     GraphError::Parse { origin, message }
 }
+
+/// Parse YAML text into a JSON value as a YAML 1.2 editor reads it (the YAML
+/// language server behind `# yaml-language-server: $schema=…`): only
+/// `true`/`false` are booleans, so a block named `y` or a column `n` stays a
+/// string. For checking files against `nanomotion schema`.
+pub fn to_json_value(text: &str, origin: &str) -> Result<serde_json::Value, GraphError> {
+    let opts = serde_saphyr::options!(strict_booleans: true);
+    serde_saphyr::from_str_with_options(text, opts).map_err(|e| GraphError::Parse {
+        origin: origin.to_string(),
+        message: plain_message(&e.to_string(), origin),
+    })
+}

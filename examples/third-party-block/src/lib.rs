@@ -1,7 +1,8 @@
 //! A block defined **outside** nanomotion, usable from YAML by linking alone.
 //!
 //! This crate depends only on `nanomotion-core`, `serde` and `typetag`. It defines
-//! [`MovingAverage`] and registers it under `type: moving_average`. A program that
+//! [`MovingAverage`] and registers it under `type: moving_average`; its
+//! `#[derive(Params)]` puts it in `nanomotion blocks` and `nanomotion schema`. A program that
 //! links this crate (e.g. `use third_party_block as _;`) can load graphs that use it;
 //! nothing in nanomotion had to change.
 //!
@@ -13,15 +14,16 @@
 //! ```
 
 use nanomotion_core::block::check;
-use nanomotion_core::{Block, BlockDoc, BuildContext, ParamDoc, ParamError, Port, Role, Tick};
+use nanomotion_core::{Block, BuildContext, ParamError, Params, Port, Role, Tick};
 use serde::{Deserialize, Serialize};
 
-/// Moving average over the last `window` samples (zeros before the start):
-/// `y[k] = (1/n) Σ_{i=0}^{n-1} u[k-i]`.
-#[derive(Debug, Clone, Serialize, Deserialize)]
+/// Moving average over the last `window` samples (example of a third-party
+/// block; zeros before the start): `y[k] = (1/n) Σ_{i=0}^{n-1} u[k-i]`.
+#[derive(Debug, Clone, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
+#[block(type_name = "moving_average", role = Math, ports = "u -> y")]
 pub struct MovingAverage {
-    /// Number of samples averaged, n ≥ 1.
+    /// Number of samples averaged, n ≥ 1 (at most 2^24).
     pub window: usize,
     #[serde(skip)]
     ring: Vec<f64>,
@@ -82,15 +84,5 @@ impl Block for MovingAverage {
     }
     fn role(&self) -> Role {
         Role::Math
-    }
-}
-
-nanomotion_core::submit_block_doc! {
-    BlockDoc {
-        type_name: "moving_average",
-        role: Role::Math,
-        summary: "moving average over the last `window` samples (example of a third-party block)",
-        params: &[ParamDoc { name: "window", doc: "samples averaged, n ≥ 1", default: None }],
-        ports: "u -> y",
     }
 }

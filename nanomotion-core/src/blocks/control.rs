@@ -50,13 +50,13 @@
 
 use crate::block::check;
 use crate::lti::StateSpace;
-use crate::{Block, BlockDoc, BuildContext, Controller, ParamDoc, ParamError, Port, Role, Tick};
+use crate::{Block, BuildContext, Controller, ParamError, Params, Port, Role, Tick};
 use nalgebra::DMatrix;
 use serde::{Deserialize, Serialize};
 use std::f64::consts::TAU;
 
 /// How [`Pid`] discretises its integrator and derivative filter.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize, Params)]
 #[serde(rename_all = "snake_case")]
 pub enum PidDiscretisation {
     /// Bilinear transform s ← (2/T)(z−1)/(z+1): keeps the frequency response
@@ -69,7 +69,7 @@ pub enum PidDiscretisation {
 }
 
 /// Anti-windup scheme of [`Pid`], active only when `output_min`/`output_max` are given.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize, Params)]
 #[serde(rename_all = "snake_case")]
 pub enum AntiWindup {
     /// Integrate regardless of saturation (shows windup; for comparison).
@@ -99,37 +99,46 @@ struct Coeffs {
     kb: f64,
 }
 
-/// `pid`: PID controller with filtered derivative, output limits and anti-windup
-/// (see the [module documentation](self) for the exact discrete equations).
-#[derive(Debug, Clone, Default, Serialize, Deserialize)]
+/// `pid`: PID controller kp + ki/s + kd·s/(1 + s/ω_d) with filtered derivative,
+/// Tustin or backward Euler, output limits and anti-windup.
+///
+/// See the [module documentation](self) for the exact discrete equations.
+#[derive(Debug, Clone, Default, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
+#[block(type_name = "pid", role = Controller, ports = "e -> u")]
 pub struct Pid {
     /// Proportional gain k_p (unit of u per unit of e).
+    #[param(finite)]
     pub kp: f64,
-    /// Integral gain k_i (unit of u per unit of e per second; default 0).
+    /// Integral gain k_i (unit of u per unit of e per second).
     #[serde(default)]
+    #[param(finite)]
     pub ki: f64,
-    /// Derivative gain k_d (unit of u per unit of e, times seconds; default 0).
+    /// Derivative gain k_d (unit of u per unit of e, times seconds).
     #[serde(default)]
+    #[param(finite)]
     pub kd: f64,
     /// Cut-off f_d (Hz) of the derivative low-pass k_d·s/(1 + s/(2πf_d)); required
     /// when k_d ≠ 0, below the Nyquist frequency.
     #[serde(default)]
     pub derivative_cutoff_hz: Option<f64>,
-    /// `tustin` (default) or `backward_euler`.
+    /// Discretisation of the integrator and derivative filter.
     #[serde(default)]
     pub discretisation: PidDiscretisation,
-    /// Lower output limit (unit of u; none by default).
+    /// Lower output limit (unit of u).
     #[serde(default)]
+    #[param(finite)]
     pub output_min: Option<f64>,
-    /// Upper output limit (unit of u; none by default).
+    /// Upper output limit (unit of u).
     #[serde(default)]
+    #[param(finite)]
     pub output_max: Option<f64>,
-    /// `clamping` (default), `back_calculation` or `none`.
+    /// Anti-windup scheme, active when a limit is given.
     #[serde(default)]
     pub anti_windup: AntiWindup,
-    /// Tracking time T_t of back-calculation (s).
+    /// Tracking time T_t of back-calculation (s), at least one sample period.
     #[serde(default)]
+    #[param(positive, default_doc = "√(T_i·T_d), or T_i without a derivative")]
     pub tracking_time_s: Option<f64>,
     #[serde(skip)]
     c: Coeffs,
@@ -184,17 +193,9 @@ impl Pid {
                 "give a positive rate",
             ));
         }
-        check::finite("kp", self.kp)?;
-        check::finite("ki", self.ki)?;
-        check::finite("kd", self.kd)?;
+        self.check_params()?;
         let lo = self.output_min.unwrap_or(f64::NEG_INFINITY);
         let hi = self.output_max.unwrap_or(f64::INFINITY);
-        if let Some(v) = self.output_min {
-            check::finite("output_min", v)?;
-        }
-        if let Some(v) = self.output_max {
-            check::finite("output_max", v)?;
-        }
         if lo > hi {
             return Err(ParamError::new(
                 "output_min",
@@ -237,7 +238,6 @@ impl Pid {
         };
         let tt = match self.tracking_time_s {
             Some(tt) => {
-                check::positive("tracking_time_s", tt)?;
                 if tt < dt {
                     return Err(ParamError::new(
                         "tracking_time_s",
@@ -362,59 +362,43 @@ impl Block for Pid {
     }
 }
 
-crate::submit_block_doc! {
-    BlockDoc {
-        type_name: "pid",
-        role: Role::Controller,
-        summary: "PID kp + ki/s + kd·s/(1+s/ω_d), Tustin or backward Euler, output limits with anti-windup",
-        params: &[
-            ParamDoc { name: "kp", doc: "proportional gain (u per e)", default: None },
-            ParamDoc { name: "ki", doc: "integral gain (u per e per s)", default: Some("0") },
-            ParamDoc { name: "kd", doc: "derivative gain (u·s per e)", default: Some("0") },
-            ParamDoc { name: "derivative_cutoff_hz", doc: "derivative low-pass cut-off (Hz), required if kd ≠ 0", default: Some("none") },
-            ParamDoc { name: "discretisation", doc: "tustin | backward_euler", default: Some("tustin") },
-            ParamDoc { name: "output_min", doc: "lower output limit", default: Some("none") },
-            ParamDoc { name: "output_max", doc: "upper output limit", default: Some("none") },
-            ParamDoc { name: "anti_windup", doc: "clamping | back_calculation | none", default: Some("clamping") },
-            ParamDoc { name: "tracking_time_s", doc: "back-calculation tracking time T_t (s)", default: Some("√(T_i·T_d) or T_i") },
-        ],
-        ports: "e -> u",
-    }
-}
-
 // ---------------------------------------------------------------------------------
 // pi
 // ---------------------------------------------------------------------------------
 
 /// `pi`: the PI controller of (2.10) in the thesis's zero form
+/// C(s) = k_p·(s + 2π f_i)/s = k_p + k_p·2π f_i / s, with output limits and
+/// anti-windup.
 ///
-/// C(s) = k_p·(s + 2π f_i)/s = k_p + k_p·2π f_i / s,
-///
-/// with integrator zero f_i = `zero_hz` (Ch. 2 loop-shapes the walking-piezo loop
+/// With integrator zero f_i = `zero_hz` (Ch. 2 loop-shapes the walking-piezo loop
 /// to ~10 Hz bandwidth on the drive frequency f_α; Ch. 5 to ~50 Hz). Realised as a
 /// [`Pid`] with k_i = k_p·2π f_i and k_d = 0 (same discretisation, limits and
 /// anti-windup).
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
+#[block(type_name = "pi", role = Controller, ports = "e -> u")]
 pub struct Pi {
     /// Gain k_p (unit of u per unit of e; for f_α in Hz per m of error).
+    #[param(finite)]
     kp: f64,
-    /// Integrator zero f_i (Hz), ≥ 0 (0 gives a P controller).
+    /// Integrator zero f_i (Hz); 0 gives a P controller.
+    #[param(non_negative)]
     zero_hz: f64,
-    /// `tustin` (default) or `backward_euler`.
+    /// Discretisation of the integrator.
     #[serde(default)]
     discretisation: PidDiscretisation,
-    /// Lower output limit (unit of u; none by default).
+    /// Lower output limit (unit of u).
     #[serde(default)]
     output_min: Option<f64>,
-    /// Upper output limit (unit of u; none by default).
+    /// Upper output limit (unit of u).
     #[serde(default)]
     output_max: Option<f64>,
-    /// `clamping` (default), `back_calculation` or `none`.
+    /// Anti-windup scheme, active when a limit is given.
     #[serde(default)]
     anti_windup: AntiWindup,
-    /// Tracking time T_t of back-calculation (s, default T_i = 1/(2π f_i)).
+    /// Tracking time T_t of back-calculation (s).
     #[serde(default)]
+    #[param(default_doc = "T_i = 1/(2π·zero_hz)")]
     tracking_time_s: Option<f64>,
     #[serde(skip)]
     pid: Pid,
@@ -487,8 +471,7 @@ impl Pi {
 
     fn prepare(&mut self, dt: f64) -> Result<(), ParamError> {
         self.dt = dt;
-        check::finite("kp", self.kp)?;
-        check::non_negative("zero_hz", self.zero_hz)?;
+        self.check_params()?;
         let ki = self.kp * TAU * self.zero_hz;
         if !ki.is_finite() {
             return Err(ParamError::new(
@@ -550,24 +533,6 @@ impl Block for Pi {
     }
     fn role(&self) -> Role {
         Role::Controller
-    }
-}
-
-crate::submit_block_doc! {
-    BlockDoc {
-        type_name: "pi",
-        role: Role::Controller,
-        summary: "PI (2.10) in zero form kp·(s + 2π·zero_hz)/s, with output limits and anti-windup",
-        params: &[
-            ParamDoc { name: "kp", doc: "gain k_p (u per e)", default: None },
-            ParamDoc { name: "zero_hz", doc: "integrator zero f_i (Hz)", default: None },
-            ParamDoc { name: "discretisation", doc: "tustin | backward_euler", default: Some("tustin") },
-            ParamDoc { name: "output_min", doc: "lower output limit", default: Some("none") },
-            ParamDoc { name: "output_max", doc: "upper output limit", default: Some("none") },
-            ParamDoc { name: "anti_windup", doc: "clamping | back_calculation | none", default: Some("clamping") },
-            ParamDoc { name: "tracking_time_s", doc: "back-calculation tracking time (s)", default: Some("1/(2π·zero_hz)") },
-        ],
-        ports: "e -> u",
     }
 }
 

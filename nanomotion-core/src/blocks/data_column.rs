@@ -12,18 +12,22 @@
 //!
 //! [`GraphSpec::build_with_data`]: crate::graph::GraphSpec::build_with_data
 
-use crate::{Block, BlockDoc, BuildContext, ParamDoc, ParamError, Port, Role, Tick};
+use crate::{Block, BuildContext, ParamError, Params, Port, Role, Tick};
 use serde::{Deserialize, Serialize};
 
 /// Relative tolerance between the block's rate and the data's rate.
 pub const RATE_REL_TOL: f64 = 1e-9;
 
-/// `data_column`: output `y` = sample k of measured column `column` at tick k.
-#[derive(Debug, Clone, Serialize, Deserialize)]
+/// `data_column`: plays one column of the measured data (`--data FILE`) at its own
+/// rate: output `y` = sample k of column `column` at tick k; holds the last sample
+/// after the end.
+#[derive(Debug, Clone, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
+#[block(type_name = "data_column", role = Source, ports = "-> y")]
 pub struct DataColumn {
-    /// Name of the measured column to play.
+    /// Name of the measured column to play (CSV header / .mat variable).
     #[serde(deserialize_with = "column_name")]
+    #[param(schema = "column_schema")]
     pub column: String,
     /// The column's samples, copied from the data at build.
     #[serde(skip)]
@@ -42,6 +46,11 @@ impl DataColumn {
     pub fn values(&self) -> &[f64] {
         &self.values
     }
+}
+
+/// The schema of `column`: a string (what [`column_name`] reads).
+fn column_schema() -> serde_json::Value {
+    serde_json::json!({ "type": "string" })
 }
 
 /// A column name; the message for a YAML boolean (`y`, `n`, `on`, `off` unquoted)
@@ -119,18 +128,6 @@ impl Block for DataColumn {
     }
     fn role(&self) -> Role {
         Role::Source
-    }
-}
-
-crate::submit_block_doc! {
-    BlockDoc {
-        type_name: "data_column",
-        role: Role::Source,
-        summary: "plays one column of the measured data (--data FILE) at its own rate, sample k at tick k; holds the last sample after the end",
-        params: &[
-            ParamDoc { name: "column", doc: "name of the measured column (CSV header / .mat variable)", default: None },
-        ],
-        ports: "-> y",
     }
 }
 

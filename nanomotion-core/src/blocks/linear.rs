@@ -9,7 +9,8 @@
 //! (default 1). Input port `u`, output port `y`. [`Block::lti`] returns the exact
 //! discrete model that is simulated.
 
-use crate::block::{BlockDoc, BuildContext, ParamDoc, Port, Role, Tick, check};
+use crate::block::{BuildContext, Port, Role, Tick, check};
+use crate::doc::Params;
 use crate::error::ParamError;
 use crate::lti::{self, C2dMethod, LtiError, SsStepper, StateSpace, TransferFunction};
 use crate::{Block, Controller};
@@ -18,7 +19,7 @@ use serde::{Deserialize, Serialize};
 use std::f64::consts::PI;
 
 /// Discretisation of a continuous model in a block (YAML `tustin` or `zoh`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Params)]
 #[serde(rename_all = "snake_case")]
 pub enum Discretisation {
     /// Bilinear (Tustin) transform, optionally pre-warped (`prewarp_hz`):
@@ -169,7 +170,7 @@ fn c2d_method(
         ));
     };
     if let Some(f) = prewarp_hz {
-        check::positive("prewarp_hz", f)?;
+        // > 0 is declared on the field (`#[param(positive)]`)
         if f >= 0.5 / dt {
             return Err(ParamError::new(
                 "prewarp_hz",
@@ -193,8 +194,9 @@ fn c2d_method(
     }
 }
 
+/// `f_hz` (declared `#[param(positive)]`, checked before) below the Nyquist
+/// frequency of period `dt`.
 fn check_below_nyquist(field: &str, f_hz: f64, dt: f64) -> Result<(), ParamError> {
-    check::positive(field, f_hz)?;
     let nyq = 0.5 / dt;
     if f_hz < nyq {
         Ok(())
@@ -269,18 +271,20 @@ macro_rules! controller_impl {
 
 /// `transfer_function`: a SISO transfer function num/den, continuous in s
 /// (discretised at the block's rate by Tustin or ZOH) or discrete in z
-/// (`discrete: true`), applied to each of `width` channels.
-///
-/// Realised as a series cascade of first/second-order sections built from the
-/// poles and zeros, in state space.
-#[derive(Debug, Clone, Serialize, Deserialize)]
+/// (`discrete: true`), applied to each of `width` channels, realised as a series
+/// cascade of first/second-order sections built from the poles and zeros, in
+/// state space.
+#[derive(Debug, Clone, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
+#[block(type_name = "transfer_function", role = Math, ports = "u[width] -> y[width]")]
 pub struct TransferFunctionBlock {
-    /// Numerator coefficients, highest power of s (or z) first.
+    /// Numerator coefficients, highest power of s (or z) first; at most 65.
+    #[param(finite)]
     pub num: Vec<f64>,
-    /// Denominator coefficients, highest power of s (or z) first.
+    /// Denominator coefficients, highest power of s (or z) first; at most 65.
+    #[param(finite)]
     pub den: Vec<f64>,
-    /// `true` if `num`/`den` are in z at the block's rate; default `false` (in s).
+    /// `true` if `num`/`den` are in z at the block's rate (else in s).
     #[serde(default)]
     pub discrete: bool,
     /// `tustin` or `zoh`; required for a continuous model.
@@ -289,9 +293,11 @@ pub struct TransferFunctionBlock {
     /// Tustin pre-warp frequency (Hz), where the discrete response matches the
     /// continuous one exactly.
     #[serde(default)]
+    #[param(positive)]
     pub prewarp_hz: Option<f64>,
-    /// Number of independent channels (default 1).
+    /// Number of independent channels.
     #[serde(default = "one")]
+    #[param(width)]
     pub width: usize,
     #[serde(skip)]
     core: Option<LinearCore>,
@@ -352,11 +358,9 @@ impl Block for TransferFunctionBlock {
     }
 
     fn build(&mut self, ctx: &BuildContext) -> Result<(), ParamError> {
-        check::width("width", self.width)?;
         check::size("num (coefficients)", self.num.len(), 0, MAX_TF_ORDER + 1)?;
         check::size("den (coefficients)", self.den.len(), 0, MAX_TF_ORDER + 1)?;
-        check::all_finite("num", &self.num)?;
-        check::all_finite("den", &self.den)?;
+        self.check_params()?;
         if self.den.iter().all(|&v| v == 0.0) {
             return Err(ParamError::new(
                 "den",
@@ -395,40 +399,26 @@ impl Block for TransferFunctionBlock {
 }
 controller_impl!(TransferFunctionBlock);
 
-crate::submit_block_doc! {
-    BlockDoc {
-        type_name: "transfer_function",
-        role: Role::Math,
-        summary: "SISO transfer function num/den in s (discretised by tustin or zoh) or in z, per channel, realised as a cascade of second-order sections",
-        params: &[
-            ParamDoc { name: "num", doc: "numerator coefficients, highest power of s (or z) first", default: None },
-            ParamDoc { name: "den", doc: "denominator coefficients, highest power of s (or z) first", default: None },
-            ParamDoc { name: "discrete", doc: "true if num/den are in z at the block's rate", default: Some("false") },
-            ParamDoc { name: "discretisation", doc: "tustin | zoh (required for a continuous model)", default: None },
-            ParamDoc { name: "prewarp_hz", doc: "Tustin pre-warp frequency (Hz)", default: Some("none") },
-            ParamDoc { name: "width", doc: "number of independent channels", default: Some("1") },
-        ],
-        ports: "u[width] -> y[width]",
-    }
-}
-
 // ---------------------------------------------------------------------------
 // state_space
 
 /// `state_space`: a MIMO state-space model x' = A x + B u, y = C x + D u, with the
-/// matrices given **row-major** as lists of rows; continuous (discretised at the
-/// block's rate) or discrete (`discrete: true`).
-#[derive(Debug, Clone, Serialize, Deserialize)]
+/// matrices (A, B, C, D) given **row-major** as lists of rows; continuous
+/// (discretised at the block's rate by tustin or zoh) or discrete
+/// (`discrete: true`).
+#[derive(Debug, Clone, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
+#[block(type_name = "state_space", role = Math, ports = "u[m] -> y[p]")]
 pub struct StateSpaceBlock {
-    /// A (n × n), list of n rows.
+    /// A (n × n), list of n rows; at most 256 states.
     pub a: Vec<Vec<f64>>,
     /// B (n × m), list of n rows.
     pub b: Vec<Vec<f64>>,
     /// C (p × n), list of p rows.
     pub c: Vec<Vec<f64>>,
-    /// D (p × m), list of p rows; default zero.
+    /// D (p × m), list of p rows.
     #[serde(default)]
+    #[param(default_doc = "zero (p × m)")]
     pub d: Vec<Vec<f64>>,
     /// `true` if the model is already discrete at the block's rate.
     #[serde(default)]
@@ -438,26 +428,31 @@ pub struct StateSpaceBlock {
     pub discretisation: Option<Discretisation>,
     /// Tustin pre-warp frequency (Hz).
     #[serde(default)]
+    #[param(positive)]
     pub prewarp_hz: Option<f64>,
-    /// Calibration gain g on the input: B, D ← g·B, g·D (default 1). Fitted by
+    /// Calibration gain g on the input: B, D ← g·B, g·D. Fitted by
     /// `nanomotion diagnose`'s nominal calibration (see [`crate::Tunable`]).
     #[serde(default = "unity", skip_serializing_if = "is_unity")]
+    #[param(positive)]
     pub gain: f64,
     /// Calibration time scale λ of a continuous model: A, B ← λA, λB, i.e.
     /// G(s) ← G(s/λ) — every mode's frequency × λ, damping ratios and static
-    /// gain unchanged (default 1; must stay 1 for a discrete model).
+    /// gain unchanged (must stay 1 for a discrete model).
     #[serde(default = "unity", skip_serializing_if = "is_unity")]
+    #[param(positive)]
     pub frequency_scale: f64,
     /// Calibration damping scale d of a continuous model: every complex pole
     /// pair σ ± jω_d moves to d·σ ± jω_d (decay rate, so damping ratio, × d;
-    /// eigenvectors and residues kept, see [`lti::linalg::rescale_modes`])
-    /// (default 1; must stay 1 for a discrete model).
+    /// eigenvectors and residues kept, see `lti::linalg::rescale_modes`)
+    /// (must stay 1 for a discrete model).
     #[serde(default = "unity", skip_serializing_if = "is_unity")]
+    #[param(positive)]
     pub damping_scale: f64,
     /// Calibration lag scale ℓ of a continuous model: every real pole p moves
     /// to ℓ·p (an amplifier's or sensor's lag × 1/ℓ; eigenvectors and residues
-    /// kept) (default 1; must stay 1 for a discrete model).
+    /// kept) (must stay 1 for a discrete model).
     #[serde(default = "unity", skip_serializing_if = "is_unity")]
+    #[param(positive)]
     pub lag_scale: f64,
     #[serde(skip)]
     core: Option<LinearCore>,
@@ -515,9 +510,8 @@ impl StateSpaceBlock {
                 "give B (n×m) and C (p×n) with m, p ≥ 1 (or D for a static gain)",
             ));
         }
-        check::positive("gain", self.gain)?;
+        self.check_params()?;
         for (name, v) in self.continuous_scales() {
-            check::positive(name, v)?;
             if self.discrete && v != 1.0 {
                 return Err(ParamError::new(
                     name,
@@ -685,10 +679,7 @@ impl crate::Tunable for StateSpaceBlock {
         }
         let result = match self.built_dt {
             Some(dt) => self.realise(dt),
-            None => names
-                .iter()
-                .zip(p)
-                .try_for_each(|(n, &v)| check::positive(n, v)),
+            None => self.check_params(),
         };
         if result.is_err() {
             for (n, &v) in names.iter().zip(&old) {
@@ -702,28 +693,6 @@ impl crate::Tunable for StateSpaceBlock {
     }
 }
 
-crate::submit_block_doc! {
-    BlockDoc {
-        type_name: "state_space",
-        role: Role::Math,
-        summary: "MIMO state-space model (A, B, C, D row-major, lists of rows), continuous (tustin/zoh) or discrete",
-        params: &[
-            ParamDoc { name: "a", doc: "A (n×n), list of rows", default: None },
-            ParamDoc { name: "b", doc: "B (n×m), list of rows", default: None },
-            ParamDoc { name: "c", doc: "C (p×n), list of rows", default: None },
-            ParamDoc { name: "d", doc: "D (p×m), list of rows", default: Some("zero") },
-            ParamDoc { name: "discrete", doc: "true if the model is discrete at the block's rate", default: Some("false") },
-            ParamDoc { name: "discretisation", doc: "tustin | zoh (required for a continuous model)", default: None },
-            ParamDoc { name: "prewarp_hz", doc: "Tustin pre-warp frequency (Hz)", default: Some("none") },
-            ParamDoc { name: "gain", doc: "calibration gain on the input (B, D ← g·B, g·D)", default: Some("1") },
-            ParamDoc { name: "frequency_scale", doc: "calibration time scale of a continuous model (A, B ← λA, λB: frequencies × λ)", default: Some("1") },
-            ParamDoc { name: "damping_scale", doc: "calibration damping scale of a continuous model (complex poles σ ± jω_d → d·σ ± jω_d)", default: Some("1") },
-            ParamDoc { name: "lag_scale", doc: "calibration lag scale of a continuous model (real poles p → ℓ·p)", default: Some("1") },
-        ],
-        ports: "u[m] -> y[p]",
-    }
-}
-
 // ---------------------------------------------------------------------------
 // low_pass
 
@@ -732,17 +701,22 @@ fn default_order() -> usize {
 }
 
 /// `low_pass`: digital Butterworth low-pass of order `order` with −3 dB
-/// frequency `cutoff_hz` (pre-warped bilinear design, unity DC gain), per channel.
-#[derive(Debug, Clone, Serialize, Deserialize)]
+/// frequency `cutoff_hz` (pre-warped bilinear design, unity DC gain), per
+/// channel.
+#[derive(Debug, Clone, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
+#[block(type_name = "low_pass", role = Math, ports = "u[width] -> y[width]")]
 pub struct LowPass {
     /// −3 dB frequency f_c in Hz (below Nyquist).
+    #[param(positive)]
     pub cutoff_hz: f64,
-    /// Filter order n ≥ 1 (default 2).
+    /// Filter order n.
     #[serde(default = "default_order")]
+    #[param(size(1, MAX_LOW_PASS_ORDER))]
     pub order: usize,
-    /// Number of independent channels (default 1).
+    /// Number of independent channels.
     #[serde(default = "one")]
+    #[param(width)]
     pub width: usize,
     #[serde(skip)]
     core: Option<LinearCore>,
@@ -770,8 +744,7 @@ impl Block for LowPass {
     core_steps!();
 
     fn build(&mut self, ctx: &BuildContext) -> Result<(), ParamError> {
-        check::width("width", self.width)?;
-        check::size("order", self.order, 1, MAX_LOW_PASS_ORDER)?;
+        self.check_params()?;
         check_below_nyquist("cutoff_hz", self.cutoff_hz, ctx.dt)?;
         let sos = lti::butter_lowpass(self.order, self.cutoff_hz, ctx.dt)
             .map_err(|e| lti_to_param("cutoff_hz", e))?;
@@ -781,20 +754,6 @@ impl Block for LowPass {
     }
 }
 controller_impl!(LowPass);
-
-crate::submit_block_doc! {
-    BlockDoc {
-        type_name: "low_pass",
-        role: Role::Math,
-        summary: "Butterworth low-pass filter (bilinear, pre-warped, unity DC gain), per channel",
-        params: &[
-            ParamDoc { name: "cutoff_hz", doc: "-3 dB frequency (Hz)", default: None },
-            ParamDoc { name: "order", doc: "filter order, 1 ≤ order ≤ 16", default: Some("2") },
-            ParamDoc { name: "width", doc: "number of independent channels", default: Some("1") },
-        ],
-        ports: "u[width] -> y[width]",
-    }
-}
 
 // ---------------------------------------------------------------------------
 // notch
@@ -807,21 +766,26 @@ fn default_notch_damping() -> f64 {
 /// N(s) = (s² + 2·depth·ζ·ω₀ s + ω₀²)/(s² + 2ζω₀ s + ω₀²), ω₀ = 2π·centre_hz,
 /// discretised by Tustin pre-warped at the centre so that the discrete gain at
 /// `centre_hz` is exactly `depth` and the DC gain is 1. Per channel.
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
+#[block(type_name = "notch", role = Math, ports = "u[width] -> y[width]")]
 pub struct Notch {
     /// Centre frequency f₀ in Hz (below Nyquist).
+    #[param(positive)]
     pub centre_hz: f64,
-    /// Damping ζ of the poles (> 0): the −3 dB width of a deep notch is about
-    /// 2ζ·f₀ Hz (default 0.1).
+    /// Damping ζ of the poles: the −3 dB width of a deep notch is about
+    /// 2ζ·f₀ Hz.
     #[serde(default = "default_notch_damping")]
+    #[param(positive)]
     pub damping: f64,
-    /// Gain at the centre frequency (≥ 0): 0 removes f₀ completely, 0.1 is
-    /// −20 dB; > 1 gives a peak instead (default 0).
+    /// Gain at the centre frequency: 0 removes f₀ completely (full notch), 0.1
+    /// is −20 dB; > 1 gives a peak instead.
     #[serde(default)]
+    #[param(non_negative)]
     pub depth: f64,
-    /// Number of independent channels (default 1).
+    /// Number of independent channels.
     #[serde(default = "one")]
+    #[param(width)]
     pub width: usize,
     #[serde(skip)]
     core: Option<LinearCore>,
@@ -857,10 +821,8 @@ impl Block for Notch {
     core_steps!();
 
     fn build(&mut self, ctx: &BuildContext) -> Result<(), ParamError> {
-        check::width("width", self.width)?;
+        self.check_params()?;
         check_below_nyquist("centre_hz", self.centre_hz, ctx.dt)?;
-        check::positive("damping", self.damping)?;
-        check::non_negative("depth", self.depth)?;
         let model = self
             .continuous_model()
             .c2d(
@@ -877,21 +839,6 @@ impl Block for Notch {
 }
 controller_impl!(Notch);
 
-crate::submit_block_doc! {
-    BlockDoc {
-        type_name: "notch",
-        role: Role::Math,
-        summary: "second-order notch (Tustin pre-warped at the centre), per channel",
-        params: &[
-            ParamDoc { name: "centre_hz", doc: "centre frequency (Hz)", default: None },
-            ParamDoc { name: "damping", doc: "pole damping ratio (-); width ≈ 2·damping·centre_hz", default: Some("0.1") },
-            ParamDoc { name: "depth", doc: "gain at the centre frequency (-), 0 = full notch", default: Some("0") },
-            ParamDoc { name: "width", doc: "number of independent channels", default: Some("1") },
-        ],
-        ports: "u[width] -> y[width]",
-    }
-}
-
 // ---------------------------------------------------------------------------
 // lead_lag
 
@@ -904,22 +851,30 @@ fn default_gain() -> f64 {
 /// by Tustin pre-warped at `prewarp_hz` (default: the geometric mean
 /// √(zero_hz·pole_hz), where a lead's phase peaks, if that is below Nyquist;
 /// otherwise plain Tustin). DC gain `gain`. Per channel.
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
+#[block(type_name = "lead_lag", role = Controller, ports = "u[width] -> y[width]")]
 pub struct LeadLag {
-    /// Zero frequency in Hz (> 0).
+    /// Zero frequency (Hz).
+    #[param(positive)]
     pub zero_hz: f64,
-    /// Pole frequency in Hz (> 0).
+    /// Pole frequency (Hz).
+    #[param(positive)]
     pub pole_hz: f64,
-    /// DC gain (default 1).
+    /// DC gain (-).
     #[serde(default = "default_gain")]
+    #[param(finite)]
     pub gain: f64,
-    /// Tustin pre-warp frequency in Hz (default √(zero_hz·pole_hz) if below
-    /// Nyquist).
+    /// Tustin pre-warp frequency (Hz).
     #[serde(default)]
+    #[param(
+        positive,
+        default_doc = "√(zero_hz·pole_hz) if below Nyquist, else plain Tustin"
+    )]
     pub prewarp_hz: Option<f64>,
-    /// Number of independent channels (default 1).
+    /// Number of independent channels.
     #[serde(default = "one")]
+    #[param(width)]
     pub width: usize,
     #[serde(skip)]
     core: Option<LinearCore>,
@@ -969,10 +924,7 @@ impl Block for LeadLag {
     }
 
     fn build(&mut self, ctx: &BuildContext) -> Result<(), ParamError> {
-        check::width("width", self.width)?;
-        check::positive("zero_hz", self.zero_hz)?;
-        check::positive("pole_hz", self.pole_hz)?;
-        check::finite("gain", self.gain)?;
+        self.check_params()?;
         if let Some(f) = self.prewarp_hz {
             check_below_nyquist("prewarp_hz", f, ctx.dt)?;
         }
@@ -991,35 +943,21 @@ impl Block for LeadLag {
 }
 controller_impl!(LeadLag);
 
-crate::submit_block_doc! {
-    BlockDoc {
-        type_name: "lead_lag",
-        role: Role::Controller,
-        summary: "lead/lag filter gain·(1 + s/ωz)/(1 + s/ωp), Tustin pre-warped, per channel",
-        params: &[
-            ParamDoc { name: "zero_hz", doc: "zero frequency (Hz)", default: None },
-            ParamDoc { name: "pole_hz", doc: "pole frequency (Hz)", default: None },
-            ParamDoc { name: "gain", doc: "DC gain (-)", default: Some("1") },
-            ParamDoc { name: "prewarp_hz", doc: "Tustin pre-warp frequency (Hz)", default: Some("sqrt(zero_hz*pole_hz)") },
-            ParamDoc { name: "width", doc: "number of independent channels", default: Some("1") },
-        ],
-        ports: "u[width] -> y[width]",
-    }
-}
-
 // ---------------------------------------------------------------------------
 // delay
 
 /// `delay`: pure delay y\[k\] = u\[k − d\] of `d` samples (z^-d) per channel, run as a
 /// ring buffer (O(1) per sample for any d). No direct feed-through for d ≥ 1, so
 /// it breaks algebraic loops.
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
+#[block(type_name = "delay", role = Math, ports = "u[width] -> y[width]")]
 pub struct Delay {
-    /// Delay d in samples of the block's rate.
+    /// Delay d in samples of the block's rate; d · width ≤ 2^24.
     pub d: usize,
-    /// Number of independent channels (default 1).
+    /// Number of independent channels.
     #[serde(default = "one")]
+    #[param(width)]
     pub width: usize,
     #[serde(skip)]
     buf: Vec<f64>,
@@ -1063,7 +1001,7 @@ impl Block for Delay {
     }
 
     fn build(&mut self, ctx: &BuildContext) -> Result<(), ParamError> {
-        check::width("width", self.width)?;
+        self.check_params()?;
         check::buffer("d", self.d, 0, self.width)?;
         self.buf = vec![0.0; self.d * self.width];
         self.head = 0;
@@ -1100,19 +1038,6 @@ impl Block for Delay {
             return None;
         }
         lti::append(&vec![lti::delay(self.d, self.dt); self.width]).ok()
-    }
-}
-
-crate::submit_block_doc! {
-    BlockDoc {
-        type_name: "delay",
-        role: Role::Math,
-        summary: "pure delay z^-d of d samples per channel (no feed-through for d ≥ 1)",
-        params: &[
-            ParamDoc { name: "d", doc: "delay (samples), d · width ≤ 2^24", default: None },
-            ParamDoc { name: "width", doc: "number of independent channels", default: Some("1") },
-        ],
-        ports: "u[width] -> y[width]",
     }
 }
 

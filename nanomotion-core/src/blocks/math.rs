@@ -18,8 +18,9 @@
 //! ```
 
 use crate::block::check;
+use crate::doc::Params;
 use crate::lti::StateSpace;
-use crate::{Block, BlockDoc, BuildContext, ParamDoc, ParamError, Port, Role, Tick};
+use crate::{Block, BuildContext, ParamError, Port, Tick};
 use nalgebra::DMatrix;
 use serde::{Deserialize, Serialize};
 
@@ -58,13 +59,16 @@ fn numbered_ports(prefix: &str, widths: impl IntoIterator<Item = usize>) -> Vec<
 // ---------------------------------------------------------------------------------
 
 /// `gain`: y = k·u, element-wise on a vector of width `n`.
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
+#[block(type_name = "gain", role = Math, ports = "u[n] -> y[n]")]
 pub struct Gain {
     /// Gain k (unit of y per unit of u).
+    #[param(finite)]
     pub k: f64,
-    /// Signal width n (YAML `width`, default 1).
+    /// Signal width n.
     #[serde(default = "one")]
+    #[param(width)]
     pub width: usize,
     #[serde(skip)]
     dt: f64,
@@ -100,8 +104,7 @@ impl Block for Gain {
         vec![Port::new("y", self.width)]
     }
     fn build(&mut self, ctx: &BuildContext) -> Result<(), ParamError> {
-        check::finite("k", self.k)?;
-        check::width("width", self.width)?;
+        self.check_params()?;
         self.dt = ctx.dt;
         Ok(())
     }
@@ -116,37 +119,32 @@ impl Block for Gain {
     }
 }
 
-crate::submit_block_doc! {
-    BlockDoc {
-        type_name: "gain",
-        role: Role::Math,
-        summary: "y = k·u, element-wise",
-        params: &[
-            ParamDoc { name: "k", doc: "gain (unit of y per unit of u)", default: None },
-            ParamDoc { name: "width", doc: "signal width", default: Some("1") },
-        ],
-        ports: "u[n] -> y[n]",
-    }
-}
-
 // ---------------------------------------------------------------------------------
 // sum
 // ---------------------------------------------------------------------------------
 
 /// `sum`: y = Σᵢ sᵢ·inᵢ with signs sᵢ = ±1 given as a string (`"+-"` gives
-/// y = in0 − in1, the error of a feedback loop).
-#[derive(Debug, Clone, Serialize, Deserialize)]
+/// y = in0 − in1, the error r − y of a feedback loop).
+#[derive(Debug, Clone, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
+#[block(type_name = "sum", role = Math, ports = "in0[n], in1[n], ... -> y[n]")]
 pub struct Sum {
     /// One `+` or `-` per input, in port order (`in0`, `in1`, ...).
+    #[param(schema = "signs_schema")]
     pub signs: String,
-    /// Width n of every input and of the output (YAML `width`, default 1).
+    /// Width n of every input and of the output.
     #[serde(default = "one")]
+    #[param(width)]
     pub width: usize,
     #[serde(skip)]
     gains: Vec<f64>,
     #[serde(skip)]
     dt: f64,
+}
+
+/// The schema of `signs`: 1 to [`MAX_PORTS`] characters `+`/`-`.
+fn signs_schema() -> serde_json::Value {
+    serde_json::json!({ "type": "string", "pattern": format!("^[+-]{{1,{MAX_PORTS}}}$") })
 }
 
 impl Sum {
@@ -166,7 +164,7 @@ impl Sum {
         Ok(s)
     }
     fn parse(&mut self) -> Result<(), ParamError> {
-        check::width("width", self.width)?;
+        self.check_params()?;
         check::size("signs", self.signs.chars().count(), 0, MAX_PORTS)?;
         let mut gains = Vec::with_capacity(self.signs.len());
         for (i, c) in self.signs.chars().enumerate() {
@@ -237,32 +235,22 @@ impl Block for Sum {
     }
 }
 
-crate::submit_block_doc! {
-    BlockDoc {
-        type_name: "sum",
-        role: Role::Math,
-        summary: "y = Σ ±in_i with signs from a string such as \"+-\" (r − y)",
-        params: &[
-            ParamDoc { name: "signs", doc: "one `+` or `-` per input in0, in1, ...", default: None },
-            ParamDoc { name: "width", doc: "width of every input and the output", default: Some("1") },
-        ],
-        ports: "in0[n], in1[n], ... -> y[n]",
-    }
-}
-
 // ---------------------------------------------------------------------------------
 // product
 // ---------------------------------------------------------------------------------
 
 /// `product`: element-wise product y = in0·in1·…  of `factors` inputs of width `n`.
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
+#[block(type_name = "product", role = Math, ports = "in0[n], in1[n], ... -> y[n]")]
 pub struct Product {
-    /// Number of inputs multiplied (default 2).
+    /// Number of inputs multiplied.
     #[serde(default = "two")]
+    #[param(size(1, MAX_PORTS))]
     pub factors: usize,
-    /// Width n of every input and of the output (YAML `width`, default 1).
+    /// Width n of every input and of the output.
     #[serde(default = "one")]
+    #[param(width)]
     pub width: usize,
 }
 
@@ -291,24 +279,10 @@ impl Block for Product {
         vec![Port::new("y", self.width)]
     }
     fn build(&mut self, _ctx: &BuildContext) -> Result<(), ParamError> {
-        check::size("factors", self.factors, 1, MAX_PORTS)?;
-        check::width("width", self.width)
+        self.check_params()
     }
     fn output(&mut self, _tick: Tick, u: &[f64], y: &mut [f64]) {
         self.apply(u, y);
-    }
-}
-
-crate::submit_block_doc! {
-    BlockDoc {
-        type_name: "product",
-        role: Role::Math,
-        summary: "element-wise product y = in0·in1·…",
-        params: &[
-            ParamDoc { name: "factors", doc: "number of inputs", default: Some("2") },
-            ParamDoc { name: "width", doc: "width of every input and the output", default: Some("1") },
-        ],
-        ports: "in0[n], in1[n], ... -> y[n]",
     }
 }
 
@@ -316,19 +290,22 @@ crate::submit_block_doc! {
 // saturation
 // ---------------------------------------------------------------------------------
 
-/// `saturation`: y = min(max(u, lower), upper), element-wise. A NaN input passes as
-/// NaN (it is never hidden by the clamp).
+/// `saturation`: y = min(max(u, lower), upper), element-wise.
 ///
+/// A NaN input passes as NaN (it is never hidden by the clamp).
 /// [`Tunable`](crate::Tunable) parameter vector: `[lower, upper]`.
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
+#[block(type_name = "saturation", role = Math, ports = "u[n] -> y[n]")]
 pub struct Saturation {
     /// Lower limit (unit of u).
+    #[param(at_most = upper)]
     pub lower: f64,
     /// Upper limit (unit of u), ≥ `lower`.
     pub upper: f64,
-    /// Signal width n (YAML `width`, default 1).
+    /// Signal width n.
     #[serde(default = "one")]
+    #[param(width)]
     pub width: usize,
 }
 
@@ -368,8 +345,7 @@ impl Block for Saturation {
         vec![Port::new("y", self.width).unit_of_input(0)]
     }
     fn build(&mut self, _ctx: &BuildContext) -> Result<(), ParamError> {
-        check::ordered("lower", self.lower, "upper", self.upper)?;
-        check::width("width", self.width)
+        self.check_params()
     }
     fn output(&mut self, _tick: Tick, u: &[f64], y: &mut [f64]) {
         self.apply(u, y);
@@ -413,35 +389,24 @@ impl crate::Tunable for Saturation {
     }
 }
 
-crate::submit_block_doc! {
-    BlockDoc {
-        type_name: "saturation",
-        role: Role::Math,
-        summary: "y = min(max(u, lower), upper), element-wise",
-        params: &[
-            ParamDoc { name: "lower", doc: "lower limit (unit of u)", default: None },
-            ParamDoc { name: "upper", doc: "upper limit (unit of u), ≥ lower", default: None },
-            ParamDoc { name: "width", doc: "signal width", default: Some("1") },
-        ],
-        ports: "u[n] -> y[n]",
-    }
-}
-
 // ---------------------------------------------------------------------------------
 // deadzone
 // ---------------------------------------------------------------------------------
 
 /// `deadzone`: y = 0 inside `[lower, upper]`, y = u − upper above it and
 /// y = u − lower below it (continuous, slope 1 outside the zone), element-wise.
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
+#[block(type_name = "deadzone", role = Math, ports = "u[n] -> y[n]")]
 pub struct Deadzone {
     /// Start of the dead zone (unit of u).
+    #[param(at_most = upper)]
     pub lower: f64,
     /// End of the dead zone (unit of u), ≥ `lower`.
     pub upper: f64,
-    /// Signal width n (YAML `width`, default 1).
+    /// Signal width n.
     #[serde(default = "one")]
+    #[param(width)]
     pub width: usize,
 }
 
@@ -477,27 +442,12 @@ impl Block for Deadzone {
         vec![Port::new("y", self.width).unit_of_input(0)]
     }
     fn build(&mut self, _ctx: &BuildContext) -> Result<(), ParamError> {
-        check::ordered("lower", self.lower, "upper", self.upper)?;
-        check::width("width", self.width)
+        self.check_params()
     }
     fn output(&mut self, _tick: Tick, u: &[f64], y: &mut [f64]) {
         for (yi, &ui) in y.iter_mut().zip(u) {
             *yi = self.map(ui);
         }
-    }
-}
-
-crate::submit_block_doc! {
-    BlockDoc {
-        type_name: "deadzone",
-        role: Role::Math,
-        summary: "zero inside [lower, upper], u − upper above, u − lower below",
-        params: &[
-            ParamDoc { name: "lower", doc: "start of the dead zone (unit of u)", default: None },
-            ParamDoc { name: "upper", doc: "end of the dead zone (unit of u), ≥ lower", default: None },
-            ParamDoc { name: "width", doc: "signal width", default: Some("1") },
-        ],
-        ports: "u[n] -> y[n]",
     }
 }
 
@@ -507,6 +457,17 @@ crate::submit_block_doc! {
 
 /// Most input ports of `sum`, `product`, `mux` and output ports of `demux`: 256.
 pub const MAX_PORTS: usize = 256;
+
+/// The schema of `widths`: 1 to [`MAX_PORTS`] widths, each 1 to [`MAX_WIDTH`](crate::block::MAX_WIDTH)
+/// (what [`check_widths`] checks).
+fn widths_schema() -> serde_json::Value {
+    serde_json::json!({
+        "type": "array",
+        "minItems": 1,
+        "maxItems": MAX_PORTS,
+        "items": { "type": "integer", "minimum": 1, "maximum": crate::block::MAX_WIDTH },
+    })
+}
 
 fn check_widths(widths: &[usize]) -> Result<(), ParamError> {
     if widths.is_empty() {
@@ -531,11 +492,14 @@ fn identity_ss(widths: &[usize], dt: f64) -> StateSpace {
     static_ss(DMatrix::identity(n, n), dt)
 }
 
-/// `mux`: concatenates inputs `in0`, `in1`, ... (widths from `widths`) into `y`.
-#[derive(Debug, Clone, Serialize, Deserialize)]
+/// `mux`: concatenates inputs `in0`, `in1`, ... (widths from `widths`) into one
+/// vector `y`.
+#[derive(Debug, Clone, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
+#[block(type_name = "mux", role = Math, ports = "in0[w0], in1[w1], ... -> y[Σw]")]
 pub struct Mux {
-    /// Width of each input, in port order.
+    /// Width of each input, in port order, e.g. [1, 1, 1].
+    #[param(schema = "widths_schema")]
     pub widths: Vec<usize>,
     #[serde(skip)]
     dt: f64,
@@ -569,21 +533,13 @@ impl Block for Mux {
     }
 }
 
-crate::submit_block_doc! {
-    BlockDoc {
-        type_name: "mux",
-        role: Role::Math,
-        summary: "concatenate inputs in0, in1, ... into one vector y",
-        params: &[ParamDoc { name: "widths", doc: "width of each input, e.g. [1, 1, 1]", default: None }],
-        ports: "in0[w0], in1[w1], ... -> y[Σw]",
-    }
-}
-
 /// `demux`: splits the input `u` into outputs `y0`, `y1`, ... (widths from `widths`).
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
+#[block(type_name = "demux", role = Math, ports = "u[Σw] -> y0[w0], y1[w1], ...")]
 pub struct Demux {
-    /// Width of each output, in port order.
+    /// Width of each output, in port order, e.g. [1, 1, 1].
+    #[param(schema = "widths_schema")]
     pub widths: Vec<usize>,
     #[serde(skip)]
     dt: f64,
@@ -614,16 +570,6 @@ impl Block for Demux {
     }
     fn lti(&self) -> Option<StateSpace> {
         Some(identity_ss(&self.widths, self.dt))
-    }
-}
-
-crate::submit_block_doc! {
-    BlockDoc {
-        type_name: "demux",
-        role: Role::Math,
-        summary: "split the input vector u into outputs y0, y1, ...",
-        params: &[ParamDoc { name: "widths", doc: "width of each output, e.g. [1, 1, 1]", default: None }],
-        ports: "u[Σw] -> y0[w0], y1[w1], ...",
     }
 }
 

@@ -17,9 +17,7 @@
 
 use crate::block::check;
 use crate::rng::Rng;
-use crate::{
-    Block, BlockDoc, BuildContext, ParamDoc, ParamError, Port, Role, Sensor, Tick, Tunable,
-};
+use crate::{Block, BuildContext, ParamError, Params, Port, Role, Sensor, Tick, Tunable};
 use serde::{Deserialize, Serialize};
 
 /// Resolution of the metrological AFM's laser interferometers (m), Ch. 6.
@@ -30,7 +28,7 @@ fn one() -> usize {
 }
 
 /// How a [`Quantizer`] maps a value onto its grid of `lsb` steps.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Params)]
 #[serde(rename_all = "snake_case")]
 pub enum Rounding {
     /// To the nearest step (ties away from zero): error in [−lsb/2, lsb/2],
@@ -45,23 +43,29 @@ fn round() -> Rounding {
     Rounding::Round
 }
 
-/// `quantizer`: y = lsb·round(u/lsb) or lsb·⌊u/lsb⌋, element-wise; with an
-/// `offset` o the grid is shifted: y = o + lsb·round((u − o)/lsb).
+/// `quantizer`: finite resolution, y = lsb·round(u/lsb) or lsb·⌊u/lsb⌋,
+/// element-wise; with an `offset` o the grid is shifted: y = o + lsb·round((u − o)/lsb).
 ///
 /// [`Tunable`] parameter vector: `[lsb, offset]`.
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
+#[block(type_name = "quantizer", role = Sensor, ports = "u[n] -> y[n]")]
 pub struct Quantizer {
-    /// Resolution: one least-significant bit (unit of u, e.g. 0.15e-9 m).
+    /// Resolution: one least-significant bit (unit of u, e.g. 0.15e-9 m for the
+    /// interferometer).
+    #[param(positive)]
     pub lsb: f64,
-    /// `round` (default) or `floor`.
+    /// `round` (nearest: interferometer) or `floor` (encoder count).
     #[serde(default = "round")]
     pub rounding: Rounding,
-    /// Signal width n (default 1).
+    /// Signal width n.
     #[serde(default = "one")]
+    #[param(width)]
     pub width: usize,
-    /// Offset o of the grid (unit of u, default 0): the levels are o + k·lsb.
+    /// Offset o of the grid (unit of u): the levels are o + k·lsb; tunable with
+    /// `lsb` (parameter vector `[lsb, offset]`).
     #[serde(default, skip_serializing_if = "is_zero")]
+    #[param(finite)]
     pub offset: f64,
 }
 
@@ -97,10 +101,6 @@ impl Quantizer {
             Rounding::Floor => q.floor(),
         }
     }
-    fn check_params(lsb: f64, offset: f64) -> Result<(), ParamError> {
-        check::positive("lsb", lsb)?;
-        check::finite("offset", offset)
-    }
 }
 
 impl Tunable for Quantizer {
@@ -118,9 +118,13 @@ impl Tunable for Quantizer {
                 "give [lsb, offset]",
             ));
         }
-        Self::check_params(p[0], p[1])?;
-        self.lsb = p[0];
-        self.offset = p[1];
+        let tuned = Self {
+            lsb: p[0],
+            offset: p[1],
+            ..self.clone()
+        };
+        tuned.check_params()?;
+        *self = tuned;
         Ok(())
     }
 }
@@ -142,8 +146,7 @@ impl Block for Quantizer {
         vec![Port::new("y", self.width).unit_of_input(0)]
     }
     fn build(&mut self, _ctx: &BuildContext) -> Result<(), ParamError> {
-        Self::check_params(self.lsb, self.offset)?;
-        check::width("width", self.width)
+        self.check_params()
     }
     fn output(&mut self, tick: Tick, u: &[f64], y: &mut [f64]) {
         self.measure(tick.t, u, y);
@@ -168,27 +171,12 @@ impl Block for Quantizer {
     }
 }
 
-crate::submit_block_doc! {
-    BlockDoc {
-        type_name: "quantizer",
-        role: Role::Sensor,
-        summary: "finite resolution: y = lsb·round(u/lsb) or lsb·floor(u/lsb)",
-        params: &[
-            ParamDoc { name: "lsb", doc: "resolution, one step (unit of u; interferometer 0.15e-9 m)", default: None },
-            ParamDoc { name: "rounding", doc: "round (nearest) | floor (encoder count)", default: Some("round") },
-            ParamDoc { name: "width", doc: "signal width", default: Some("1") },
-            ParamDoc { name: "offset", doc: "grid offset o (unit of u): levels o + k·lsb; tunable [lsb, offset]", default: Some("0") },
-        ],
-        ports: "u[n] -> y[n]",
-    }
-}
-
 // ---------------------------------------------------------------------------------
 // measurement_noise
 // ---------------------------------------------------------------------------------
 
 /// Distribution of [`MeasurementNoise`].
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Params)]
 #[serde(rename_all = "snake_case")]
 pub enum NoiseDistribution {
     /// N(0, σ²) with σ = `std`.
@@ -202,23 +190,25 @@ fn placeholder_rng() -> Rng {
     Rng::new(0)
 }
 
-/// `measurement_noise`: y = u + w with w white, seeded from
-/// [`BuildContext::seed`] (same seed, same bits), independent per channel.
-/// Give `std` for `gaussian` (the default) or `bound` for `uniform`.
-#[derive(Debug, Clone, Serialize, Deserialize)]
+/// `measurement_noise`: y = u + w with w white (gaussian with `std`, or uniform
+/// in ±`bound`: Table 6.1), seeded from [`BuildContext::seed`] (same seed, same
+/// bits), independent per channel.
+#[derive(Debug, Clone, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
+#[block(type_name = "measurement_noise", role = Sensor, ports = "u[n] -> y[n]")]
 pub struct MeasurementNoise {
-    /// `gaussian` (default) or `uniform`.
+    /// Distribution of w.
     #[serde(default = "gaussian")]
     pub distribution: NoiseDistribution,
     /// Standard deviation σ (unit of u), for `gaussian`.
     #[serde(default)]
     pub std: Option<f64>,
-    /// Half-width of the uniform noise (unit of u), for `uniform`.
+    /// Half-width of the uniform noise (unit of u, e.g. 5e-9 m), for `uniform`.
     #[serde(default)]
     pub bound: Option<f64>,
-    /// Signal width n (default 1).
+    /// Signal width n.
     #[serde(default = "one")]
+    #[param(width)]
     pub width: usize,
     #[serde(skip)]
     scale: f64,
@@ -254,7 +244,7 @@ impl MeasurementNoise {
         }
     }
     fn prepare(&mut self, seed: u64) -> Result<(), ParamError> {
-        check::width("width", self.width)?;
+        self.check_params()?;
         self.scale = match (self.distribution, self.std, self.bound) {
             (NoiseDistribution::Gaussian, Some(s), None) => {
                 check::non_negative("std", s)?;
@@ -312,21 +302,6 @@ impl Block for MeasurementNoise {
     }
     fn role(&self) -> Role {
         Role::Sensor
-    }
-}
-
-crate::submit_block_doc! {
-    BlockDoc {
-        type_name: "measurement_noise",
-        role: Role::Sensor,
-        summary: "y = u + seeded white noise, gaussian (std) or uniform in ±bound (Table 6.1)",
-        params: &[
-            ParamDoc { name: "distribution", doc: "gaussian | uniform", default: Some("gaussian") },
-            ParamDoc { name: "std", doc: "standard deviation (unit of u), gaussian", default: Some("none") },
-            ParamDoc { name: "bound", doc: "half-width (unit of u), uniform; e.g. 5e-9 m", default: Some("none") },
-            ParamDoc { name: "width", doc: "signal width", default: Some("1") },
-        ],
-        ports: "u[n] -> y[n]",
     }
 }
 

@@ -25,8 +25,9 @@
 //! ```
 
 use crate::block::check;
+use crate::doc::Params;
 use crate::rng::Rng;
-use crate::{Block, BlockDoc, BuildContext, ParamDoc, ParamError, Port, Role, Source, Tick};
+use crate::{Block, BuildContext, ParamError, Port, Role, Source, Tick};
 use serde::{Deserialize, Serialize};
 use std::f64::consts::{PI, TAU};
 
@@ -47,13 +48,16 @@ fn zero() -> f64 {
 // ---------------------------------------------------------------------------------
 
 /// `constant`: y = value on every channel.
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
+#[block(type_name = "constant", role = Source, ports = "-> y[width]")]
 pub struct Constant {
     /// The value (unit of the signal).
+    #[param(finite)]
     pub value: f64,
-    /// Output width (default 1).
+    /// Output width.
     #[serde(default = "one")]
+    #[param(width)]
     pub width: usize,
 }
 
@@ -76,8 +80,7 @@ impl Block for Constant {
         vec![Port::new("y", self.width)]
     }
     fn build(&mut self, _ctx: &BuildContext) -> Result<(), ParamError> {
-        check::finite("value", self.value)?;
-        check::width("width", self.width)
+        self.check_params()
     }
     fn output(&mut self, tick: Tick, _u: &[f64], y: &mut [f64]) {
         self.sample(tick.t, y);
@@ -87,35 +90,26 @@ impl Block for Constant {
     }
 }
 
-crate::submit_block_doc! {
-    BlockDoc {
-        type_name: "constant",
-        role: Role::Source,
-        summary: "a constant value",
-        params: &[
-            ParamDoc { name: "value", doc: "the value (unit of the signal)", default: None },
-            ParamDoc { name: "width", doc: "output width", default: Some("1") },
-        ],
-        ports: "-> y[width]",
-    }
-}
-
 // ---------------------------------------------------------------------------------
 // step
 // ---------------------------------------------------------------------------------
 
 /// `step`: y = `initial` for t < `time_s`, `final` for t ≥ `time_s`.
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
+#[block(type_name = "step", role = Source, ports = "-> y")]
 pub struct Step {
-    /// Time of the step (s, default 0).
+    /// Time of the step (s).
     #[serde(default = "zero")]
+    #[param(finite)]
     pub time_s: f64,
-    /// Value before the step (default 0).
+    /// Value before the step.
     #[serde(default = "zero")]
+    #[param(finite)]
     pub initial: f64,
     /// Value from the step on (YAML `final`).
     #[serde(rename = "final")]
+    #[param(finite)]
     pub final_value: f64,
 }
 
@@ -146,29 +140,13 @@ impl Block for Step {
         vec![Port::new("y", 1)]
     }
     fn build(&mut self, _ctx: &BuildContext) -> Result<(), ParamError> {
-        check::finite("time_s", self.time_s)?;
-        check::finite("initial", self.initial)?;
-        check::finite("final", self.final_value)
+        self.check_params()
     }
     fn output(&mut self, tick: Tick, _u: &[f64], y: &mut [f64]) {
         self.sample(tick.t, y);
     }
     fn role(&self) -> Role {
         Role::Source
-    }
-}
-
-crate::submit_block_doc! {
-    BlockDoc {
-        type_name: "step",
-        role: Role::Source,
-        summary: "step from `initial` to `final` at `time_s`",
-        params: &[
-            ParamDoc { name: "time_s", doc: "time of the step (s)", default: Some("0") },
-            ParamDoc { name: "initial", doc: "value before the step", default: Some("0") },
-            ParamDoc { name: "final", doc: "value from the step on", default: None },
-        ],
-        ports: "-> y",
     }
 }
 
@@ -180,16 +158,20 @@ crate::submit_block_doc! {
 /// the constant-velocity reference of Ch. 2 and 5 (e.g. 10 µm/s). Outputs position
 /// `y` (m) and velocity `v` (m/s), e.g. for the amplitude/phase feed-forward
 /// (2.11)–(2.12) that needs ṙ.
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
+#[block(type_name = "constant_velocity", role = Source, ports = "-> y (m), v (m/s)")]
 pub struct ConstantVelocity {
     /// Velocity ṙ after the start (m/s).
+    #[param(finite)]
     pub velocity_m_s: f64,
-    /// Time at which the motion starts (s, default 0).
+    /// Time at which the motion starts (s).
     #[serde(default = "zero")]
+    #[param(finite)]
     pub start_s: f64,
-    /// Position before the start (m, default 0).
+    /// Position before the start (m).
     #[serde(default = "zero")]
+    #[param(finite)]
     pub initial_m: f64,
 }
 
@@ -231,9 +213,7 @@ impl Block for ConstantVelocity {
         ]
     }
     fn build(&mut self, _ctx: &BuildContext) -> Result<(), ParamError> {
-        check::finite("velocity_m_s", self.velocity_m_s)?;
-        check::finite("start_s", self.start_s)?;
-        check::finite("initial_m", self.initial_m)
+        self.check_params()
     }
     fn output(&mut self, tick: Tick, _u: &[f64], y: &mut [f64]) {
         self.sample(tick.t, y);
@@ -243,37 +223,28 @@ impl Block for ConstantVelocity {
     }
 }
 
-crate::submit_block_doc! {
-    BlockDoc {
-        type_name: "constant_velocity",
-        role: Role::Source,
-        summary: "ramp reference r = initial_m + velocity_m_s·(t − start_s) after start_s",
-        params: &[
-            ParamDoc { name: "velocity_m_s", doc: "velocity ṙ (m/s)", default: None },
-            ParamDoc { name: "start_s", doc: "start of the motion (s)", default: Some("0") },
-            ParamDoc { name: "initial_m", doc: "position before the start (m)", default: Some("0") },
-        ],
-        ports: "-> y (m), v (m/s)",
-    }
-}
-
 // ---------------------------------------------------------------------------------
 // sinusoid
 // ---------------------------------------------------------------------------------
 
 /// `sinusoid`: y = offset + amplitude·sin(2π·frequency_hz·t + phase_rad).
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
+#[block(type_name = "sinusoid", role = Source, ports = "-> y")]
 pub struct Sinusoid {
-    /// Amplitude (unit of the signal), ≥ 0.
+    /// Amplitude (unit of the signal).
+    #[param(non_negative)]
     pub amplitude: f64,
-    /// Frequency f (Hz), ≥ 0.
+    /// Frequency f (Hz).
+    #[param(non_negative)]
     pub frequency_hz: f64,
-    /// Phase φ at t = 0 (rad, default 0).
+    /// Phase φ at t = 0 (rad).
     #[serde(default = "zero")]
+    #[param(finite)]
     pub phase_rad: f64,
-    /// Offset added (default 0).
+    /// Offset added (unit of the signal).
     #[serde(default = "zero")]
+    #[param(finite)]
     pub offset: f64,
 }
 
@@ -301,10 +272,7 @@ impl Block for Sinusoid {
         vec![Port::new("y", 1)]
     }
     fn build(&mut self, _ctx: &BuildContext) -> Result<(), ParamError> {
-        check::non_negative("amplitude", self.amplitude)?;
-        check::non_negative("frequency_hz", self.frequency_hz)?;
-        check::finite("phase_rad", self.phase_rad)?;
-        check::finite("offset", self.offset)
+        self.check_params()
     }
     fn output(&mut self, tick: Tick, _u: &[f64], y: &mut [f64]) {
         self.sample(tick.t, y);
@@ -314,40 +282,30 @@ impl Block for Sinusoid {
     }
 }
 
-crate::submit_block_doc! {
-    BlockDoc {
-        type_name: "sinusoid",
-        role: Role::Source,
-        summary: "offset + amplitude·sin(2π·frequency_hz·t + phase_rad)",
-        params: &[
-            ParamDoc { name: "amplitude", doc: "amplitude (unit of the signal), ≥ 0", default: None },
-            ParamDoc { name: "frequency_hz", doc: "frequency (Hz), ≥ 0", default: None },
-            ParamDoc { name: "phase_rad", doc: "phase at t = 0 (rad)", default: Some("0") },
-            ParamDoc { name: "offset", doc: "offset added", default: Some("0") },
-        ],
-        ports: "-> y",
-    }
-}
-
 // ---------------------------------------------------------------------------------
 // triangular_scan
 // ---------------------------------------------------------------------------------
 
 /// `triangular_scan`: the triangular set-point of the fast axis of an AFM raster
-/// scan (Ch. 6–7): trace and retrace at constant speed 4·A·f between −A and +A.
+/// line scan (Ch. 6–7): trace and retrace at constant speed 4·A·f between
+/// offset − A and offset + A.
 ///
 /// With p = frac(f·t): y = offset + A·4p for p < ¼, A·(2 − 4p) for ¼ ≤ p < ¾,
 /// A·(4p − 4) after — zero at t = 0 rising, +A at T/4, zero at T/2, −A at 3T/4
 /// (T = 1/f), like a sine of the same frequency.
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
+#[block(type_name = "triangular_scan", role = Source, ports = "-> y (m)")]
 pub struct TriangularScan {
     /// Amplitude A (m): the scan covers [offset − A, offset + A], a line of 2A.
+    #[param(non_negative)]
     pub amplitude: f64,
     /// Line frequency f (Hz): one trace and one retrace per period.
+    #[param(non_negative)]
     pub frequency_hz: f64,
-    /// Centre of the scan (m, default 0).
+    /// Centre of the scan (m).
     #[serde(default = "zero")]
+    #[param(finite)]
     pub offset: f64,
 }
 
@@ -383,9 +341,7 @@ impl Block for TriangularScan {
         vec![Port::new("y", 1)]
     }
     fn build(&mut self, _ctx: &BuildContext) -> Result<(), ParamError> {
-        check::non_negative("amplitude", self.amplitude)?;
-        check::non_negative("frequency_hz", self.frequency_hz)?;
-        check::finite("offset", self.offset)
+        self.check_params()
     }
     fn output(&mut self, tick: Tick, _u: &[f64], y: &mut [f64]) {
         self.sample(tick.t, y);
@@ -395,26 +351,12 @@ impl Block for TriangularScan {
     }
 }
 
-crate::submit_block_doc! {
-    BlockDoc {
-        type_name: "triangular_scan",
-        role: Role::Source,
-        summary: "AFM raster line scan: triangle between offset ± amplitude at frequency_hz",
-        params: &[
-            ParamDoc { name: "amplitude", doc: "half the line length A (m)", default: None },
-            ParamDoc { name: "frequency_hz", doc: "line frequency (Hz): one trace + one retrace", default: None },
-            ParamDoc { name: "offset", doc: "centre of the scan (m)", default: Some("0") },
-        ],
-        ports: "-> y (m)",
-    }
-}
-
 // ---------------------------------------------------------------------------------
 // point_to_point
 // ---------------------------------------------------------------------------------
 
 /// Shape of a [`PointToPoint`] move.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Params)]
 #[serde(rename_all = "snake_case")]
 pub enum P2pProfile {
     /// Third-order (jerk-limited, "S-curve") profile: up to seven phases of
@@ -467,21 +409,26 @@ struct Plan {
 ///   shortest duration that respects every given limit (peaks: minimum jerk
 ///   v = 1.875 D/T, a = 5.774 D/T², j = 60 D/T³; cycloidal v = 2 D/T,
 ///   a = 2π D/T², j = 4π² D/T³).
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
+#[block(type_name = "point_to_point", role = Source, ports = "-> y (m), v (m/s), a (m/s²)")]
 pub struct PointToPoint {
-    /// Start position (m, default 0).
+    /// Start position (m).
     #[serde(default = "zero")]
+    #[param(finite)]
     pub start_m: f64,
     /// Target position (m).
+    #[param(finite)]
     pub target_m: f64,
-    /// Time at which the move begins (s, default 0).
+    /// Time at which the move begins (s).
     #[serde(default = "zero")]
+    #[param(finite)]
     pub begin_s: f64,
-    /// Profile shape (default `third_order`).
+    /// Profile shape.
     #[serde(default = "third_order")]
     pub profile: P2pProfile,
-    /// Duration of a `minimum_jerk` or `cycloidal` move (s).
+    /// Duration of a `minimum_jerk` or `cycloidal` move (s); `minimum_jerk`/`cycloidal`
+    /// only.
     #[serde(default)]
     pub duration_s: Option<f64>,
     /// Velocity limit (m/s).
@@ -549,9 +496,7 @@ impl PointToPoint {
 
     /// Validate the parameters and plan the move.
     fn plan(&mut self) -> Result<(), ParamError> {
-        check::finite("start_m", self.start_m)?;
-        check::finite("target_m", self.target_m)?;
-        check::finite("begin_s", self.begin_s)?;
+        self.check_params()?;
         for (field, v) in [
             ("duration_s", self.duration_s),
             ("v_max_m_s", self.v_max_m_s),
@@ -743,25 +688,6 @@ impl Block for PointToPoint {
     }
 }
 
-crate::submit_block_doc! {
-    BlockDoc {
-        type_name: "point_to_point",
-        role: Role::Source,
-        summary: "smooth move start_m -> target_m: third_order (jerk-limited), minimum_jerk or cycloidal",
-        params: &[
-            ParamDoc { name: "start_m", doc: "start position (m)", default: Some("0") },
-            ParamDoc { name: "target_m", doc: "target position (m)", default: None },
-            ParamDoc { name: "begin_s", doc: "time the move begins (s)", default: Some("0") },
-            ParamDoc { name: "profile", doc: "third_order | minimum_jerk | cycloidal", default: Some("third_order") },
-            ParamDoc { name: "duration_s", doc: "move time (s), minimum_jerk/cycloidal only", default: Some("none") },
-            ParamDoc { name: "v_max_m_s", doc: "velocity limit (m/s)", default: Some("none") },
-            ParamDoc { name: "a_max_m_s2", doc: "acceleration limit (m/s²)", default: Some("none") },
-            ParamDoc { name: "j_max_m_s3", doc: "jerk limit (m/s³), required for third_order", default: Some("none") },
-        ],
-        ports: "-> y (m), v (m/s), a (m/s²)",
-    }
-}
-
 // ---------------------------------------------------------------------------------
 // white_noise
 // ---------------------------------------------------------------------------------
@@ -778,20 +704,23 @@ fn placeholder_rng() -> Rng {
 /// density S (unit²/Hz) of the sampled noise, flat from 0 to the Nyquist frequency:
 /// σ = √(S·f_s/2), so that ∫₀^{f_s/2} S df = σ² (the end value of the cumulative
 /// PSD is the variance).
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
+#[block(type_name = "white_noise", role = Source, ports = "-> y[width]")]
 pub struct WhiteNoise {
     /// Standard deviation σ per sample (unit of the signal).
     #[serde(default)]
     pub std: Option<f64>,
-    /// One-sided PSD (unit²/Hz), alternative to `std`.
+    /// One-sided PSD S (unit²/Hz), alternative to `std`: σ = √(S·f_s/2).
     #[serde(default)]
     pub psd: Option<f64>,
-    /// Mean (default 0).
+    /// Mean (unit of the signal).
     #[serde(default = "zero")]
+    #[param(finite)]
     pub mean: f64,
-    /// Number of independent channels (default 1).
+    /// Number of independent channels.
     #[serde(default = "one")]
+    #[param(width)]
     pub width: usize,
     #[serde(skip)]
     sigma: f64,
@@ -849,8 +778,7 @@ impl Block for WhiteNoise {
         vec![Port::new("y", self.width)]
     }
     fn build(&mut self, ctx: &BuildContext) -> Result<(), ParamError> {
-        check::finite("mean", self.mean)?;
-        check::width("width", self.width)?;
+        self.check_params()?;
         self.sigma = self.sigma_for(ctx.dt)?;
         self.rng = Rng::new(ctx.seed);
         Ok(())
@@ -860,21 +788,6 @@ impl Block for WhiteNoise {
     }
     fn role(&self) -> Role {
         Role::Source
-    }
-}
-
-crate::submit_block_doc! {
-    BlockDoc {
-        type_name: "white_noise",
-        role: Role::Source,
-        summary: "seeded Gaussian white noise, by std per sample or one-sided psd",
-        params: &[
-            ParamDoc { name: "std", doc: "standard deviation per sample (unit of the signal)", default: Some("none") },
-            ParamDoc { name: "psd", doc: "one-sided PSD (unit²/Hz); σ = √(psd·f_s/2)", default: Some("none") },
-            ParamDoc { name: "mean", doc: "mean", default: Some("0") },
-            ParamDoc { name: "width", doc: "independent channels", default: Some("1") },
-        ],
-        ports: "-> y[width]",
     }
 }
 

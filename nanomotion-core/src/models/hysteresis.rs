@@ -54,7 +54,7 @@ impl Direction {
 }
 
 /// One parameter set of the Coleman–Hodgdon model (6.3).
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, crate::Params)]
 #[serde(deny_unknown_fields)]
 pub struct ChParams {
     /// α (1/\[u\]) > 0: rate at which y approaches the anhysteretic line after a

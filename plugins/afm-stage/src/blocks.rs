@@ -4,25 +4,31 @@
 //! `hysteresis_feedforward` and `position_feedforward`.)
 
 use crate::hysteresis::{CH_NAMES_UM_V, ChParams, ColemanHodgdon, Direction, ExtendedCh};
-use nanomotion_core::block::check;
-use nanomotion_core::{
-    Actuator, Block, BlockDoc, BuildContext, ParamDoc, ParamError, Port, Role, Tick,
-};
+use nanomotion_core::Params;
+use nanomotion_core::{Actuator, Block, BuildContext, ParamError, Port, Role, Tick};
 use serde::{Deserialize, Serialize};
 
-/// `coleman_hodgdon`: piezo hysteresis x = H(V) by the Coleman–Hodgdon ODE
+/// `coleman_hodgdon`: Coleman–Hodgdon piezo hysteresis dx/dt = α|V̇|(bV − x) + uV̇
+/// (6.3), exact per sample, optional asymmetric retrace set.
+///
+/// Piezo hysteresis x = H(V) by the Coleman–Hodgdon ODE
 /// dx/dt = α|V̇|(bV − x) + uV̇, integrated exactly per sample, with optional
 /// separate retrace parameters. Input `v` (V), output `x` (µm).
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
+#[block(type_name = "coleman_hodgdon", role = Actuator, ports = "v (V) -> x (µm)")]
 pub struct ColemanHodgdonBlock {
     /// Parameters for increasing voltage (α in 1/V, b and u in µm/V).
+    /// {alpha_per_v (1/V), b_um_per_v, u_um_per_v (µm/V)}, also spelled {alpha, b, c} (the
+    /// core model's names).
     pub trace: ChParams,
     /// Parameters for decreasing voltage (default: the trace set).
     #[serde(default)]
+    #[param(default_doc = "= trace")]
     pub retrace: Option<ChParams>,
     /// Initial voltage (V), reached along the virgin curve from x = 0 at 0 V.
     #[serde(default)]
+    #[param(finite)]
     pub initial_v: f64,
     #[serde(skip)]
     h: Option<ColemanHodgdon>,
@@ -59,7 +65,7 @@ impl Block for ColemanHodgdonBlock {
         vec![Port::new("x", 1)]
     }
     fn build(&mut self, _ctx: &BuildContext) -> Result<(), ParamError> {
-        check::finite("initial_v", self.initial_v)?;
+        self.check_params()?;
         let retrace = self.retrace.unwrap_or(self.trace);
         self.trace.validate_as("trace.", &CH_NAMES_UM_V)?;
         retrace.validate_as("retrace.", &CH_NAMES_UM_V)?;
@@ -76,29 +82,22 @@ impl Block for ColemanHodgdonBlock {
     }
 }
 
-nanomotion_core::submit_block_doc! {
-    BlockDoc {
-        type_name: "coleman_hodgdon",
-        role: Role::Actuator,
-        summary: "Coleman–Hodgdon piezo hysteresis dx/dt = α|V̇|(bV − x) + uV̇ (6.3), exact per sample, optional asymmetric retrace set",
-        params: &[
-            ParamDoc { name: "trace", doc: "{alpha_per_v (1/V), b_um_per_v, u_um_per_v (µm/V)} (also spelled {alpha, b, c}, the core model's names)", default: None },
-            ParamDoc { name: "retrace", doc: "parameters for decreasing voltage", default: Some("= trace") },
-            ParamDoc { name: "initial_v", doc: "initial voltage (V)", default: Some("0") },
-        ],
-        ports: "v (V) -> x (µm)",
-    }
-}
-
-/// `extended_coleman_hodgdon`: the extended asymmetric model (6.4) on the fixed
+/// `extended_coleman_hodgdon`: extended asymmetric Coleman–Hodgdon model (6.4) on a
+/// fixed voltage range, trace/retrace by the sign of ΔV.
+///
+/// The extended asymmetric model (6.4) on the fixed
 /// range [v_min_v, v_max_v]; the branch follows the sign of ΔV and is kept at
 /// standstill. Input `v` (V), output `x` (µm).
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
+#[block(type_name = "extended_coleman_hodgdon", role = Actuator, ports = "v (V) -> x (µm)")]
 pub struct ExtendedChBlock {
     /// The model (6.4): `trace` and `retrace` parameter sets.
+    /// Each set: {a_um_per_v, b_um_per_v, c_per_v, u_um_per_v, alpha_per_v, d_um_per_v2,
+    /// e_um_per_v, f_um}.
     pub model: ExtendedCh,
     /// V_m (V).
+    #[param(at_most = v_max_v)]
     pub v_min_v: f64,
     /// V_M (V).
     pub v_max_v: f64,
@@ -117,7 +116,7 @@ impl Block for ExtendedChBlock {
     fn build(&mut self, _ctx: &BuildContext) -> Result<(), ParamError> {
         self.model.trace.validate("model.trace.")?;
         self.model.retrace.validate("model.retrace.")?;
-        check::ordered("v_min_v", self.v_min_v, "v_max_v", self.v_max_v)?;
+        self.check_params()?;
         if self.v_min_v == self.v_max_v {
             return Err(ParamError::new(
                 "v_max_v",
@@ -151,19 +150,6 @@ impl Block for ExtendedChBlock {
     }
     fn role(&self) -> Role {
         Role::Actuator
-    }
-}
-
-nanomotion_core::submit_block_doc! {
-    BlockDoc {
-        type_name: "extended_coleman_hodgdon",
-        role: Role::Actuator,
-        summary: "extended asymmetric Coleman–Hodgdon model (6.4) on a fixed voltage range, trace/retrace by the sign of ΔV",
-        params: &[
-            ParamDoc { name: "model", doc: "{trace: {a_um_per_v, b_um_per_v, c_per_v, u_um_per_v, alpha_per_v, d_um_per_v2, e_um_per_v, f_um}, retrace: {...}}", default: None },
-            ParamDoc { name: "v_min_v / v_max_v", doc: "voltage range V_m, V_M (V)", default: None },
-        ],
-        ports: "v (V) -> x (µm)",
     }
 }
 

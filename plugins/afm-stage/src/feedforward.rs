@@ -8,10 +8,9 @@
 
 use crate::error::{AfmError, finite};
 use crate::hysteresis::{Branch, Direction, ExtendedCh};
+use nanomotion_core::Params;
 use nanomotion_core::block::check;
-use nanomotion_core::{
-    Block, BlockDoc, BuildContext, Controller, ParamDoc, ParamError, Port, Role, Tick,
-};
+use nanomotion_core::{Block, BuildContext, Controller, ParamError, Port, Role, Tick};
 use serde::{Deserialize, Serialize};
 
 /// Solve for the voltage range [V_m, V_M] on which branch `dir` of `model` runs from
@@ -245,15 +244,22 @@ pub enum FfRange {
     },
 }
 
-/// `hysteresis_feedforward`: inverse extended Coleman–Hodgdon model (6.6) with
+/// `hysteresis_feedforward`: inverse extended Coleman–Hodgdon hysteresis feed-forward
+/// (6.6) with trace/retrace switching at standstill (Fig. 6.9).
+///
+/// Inverse extended Coleman–Hodgdon model (6.6) with
 /// trace/retrace switching at standstill (Fig. 6.9). Input `r` (m), outputs `v` (V)
 /// and `state` = [direction (+1 trace, −1 retrace), out-of-range samples so far].
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
+#[block(type_name = "hysteresis_feedforward", role = Controller, ports = "r (m) -> v (V), state[2] (direction ±1, out-of-range count)")]
 pub struct HysteresisFeedForwardBlock {
     /// The identified model (6.4): `trace` and `retrace` parameter sets (µm, V).
+    /// Each set: {a_um_per_v, b_um_per_v, c_per_v, u_um_per_v, alpha_per_v, d_um_per_v2,
+    /// e_um_per_v, f_um}.
     pub model: ExtendedCh,
     /// Voltage range, given directly or through the position range it must cover.
+    /// {voltage: {v_min_v, v_max_v}} or {position: {x_min_m, x_max_m}}.
     pub range: FfRange,
     /// Reference steps of at most this size (m per sample) count as standstill.
     #[serde(default = "default_standstill")]
@@ -335,28 +341,19 @@ impl Block for HysteresisFeedForwardBlock {
     }
 }
 
-nanomotion_core::submit_block_doc! {
-    BlockDoc {
-        type_name: "hysteresis_feedforward",
-        role: Role::Controller,
-        summary: "inverse extended Coleman–Hodgdon hysteresis feed-forward (6.6) with trace/retrace switching at standstill (Fig. 6.9)",
-        params: &[
-            ParamDoc { name: "model", doc: "extended model (6.4): {trace: {a_um_per_v, b_um_per_v, c_per_v, u_um_per_v, alpha_per_v, d_um_per_v2, e_um_per_v, f_um}, retrace: {...}}", default: None },
-            ParamDoc { name: "range", doc: "{voltage: {v_min_v, v_max_v}} or {position: {x_min_m, x_max_m}}", default: None },
-            ParamDoc { name: "standstill_m", doc: "reference step (m/sample) counted as standstill", default: Some("0") },
-        ],
-        ports: "r (m) -> v (V), state[2] (direction ±1, out-of-range count)",
-    }
-}
-
+/// `position_feedforward`: position feed-forward (6.7): v = K·r + V0.
+///
 /// Position feed-forward (6.7): V = K·r + V₀.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
+#[block(type_name = "position_feedforward", role = Controller, ports = "r (m) -> v (V)")]
 pub struct PositionFeedForward {
     /// K (V/µm): inverse of the stage sensitivity.
+    #[param(finite)]
     pub gain_v_per_um: f64,
     /// V₀ (V): voltage at r = 0.
     #[serde(default)]
+    #[param(finite)]
     pub offset_v: f64,
 }
 
@@ -390,27 +387,13 @@ impl Block for PositionFeedForward {
         vec![Port::new("v", 1)]
     }
     fn build(&mut self, _ctx: &BuildContext) -> Result<(), ParamError> {
-        check::finite("gain_v_per_um", self.gain_v_per_um)?;
-        check::finite("offset_v", self.offset_v)
+        self.check_params()
     }
     fn output(&mut self, _tick: Tick, u: &[f64], y: &mut [f64]) {
         self.control(u, y);
     }
     fn role(&self) -> Role {
         Role::Controller
-    }
-}
-
-nanomotion_core::submit_block_doc! {
-    BlockDoc {
-        type_name: "position_feedforward",
-        role: Role::Controller,
-        summary: "position feed-forward (6.7): v = K·r + V0",
-        params: &[
-            ParamDoc { name: "gain_v_per_um", doc: "K (V/µm), inverse stage sensitivity", default: None },
-            ParamDoc { name: "offset_v", doc: "V0 (V), voltage at r = 0", default: Some("0") },
-        ],
-        ports: "r (m) -> v (V)",
     }
 }
 

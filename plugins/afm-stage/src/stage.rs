@@ -24,12 +24,11 @@
 use crate::error::AfmError;
 use crate::hysteresis::{CH_NAMES_UM_V, ChParams, ColemanHodgdon};
 use nalgebra::DMatrix;
+use nanomotion_core::Params;
 use nanomotion_core::block::check;
 use nanomotion_core::lti::{C2dMethod, SsStepper, StateSpace};
 use nanomotion_core::rng::Rng;
-use nanomotion_core::{
-    Block, BlockDoc, BuildContext, ParamDoc, ParamError, Plant, Port, Role, Tick,
-};
+use nanomotion_core::{Block, BuildContext, ParamError, Plant, Port, Role, Tick};
 use serde::{Deserialize, Serialize};
 use std::f64::consts::TAU;
 
@@ -179,7 +178,11 @@ fn default_contact_z() -> f64 {
     10e-6
 }
 
-/// `afm_stage`: the 3-DOF metrological AFM stage (see the [module docs](self)).
+/// `afm_stage`: 3-DOF metrological AFM stage (Ch. 6-7): piezo hysteresis, 2nd-order
+/// modes, static+dynamic coupling, interferometers (Table 6.1), cantilever deflection
+/// over a grating.
+///
+/// The 3-DOF metrological AFM stage (see the [module docs](self)).
 ///
 /// Input `v[3]` (V): drive voltages of the x, y, z piezo stacks. Outputs:
 /// `pos[3]` (m, interferometer), `deflection` (m, cantilever), `true_pos[3]` (m,
@@ -197,35 +200,47 @@ fn default_contact_z() -> f64 {
 /// let want = 50.0 - 10.0 * (1.0 - (-1.5f64).exp());
 /// assert!((y[4] * 1e6 - want).abs() < 1e-6);
 /// ```
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
+#[block(type_name = "afm_stage", role = Plant, ports = "v[3] (V) -> pos[3] (m), deflection (m), true_pos[3] (m), saturated[3]")]
 pub struct AfmStage {
     /// Lowest drive voltage (V); lower inputs are clipped and reported.
     #[serde(default = "default_v_min")]
+    #[param(at_most = v_max_v)]
     pub v_min_v: f64,
     /// Highest drive voltage (V).
     #[serde(default = "default_v_max")]
     pub v_max_v: f64,
     /// Per-axis hysteresis [x, y, z] (Coleman–Hodgdon trace/retrace sets, µm and V).
+    /// Each axis: {trace: {alpha_per_v, b_um_per_v, u_um_per_v}, retrace: {...}}
+    /// (Coleman–Hodgdon, (6.3)).
     #[serde(default = "default_hysteresis")]
+    #[param(default_doc = "asymmetric, ~1 µm/V x/y, 0.2 µm/V z")]
     pub hysteresis: [AxisHysteresis; 3],
     /// Resonance of each diagonal mode (Hz); Ch. 7: 124 Hz (x), 126 Hz (y).
     #[serde(default = "default_resonance")]
+    #[param(default_doc = "[124, 126, 350]")]
     pub resonance_hz: [f64; 3],
     /// Relative damping ζ of each diagonal mode (-).
     #[serde(default = "default_damping")]
+    #[param(default_doc = "[0.05, 0.05, 0.05]")]
     pub damping: [f64; 3],
     /// Static coupling S (row = output j, column = input i; diagonal ignored), (-).
+    /// 3×3, row-major.
     #[serde(default = "default_static_coupling")]
+    #[param(default_doc = "≈0.005")]
     pub static_coupling: [[f64; 3]; 3],
     /// Dynamic coupling D through the parasitic mode (row = output, column = input), (-).
     #[serde(default = "default_dynamic_coupling")]
+    #[param(default_doc = "≈0.005 (static + dynamic ≈ −40 dB at DC)")]
     pub dynamic_coupling: [[f64; 3]; 3],
     /// Parasitic mode frequency (Hz).
     #[serde(default = "default_parasitic_hz")]
+    #[param(positive)]
     pub parasitic_hz: f64,
     /// Parasitic mode damping (-).
     #[serde(default = "default_parasitic_damping")]
+    #[param(positive)]
     pub parasitic_damping: f64,
     /// Interferometer resolution per axis (m), Table 6.1: 0.15 nm.
     #[serde(default = "default_resolution")]
@@ -236,18 +251,24 @@ pub struct AfmStage {
     pub noise_bound_m: [f64; 3],
     /// Cantilever deflection resolution (m).
     #[serde(default = "default_defl_resolution")]
+    #[param(non_negative)]
     pub deflection_resolution_m: f64,
     /// Cantilever deflection noise bound (m).
     #[serde(default = "default_defl_noise")]
+    #[param(non_negative)]
     pub deflection_noise_bound_m: f64,
     /// Sample topography.
+    /// `flat`, or {grating: {pitch_m, height_m, duty, angle_rad, offset_m}}.
     #[serde(default = "default_topography")]
+    #[param(default_doc = "grating 10 µm pitch, 20 nm steps")]
     pub topography: Topography,
     /// Stage z position at which the tip touches a zero-height sample (m).
     #[serde(default = "default_contact_z")]
+    #[param(finite)]
     pub contact_z_m: f64,
     /// Initial drive voltages (V), reached along the virgin curve from 0 V.
     #[serde(default)]
+    #[param(default_doc = "[0, 0, 0]")]
     pub initial_v: [f64; 3],
     #[serde(skip)]
     rt: Option<Runtime>,
@@ -368,7 +389,7 @@ impl AfmStage {
     }
 
     fn validate(&self) -> Result<(), ParamError> {
-        check::ordered("v_min_v", self.v_min_v, "v_max_v", self.v_max_v)?;
+        self.check_params()?;
         if self.v_min_v == self.v_max_v {
             return Err(ParamError::new(
                 "v_max_v",
@@ -400,11 +421,6 @@ impl AfmStage {
             check::all_finite(&format!("static_coupling[{i}]"), &self.static_coupling[i])?;
             check::all_finite(&format!("dynamic_coupling[{i}]"), &self.dynamic_coupling[i])?;
         }
-        check::positive("parasitic_hz", self.parasitic_hz)?;
-        check::positive("parasitic_damping", self.parasitic_damping)?;
-        check::non_negative("deflection_resolution_m", self.deflection_resolution_m)?;
-        check::non_negative("deflection_noise_bound_m", self.deflection_noise_bound_m)?;
-        check::finite("contact_z_m", self.contact_z_m)?;
         self.topography.validate()
     }
 
@@ -532,29 +548,6 @@ impl Block for AfmStage {
     }
     fn role(&self) -> Role {
         Role::Plant
-    }
-}
-
-nanomotion_core::submit_block_doc! {
-    BlockDoc {
-        type_name: "afm_stage",
-        role: Role::Plant,
-        summary: "3-DOF metrological AFM stage (Ch. 6-7): piezo hysteresis, 2nd-order modes, static+dynamic coupling, interferometers (Table 6.1), cantilever deflection over a grating",
-        params: &[
-            ParamDoc { name: "v_min_v / v_max_v", doc: "drive voltage range (V); inputs outside are clipped and reported", default: Some("0 / 100") },
-            ParamDoc { name: "hysteresis", doc: "[x, y, z] of {trace: {alpha_per_v, b_um_per_v, u_um_per_v}, retrace: {...}} (Coleman–Hodgdon, (6.3))", default: Some("asymmetric, ~1 µm/V x/y, 0.2 µm/V z") },
-            ParamDoc { name: "resonance_hz", doc: "diagonal modes (Hz), Ch. 7 (7.1)", default: Some("[124, 126, 350]") },
-            ParamDoc { name: "damping", doc: "relative damping of the diagonal modes (-)", default: Some("[0.05, 0.05, 0.05]") },
-            ParamDoc { name: "static_coupling", doc: "3×3 row-major (output, input) static coupling (-), diagonal ignored", default: Some("≈0.005") },
-            ParamDoc { name: "dynamic_coupling", doc: "3×3 coupling through the parasitic mode (-)", default: Some("≈0.005 (static + dynamic ≈ −40 dB at DC)") },
-            ParamDoc { name: "parasitic_hz / parasitic_damping", doc: "parasitic coupling mode (Hz, -)", default: Some("400 / 0.02") },
-            ParamDoc { name: "resolution_m / noise_bound_m", doc: "interferometer resolution and noise bound per axis (m), Table 6.1", default: Some("0.15 nm / [5, 4, 2] nm") },
-            ParamDoc { name: "deflection_resolution_m / deflection_noise_bound_m", doc: "cantilever sensor (m)", default: Some("0.05 nm / 0.15 nm") },
-            ParamDoc { name: "topography", doc: "flat, or {grating: {pitch_m, height_m, duty, angle_rad, offset_m}}", default: Some("grating 10 µm pitch, 20 nm steps") },
-            ParamDoc { name: "contact_z_m", doc: "stage z where the tip touches a zero-height sample (m)", default: Some("10e-6") },
-            ParamDoc { name: "initial_v", doc: "initial voltages (V)", default: Some("[0, 0, 0]") },
-        ],
-        ports: "v[3] (V) -> pos[3] (m), deflection (m), true_pos[3] (m), saturated[3]",
     }
 }
 

@@ -44,8 +44,9 @@ use crate::estimate::{
     Combined, EstimateError, EstimatorOptions, LineRef, Workspace, estimate_rotation_in,
 };
 use crate::plan::MAX_LINES;
+use nanomotion_core::Params;
 use nanomotion_core::block::check;
-use nanomotion_core::{Block, BlockDoc, BuildContext, ParamDoc, ParamError, Port, Role, Tick};
+use nanomotion_core::{Block, BuildContext, ParamError, Port, Role, Tick};
 use serde::{Deserialize, Serialize};
 
 /// What to output for α when the estimate fails.
@@ -69,9 +70,14 @@ fn alias() -> f64 {
     EstimatorOptions::default().alias_level
 }
 
-/// `rotation_estimator`: see the [module docs](self).
-#[derive(Debug, Clone, Serialize, Deserialize)]
+/// `rotation_estimator`: DRC rotation estimate (7.18)–(7.21) in a graph: records the
+/// estimation lines (line index from drc_scan_plan), estimates α once when the last
+/// line ends (one tick, preallocated), outputs α for frame_rotation.
+///
+/// See the [module docs](self).
+#[derive(Debug, Clone, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
+#[block(type_name = "rotation_estimator", role = Estimator, ports = "z, line, r[2] -> alpha (rad), sigma (rad), status (0 estimating, 1 valid, −code failed)")]
 pub struct RotationEstimator {
     /// Number of estimation lines (2 … 16); the estimate runs when line
     /// `lines − 1` ends.
@@ -90,6 +96,7 @@ pub struct RotationEstimator {
     pub alias_level: f64,
     /// `stop` (α = NaN, default) or `plain_rc` (α = 0) on failure.
     #[serde(default)]
+    #[param(default_doc = "stop")]
     pub on_failure: OnFailure,
     #[serde(skip)]
     state: Option<State>,
@@ -344,22 +351,5 @@ impl Block for RotationEstimator {
     }
     fn role(&self) -> Role {
         Role::Estimator
-    }
-}
-
-nanomotion_core::submit_block_doc! {
-    BlockDoc {
-        type_name: "rotation_estimator",
-        role: Role::Estimator,
-        summary: "DRC rotation estimate (7.18)–(7.21) in a graph: records the estimation lines (line index from drc_scan_plan), estimates α once when the last line ends (one tick, preallocated), outputs α for frame_rotation",
-        params: &[
-            ParamDoc { name: "lines", doc: "estimation lines (2 … 16)", default: None },
-            ParamDoc { name: "max_line_s", doc: "longest line (s): buffer of max_line_s/t_s + 2 samples per line", default: None },
-            ParamDoc { name: "max_angle_rad", doc: "largest |α| admitted (rad)", default: Some("0.1") },
-            ParamDoc { name: "min_correlation", doc: "smallest correlation peak accepted", default: Some("0.5") },
-            ParamDoc { name: "alias_level", doc: "autocorrelation level of a repeat (alias check)", default: Some("0.5") },
-            ParamDoc { name: "on_failure", doc: "stop (α = NaN: the run stops, status < 0 says why) or plain_rc (α = 0)", default: Some("stop") },
-        ],
-        ports: "z, line, r[2] -> alpha (rad), sigma (rad), status (0 estimating, 1 valid, −code failed)",
     }
 }

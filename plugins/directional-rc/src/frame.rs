@@ -34,8 +34,9 @@
 //! ```
 
 use glam::{DMat2, DVec2};
+use nanomotion_core::Params;
 use nanomotion_core::block::check;
-use nanomotion_core::{Block, BlockDoc, BuildContext, ParamDoc, ParamError, Port, Role, Tick};
+use nanomotion_core::{Block, BuildContext, ParamError, Port, Role, Tick};
 use serde::{Deserialize, Serialize};
 
 /// Which way [`FrameRotation`] maps.
@@ -58,11 +59,15 @@ pub fn rotation(alpha_rad: f64) -> DMat2 {
     DMat2::from_cols(DVec2::new(c, -s), DVec2::new(s, c))
 }
 
-/// `frame_rotation`: maps the in-plane part (x, y) of `u` between the actuator and
+/// `frame_rotation`: DRC coordinate rotation (7.17): in-plane (x, y) by R(α)
+/// (to_sample) or R(α)ᵀ (to_actuator); z passes.
+///
+/// Maps the in-plane part (x, y) of `u` between the actuator and
 /// the sample frame by R(α) or R(α)ᵀ (7.17); a third component (z) passes
 /// unchanged. See the [module docs](self).
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
+#[block(type_name = "frame_rotation", role = Controller, ports = "u[width] (, alpha with alpha_input) -> y[width]")]
 pub struct FrameRotation {
     /// Sample rotation α about z (rad), e.g. from
     /// [`estimate_rotation`](crate::estimate::estimate_rotation). Default 0; must
@@ -74,6 +79,8 @@ pub struct FrameRotation {
     #[serde(default)]
     pub alpha_input: bool,
     /// `to_sample` (R) or `to_actuator` (Rᵀ).
+    /// R brings errors into the controller frame; Rᵀ takes references and controller
+    /// outputs to the actuators.
     pub direction: Direction,
     /// Width of `u` and `y`: 2 (x, y) or 3 (x, y, z). Default 2.
     #[serde(default = "two")]
@@ -182,21 +189,6 @@ impl Block for FrameRotation {
     }
     fn role(&self) -> Role {
         Role::Controller
-    }
-}
-
-nanomotion_core::submit_block_doc! {
-    BlockDoc {
-        type_name: "frame_rotation",
-        role: Role::Controller,
-        summary: "DRC coordinate rotation (7.17): in-plane (x, y) by R(α) (to_sample) or R(α)ᵀ (to_actuator); z passes",
-        params: &[
-            ParamDoc { name: "alpha_rad", doc: "sample rotation α about z (rad)", default: Some("0") },
-            ParamDoc { name: "alpha_input", doc: "take α from the input port `alpha` (e.g. rotation_estimator.alpha)", default: Some("false") },
-            ParamDoc { name: "direction", doc: "to_sample (R: errors into the controller frame) or to_actuator (Rᵀ: references, controller outputs)", default: None },
-            ParamDoc { name: "width", doc: "2 (x, y) or 3 (x, y, z)", default: Some("2") },
-        ],
-        ports: "u[width] (, alpha with alpha_input) -> y[width]",
     }
 }
 

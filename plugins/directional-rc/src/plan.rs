@@ -32,8 +32,9 @@
 //! assert_eq!((y[2], y[3]), (1.0, 0.0));
 //! ```
 
+use nanomotion_core::Params;
 use nanomotion_core::block::check;
-use nanomotion_core::{Block, BlockDoc, BuildContext, ParamDoc, ParamError, Port, Role, Tick};
+use nanomotion_core::{Block, BuildContext, ParamError, Port, Role, Tick};
 use serde::{Deserialize, Serialize};
 
 /// Largest number of estimation lines (also the `rotation_estimator`'s cap).
@@ -43,24 +44,34 @@ fn one() -> usize {
     1
 }
 
-/// `drc_scan_plan`: estimation lines, then the raster scan, in the sample frame.
+/// `drc_scan_plan`: DRC scan plan in the sample frame: estimation lines (line index),
+/// then the raster scan about the last line's start (rc_on after the lead-in).
+///
+/// Estimation lines, then the raster scan, in the sample frame.
 /// See the [module docs](self).
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
+#[block(type_name = "drc_scan_plan", role = Source, ports = "-> r[2] (x_r, y_r m), line (index or −1), rc_on (0/1)")]
 pub struct ScanPlan {
     /// Fast-axis amplitude A (m): y_r between −A and +A.
+    #[param(non_negative)]
     pub amplitude_m: f64,
     /// Fast-axis period T (s): one trace and one retrace; the RC period.
+    /// A multiple of 4 samples.
+    #[param(positive)]
     pub period_s: f64,
     /// Slow-axis speed during the scan (m/s).
+    #[param(finite)]
     pub slow_velocity_m_s: f64,
     /// Estimation lines m (0, or 2 … 16).
     pub estimation_lines: usize,
     /// Spacing Δx of the estimation lines along x_r (m).
+    #[param(finite)]
     pub line_spacing_m: f64,
     /// Periods of scan with `rc_on` = 0 after the estimation (default 1): the
     /// x/y loops settle after the frame switch before RC learns.
     #[serde(default = "one")]
+    #[param(size(0, 1_000_000))]
     pub lead_in_periods: usize,
     #[serde(skip)]
     n: u64,
@@ -163,10 +174,7 @@ impl Block for ScanPlan {
         ]
     }
     fn build(&mut self, ctx: &BuildContext) -> Result<(), ParamError> {
-        check::non_negative("amplitude_m", self.amplitude_m)?;
-        check::positive("period_s", self.period_s)?;
-        check::finite("slow_velocity_m_s", self.slow_velocity_m_s)?;
-        check::finite("line_spacing_m", self.line_spacing_m)?;
+        self.check_params()?;
         if self.estimation_lines == 1 || self.estimation_lines > MAX_LINES {
             return Err(ParamError::new(
                 "estimation_lines",
@@ -181,7 +189,6 @@ impl Block for ScanPlan {
                 "give the slow-axis spacing of the lines, e.g. 1.0e-6",
             ));
         }
-        check::size("lead_in_periods", self.lead_in_periods, 0, 1_000_000)?;
         let n = check::samples_of("period_s", self.period_s, ctx.dt, 1 << 40)?;
         if n < 4 || n % 4 != 0 || ((n as f64 * ctx.dt - self.period_s) / self.period_s).abs() > 1e-9
         {
@@ -204,23 +211,6 @@ impl Block for ScanPlan {
     }
     fn role(&self) -> Role {
         Role::Source
-    }
-}
-
-nanomotion_core::submit_block_doc! {
-    BlockDoc {
-        type_name: "drc_scan_plan",
-        role: Role::Source,
-        summary: "DRC scan plan in the sample frame: estimation lines (line index), then the raster scan about the last line's start (rc_on after the lead-in)",
-        params: &[
-            ParamDoc { name: "amplitude_m", doc: "fast-axis amplitude A (m)", default: None },
-            ParamDoc { name: "period_s", doc: "fast-axis period T (s), a multiple of 4 samples", default: None },
-            ParamDoc { name: "slow_velocity_m_s", doc: "slow-axis speed of the scan (m/s)", default: None },
-            ParamDoc { name: "estimation_lines", doc: "estimation lines m: 0 or 2 … 16", default: None },
-            ParamDoc { name: "line_spacing_m", doc: "spacing Δx of the estimation lines (m)", default: None },
-            ParamDoc { name: "lead_in_periods", doc: "scan periods with rc_on = 0 after the estimation", default: Some("1") },
-        ],
-        ports: "-> r[2] (x_r, y_r m), line (index or −1), rc_on (0/1)",
     }
 }
 

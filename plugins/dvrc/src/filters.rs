@@ -25,6 +25,7 @@
 
 use nalgebra::DMatrix;
 use nanomotion_core::LearningFilter;
+use nanomotion_core::Params;
 use nanomotion_core::block::check;
 use nanomotion_core::error::ParamError;
 use nanomotion_core::lti::{
@@ -35,7 +36,7 @@ use serde::{Deserialize, Serialize};
 /// How a learning filter L(z) or robustness filter Q(z) is specified (YAML: a map
 /// with `kind:`). Discrete coefficients are in **descending powers of z** at the
 /// block's own rate.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Params)]
 #[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
 pub enum FilterSpec {
     /// L = Q = 1 (no filtering, no delay).

@@ -29,7 +29,8 @@
 
 use crate::delay::{AlphaDelay, VaryingDelay};
 use crate::filters::{Filter, FilterSpec};
-use nanomotion_core::block::{BlockDoc, BuildContext, ParamDoc, Port, Role, Tick, check};
+use nanomotion_core::Params;
+use nanomotion_core::block::{BuildContext, Port, Role, Tick, check};
 use nanomotion_core::error::ParamError;
 use nanomotion_core::{Block, Controller, LearningFilter};
 use serde::{Deserialize, Serialize};
@@ -220,7 +221,7 @@ fn ho_weights() -> Vec<f64> {
 
 /// A discrete SISO model T(z) = num/den (descending powers of z) given for the
 /// stability check when the learning filter is not a ZPETC of T.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
 pub struct TfModel {
     /// Numerator, descending powers of z.
@@ -367,19 +368,25 @@ macro_rules! fixed_delay_rc_adapters {
 // repetitive_control
 // ---------------------------------------------------------------------------------
 
-/// `repetitive_control`: standard RC (5.1) with constant delay N. Input `e`
+/// `repetitive_control`: standard repetitive control (5.1), constant delay N; add w to
+/// e before K (Fig. 5.1).
+///
+/// Standard RC (5.1) with constant delay N. Input `e`
 /// (tracking error), output `w` (added to e before K, Fig. 5.1).
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
+#[block(type_name = "repetitive_control", role = Controller, ports = "e -> w")]
 pub struct RepetitiveControl {
     /// Repetitive delay N (samples at the block's rate) = P_α/T_s; see
     /// [`crate::estimate_period_samples`] to find it from a measured error.
     pub n: usize,
     /// Learning filter L (default identity).
     #[serde(default = "default_identity")]
+    #[param(default_doc = "identity")]
     pub learning: FilterSpec,
     /// Robustness filter Q (default identity).
     #[serde(default = "default_identity")]
+    #[param(default_doc = "identity")]
     pub robustness: FilterSpec,
     /// T(z) for `nanomotion rc-check` when `learning` is not a ZPETC (optional).
     #[serde(default)]
@@ -439,40 +446,32 @@ impl RepetitiveControl {
 
 fixed_delay_rc_adapters!(RepetitiveControl, "repetitive_control");
 
-nanomotion_core::submit_block_doc! {
-    BlockDoc {
-        type_name: "repetitive_control",
-        role: Role::Controller,
-        summary: "standard repetitive control (5.1), constant delay N; add w to e before K (Fig. 5.1)",
-        params: &[
-            ParamDoc { name: "n", doc: "repetitive delay N (samples) = P_α/T_s", default: None },
-            ParamDoc { name: "learning", doc: "learning filter L: {kind: zpetc|fir|iir|fir_lowpass|identity, ...}", default: Some("identity") },
-            ParamDoc { name: "robustness", doc: "robustness filter Q, e.g. {kind: fir_lowpass, taps: 101, cutoff_hz: 220}", default: Some("identity") },
-            ParamDoc { name: "t_model", doc: "T(z) {num, den} for rc-check if L is not a ZPETC", default: Some("none") },
-        ],
-        ports: "e -> w",
-    }
-}
-
 // ---------------------------------------------------------------------------------
 // high_order_rc
 // ---------------------------------------------------------------------------------
 
-/// `high_order_rc`: high-order RC, W(z) = Σ w_i z^-(i−1)N inside the memory loop
+/// `high_order_rc`: high-order repetitive control, W(z) = Σ w_i z^-(i-1)N in the memory
+/// loop (Sec. 5.5.4).
+///
+/// High-order RC, W(z) = Σ w_i z^-(i−1)N inside the memory loop
 /// (Sec. 5.5.4; default W = 2 − z^-N, the optimal second-order weights).
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
+#[block(type_name = "high_order_rc", role = Controller, ports = "e -> w")]
 pub struct HighOrderRc {
     /// Repetitive delay N (samples).
     pub n: usize,
     /// Weights (w_1, ..., w_nHO), Σ w_i = 1 for a unit DC gain (default [2, −1]).
     #[serde(default = "ho_weights")]
+    #[param(default_doc = "[2, -1]")]
     pub weights: Vec<f64>,
     /// Learning filter L (default identity).
     #[serde(default = "default_identity")]
+    #[param(default_doc = "identity")]
     pub learning: FilterSpec,
     /// Robustness filter Q (default identity).
     #[serde(default = "default_identity")]
+    #[param(default_doc = "identity")]
     pub robustness: FilterSpec,
     /// T(z) for `nanomotion rc-check` when `learning` is not a ZPETC (optional).
     #[serde(default)]
@@ -530,27 +529,14 @@ impl HighOrderRc {
 
 fixed_delay_rc_adapters!(HighOrderRc, "high_order_rc");
 
-nanomotion_core::submit_block_doc! {
-    BlockDoc {
-        type_name: "high_order_rc",
-        role: Role::Controller,
-        summary: "high-order repetitive control, W(z) = Σ w_i z^-(i-1)N in the memory loop (Sec. 5.5.4)",
-        params: &[
-            ParamDoc { name: "n", doc: "repetitive delay N (samples)", default: None },
-            ParamDoc { name: "weights", doc: "W(z) weights w_1..w_nHO", default: Some("[2, -1]") },
-            ParamDoc { name: "learning", doc: "learning filter L", default: Some("identity") },
-            ParamDoc { name: "robustness", doc: "robustness filter Q", default: Some("identity") },
-            ParamDoc { name: "t_model", doc: "T(z) {num, den} for rc-check", default: Some("none") },
-        ],
-        ports: "e -> w",
-    }
-}
-
 // ---------------------------------------------------------------------------------
 // dvrc
 // ---------------------------------------------------------------------------------
 
-/// `dvrc`: delay-varying repetitive control (Sec. 5.3): the memory-loop delay
+/// `dvrc`: delay-varying repetitive control (5.7)-(5.8): memory delay N_k = k - k*(α_k)
+/// follows the repetitive variable α.
+///
+/// Delay-varying repetitive control (Sec. 5.3): the memory-loop delay
 /// follows the repetitive variable α (input port `alpha`, e.g. the walking driver's
 /// leg angle with P_α = 2π), N_k = k − k*(α_k) (5.7)–(5.8), limited to
 /// \[n_min, n_max\] = \[m, M\] (the range (5.9) must hold for). Outputs `w` and the
@@ -558,11 +544,13 @@ nanomotion_core::submit_block_doc! {
 ///
 /// The ring buffer is preallocated for n_max; a tick does not allocate. With α = t
 /// (P_α = N·T_s, n_init = N) it is bit-for-bit [`RepetitiveControl`].
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
+#[block(type_name = "dvrc", role = Controller, ports = "e, alpha -> w, n")]
 pub struct Dvrc {
     /// Repetitive period P_α in units of α (default 2π rad).
     #[serde(default = "default_period")]
+    #[param(default_doc = "2π")]
     pub period_alpha: f64,
     /// Smallest delay m (samples).
     pub n_min: usize,
@@ -570,12 +558,15 @@ pub struct Dvrc {
     pub n_max: usize,
     /// Delay used until α has advanced by one period (default n_max).
     #[serde(default)]
+    #[param(default_doc = "n_max")]
     pub n_init: Option<usize>,
     /// Learning filter L (default identity).
     #[serde(default = "default_identity")]
+    #[param(default_doc = "identity")]
     pub learning: FilterSpec,
     /// Robustness filter Q (default identity).
     #[serde(default = "default_identity")]
+    #[param(default_doc = "identity")]
     pub robustness: FilterSpec,
     /// T(z) for `nanomotion rc-check` when `learning` is not a ZPETC (optional).
     #[serde(default)]
@@ -725,24 +716,6 @@ impl Block for Dvrc {
     fn learning(&self) -> Option<nanomotion_core::gate::LearningModel> {
         let (m, _) = self.core.as_ref()?;
         learning_of(m, self.n_min, self.n_max, None)
-    }
-}
-
-nanomotion_core::submit_block_doc! {
-    BlockDoc {
-        type_name: "dvrc",
-        role: Role::Controller,
-        summary: "delay-varying repetitive control (5.7)-(5.8): memory delay N_k = k - k*(α_k) follows the repetitive variable α",
-        params: &[
-            ParamDoc { name: "period_alpha", doc: "repetitive period P_α (units of α)", default: Some("2π") },
-            ParamDoc { name: "n_min", doc: "smallest delay m (samples), ≥ l + q + 1", default: None },
-            ParamDoc { name: "n_max", doc: "largest delay M (samples): ring buffer size", default: None },
-            ParamDoc { name: "n_init", doc: "delay until α has advanced one period (samples)", default: Some("n_max") },
-            ParamDoc { name: "learning", doc: "learning filter L", default: Some("identity") },
-            ParamDoc { name: "robustness", doc: "robustness filter Q", default: Some("identity") },
-            ParamDoc { name: "t_model", doc: "T(z) {num, den} for rc-check", default: Some("none") },
-        ],
-        ports: "e, alpha -> w, n",
     }
 }
 

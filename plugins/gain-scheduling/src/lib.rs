@@ -44,10 +44,9 @@
 //! assert!((u[0] - 20.0).abs() < 1e-9);
 //! ```
 
+use nanomotion_core::Params;
 use nanomotion_core::block::check;
-use nanomotion_core::{
-    Block, BlockDoc, BuildContext, Controller, ParamDoc, ParamError, Port, Role, Tick,
-};
+use nanomotion_core::{Block, BuildContext, Controller, ParamError, Port, Role, Tick};
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
@@ -411,6 +410,9 @@ pub fn fit_power_db(sigma: &[f64], gain_db: &[f64]) -> Result<(GainLaw, f64), Fi
 // Graph block
 // ---------------------------------------------------------------------------
 
+/// `gain_scheduled`: gain scheduling (2.13): any inner block with K(σ) = Π K_i(σ_i)
+/// from tables or fitted dB power laws, bumpless at the input.
+///
 /// Graph block `gain_scheduled`: any inner block with a gain schedule.
 ///
 /// Inputs: the inner block's inputs, then `sigma` (one value per factor of
@@ -425,15 +427,20 @@ pub fn fit_power_db(sigma: &[f64], gain_db: &[f64]) -> Result<(GainLaw, f64), Fi
 ///   - {kind: power_db, a: -30.0, b: 0.5, c: 203.5}
 ///   - {kind: table, x: [0.785, 1.571], gain: [2.0, 1.0]}
 /// ```
-#[derive(Debug, Serialize, Deserialize)]
+#[derive(Debug, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
+#[block(type_name = "gain_scheduled", role = Controller, ports = "<inner inputs>, sigma[n] -> <inner outputs>, gain")]
 pub struct GainScheduledBlock {
     /// The inner block (any registered type), e.g. `{type: pi, kp: 1, zero_hz: 2}`.
     pub controller: Box<dyn Block>,
     /// One factor K_i(σ_i) per scheduling variable; K = Π K_i (2.13).
+    /// Each: {kind: constant, gain} | {kind: table, x, gain} | {kind: table_db, x, gain_db}
+    /// | {kind: power_db, a, b, c} (K = 10^((aσ^b + c)/20)).
     pub schedule: GainSchedule,
     /// `input` (default, bumpless) or `output`.
+    /// `input`: u = C(K·e); `output`: u = K·C(e).
     #[serde(default)]
+    #[param(default_doc = "input")]
     pub placement: Placement,
     #[serde(skip)]
     n_in: usize,
@@ -580,19 +587,5 @@ impl Block for GainScheduledBlock {
             note = format!("{note}; inner controller: {n}");
         }
         Some(nanomotion_core::Linearisation { points, note })
-    }
-}
-
-nanomotion_core::submit_block_doc! {
-    BlockDoc {
-        type_name: "gain_scheduled",
-        role: Role::Controller,
-        summary: "gain scheduling (2.13): any inner block with K(σ) = Π K_i(σ_i) from tables or fitted dB power laws, bumpless at the input",
-        params: &[
-            ParamDoc { name: "controller", doc: "the inner block, inline: {type: pi, kp: …, zero_hz: …}", default: None },
-            ParamDoc { name: "schedule", doc: "list of factors: {kind: constant, gain} | {kind: table, x, gain} | {kind: table_db, x, gain_db} | {kind: power_db, a, b, c} (K = 10^((aσ^b + c)/20))", default: None },
-            ParamDoc { name: "placement", doc: "input (u = C(K·e), bumpless) | output (u = K·C(e))", default: Some("input") },
-        ],
-        ports: "<inner inputs>, sigma[n] -> <inner outputs>, gain",
     }
 }

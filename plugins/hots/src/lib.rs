@@ -47,10 +47,9 @@ pub mod sim;
 pub use calibration::{CalibrationError, SlitCalibration};
 pub use model::{ErrorModel, Grid, MotionSample, Settings, Target};
 
+use nanomotion_core::Params;
 use nanomotion_core::block::check;
-use nanomotion_core::{
-    Block, BlockDoc, BuildContext, Estimator, ParamDoc, ParamError, Port, Role, Tick,
-};
+use nanomotion_core::{Block, BuildContext, Estimator, ParamError, Port, Role, Tick};
 use serde::{Deserialize, Serialize};
 use timestamp_encoder::{Fallback, TimestampEstimator};
 
@@ -70,7 +69,10 @@ fn d_timeout() -> f64 {
 /// Largest `calibration_file` read: 16 MiB (a real calibration is a few kB).
 pub const MAX_CALIBRATION_BYTES: u64 = 16 << 20;
 
-/// `hots_estimator`: the time-stamping estimator of order m with a stored slit
+/// `hots_estimator`: HOTS (Ch. 9 reconstruction): time-stamping LS estimator of order m
+/// with a stored per-edge slit calibration applied to the events.
+///
+/// The time-stamping estimator of order m with a stored slit
 /// calibration applied to every event before the fit. The calibration comes from
 /// `calibration_file` (a [`SlitCalibration`] as JSON, read once in `build`) or
 /// inline `edge_offsets_counts` (not both). Choose `order` here and `register_len`
@@ -78,13 +80,16 @@ pub const MAX_CALIBRATION_BYTES: u64 = 16 << 20;
 ///
 /// Input `register` (2 + 2n, the encoder's layout); outputs `y` = [x̂, ẋ̂, ẍ̂] and
 /// `status`, as `timestamp_estimator`.
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
+#[block(type_name = "hots_estimator", role = Estimator, ports = "register[2+2n] -> y[3] = [x, v, a], status")]
 pub struct HotsEstimator {
     /// Polynomial order m, default 2.
+    /// At most 4.
     #[serde(default = "d_m")]
     pub order: usize,
     /// Register length n of the encoder, default 5.
+    /// n > m.
     #[serde(default = "d_n")]
     pub register_len: usize,
     /// Resolution Δ (units per count).
@@ -96,11 +101,14 @@ pub struct HotsEstimator {
     /// from the fit) or `zero_standstill` (also v̂ = â = 0, plus the standstill
     /// rule); see `timestamp_encoder::Fallback`.
     #[serde(default)]
+    #[param(default_doc = "thesis")]
     pub fallback: Fallback,
     /// Standstill timeout (s), default 0.01 (`fallback: zero_standstill` only).
+    /// 0 disables.
     #[serde(default = "d_timeout")]
     pub standstill_timeout_s: f64,
     /// Path of a JSON [`SlitCalibration`], read in `build`.
+    /// At most 16 MiB; a relative path is relative to the graph file's folder.
     #[serde(default)]
     pub calibration_file: Option<String>,
     /// Inline calibration table ê (counts per edge).
@@ -209,24 +217,5 @@ impl Block for HotsEstimator {
     }
     fn role(&self) -> Role {
         Role::Estimator
-    }
-}
-
-nanomotion_core::submit_block_doc! {
-    BlockDoc {
-        type_name: "hots_estimator",
-        role: Role::Estimator,
-        summary: "HOTS (Ch. 9 reconstruction): time-stamping LS estimator of order m with a stored per-edge slit calibration applied to the events",
-        params: &[
-            ParamDoc { name: "order", doc: "polynomial order m, ≤ 4", default: Some("2") },
-            ParamDoc { name: "register_len", doc: "register length n of the encoder, n > m", default: Some("5") },
-            ParamDoc { name: "resolution", doc: "units per count Δ", default: None },
-            ParamDoc { name: "band_counts", doc: "fallback band (counts)", default: Some("1") },
-            ParamDoc { name: "fallback", doc: "out-of-band rule: thesis (position → count, v/a from the fit) or zero_standstill (also v = a = 0, plus standstill)", default: Some("thesis") },
-            ParamDoc { name: "standstill_timeout_s", doc: "zero_standstill only: standstill timeout (s); 0 disables", default: Some("0.01") },
-            ParamDoc { name: "calibration_file", doc: "JSON SlitCalibration read at build (≤ 16 MiB; a relative path is relative to the graph file's folder)", default: Some("none") },
-            ParamDoc { name: "edge_offsets_counts", doc: "inline calibration ê per edge (counts)", default: Some("[]") },
-        ],
-        ports: "register[2+2n] -> y[3] = [x, v, a], status",
     }
 }

@@ -17,8 +17,9 @@
 
 use crate::error::MimoError;
 use nalgebra::DMatrix;
+use nanomotion_core::Params;
 use nanomotion_core::lti::{C2dMethod, StateSpace, c2d};
-use nanomotion_core::{Block, BlockDoc, BuildContext, ParamDoc, ParamError, Port, Role, Tick};
+use nanomotion_core::{Block, BuildContext, ParamError, Port, Role, Tick};
 use serde::{Deserialize, Serialize};
 
 /// Largest controller order accepted (states).
@@ -126,17 +127,27 @@ struct Runtime {
     feedthrough: bool,
 }
 
+/// `mimo_controller`: MIMO state-space controller (any order and widths; Ch. 7 H∞
+/// design): e = s⊙(r − y), u = C x + D e + u0, x ← A x + B e; discrete at the block's
+/// rate or continuous (Tustin).
+///
 /// `mimo_controller` (see the [module docs](self)).
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
+#[block(type_name = "mimo_controller", role = Controller, ports = "r[p], y[p] -> u[m]")]
 pub struct MimoController {
     /// The controller (inputs: errors, outputs: controls).
+    /// {a, b, c, d: lists of rows, dt_s: sample period of a discrete model (absent:
+    /// continuous)}; `nanomotion synth` writes it.
     pub model: ControllerModel,
     /// Per-input scale s of the error (default 1).
+    /// E.g. 1e9 for a controller in nm on sensors in m.
     #[serde(default)]
+    #[param(default_doc = "1")]
     pub error_scale: Vec<f64>,
     /// Per-output operating point u₀ added to the controller output (default 0).
     #[serde(default)]
+    #[param(default_doc = "0")]
     pub u_offset: Vec<f64>,
     /// Lower output limit (all outputs), optional.
     #[serde(default)]
@@ -418,21 +429,6 @@ impl Block for MimoController {
         self.rt.as_ref().map_or(0, |r| {
             8 * (r.ab.len() + r.cd.len() + r.z.len() + r.xn.len())
         })
-    }
-}
-
-nanomotion_core::submit_block_doc! {
-    BlockDoc {
-        type_name: "mimo_controller",
-        role: Role::Controller,
-        summary: "MIMO state-space controller (any order and widths; Ch. 7 H∞ design): e = s⊙(r − y), u = C x + D e + u0, x ← A x + B e; discrete at the block's rate or continuous (Tustin)",
-        params: &[
-            ParamDoc { name: "model", doc: "{a, b, c, d: lists of rows, dt_s: sample period of a discrete model (absent: continuous)}; `nanomotion synth` writes it", default: None },
-            ParamDoc { name: "error_scale", doc: "per-input factor on r − y (e.g. 1e9 for a controller in nm on sensors in m)", default: Some("1") },
-            ParamDoc { name: "u_offset", doc: "per-output operating point added to u", default: Some("0") },
-            ParamDoc { name: "u_min / u_max", doc: "output clamp (all outputs)", default: Some("none") },
-        ],
-        ports: "r[p], y[p] -> u[m]",
     }
 }
 

@@ -40,11 +40,9 @@
 
 use crate::poly::{MAX_DEG, Poly, roots_in, solve_monotone};
 use crate::skip::{history_len, register_indices};
-use nanomotion_core::block::check;
+use nanomotion_core::Params;
 use nanomotion_core::rng::Rng;
-use nanomotion_core::{
-    Block, BlockDoc, BuildContext, ParamDoc, ParamError, Port, Role, Sensor, Tick,
-};
+use nanomotion_core::{Block, BuildContext, ParamError, Port, Role, Sensor, Tick};
 use serde::{Deserialize, Serialize};
 
 /// Default clock of the event time-stamps: 20 MHz (50 ns), Sec. 8.5.
@@ -74,6 +72,10 @@ fn d_deriv() -> usize {
     1
 }
 
+/// `timestamp_encoder`: optical incremental encoder (Ch. 8): quadrature edges with slit
+/// errors, events time-stamped on a 20 MHz clock by crossing detection, register of the
+/// last n events with skip σ (8.5)-(8.7).
+///
 /// The time-stamping encoder. Build it (plain Rust: set fields, call
 /// [`TimestampEncoder::prepare`]; graph: `type: timestamp_encoder`), then feed it
 /// the true trajectory tick by tick.
@@ -96,23 +98,30 @@ fn d_deriv() -> usize {
 /// let t12 = 12.0 * std::f64::consts::TAU / 400.0 / w;
 /// assert!((reg[2] - t12).abs() <= 50e-9 && reg[3] == 12.0);
 /// ```
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
+#[block(type_name = "timestamp_encoder", role = Sensor, ports = "x[1+derivatives] -> register[2+2n] = [count, n_valid, t_1, x_1, …] newest first (s, counts), x_q (count·Δ)")]
 pub struct TimestampEncoder {
     /// Slits per revolution N (-); 4N counts per revolution. Default 100.
+    /// 1 ≤ N ≤ 2^20.
     #[serde(default = "d_lines")]
+    #[param(size(1, MAX_LINES))]
     pub lines: usize,
     /// Input units per revolution (2π for rad, the default; a linear scale's length
     /// in m for a linear encoder).
     #[serde(default = "d_rev")]
+    #[param(positive)]
     pub revolution: f64,
     /// Time-stamp clock f_clk (Hz), default 20 MHz (Sec. 8.5).
     #[serde(default = "d_clock")]
+    #[param(positive)]
     pub clock_hz: f64,
     /// Register length n (events), default 5 (the thesis's hardware), at most 16.
     #[serde(default = "d_n")]
+    #[param(at_least_one)]
     pub register_len: usize,
     /// Skip σ (events skipped between stored ones), (8.5)–(8.7), default 0.
+    /// The newest event is always kept.
     #[serde(default)]
     pub skip: i64,
     /// Derivatives provided on the input: 0 → `[x]`, 1 → `[x, ẋ]` (default),
@@ -121,21 +130,27 @@ pub struct TimestampEncoder {
     pub derivatives: usize,
     /// Random per-slit spacing error, standard deviation (counts), seeded. Default 0.
     #[serde(default)]
+    #[param(non_negative)]
     pub slit_error_std_counts: f64,
     /// Explicit edge errors (counts): N values (per slit) or 4N (per edge). Default none.
     #[serde(default)]
+    #[param(finite)]
     pub slit_errors_counts: Vec<f64>,
     /// Eccentricity: amplitude of the once-per-revolution error (counts). Default 0.
     #[serde(default)]
+    #[param(finite)]
     pub eccentricity_counts: f64,
     /// Eccentricity phase φ (rad). Default 0.
     #[serde(default)]
+    #[param(finite)]
     pub eccentricity_phase_rad: f64,
     /// Shift of channel B's edges (counts): A/B photodiode misplacement. Default 0.
     #[serde(default)]
+    #[param(finite)]
     pub quadrature_error_counts: f64,
     /// Shift of the falling edges (counts): slit width (duty-cycle) error. Default 0.
     #[serde(default)]
+    #[param(finite)]
     pub duty_error_counts: f64,
     /// Run-time state (events, count); not a parameter. Public only so that
     /// `TimestampEncoder { skip: 2, ..Default::default() }` works.
@@ -186,10 +201,7 @@ impl TimestampEncoder {
     /// Validate the parameters, draw the seeded slit errors and allocate the event
     /// history. Called by [`Block::build`] with the block's seed.
     pub fn prepare(&mut self, seed: u64) -> Result<(), ParamError> {
-        check::size("lines", self.lines, 1, MAX_LINES)?;
-        check::positive("revolution", self.revolution)?;
-        check::positive("clock_hz", self.clock_hz)?;
-        check::at_least_one("register_len", self.register_len)?;
+        self.check_params()?;
         if self.register_len > MAX_REGISTER_LEN {
             return Err(ParamError::new(
                 "register_len",
@@ -218,12 +230,6 @@ impl TimestampEncoder {
                 "give 0 ([x]), 1 ([x, v]) or 2 ([x, v, a])",
             ));
         }
-        check::non_negative("slit_error_std_counts", self.slit_error_std_counts)?;
-        check::all_finite("slit_errors_counts", &self.slit_errors_counts)?;
-        check::finite("eccentricity_counts", self.eccentricity_counts)?;
-        check::finite("eccentricity_phase_rad", self.eccentricity_phase_rad)?;
-        check::finite("quadrature_error_counts", self.quadrature_error_counts)?;
-        check::finite("duty_error_counts", self.duty_error_counts)?;
         let n_lines = self.lines;
         let n4 = 4 * n_lines;
         let table = &self.slit_errors_counts;
@@ -502,28 +508,5 @@ impl Block for TimestampEncoder {
     }
     fn role(&self) -> Role {
         Role::Sensor
-    }
-}
-
-nanomotion_core::submit_block_doc! {
-    BlockDoc {
-        type_name: "timestamp_encoder",
-        role: Role::Sensor,
-        summary: "optical incremental encoder (Ch. 8): quadrature edges with slit errors, events time-stamped on a 20 MHz clock by crossing detection, register of the last n events with skip σ (8.5)-(8.7)",
-        params: &[
-            ParamDoc { name: "lines", doc: "slits per revolution N, 1 ≤ N ≤ 2^20; 4N counts/rev", default: Some("100") },
-            ParamDoc { name: "revolution", doc: "input units per revolution (2π rad; scale length in m)", default: Some("6.283185307179586") },
-            ParamDoc { name: "clock_hz", doc: "time-stamp clock (Hz)", default: Some("20e6") },
-            ParamDoc { name: "register_len", doc: "register length n (events), ≤ 16", default: Some("5") },
-            ParamDoc { name: "skip", doc: "skip σ (events) (8.5)-(8.7); the newest event is always kept", default: Some("0") },
-            ParamDoc { name: "derivatives", doc: "input [x] (0), [x, v] (1) or [x, v, a] (2): linear, cubic, quintic interpolation between ticks", default: Some("1") },
-            ParamDoc { name: "slit_error_std_counts", doc: "random per-slit spacing error, std (counts), seeded", default: Some("0") },
-            ParamDoc { name: "slit_errors_counts", doc: "explicit errors (counts): N per slit or 4N per edge", default: Some("[]") },
-            ParamDoc { name: "eccentricity_counts", doc: "once-per-revolution error amplitude (counts)", default: Some("0") },
-            ParamDoc { name: "eccentricity_phase_rad", doc: "its phase (rad)", default: Some("0") },
-            ParamDoc { name: "quadrature_error_counts", doc: "shift of channel B's edges (counts)", default: Some("0") },
-            ParamDoc { name: "duty_error_counts", doc: "shift of falling edges (counts)", default: Some("0") },
-        ],
-        ports: "x[1+derivatives] -> register[2+2n] = [count, n_valid, t_1, x_1, …] newest first (s, counts), x_q (count·Δ)",
     }
 }

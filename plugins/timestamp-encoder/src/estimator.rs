@@ -47,10 +47,9 @@
 //! (0 = fitted).
 
 use crate::fit::{MAX_M, MAX_N, fit_events};
+use nanomotion_core::Params;
 use nanomotion_core::block::check;
-use nanomotion_core::{
-    Block, BlockDoc, BuildContext, Estimator, ParamDoc, ParamError, Port, Role, Tick,
-};
+use nanomotion_core::{Block, BuildContext, Estimator, ParamError, Port, Role, Tick};
 use serde::{Deserialize, Serialize};
 
 fn d_m() -> usize {
@@ -101,6 +100,12 @@ pub enum Status {
     PseudoEvent = 4,
 }
 
+/// `timestamp_estimator`: time-stamping estimator (8.1)-(8.4): LS polynomial of order m
+/// through the register's events, scaled time, extrapolated to the sample for x, v, a;
+/// fallback outside ±band: thesis (x → count, v/a kept), zero_standstill (x → count, v
+/// = a = 0, 10 ms standstill) or pseudo_event (thesis, plus a pseudo-event (now, newest
+/// position) in the fit after 10 ms without an event).
+///
 /// The time-stamping estimator (8.1)–(8.4). Plain Rust:
 ///
 /// ```
@@ -118,8 +123,9 @@ pub enum Status {
 /// // At t = 0.2 s: x = 2 rad, v = 20 rad/s, a = 100 rad/s².
 /// assert!((y[0] - 2.0).abs() < 1e-4 && (y[1] - 20.0).abs() < 0.01 && (y[2] - 100.0).abs() < 5.0, "{y:?}");
 /// ```
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
+#[block(type_name = "timestamp_estimator", role = Estimator, ports = "register[2+2n] -> y[3] = [x, v, a] (units, /s, /s²), status (0 fit, 1 out of band, 2 no events, 3 standstill, 4 fit through a pseudo-event)")]
 pub struct TimestampEstimator {
     /// Polynomial order m (8.1), 0..=4, default 2.
     #[serde(default = "d_m")]
@@ -134,7 +140,11 @@ pub struct TimestampEstimator {
     pub band_counts: f64,
     /// What happens out of band: `thesis` (default), `zero_standstill` or
     /// `pseudo_event`.
+    /// `thesis` (Sec. 8.3: position → count, v/a from the fit), `zero_standstill` (also v =
+    /// a = 0, plus standstill) or `pseudo_event` (thesis, plus a pseudo-event (now, newest
+    /// position) in the fit after the timeout).
     #[serde(default)]
+    #[param(default_doc = "thesis")]
     pub fallback: Fallback,
     /// Minimum age of the newest event for standstill (s), default 0.01; 0
     /// disables. Used by `fallback: zero_standstill` and `pseudo_event` only (see
@@ -322,23 +332,5 @@ impl Block for TimestampEstimator {
     }
     fn role(&self) -> Role {
         Role::Estimator
-    }
-}
-
-nanomotion_core::submit_block_doc! {
-    BlockDoc {
-        type_name: "timestamp_estimator",
-        role: Role::Estimator,
-        summary: "time-stamping estimator (8.1)-(8.4): LS polynomial of order m through the register's events, scaled time, extrapolated to the sample for x, v, a; fallback outside ±band: thesis (x → count, v/a kept), zero_standstill (x → count, v = a = 0, 10 ms standstill) or pseudo_event (thesis, plus a pseudo-event (now, newest position) in the fit after 10 ms without an event)",
-        params: &[
-            ParamDoc { name: "order", doc: "polynomial order m (8.1), ≤ 4", default: Some("2") },
-            ParamDoc { name: "register_len", doc: "register length n of the encoder, n > m", default: Some("5") },
-            ParamDoc { name: "resolution", doc: "units per count Δ (2π/400 rad for 100 lines)", default: None },
-            ParamDoc { name: "band_counts", doc: "fallback band around the cell centre (counts)", default: Some("1") },
-            ParamDoc { name: "fallback", doc: "out-of-band rule: thesis (Sec. 8.3: position → count, v/a from the fit), zero_standstill (also v = a = 0, plus standstill) or pseudo_event (thesis, plus phobos's pseudo-event after the timeout)", default: Some("thesis") },
-            ParamDoc { name: "standstill_timeout_s", doc: "zero_standstill / pseudo_event: newest event older than this → standstill / pseudo-event (s); 0 disables", default: Some("0.01") },
-            ParamDoc { name: "edge_offsets_counts", doc: "slit calibration ê per edge (counts), added to events (hots crate)", default: Some("[]") },
-        ],
-        ports: "register[2+2n] -> y[3] = [x, v, a] (units, /s, /s²), status (0 fit, 1 out of band, 2 no events, 3 standstill, 4 fit through a pseudo-event)",
     }
 }

@@ -11,12 +11,11 @@
 
 use crate::linear::LinearStageParams;
 use nalgebra::DMatrix;
+use nanomotion_core::Params;
 use nanomotion_core::block::check;
 use nanomotion_core::blocks::control::Pi;
 use nanomotion_core::lti::{C2dMethod, Margins, StateSpace, c2d, delay, series, stability_margins};
-use nanomotion_core::{
-    Block, BlockDoc, BuildContext, Controller, ParamDoc, ParamError, Port, Role, Tick,
-};
+use nanomotion_core::{Block, BuildContext, Controller, ParamError, Port, Role, Tick};
 use serde::{Deserialize, Serialize};
 use std::f64::consts::{FRAC_PI_2, FRAC_PI_4, TAU};
 
@@ -142,22 +141,29 @@ pub fn design_pi(
 /// assert_eq!(ff.amplitude_phase(0.0), (23.0, std::f64::consts::FRAC_PI_4 - std::f64::consts::FRAC_PI_2));
 /// assert_eq!(ff.amplitude_phase(-2e-3), (46.0, 0.0));
 /// ```
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
 pub struct StepSizeFeedForward {
     /// v_max (m/s), the largest reference velocity of the move.
+    #[param(positive)]
     pub v_max_m_s: f64,
     /// A_min (V); thesis 23 V.
     #[serde(default = "d_amin")]
+    #[param(range(0.0, 46.0), at_most = amplitude_max_v)]
     pub amplitude_min_v: f64,
     /// A_max (V); thesis 46 V.
     #[serde(default = "d_amax")]
+    #[param(range(0.0, 46.0))]
     pub amplitude_max_v: f64,
     /// φ̄_min (rad), the smallest phase difference.
+    /// φ = φ̄ − π/2.
     #[serde(default = "d_pmin")]
+    #[param(default_doc = "π/4")]
+    #[param(at_most = phase_diff_max_rad)]
     pub phase_diff_min_rad: f64,
     /// φ̄_max (rad), the largest phase difference; thesis π/2.
     #[serde(default = "d_pmax")]
+    #[param(default_doc = "π/2")]
     pub phase_diff_max_rad: f64,
 }
 
@@ -189,21 +195,7 @@ impl Default for StepSizeFeedForward {
 impl StepSizeFeedForward {
     /// Check the fields (typed errors naming them).
     pub fn validate(&self) -> Result<(), ParamError> {
-        check::positive("v_max_m_s", self.v_max_m_s)?;
-        check::in_range("amplitude_min_v", self.amplitude_min_v, 0.0, 46.0)?;
-        check::in_range("amplitude_max_v", self.amplitude_max_v, 0.0, 46.0)?;
-        check::ordered(
-            "amplitude_min_v",
-            self.amplitude_min_v,
-            "amplitude_max_v",
-            self.amplitude_max_v,
-        )?;
-        check::ordered(
-            "phase_diff_min_rad",
-            self.phase_diff_min_rad,
-            "phase_diff_max_rad",
-            self.phase_diff_max_rad,
-        )
+        self.check_params()
     }
     /// (A (V), φ (rad)) for the reference velocity `r_dot` (m/s); a non-finite
     /// `r_dot` gives the smallest step.
@@ -229,11 +221,15 @@ impl Controller for StepSizeFeedForward {
     fn reset(&mut self) {}
 }
 
+/// `walking_piezo_feedforward`: step-size feed-forward (2.11)-(2.12): waveform
+/// amplitude A and phase φ from the reference velocity |ṙ|.
+///
 /// Graph block `walking_piezo_feedforward`: input `r_dot` (1, m/s); outputs
 /// `amplitude` (1, V) and `phase` (1, rad) for the driver's inputs, and `phase_diff`
 /// (1, rad) = φ̄, a natural scheduling variable for K_φ (2.13).
-#[derive(Debug, Clone, Default, Serialize, Deserialize)]
+#[derive(Debug, Clone, Default, Serialize, Deserialize, Params)]
 #[serde(transparent)]
+#[block(type_name = "walking_piezo_feedforward", role = Controller, ports = "r_dot (m/s) -> amplitude (V), phase (rad), phase_diff (rad)")]
 pub struct StepSizeFeedForwardBlock {
     /// The parameters.
     pub params: StepSizeFeedForward,
@@ -262,22 +258,6 @@ impl Block for StepSizeFeedForwardBlock {
     }
     fn role(&self) -> Role {
         Role::Controller
-    }
-}
-
-nanomotion_core::submit_block_doc! {
-    BlockDoc {
-        type_name: "walking_piezo_feedforward",
-        role: Role::Controller,
-        summary: "step-size feed-forward (2.11)-(2.12): waveform amplitude A and phase φ from the reference velocity |ṙ|",
-        params: &[
-            ParamDoc { name: "v_max_m_s", doc: "largest reference velocity v_max (m/s)", default: None },
-            ParamDoc { name: "amplitude_min_v", doc: "A_min (V)", default: Some("23") },
-            ParamDoc { name: "amplitude_max_v", doc: "A_max (V)", default: Some("46") },
-            ParamDoc { name: "phase_diff_min_rad", doc: "smallest phase difference φ̄_min (rad); φ = φ̄ − π/2", default: Some("π/4") },
-            ParamDoc { name: "phase_diff_max_rad", doc: "largest phase difference φ̄_max (rad)", default: Some("π/2") },
-        ],
-        ports: "r_dot (m/s) -> amplitude (V), phase (rad), phase_diff (rad)",
     }
 }
 

@@ -39,10 +39,9 @@
 //! naming the input; the graph block then holds the last valid value and counts a
 //! fault on its `faults` output.
 
+use nanomotion_core::Params;
 use nanomotion_core::block::check;
-use nanomotion_core::{
-    Actuator, Block, BlockDoc, BuildContext, ParamDoc, ParamError, Port, Role, Tick,
-};
+use nanomotion_core::{Actuator, Block, BuildContext, ParamError, Port, Role, Tick};
 use serde::{Deserialize, Serialize};
 use std::f64::consts::{FRAC_PI_2, PI, TAU};
 use thiserror::Error;
@@ -236,23 +235,29 @@ impl Default for WaveformShape {
 }
 
 /// Parameters of the driver (block `walking_piezo_driver`).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
 pub struct DriverParams {
     /// The waveform shape; default the asymmetric waveform with q = 1/3.
+    /// {kind: sinusoidal | asymmetric | asymmetric_fourier | rhombic | free}; overlap_q ∈
+    /// (0, 1) for the asymmetric ones; points_v: 4×8 V for free.
     #[serde(default)]
+    #[param(default_doc = "{kind: asymmetric, overlap_q: 1/3}")]
     pub shape: WaveformShape,
     /// Amplitude A (V) when no `amplitude` input is used; in [0, V_max]. Ā = 46 V.
     #[serde(default = "d_a")]
     pub amplitude_v: f64,
     /// Phase φ (rad) of (2.2) when no `phase` input is used (φ = 0: largest step).
     #[serde(default)]
+    #[param(finite)]
     pub phase_rad: f64,
     /// Angle α at t = 0 (rad).
     #[serde(default)]
+    #[param(finite)]
     pub alpha0_rad: f64,
     /// Upper voltage limit V_max (V) of the amplifiers; thesis 46 V.
     #[serde(default = "d_a")]
+    #[param(positive)]
     pub voltage_max_v: f64,
     /// Add an input port `amplitude` (1, V) for A(t), e.g. from the feed-forward (2.11).
     #[serde(default)]
@@ -283,10 +288,9 @@ impl Default for DriverParams {
 impl DriverParams {
     /// Check every field (typed errors naming it).
     pub fn validate(&self) -> Result<(), ParamError> {
-        check::positive("voltage_max_v", self.voltage_max_v)?;
+        self.check_params()?;
+        // the upper bound is another field: checked here, after it
         check::in_range("amplitude_v", self.amplitude_v, 0.0, self.voltage_max_v)?;
-        check::finite("phase_rad", self.phase_rad)?;
-        check::finite("alpha0_rad", self.alpha0_rad)?;
         match &self.shape {
             WaveformShape::Asymmetric { overlap_q }
             | WaveformShape::AsymmetricFourier { overlap_q } => {
@@ -507,14 +511,19 @@ impl Actuator for WaveformDriver {
 // Graph block
 // ---------------------------------------------------------------------------
 
+/// `walking_piezo_driver`: walking-piezo driver (Sec. 2.4): f_α → α = 2π∫f_α dt and
+/// u1..u4 from sinusoidal (2.2), asymmetric (Sec. 2.4.1) or its Fourier fit (2.9),
+/// rhombic, or free (4.21)-(4.22) waveforms.
+///
 /// Graph block `walking_piezo_driver`.
 ///
 /// Inputs: `f_alpha` (1, Hz), then `amplitude` (1, V) if `amplitude_input`, then
 /// `phase` (1, rad) if `phase_input`. Outputs: `u` (4, V), `alpha` (1, rad),
 /// `faults` (1, cumulative count of refused samples: non-finite f_α, A or φ, or A
 /// outside [0, V_max]; the last valid f_α, A, φ are then used).
-#[derive(Debug, Clone, Default, Serialize, Deserialize)]
+#[derive(Debug, Clone, Default, Serialize, Deserialize, Params)]
 #[serde(transparent)]
+#[block(type_name = "walking_piezo_driver", role = Actuator, ports = "f_alpha (Hz) [, amplitude (V)] [, phase (rad)] -> u[4] (V), alpha (rad), faults")]
 pub struct WaveformDriverBlock {
     /// The parameters.
     pub params: DriverParams,
@@ -596,24 +605,6 @@ impl Block for WaveformDriverBlock {
     }
     fn role(&self) -> Role {
         Role::Actuator
-    }
-}
-
-nanomotion_core::submit_block_doc! {
-    BlockDoc {
-        type_name: "walking_piezo_driver",
-        role: Role::Actuator,
-        summary: "walking-piezo driver (Sec. 2.4): f_α → α = 2π∫f_α dt and u1..u4 from sinusoidal (2.2), asymmetric (Sec. 2.4.1) or its Fourier fit (2.9), rhombic, or free (4.21)-(4.22) waveforms",
-        params: &[
-            ParamDoc { name: "shape", doc: "{kind: sinusoidal | asymmetric | asymmetric_fourier | rhombic | free}; overlap_q ∈ (0,1) for the asymmetric ones; points_v: 4×8 V for free", default: Some("{kind: asymmetric, overlap_q: 1/3}") },
-            ParamDoc { name: "amplitude_v", doc: "amplitude A (V) without an amplitude input, in [0, voltage_max_v]", default: Some("46") },
-            ParamDoc { name: "phase_rad", doc: "phase φ (rad) of (2.2) without a phase input", default: Some("0") },
-            ParamDoc { name: "alpha0_rad", doc: "angle α at t = 0 (rad)", default: Some("0") },
-            ParamDoc { name: "voltage_max_v", doc: "amplifier range V_max (V)", default: Some("46") },
-            ParamDoc { name: "amplitude_input", doc: "add input `amplitude` (V) for A(t) (2.11)", default: Some("false") },
-            ParamDoc { name: "phase_input", doc: "add input `phase` (rad) for φ(t) (2.12)", default: Some("false") },
-        ],
-        ports: "f_alpha (Hz) [, amplitude (V)] [, phase (rad)] -> u[4] (V), alpha (rad), faults",
     }
 }
 

@@ -9,9 +9,10 @@
 //! u1, u2 and pair p2 = {B, C} by u3, u4.
 
 use nalgebra::DMatrix;
+use nanomotion_core::Params;
 use nanomotion_core::block::check;
 use nanomotion_core::lti::StateSpace;
-use nanomotion_core::{Block, BlockDoc, BuildContext, ParamDoc, ParamError, Port, Role, Tick};
+use nanomotion_core::{Block, BuildContext, ParamError, Port, Role, Tick};
 use serde::{Deserialize, Serialize};
 
 /// Bending coefficient c_x of the Ch. 5 motor (m/V).
@@ -27,7 +28,7 @@ fn d_cy() -> [f64; 4] {
 }
 
 /// Per-stack bending and extension coefficients of (4.2).
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
 pub struct LegKinematics {
     /// Bending coefficients c_x1..c_x4 (m/V); default 64.5 nm/V each (Ch. 5).
@@ -108,10 +109,14 @@ impl LegKinematics {
     }
 }
 
+/// `walking_piezo_legs`: walking piezo leg kinematics (4.2): four stack voltages to the
+/// two pairs' free tip positions.
+///
 /// Graph block `walking_piezo_legs`: u (4 V) → x_p (2, m), y_p (2, m), the static
 /// map (4.2).
-#[derive(Debug, Clone, Default, Serialize, Deserialize)]
+#[derive(Debug, Clone, Default, Serialize, Deserialize, Params)]
 #[serde(transparent)]
+#[block(type_name = "walking_piezo_legs", role = Math, ports = "u[4] (V) -> x_p[2] (m), y_p[2] (m)")]
 pub struct LegKinematicsBlock {
     /// The coefficients.
     pub kinematics: LegKinematics,
@@ -142,19 +147,6 @@ impl Block for LegKinematicsBlock {
     }
     fn role(&self) -> Role {
         Role::Math
-    }
-}
-
-nanomotion_core::submit_block_doc! {
-    BlockDoc {
-        type_name: "walking_piezo_legs",
-        role: Role::Math,
-        summary: "walking piezo leg kinematics (4.2): four stack voltages to the two pairs' free tip positions",
-        params: &[
-            ParamDoc { name: "c_x_m_v", doc: "bending coefficients c_x1..c_x4 (m/V)", default: Some("[64.5e-9; 4]") },
-            ParamDoc { name: "c_y_m_v", doc: "extension coefficients c_y1..c_y4 (m/V)", default: Some("[29.8e-9; 4]") },
-        ],
-        ports: "u[4] (V) -> x_p[2] (m), y_p[2] (m)",
     }
 }
 

@@ -14,11 +14,10 @@
 //! `nanomotion_core::lti::c2d` and stepped without allocation.
 
 use nalgebra::DMatrix;
+use nanomotion_core::Params;
 use nanomotion_core::block::check;
 use nanomotion_core::lti::{C2dMethod, LtiError, SsStepper, StateSpace, series};
-use nanomotion_core::{
-    Block, BlockDoc, BuildContext, ParamDoc, ParamError, Plant, Port, Role, Tick,
-};
+use nanomotion_core::{Block, BuildContext, ParamError, Plant, Port, Role, Tick};
 use serde::{Deserialize, Serialize};
 use std::f64::consts::PI;
 
@@ -35,22 +34,26 @@ fn lti_to_param(field: &str, e: LtiError) -> ParamError {
 // ---------------------------------------------------------------------------
 
 /// Parameters of the Ch. 2 linear model (2.7). Defaults are the thesis's values.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
 pub struct LinearStageParams {
     /// Stage mass M (kg); thesis: 0.255 kg.
     #[serde(default = "d_lin_mass")]
+    #[param(positive)]
     pub mass_kg: f64,
     /// Resonance f_res (Hz) giving the stiffness k = 4π²M f_res²; thesis: 575 Hz.
     #[serde(default = "d_lin_fres")]
+    #[param(positive)]
     pub f_res_hz: f64,
     /// Damping b (N·s/m) of the rubber casting; thesis: 16 N·s/m.
     #[serde(default = "d_lin_b")]
+    #[param(non_negative)]
     pub damping_ns_m: f64,
     /// Motor constant c (m per cycle of α), the leg travel per waveform period
     /// (2.5). From (2.8), |P| = −138 dB (m/Hz) at 10 Hz: c = 2π·10·10^(−138/20)
     /// = 7.91 µm.
     #[serde(default = "d_lin_c")]
+    #[param(finite)]
     pub motor_constant_m: f64,
 }
 
@@ -81,10 +84,7 @@ impl Default for LinearStageParams {
 impl LinearStageParams {
     /// Check that every parameter is physical.
     pub fn validate(&self) -> Result<(), ParamError> {
-        check::positive("mass_kg", self.mass_kg)?;
-        check::positive("f_res_hz", self.f_res_hz)?;
-        check::non_negative("damping_ns_m", self.damping_ns_m)?;
-        check::finite("motor_constant_m", self.motor_constant_m)?;
+        self.check_params()?;
         if self.motor_constant_m == 0.0 {
             return Err(ParamError::new(
                 "motor_constant_m",
@@ -199,9 +199,13 @@ impl Plant for LinearStage {
     }
 }
 
+/// `walking_piezo_linear`: walking piezo stage, linear model (2.7) P(s) =
+/// c(bs+k)/(s(Ms²+bs+k)), ZOH-discretised.
+///
 /// Graph block `walking_piezo_linear`: the model (2.7), f_α (Hz) → x_s (m), ẋ_s (m/s).
-#[derive(Debug, Clone, Default, Serialize, Deserialize)]
+#[derive(Debug, Clone, Default, Serialize, Deserialize, Params)]
 #[serde(transparent)]
+#[block(type_name = "walking_piezo_linear", role = Plant, ports = "f_alpha[1] (Hz) -> x_s[1] (m), v_s[1] (m/s), faults[1] (count of non-finite inputs)")]
 pub struct LinearStageBlock {
     /// The parameters.
     pub params: LinearStageParams,
@@ -273,21 +277,6 @@ impl Block for LinearStageBlock {
     }
 }
 
-nanomotion_core::submit_block_doc! {
-    BlockDoc {
-        type_name: "walking_piezo_linear",
-        role: Role::Plant,
-        summary: "walking piezo stage, linear model (2.7) P(s) = c(bs+k)/(s(Ms²+bs+k)), ZOH-discretised",
-        params: &[
-            ParamDoc { name: "mass_kg", doc: "stage mass M (kg)", default: Some("0.255") },
-            ParamDoc { name: "f_res_hz", doc: "resonance f_res (Hz), k = 4π²M f_res²", default: Some("575") },
-            ParamDoc { name: "damping_ns_m", doc: "damping b (N·s/m)", default: Some("16") },
-            ParamDoc { name: "motor_constant_m", doc: "motor constant c, leg travel per cycle (m), (2.5)/(2.8)", default: Some("7.91e-6") },
-        ],
-        ports: "f_alpha[1] (Hz) -> x_s[1] (m), v_s[1] (m/s), faults[1] (count of non-finite inputs)",
-    }
-}
-
 // ---------------------------------------------------------------------------
 // (2.3) with the voltages and the switching between the pairs
 // ---------------------------------------------------------------------------
@@ -295,7 +284,7 @@ nanomotion_core::submit_block_doc! {
 /// Parameters of the switched model (2.3): the mass–spring–damper of Fig. 2.7
 /// driven by the leg pair that is higher (y_p1 ≥ y_p2: pair 1), with leg positions
 /// from the voltages by (4.2).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
 pub struct SwitchedStageParams {
     /// Stage mass M (kg); thesis: 0.255 kg.
@@ -441,10 +430,14 @@ impl Plant for SwitchedStage {
     }
 }
 
+/// `walking_piezo_switched`: walking piezo stage, switched linear model (2.3): the
+/// higher leg pair drives a mass-spring-damper.
+///
 /// Graph block `walking_piezo_switched`: the switched linear model (2.3),
 /// u (4, V) → x_s (m), x_p (m), pair (1 or 2).
-#[derive(Debug, Clone, Default, Serialize, Deserialize)]
+#[derive(Debug, Clone, Default, Serialize, Deserialize, Params)]
 #[serde(transparent)]
+#[block(type_name = "walking_piezo_switched", role = Plant, ports = "u[4] (V) -> x_s[1] (m), x_p[1] (m), pair[1] (1 or 2), faults[1]")]
 pub struct SwitchedStageBlock {
     /// The parameters.
     pub params: SwitchedStageParams,
@@ -494,22 +487,6 @@ impl Block for SwitchedStageBlock {
     }
 }
 
-nanomotion_core::submit_block_doc! {
-    BlockDoc {
-        type_name: "walking_piezo_switched",
-        role: Role::Plant,
-        summary: "walking piezo stage, switched linear model (2.3): the higher leg pair drives a mass-spring-damper",
-        params: &[
-            ParamDoc { name: "mass_kg", doc: "stage mass M (kg)", default: Some("0.255") },
-            ParamDoc { name: "f_res_hz", doc: "resonance f_res (Hz)", default: Some("575") },
-            ParamDoc { name: "damping_ns_m", doc: "damping b (N·s/m)", default: Some("16") },
-            ParamDoc { name: "c_x_m_v", doc: "bending coefficients c_x1..c_x4 (m/V)", default: Some("[64.5e-9; 4]") },
-            ParamDoc { name: "c_y_m_v", doc: "extension coefficients c_y1..c_y4 (m/V)", default: Some("[29.8e-9; 4]") },
-        ],
-        ports: "u[4] (V) -> x_s[1] (m), x_p[1] (m), pair[1] (1 or 2), faults[1]",
-    }
-}
-
 // ---------------------------------------------------------------------------
 // (5.31)
 // ---------------------------------------------------------------------------
@@ -523,7 +500,7 @@ nanomotion_core::submit_block_doc! {
 /// the thesis's value of c is lost in the text, so the default is the Ch. 2 value).
 /// The b's are the thesis's "2ζ" coefficients; their printed values lost their
 /// zeros and are read as 0.33, 0.2 and 0.175.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
 pub struct FittedStageParams {
     /// Low-frequency gain c (m per cycle): G(s) ≈ c/s.
@@ -549,6 +526,7 @@ pub struct FittedStageParams {
     pub b_p2: f64,
     /// Pure delay (s), an integer number of block periods; thesis: three samples
     /// at 4 kHz = 0.75 ms.
+    /// At most 2^24 periods (a ring buffer; the LTI model carries it as states up to 512).
     #[serde(default = "d_delay")]
     pub delay_s: f64,
 }
@@ -834,9 +812,13 @@ impl Plant for FittedStage {
     }
 }
 
+/// `walking_piezo_fitted`: walking piezo stage, Ch. 5 fitted model (5.31): integrator,
+/// 527 Hz resonance, 624 Hz anti-resonance, 650 Hz resonance, 3-sample delay.
+///
 /// Graph block `walking_piezo_fitted`: the Ch. 5 model (5.31), f_α (Hz) → x_s (m).
-#[derive(Debug, Clone, Default, Serialize, Deserialize)]
+#[derive(Debug, Clone, Default, Serialize, Deserialize, Params)]
 #[serde(transparent)]
+#[block(type_name = "walking_piezo_fitted", role = Plant, ports = "f_alpha[1] (Hz) -> x_s[1] (m), faults[1] (count of non-finite inputs)")]
 pub struct FittedStageBlock {
     /// The parameters.
     pub params: FittedStageParams,
@@ -915,25 +897,6 @@ impl Block for FittedStageBlock {
     }
     fn role(&self) -> Role {
         Role::Plant
-    }
-}
-
-nanomotion_core::submit_block_doc! {
-    BlockDoc {
-        type_name: "walking_piezo_fitted",
-        role: Role::Plant,
-        summary: "walking piezo stage, Ch. 5 fitted model (5.31): integrator, 527 Hz resonance, 624 Hz anti-resonance, 650 Hz resonance, 3-sample delay",
-        params: &[
-            ParamDoc { name: "gain_m_per_cycle", doc: "low-frequency gain c, G ≈ c/s (m per cycle)", default: Some("7.91e-6") },
-            ParamDoc { name: "f_p1_hz", doc: "first resonance (Hz)", default: Some("527") },
-            ParamDoc { name: "b_p1", doc: "its damping coefficient b = 2ζ", default: Some("0.33") },
-            ParamDoc { name: "f_z1_hz", doc: "anti-resonance (Hz)", default: Some("624") },
-            ParamDoc { name: "b_z1", doc: "its damping coefficient b = 2ζ", default: Some("0.2") },
-            ParamDoc { name: "f_p2_hz", doc: "second resonance (Hz)", default: Some("650") },
-            ParamDoc { name: "b_p2", doc: "its damping coefficient b = 2ζ", default: Some("0.175") },
-            ParamDoc { name: "delay_s", doc: "pure delay (s), a multiple of the block period, at most 2^24 periods (a ring buffer; the LTI model carries it as states up to 512)", default: Some("0.00075 (3 samples at 4 kHz)") },
-        ],
-        ports: "f_alpha[1] (Hz) -> x_s[1] (m), faults[1] (count of non-finite inputs)",
     }
 }
 

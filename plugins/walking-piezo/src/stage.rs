@@ -25,10 +25,9 @@ use crate::contact::{ContactLaw, YSolution, solve_y};
 use crate::friction::{FixedPointSettings, XCoefficients, XState, step_x};
 use crate::kinematics::{C_X_M_PER_V, C_Y_M_PER_V, LegKinematics};
 use crate::variation::{MuVariation, MuVariationParams, StripProfile, StripProfileParams};
+use nanomotion_core::Params;
 use nanomotion_core::block::check;
-use nanomotion_core::{
-    Block, BlockDoc, BuildContext, ParamDoc, ParamError, Plant, Port, Role, Tick,
-};
+use nanomotion_core::{Block, BuildContext, ParamError, Plant, Port, Role, Tick};
 use serde::{Deserialize, Serialize};
 use std::f64::consts::PI;
 use thiserror::Error;
@@ -41,7 +40,7 @@ use thiserror::Error;
 /// text gives them (Sec. 4.4.1, Ch. 5); Table 4.1's identified values (dampings,
 /// per-stack coefficients, μ) and q1 lost their digits in the text, so those
 /// defaults are physically reasoned and marked as such.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
 pub struct StageParams {
     /// Stage mass M_s (kg); thesis: 0.428 kg (weighed).
@@ -117,11 +116,13 @@ pub struct StageParams {
     pub strip_leg_pitch_m: f64,
     /// Internal sub-steps per block period (the thesis's Δt = 25 µs is one step at
     /// 40 kHz, or 10 sub-steps at 4 kHz).
+    /// 1 to 1000.
     #[serde(default = "d_substeps")]
     pub substeps: u32,
     /// r of (4.18) (N·s/m); leave out for r* = 2/(λ_min(W) + λ_max(W)), the
     /// fastest; must be below 2/λ_max(W).
     #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[param(default_doc = "optimal r* = 2/(λ_min+λ_max)")]
     pub prox_r: Option<f64>,
     /// Tolerance ε on |λ^{L+1} − λ^L| (N).
     #[serde(default = "d_tol")]
@@ -824,6 +825,10 @@ impl Plant for WalkingPiezoStage {
 // Graph block
 // ---------------------------------------------------------------------------
 
+/// `walking_piezo_stage`: walking piezo stage, Ch. 4 nonlinear model: set-valued
+/// friction, one-sided contacts, preload sharing, dedicated time-stepping solver
+/// (4.16)-(4.19).
+///
 /// Graph block `walking_piezo_stage`: the nonlinear model of Ch. 4.
 ///
 /// Inputs: `u` (4, V) and, with `external_force_input: true`, `f_ext` (1, N).
@@ -831,8 +836,9 @@ impl Plant for WalkingPiezoStage {
 /// `friction` (2), `slip` (2), `mu` (2), `iterations` (of the last step),
 /// `nonconverged` (cumulative count of sub-steps that hit the cap), `faults`
 /// (cumulative count of refused steps).
-#[derive(Debug, Clone, Default, Serialize, Deserialize)]
+#[derive(Debug, Clone, Default, Serialize, Deserialize, Params)]
 #[serde(transparent)]
+#[block(type_name = "walking_piezo_stage", role = Plant, ports = "u[4] (V) [, f_ext[1] (N)] -> x_s, v_s, x_legs[2], y_legs[2], y_h, f_n[2], friction[2], slip[2], mu[2], iterations, nonconverged, faults")]
 pub struct WalkingPiezoStageBlock {
     /// The parameters.
     pub params: StageParams,
@@ -901,40 +907,5 @@ impl Block for WalkingPiezoStageBlock {
     }
     fn role(&self) -> Role {
         Role::Plant
-    }
-}
-
-nanomotion_core::submit_block_doc! {
-    BlockDoc {
-        type_name: "walking_piezo_stage",
-        role: Role::Plant,
-        summary: "walking piezo stage, Ch. 4 nonlinear model: set-valued friction, one-sided contacts, preload sharing, dedicated time-stepping solver (4.16)-(4.19)",
-        params: &[
-            ParamDoc { name: "stage_mass_kg", doc: "stage mass M_s (kg)", default: Some("0.428") },
-            ParamDoc { name: "leg_stiffness_x_n_m", doc: "k_x1, k_x2 (N/m)", default: Some("[4.98e6, 4.98e6] (543 Hz)") },
-            ParamDoc { name: "leg_damping_x_ns_m", doc: "d_x1, d_x2 (N·s/m)", default: Some("[100, 100]") },
-            ParamDoc { name: "leg_stiffness_y_n_m", doc: "k_y1, k_y2 = EA/L (N/m)", default: Some("[1.575e8, 1.575e8]") },
-            ParamDoc { name: "leg_damping_y_ns_m", doc: "d_y1, d_y2 (N·s/m)", default: Some("[5000, 5000]") },
-            ParamDoc { name: "c_x_m_v", doc: "bending coefficients c_x1..c_x4 (m/V), (4.2)", default: Some("[64.5e-9; 4]") },
-            ParamDoc { name: "c_y_m_v", doc: "extension coefficients c_y1..c_y4 (m/V), (4.2)", default: Some("[29.8e-9; 4]") },
-            ParamDoc { name: "preload_n", doc: "preload F_p (N), (4.14)", default: Some("55") },
-            ParamDoc { name: "contact_q1", doc: "contact law q1 (m·N^-q2), (4.4)", default: Some("1.5e-8") },
-            ParamDoc { name: "contact_q2", doc: "contact law exponent q2, (4.4)", default: Some("0.75") },
-            ParamDoc { name: "mu", doc: "nominal friction coefficient μ", default: Some("0.2") },
-            ParamDoc { name: "mu_pair_rel", doc: "relative std of the per-pair μ difference", default: Some("0.1") },
-            ParamDoc { name: "mu_spatial_rel", doc: "relative std of μ along the strip", default: Some("0.1") },
-            ParamDoc { name: "mu_spatial_corr_m", doc: "correlation length of μ along the strip (m)", default: Some("20e-6") },
-            ParamDoc { name: "mu_temporal_rel", doc: "relative std of μ in time", default: Some("0.05") },
-            ParamDoc { name: "mu_temporal_tau_s", doc: "correlation time of μ (s)", default: Some("0.5") },
-            ParamDoc { name: "strip_height_rms_m", doc: "rms height of the seeded drive-strip profile (m); 0 = flat strip", default: Some("0") },
-            ParamDoc { name: "strip_height_corr_m", doc: "correlation length of the strip profile (m)", default: Some("2e-6") },
-            ParamDoc { name: "strip_leg_pitch_m", doc: "pitch of the legs A, B, C, D along the strip (m)", default: Some("2e-3") },
-            ParamDoc { name: "substeps", doc: "internal sub-steps per block period, 1 to 1000", default: Some("1") },
-            ParamDoc { name: "prox_r", doc: "r of (4.18) (N·s/m), below 2/λ_max(W)", default: Some("optimal r* = 2/(λ_min+λ_max)") },
-            ParamDoc { name: "tol_n", doc: "fixed-point tolerance ε (N)", default: Some("1e-10") },
-            ParamDoc { name: "max_iter", doc: "fixed-point iteration cap (hits are counted in `nonconverged`)", default: Some("200") },
-            ParamDoc { name: "external_force_input", doc: "add input f_ext (N), an external force on the stage", default: Some("false") },
-        ],
-        ports: "u[4] (V) [, f_ext[1] (N)] -> x_s, v_s, x_legs[2], y_legs[2], y_h, f_n[2], friction[2], slip[2], mu[2], iterations, nonconverged, faults",
     }
 }

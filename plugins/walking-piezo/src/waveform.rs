@@ -8,10 +8,8 @@
 //!
 //! with α(t) = α0 + 2π f_α t.
 
-use nanomotion_core::block::check;
-use nanomotion_core::{
-    Block, BlockDoc, BuildContext, ParamDoc, ParamError, Port, Role, Source, Tick,
-};
+use nanomotion_core::Params;
+use nanomotion_core::{Block, BuildContext, ParamError, Port, Role, Source, Tick};
 use serde::{Deserialize, Serialize};
 use std::f64::consts::{FRAC_PI_2, PI, TAU};
 
@@ -28,20 +26,24 @@ use std::f64::consts::{FRAC_PI_2, PI, TAU};
 /// }
 /// assert_eq!(y[4], 0.0);                          // α
 /// ```
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
 pub struct SinusoidalWaveform {
     /// Drive frequency f_α (Hz).
     #[serde(default = "d_f")]
+    #[param(finite)]
     pub f_alpha_hz: f64,
     /// Amplitude A (V), the peak-to-peak voltage of each waveform; in [0, 46] V.
     #[serde(default = "d_a")]
+    #[param(range(0.0, 46.0))]
     pub amplitude_v: f64,
     /// Additional phase φ (rad) of (2.2); 0 gives the largest step.
     #[serde(default)]
+    #[param(finite)]
     pub phase_rad: f64,
     /// Angle at t = 0 (rad).
     #[serde(default)]
+    #[param(finite)]
     pub alpha0_rad: f64,
 }
 
@@ -66,10 +68,7 @@ impl Default for SinusoidalWaveform {
 impl SinusoidalWaveform {
     /// Check the parameters (A ∈ [0, 46] V, finite f_α and φ).
     pub fn validate(&self) -> Result<(), ParamError> {
-        check::finite("f_alpha_hz", self.f_alpha_hz)?;
-        check::in_range("amplitude_v", self.amplitude_v, 0.0, 46.0)?;
-        check::finite("phase_rad", self.phase_rad)?;
-        check::finite("alpha0_rad", self.alpha0_rad)
+        self.check_params()
     }
     /// The four voltages (2.2) at angle `alpha` (rad).
     pub fn voltages(&self, alpha: f64) -> [f64; 4] {
@@ -97,9 +96,13 @@ impl Source for SinusoidalWaveform {
     }
 }
 
+/// `walking_waveform`: sinusoidal walking-piezo waveforms (2.2) at a fixed drive
+/// frequency f_α.
+///
 /// Graph block `walking_waveform`: outputs `u` (4, V) and `alpha` (1, rad).
-#[derive(Debug, Clone, Default, Serialize, Deserialize)]
+#[derive(Debug, Clone, Default, Serialize, Deserialize, Params)]
 #[serde(transparent)]
+#[block(type_name = "walking_waveform", role = Source, ports = "-> u[4] (V), alpha[1] (rad)")]
 pub struct WalkingWaveformBlock {
     /// The waveform.
     pub waveform: SinusoidalWaveform,
@@ -118,21 +121,6 @@ impl Block for WalkingWaveformBlock {
     }
     fn role(&self) -> Role {
         Role::Source
-    }
-}
-
-nanomotion_core::submit_block_doc! {
-    BlockDoc {
-        type_name: "walking_waveform",
-        role: Role::Source,
-        summary: "sinusoidal walking-piezo waveforms (2.2) at a fixed drive frequency f_α",
-        params: &[
-            ParamDoc { name: "f_alpha_hz", doc: "drive frequency f_α (Hz)", default: Some("10") },
-            ParamDoc { name: "amplitude_v", doc: "amplitude A (V), in [0, 46]", default: Some("46") },
-            ParamDoc { name: "phase_rad", doc: "additional phase φ (rad)", default: Some("0") },
-            ParamDoc { name: "alpha0_rad", doc: "angle at t = 0 (rad)", default: Some("0") },
-        ],
-        ports: "-> u[4] (V), alpha[1] (rad)",
     }
 }
 

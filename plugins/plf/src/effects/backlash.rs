@@ -1,13 +1,15 @@
 //! `backlash`: the play operator.
 
 use super::{MAX_MAGNITUDE, check_bounded, check_len};
+use nanomotion_core::Params;
 use nanomotion_core::block::check;
-use nanomotion_core::{
-    Block, BlockDoc, BuildContext, ParamDoc, ParamError, Port, Role, Tick, Tunable,
-};
+use nanomotion_core::{Block, BuildContext, ParamError, Port, Role, Tick, Tunable};
 use serde::{Deserialize, Serialize};
 
-/// `backlash`: play operator of width w ≥ 0. The output follows the input only
+/// `backlash`: PLF effect: play operator of width w: y moves only once u is w/2 past
+/// it, y₀ = u₀; tunable [width].
+///
+/// Play operator of width w ≥ 0. The output follows the input only
 /// after the input has moved w/2 past it:
 ///
 /// ```text
@@ -20,8 +22,9 @@ use serde::{Deserialize, Serialize};
 /// changing the state.
 ///
 /// [`Tunable`] vector: `[width]`.
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
+#[block(type_name = "backlash", role = Plant, ports = "u -> y")]
 pub struct Backlash {
     /// Total play w (unit of u), ≥ 0.
     pub width: f64,
@@ -93,17 +96,5 @@ impl Tunable for Backlash {
         Self::check(p[0])?;
         self.width = p[0];
         Ok(())
-    }
-}
-
-nanomotion_core::submit_block_doc! {
-    BlockDoc {
-        type_name: "backlash",
-        role: Role::Plant,
-        summary: "PLF effect: play operator of width w: y moves only once u is w/2 past it, y₀ = u₀; tunable [width]",
-        params: &[
-            ParamDoc { name: "width", doc: "total play w ≥ 0 (unit of u)", default: None },
-        ],
-        ports: "u -> y",
     }
 }

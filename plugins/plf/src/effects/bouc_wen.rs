@@ -5,20 +5,23 @@
 //! benchmark), whose loops saturate instead of following an anhysteretic line.
 
 use super::check_len;
+use nanomotion_core::Params;
 use nanomotion_core::block::check;
-use nanomotion_core::{
-    Block, BlockDoc, BuildContext, ParamDoc, ParamError, Port, Role, Tick, Tunable,
-};
+use nanomotion_core::{Block, BuildContext, ParamError, Port, Role, Tick, Tunable};
 use serde::{Deserialize, Serialize};
 
-/// `bouc_wen`: y = linear·u + z with ż = a·u̇ − β|u̇|z − γ·u̇|z| (ν = 1), z(0) = 0.
+/// `bouc_wen`: PLF effect (hysteresis): Bouc–Wen y = linear·u + z, ż = a·u̇ − β|u̇|z −
+/// γ·u̇|z| (ν = 1), exact per sample, z(0) = 0; tunable [a, beta, gamma, linear].
+///
+/// Y = linear·u + z with ż = a·u̇ − β|u̇|z − γ·u̇|z| (ν = 1), z(0) = 0.
 ///
 /// Along a sample the input moves monotonically, so dz/du = a − (β·s ± γ)z on each
 /// side of z = 0 (s = sign u̇) is linear and is integrated **exactly**, including
 /// the crossing of z = 0 inside a sample. [`Tunable`] vector: `[a, beta, gamma,
 /// linear]`.
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
+#[block(type_name = "bouc_wen", role = Actuator, ports = "u -> y")]
 pub struct BoucWen {
     /// a (\[y\]/\[u\]): slope of z right after a reversal.
     pub a: f64,
@@ -170,21 +173,6 @@ impl Tunable for BoucWen {
         self.gamma = p[2];
         self.linear = p[3];
         Ok(())
-    }
-}
-
-nanomotion_core::submit_block_doc! {
-    BlockDoc {
-        type_name: "bouc_wen",
-        role: Role::Actuator,
-        summary: "PLF effect (hysteresis): Bouc–Wen y = linear·u + z, ż = a·u̇ − β|u̇|z − γ·u̇|z| (ν = 1), exact per sample, z(0) = 0; tunable [a, beta, gamma, linear]",
-        params: &[
-            ParamDoc { name: "a", doc: "a ([y]/[u]), slope of z after a reversal", default: None },
-            ParamDoc { name: "beta", doc: "β (1/[u]) ≥ 0", default: None },
-            ParamDoc { name: "gamma", doc: "γ (1/[u]), loop shape", default: None },
-            ParamDoc { name: "linear", doc: "linear part of the output ([y]/[u])", default: Some("0") },
-        ],
-        ports: "u -> y",
     }
 }
 

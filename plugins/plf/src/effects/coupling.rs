@@ -2,25 +2,29 @@
 
 use super::{MAX_MAGNITUDE, check_bounded, check_count, check_len};
 use nalgebra::DMatrix;
+use nanomotion_core::Params;
 use nanomotion_core::lti::StateSpace;
-use nanomotion_core::{
-    Block, BlockDoc, BuildContext, ParamDoc, ParamError, Port, Role, Tick, Tunable,
-};
+use nanomotion_core::{Block, BuildContext, ParamError, Port, Role, Tick, Tunable};
 use serde::{Deserialize, Serialize};
 
 /// Most coupled signals of an `axis_coupling`.
 pub const MAX_COUPLED: usize = 8;
 
-/// `axis_coupling`: y = u + Σ_j c_j·s_j, with port `s` of width n = len(coupling),
+/// `axis_coupling`: PLF effect: y = u + Σ_j c_j·s_j (static cross-axis coupling), LTI;
+/// tunable [coupling..].
+///
+/// Y = u + Σ_j c_j·s_j, with port `s` of width n = len(coupling),
 /// 1 ≤ n ≤ [`MAX_COUPLED`]: the static coupling of other axes into this one (the
 /// off-diagonal terms of the AFM stage's coupling matrix, Sec. 6.2). Linear:
 /// [`Block::lti`] is the gain [1, c_1, ..., c_n] from [u; s] to y.
 ///
 /// [`Tunable`] vector: `[coupling[0..n]]`.
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
+#[block(type_name = "axis_coupling", role = Plant, ports = "u, s[n] -> y")]
 pub struct AxisCoupling {
     /// c_1..c_n (\[u\]/\[s\]).
+    /// 1 ≤ n ≤ 8 = the width of port `s`.
     pub coupling: Vec<f64>,
     #[serde(skip)]
     dt: Option<f64>,
@@ -96,17 +100,5 @@ impl Tunable for AxisCoupling {
         Self::check(p)?;
         self.coupling.copy_from_slice(p);
         Ok(())
-    }
-}
-
-nanomotion_core::submit_block_doc! {
-    BlockDoc {
-        type_name: "axis_coupling",
-        role: Role::Plant,
-        summary: "PLF effect: y = u + Σ_j c_j·s_j (static cross-axis coupling), LTI; tunable [coupling..]",
-        params: &[
-            ParamDoc { name: "coupling", doc: "c_1..c_n ([u]/[s]), 1 ≤ n ≤ 8 = width of port s", default: None },
-        ],
-        ports: "u, s[n] -> y",
     }
 }

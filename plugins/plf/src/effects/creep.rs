@@ -1,17 +1,16 @@
 //! `creep`: piezo creep as a sum of first-order lags.
 
 use super::{MAX_MAGNITUDE, check_bounded, check_count, check_len};
+use nanomotion_core::Params;
 use nanomotion_core::block::check;
-use nanomotion_core::{
-    Block, BlockDoc, BuildContext, ParamDoc, ParamError, Port, Role, Tick, Tunable,
-};
+use nanomotion_core::{Block, BuildContext, ParamError, Port, Role, Tick, Tunable};
 use serde::{Deserialize, Serialize};
 
 /// Most terms a `creep` block may have.
 pub const MAX_TERMS: usize = 4;
 
 /// One first-order term of [`Creep`].
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
 pub struct CreepTerm {
     /// Gain k_i (\[y\]/\[u\]).
@@ -20,7 +19,9 @@ pub struct CreepTerm {
     pub tau_s: f64,
 }
 
-/// `creep`:
+/// `creep`: PLF effect: piezo creep y = u + Σ k_i/(τ_i s + 1)·u (ZOH-exact, 1–4 terms;
+/// a sum-of-exponentials approximation of the logarithmic creep); tunable [gain_1,
+/// tau_1, ...].
 ///
 /// ```text
 /// y = u + Σ_i k_i·L_i(u),    L_i(s) = 1/(τ_i s + 1)
@@ -35,10 +36,12 @@ pub struct CreepTerm {
 ///
 /// [`Tunable`] vector: `[gain_1, tau_1, gain_2, tau_2, ...]` (YAML
 /// `terms[i].gain`, `terms[i].tau_s`).
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
+#[block(type_name = "creep", role = Actuator, ports = "u -> y")]
 pub struct Creep {
     /// The terms {gain, tau_s}.
+    /// [{gain: k_i ([y]/[u]), tau_s: τ_i (s) > 0}], 1 to 4 terms.
     pub terms: Vec<CreepTerm>,
     #[serde(skip)]
     a: [f64; MAX_TERMS],
@@ -183,17 +186,5 @@ impl Tunable for Creep {
         Self::check_terms(&next)?;
         self.terms = next;
         Ok(())
-    }
-}
-
-nanomotion_core::submit_block_doc! {
-    BlockDoc {
-        type_name: "creep",
-        role: Role::Actuator,
-        summary: "PLF effect: piezo creep y = u + Σ k_i/(τ_i s + 1)·u (ZOH-exact, 1–4 terms; a sum-of-exponentials approximation of the logarithmic creep); tunable [gain_1, tau_1, ...]",
-        params: &[
-            ParamDoc { name: "terms", doc: "[{gain: k_i ([y]/[u]), tau_s: τ_i (s) > 0}], 1 to 4 terms", default: None },
-        ],
-        ports: "u -> y",
     }
 }

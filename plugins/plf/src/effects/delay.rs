@@ -1,16 +1,18 @@
 //! `time_delay`: y(t) = u(t − τ) with fractional delays.
 
 use super::check_len;
+use nanomotion_core::Params;
 use nanomotion_core::block::check;
-use nanomotion_core::{
-    Block, BlockDoc, BuildContext, ParamDoc, ParamError, Port, Role, Tick, Tunable,
-};
+use nanomotion_core::{Block, BuildContext, ParamError, Port, Role, Tick, Tunable};
 use serde::{Deserialize, Serialize};
 
 /// Largest delay buffer (samples) a `time_delay` may allocate.
 pub const MAX_DELAY_SAMPLES: f64 = 1e6;
 
-/// `time_delay`: y(t) = u(t − τ), τ = `delay_s`. With τ/dt = n + f (n integer,
+/// `time_delay`: PLF effect: y(t) = u(t − delay_s), fractional delays by linear
+/// interpolation, samples before the start = first input; tunable [delay_s].
+///
+/// Y(t) = u(t − τ), τ = `delay_s`. With τ/dt = n + f (n integer,
 /// 0 ≤ f < 1) the output is the linear interpolation (1 − f)·u_{k−n} + f·u_{k−n−1}
 /// (exact for integer delays and for ramps). The samples before the start are the
 /// first input. The buffer holds `max_delay_s` (fixed when built, at most
@@ -18,12 +20,14 @@ pub const MAX_DELAY_SAMPLES: f64 = 1e6;
 /// reallocating. Direct feed-through (τ may be below one sample).
 ///
 /// [`Tunable`] vector: `[delay_s]`.
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
+#[block(type_name = "time_delay", role = Math, ports = "u -> y")]
 pub struct TimeDelay {
     /// Delay τ (s), 0 ≤ τ ≤ `max_delay_s`.
     pub delay_s: f64,
     /// Longest delay the buffer holds (s), ≥ 0.
+    /// Fixed when built; at most 10⁶ samples.
     pub max_delay_s: f64,
     #[serde(skip)]
     buf: Vec<f64>,
@@ -153,18 +157,5 @@ impl Tunable for TimeDelay {
         Self::check_delay(p[0], self.max_delay_s)?;
         self.delay_s = p[0];
         Ok(())
-    }
-}
-
-nanomotion_core::submit_block_doc! {
-    BlockDoc {
-        type_name: "time_delay",
-        role: Role::Math,
-        summary: "PLF effect: y(t) = u(t − delay_s), fractional delays by linear interpolation, samples before the start = first input; tunable [delay_s]",
-        params: &[
-            ParamDoc { name: "delay_s", doc: "delay τ (s), in [0, max_delay_s]", default: None },
-            ParamDoc { name: "max_delay_s", doc: "buffer length (s), fixed when built, ≤ 1e6 samples", default: None },
-        ],
-        ports: "u -> y",
     }
 }

@@ -1,17 +1,20 @@
 //! `drift`: an offset that changes slowly with time.
 
 use super::{MAX_MAGNITUDE, check_bounded, check_len};
-use nanomotion_core::{
-    Block, BlockDoc, BuildContext, ParamDoc, ParamError, Port, Role, Tick, Tunable,
-};
+use nanomotion_core::Params;
+use nanomotion_core::{Block, BuildContext, ParamError, Port, Role, Tick, Tunable};
 use serde::{Deserialize, Serialize};
 
-/// `drift`: y = u + offset + rate·t + curvature·t², t the tick time (s) — e.g. a
+/// `drift`: PLF effect: y = u + offset + rate·t + curvature·t²; tunable [offset, rate,
+/// curvature].
+///
+/// Y = u + offset + rate·t + curvature·t², t the tick time (s) — e.g. a
 /// thermal drift of a sensor or a slowly moving zero of an amplifier.
 ///
 /// [`Tunable`] vector: `[offset, rate, curvature]`.
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
+#[block(type_name = "drift", role = Source, ports = "u -> y")]
 pub struct Drift {
     /// Offset (\[u\]), default 0.
     #[serde(default)]
@@ -85,19 +88,5 @@ impl Tunable for Drift {
         self.rate = p[1];
         self.curvature = p[2];
         Ok(())
-    }
-}
-
-nanomotion_core::submit_block_doc! {
-    BlockDoc {
-        type_name: "drift",
-        role: Role::Source,
-        summary: "PLF effect: y = u + offset + rate·t + curvature·t²; tunable [offset, rate, curvature]",
-        params: &[
-            ParamDoc { name: "offset", doc: "offset ([u])", default: Some("0") },
-            ParamDoc { name: "rate", doc: "drift rate ([u]/s)", default: Some("0") },
-            ParamDoc { name: "curvature", doc: "quadratic term ([u]/s²)", default: Some("0") },
-        ],
-        ports: "u -> y",
     }
 }

@@ -2,13 +2,16 @@
 //! position signal.
 
 use super::{MAX_MAGNITUDE, check_bounded, check_len};
+use nanomotion_core::Params;
 use nanomotion_core::block::check;
-use nanomotion_core::{
-    Block, BlockDoc, BuildContext, ParamDoc, ParamError, Port, Role, Tick, Tunable,
-};
+use nanomotion_core::{Block, BuildContext, ParamError, Port, Role, Tick, Tunable};
 use serde::{Deserialize, Serialize};
 
-/// `friction`: input `u` is a position; the velocity is the backward difference
+/// `friction`: PLF effect: friction force from a position, y = −tanh(v/v_eps)(F_C + F_S
+/// e^{−(v/v_S)²}) − F_v v, v = Δu/dt; add it to a plant's force input; tunable
+/// [coulomb, stribeck, v_stribeck, viscous].
+///
+/// Input `u` is a position; the velocity is the backward difference
 /// v = (u_k − u_{k−1})/dt (v = 0 at the first tick), and the output is the force
 ///
 /// ```text
@@ -22,8 +25,9 @@ use serde::{Deserialize, Serialize};
 /// a signal-level force; that is why this smooth, lumped model is separate.
 ///
 /// [`Tunable`] vector: `[coulomb, stribeck, v_stribeck, viscous]`.
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
+#[block(type_name = "friction", role = Plant, ports = "u (position) -> y (force)")]
 pub struct Friction {
     /// Coulomb level F_C ≥ 0 (force unit, e.g. N).
     pub coulomb: f64,
@@ -126,21 +130,5 @@ impl Tunable for Friction {
         self.v_stribeck = p[2];
         self.viscous = p[3];
         Ok(())
-    }
-}
-
-nanomotion_core::submit_block_doc! {
-    BlockDoc {
-        type_name: "friction",
-        role: Role::Plant,
-        summary: "PLF effect: friction force from a position, y = −tanh(v/v_eps)(F_C + F_S e^{−(v/v_S)²}) − F_v v, v = Δu/dt; add it to a plant's force input; tunable [coulomb, stribeck, v_stribeck, viscous]",
-        params: &[
-            ParamDoc { name: "coulomb", doc: "Coulomb level F_C ≥ 0 (force, e.g. N)", default: None },
-            ParamDoc { name: "stribeck", doc: "Stribeck excess F_S ≥ 0 (force)", default: Some("0") },
-            ParamDoc { name: "v_stribeck", doc: "Stribeck velocity v_S > 0 ([u]/s)", default: None },
-            ParamDoc { name: "viscous", doc: "viscous coefficient F_v (force·s/[u])", default: Some("0") },
-            ParamDoc { name: "v_eps", doc: "smoothing velocity v_ε > 0 of sgn (tanh) ([u]/s)", default: None },
-        ],
-        ports: "u (position) -> y (force)",
     }
 }

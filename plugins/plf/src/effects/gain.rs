@@ -2,17 +2,16 @@
 //! signal.
 
 use super::{MAX_MAGNITUDE, check_bounded, check_count, check_len};
+use nanomotion_core::Params;
 use nanomotion_core::block::check;
-use nanomotion_core::{
-    Block, BlockDoc, BuildContext, ParamDoc, ParamError, Port, Role, Tick, Tunable,
-};
+use nanomotion_core::{Block, BuildContext, ParamError, Port, Role, Tick, Tunable};
 use serde::{Deserialize, Serialize};
 
 /// Highest polynomial order of a `position_dependent_gain`.
 pub const MAX_ORDER: usize = 8;
 
 /// Where the scheduling variable comes from.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, Params)]
 #[serde(rename_all = "snake_case")]
 pub enum GainVariable {
     /// The signal on port `s` (usually the plant's position).
@@ -26,7 +25,8 @@ fn one() -> f64 {
     1.0
 }
 
-/// `position_dependent_gain`:
+/// `position_dependent_gain`: PLF effect: y = u·(1 + g0 + Σ g_i ((s −
+/// center)/scale)^i), s from port s or s = u; tunable [coeffs.., g0].
 ///
 /// ```text
 /// y = u·(1 + g_0 + Σ_{i=1..n} g_i·((s − center)/scale)^i)
@@ -39,11 +39,13 @@ fn one() -> f64 {
 /// linearly about another point needs it.
 ///
 /// [`Tunable`] vector: `[coeffs[0..n], g0]` (g_1..g_n, then g_0).
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
+#[block(type_name = "position_dependent_gain", role = Plant, ports = "u (, s) -> y")]
 pub struct PositionDependentGain {
     /// `signal` (default, port `s`) or `input`.
     #[serde(default)]
+    #[param(default_doc = "signal")]
     pub variable: GainVariable,
     /// Centre of the polynomial (unit of s), default 0.
     #[serde(default)]
@@ -52,6 +54,7 @@ pub struct PositionDependentGain {
     #[serde(default = "one")]
     pub scale: f64,
     /// g_1..g_n (dimensionless).
+    /// 1 ≤ n ≤ 8.
     pub coeffs: Vec<f64>,
     /// g_0: constant relative gain error (dimensionless), default 0.
     #[serde(default)]
@@ -144,21 +147,5 @@ impl Tunable for PositionDependentGain {
         self.coeffs.copy_from_slice(&p[..n]);
         self.g0 = p[n];
         Ok(())
-    }
-}
-
-nanomotion_core::submit_block_doc! {
-    BlockDoc {
-        type_name: "position_dependent_gain",
-        role: Role::Plant,
-        summary: "PLF effect: y = u·(1 + g0 + Σ g_i ((s − center)/scale)^i), s from port s or s = u; tunable [coeffs.., g0]",
-        params: &[
-            ParamDoc { name: "variable", doc: "signal (port s) | input (s = u)", default: Some("signal") },
-            ParamDoc { name: "center", doc: "polynomial centre (unit of s)", default: Some("0") },
-            ParamDoc { name: "scale", doc: "polynomial scale > 0 (unit of s)", default: Some("1") },
-            ParamDoc { name: "coeffs", doc: "g_1..g_n (-), 1 ≤ n ≤ 8", default: None },
-            ParamDoc { name: "g0", doc: "constant relative gain error g_0 (-)", default: Some("0") },
-        ],
-        ports: "u (, s) -> y",
     }
 }

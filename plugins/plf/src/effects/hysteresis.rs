@@ -2,13 +2,15 @@
 //! the core's [`ColemanHodgdon`] model as an effect block.
 
 use super::check_len;
+use nanomotion_core::Params;
 use nanomotion_core::models::hysteresis::{ChParams, ColemanHodgdon};
-use nanomotion_core::{
-    Block, BlockDoc, BuildContext, ParamDoc, ParamError, Port, Role, Tick, Tunable,
-};
+use nanomotion_core::{Block, BuildContext, ParamError, Port, Role, Tick, Tunable};
 use serde::{Deserialize, Serialize};
 
-/// `hysteresis`: dy/dt = α|u̇|(b·u − y) + c·u̇, integrated exactly per sample
+/// `hysteresis`: PLF effect: Coleman–Hodgdon hysteresis dy/dt = α|u̇|(b·u − y) + c·u̇
+/// (6.3), exact per sample, starts at y = b·u₀; tunable [alpha, b, c(, retrace.*)].
+///
+/// Dy/dt = α|u̇|(b·u − y) + c·u̇, integrated exactly per sample
 /// ([`ColemanHodgdon::step`]); with `retrace` set, that parameter set is used
 /// for decreasing u (asymmetric model). The state starts on the anhysteretic line at
 /// the first input, y₀ = b·u₀ (b of the trace set). A non-finite input holds the
@@ -16,17 +18,23 @@ use serde::{Deserialize, Serialize};
 ///
 /// [`Tunable`] vector: `[alpha, b, c]`, followed by
 /// `[retrace.alpha, retrace.b, retrace.c]` when `retrace` is set.
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
+#[block(type_name = "hysteresis", role = Actuator, ports = "u -> y")]
 pub struct Hysteresis {
     /// α (1/\[u\]) > 0: how fast y returns to the anhysteretic line after a reversal.
+    /// Table 6.2: 0.03 1/V.
     pub alpha: f64,
     /// b (\[y\]/\[u\]): slope of the anhysteretic line y = b·u.
+    /// Table 6.2: ~1 µm/V.
     pub b: f64,
     /// c (\[y\]/\[u\]): slope right after a reversal (the thesis's u in (6.3)).
+    /// ~0.7 µm/V.
     pub c: f64,
     /// Parameters for decreasing u (default: the same as for increasing u).
+    /// {alpha, b, c} (asymmetric model).
     #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[param(default_doc = "= trace")]
     pub retrace: Option<ChParams>,
     #[serde(skip)]
     h: Option<ColemanHodgdon>,
@@ -136,20 +144,5 @@ impl Tunable for Hysteresis {
         self.c = trace.c;
         self.retrace = retrace;
         Ok(())
-    }
-}
-
-nanomotion_core::submit_block_doc! {
-    BlockDoc {
-        type_name: "hysteresis",
-        role: Role::Actuator,
-        summary: "PLF effect: Coleman–Hodgdon hysteresis dy/dt = α|u̇|(b·u − y) + c·u̇ (6.3), exact per sample, starts at y = b·u₀; tunable [alpha, b, c(, retrace.*)]",
-        params: &[
-            ParamDoc { name: "alpha", doc: "α (1/[u]) > 0, return rate to the anhysteretic line (Table 6.2: 0.03 1/V)", default: None },
-            ParamDoc { name: "b", doc: "b ([y]/[u]), anhysteretic slope (Table 6.2: ~1 µm/V)", default: None },
-            ParamDoc { name: "c", doc: "c ([y]/[u]), slope right after a reversal (the thesis's u, ~0.7 µm/V)", default: None },
-            ParamDoc { name: "retrace", doc: "{alpha, b, c} for decreasing u (asymmetric model)", default: Some("= trace") },
-        ],
-        ports: "u -> y",
     }
 }

@@ -1,10 +1,9 @@
 //! `repetitive_disturbance`: a Fourier series periodic in time or in a signal.
 
 use super::{MAX_MAGNITUDE, check_bounded, check_count, check_len};
+use nanomotion_core::Params;
 use nanomotion_core::block::check;
-use nanomotion_core::{
-    Block, BlockDoc, BuildContext, ParamDoc, ParamError, Port, Role, Tick, Tunable,
-};
+use nanomotion_core::{Block, BuildContext, ParamError, Port, Role, Tick, Tunable};
 use serde::{Deserialize, Serialize};
 use std::f64::consts::TAU;
 
@@ -12,7 +11,7 @@ use std::f64::consts::TAU;
 pub const MAX_HARMONICS: usize = 64;
 
 /// What the disturbance is periodic in.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, Params)]
 #[serde(rename_all = "snake_case")]
 pub enum PhaseVariable {
     /// Time: φ = t/period (period in s).
@@ -23,7 +22,8 @@ pub enum PhaseVariable {
     Signal,
 }
 
-/// `repetitive_disturbance`:
+/// `repetitive_disturbance`: PLF effect: y = u + Σ_h (cos_h cos 2πhφ + sin_h sin 2πhφ),
+/// φ = t/period or (s − origin)/period; tunable [period, cos.., sin..].
 ///
 /// ```text
 /// y = u + Σ_{h=1..H} (cos_h·cos(2πhφ) + sin_h·sin(2πhφ))
@@ -36,18 +36,21 @@ pub enum PhaseVariable {
 ///
 /// [`Tunable`] vector: `[period, cos[0..H], sin[0..H]]` (cos_1..cos_H, then
 /// sin_1..sin_H).
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
+#[block(type_name = "repetitive_disturbance", role = Source, ports = "u (, s) -> y")]
 pub struct RepetitiveDisturbance {
     /// Period (s for `time`, unit of s for `signal`), > 0.
     pub period: f64,
     /// `time` (default) or `signal`.
     #[serde(default)]
+    #[param(default_doc = "time")]
     pub variable: PhaseVariable,
     /// Origin of the phase for `signal` (unit of s), default 0.
     #[serde(default)]
     pub origin: f64,
     /// Cosine amplitudes of harmonics 1..H (\[u\]).
+    /// 1 ≤ H ≤ 64.
     pub cos: Vec<f64>,
     /// Sine amplitudes of harmonics 1..H (\[u\]), as many as `cos`.
     pub sin: Vec<f64>,
@@ -166,21 +169,5 @@ impl Tunable for RepetitiveDisturbance {
         next.check_all()?;
         *self = next;
         Ok(())
-    }
-}
-
-nanomotion_core::submit_block_doc! {
-    BlockDoc {
-        type_name: "repetitive_disturbance",
-        role: Role::Source,
-        summary: "PLF effect: y = u + Σ_h (cos_h cos 2πhφ + sin_h sin 2πhφ), φ = t/period or (s − origin)/period; tunable [period, cos.., sin..]",
-        params: &[
-            ParamDoc { name: "period", doc: "period (s, or unit of s) > 0", default: None },
-            ParamDoc { name: "variable", doc: "time | signal (phase from port s)", default: Some("time") },
-            ParamDoc { name: "origin", doc: "phase origin for signal (unit of s)", default: Some("0") },
-            ParamDoc { name: "cos", doc: "cosine amplitudes of harmonics 1..H ([u]), 1 ≤ H ≤ 64", default: None },
-            ParamDoc { name: "sin", doc: "sine amplitudes of harmonics 1..H ([u])", default: None },
-        ],
-        ports: "u (, s) -> y",
     }
 }

@@ -1,11 +1,10 @@
 //! `unmodeled_resonance`: a series pole–zero pair with unity DC gain.
 
 use super::check_len;
+use nanomotion_core::Params;
 use nanomotion_core::block::check;
 use nanomotion_core::lti::{C2dMethod, StateSpace, TransferFunction};
-use nanomotion_core::{
-    Block, BlockDoc, BuildContext, ParamDoc, ParamError, Port, Role, Tick, Tunable,
-};
+use nanomotion_core::{Block, BuildContext, ParamError, Port, Role, Tick, Tunable};
 use serde::{Deserialize, Serialize};
 use std::f64::consts::TAU;
 
@@ -21,7 +20,9 @@ pub const MIN_POLE_DAMPING: f64 = 1e-4;
 /// show in the data's band ([`UnmodeledResonance::implausible`]).
 pub const MIN_PEAK_DB: f64 = 1.0;
 
-/// `unmodeled_resonance`:
+/// `unmodeled_resonance`: PLF effect: pole–zero pair
+/// R(s) = (ω_p²/ω_z²)(s² + 2ζ_zω_z s + ω_z²)/(s² + 2ζ_pω_p s + ω_p²), unity DC gain,
+/// Tustin pre-warped at ω_p, one biquad; tunable all four.
 ///
 /// ```text
 /// R(s) = (ω_p²/ω_z²) · (s² + 2ζ_z ω_z s + ω_z²) / (s² + 2ζ_p ω_p s + ω_p²)
@@ -34,16 +35,19 @@ pub const MIN_PEAK_DB: f64 = 1.0;
 /// transient). [`Block::lti`] returns the discrete model.
 ///
 /// [`Tunable`] vector: `[f_pole_hz, zeta_pole, f_zero_hz, zeta_zero]`.
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
+#[block(type_name = "unmodeled_resonance", role = Plant, ports = "u -> y")]
 pub struct UnmodeledResonance {
     /// Pole (resonance) frequency f_p (Hz), 0 < f_p < Nyquist.
     pub f_pole_hz: f64,
     /// Pole damping ratio ζ_p, 0 < ζ_p ≤ [`MAX_DAMPING`].
+    /// `MAX_DAMPING` = 100.
     pub zeta_pole: f64,
     /// Zero (anti-resonance) frequency f_z (Hz), 0 < f_z < Nyquist.
     pub f_zero_hz: f64,
     /// Zero damping ratio ζ_z, 0 < ζ_z ≤ [`MAX_DAMPING`].
+    /// `MAX_DAMPING` = 100.
     pub zeta_zero: f64,
     /// Normalised biquad [b0, b1, b2, a1, a2] (a0 = 1).
     #[serde(skip)]
@@ -294,20 +298,5 @@ impl Tunable for UnmodeledResonance {
         self.f_zero_hz = p[2];
         self.zeta_zero = p[3];
         Ok(())
-    }
-}
-
-nanomotion_core::submit_block_doc! {
-    BlockDoc {
-        type_name: "unmodeled_resonance",
-        role: Role::Plant,
-        summary: "PLF effect: pole–zero pair R(s) = (ω_p²/ω_z²)(s² + 2ζ_zω_z s + ω_z²)/(s² + 2ζ_pω_p s + ω_p²), unity DC gain, Tustin pre-warped at ω_p, one biquad; tunable all four",
-        params: &[
-            ParamDoc { name: "f_pole_hz", doc: "resonance f_p (Hz), below Nyquist", default: None },
-            ParamDoc { name: "zeta_pole", doc: "pole damping ζ_p in (0, 100]", default: None },
-            ParamDoc { name: "f_zero_hz", doc: "anti-resonance f_z (Hz), below Nyquist", default: None },
-            ParamDoc { name: "zeta_zero", doc: "zero damping ζ_z in (0, 100]", default: None },
-        ],
-        ports: "u -> y",
     }
 }

@@ -1,16 +1,18 @@
 //! `encoder_slit_error`: per-slit line-position errors of an optical encoder.
 
 use super::{MAX_MAGNITUDE, check_bounded, check_count, check_len};
+use nanomotion_core::Params;
 use nanomotion_core::block::check;
-use nanomotion_core::{
-    Block, BlockDoc, BuildContext, ParamDoc, ParamError, Port, Role, Tick, Tunable,
-};
+use nanomotion_core::{Block, BuildContext, ParamError, Port, Role, Tick, Tunable};
 use serde::{Deserialize, Serialize};
 
 /// Longest error table of an `encoder_slit_error`.
 pub const MAX_SLITS: usize = 4096;
 
-/// `encoder_slit_error`: y = u + e[i mod N], i = ⌊(u − origin)/pitch⌋ the slit the
+/// `encoder_slit_error`: PLF effect: optical-encoder slit errors y = u + e[⌊(u −
+/// origin)/pitch⌋ mod N] (Ch. 8–9); tunable [errors..].
+///
+/// Y = u + e[i mod N], i = ⌊(u − origin)/pitch⌋ the slit the
 /// position u is on. The errors e_0..e_{N−1} are the deviations of the encoder's
 /// line (slit) positions from the ideal grid, repeating every revolution of N slits
 /// (Merry 2009, Ch. 8–9: the slit errors behind the time-stamping encoder's
@@ -19,8 +21,9 @@ pub const MAX_SLITS: usize = 4096;
 /// fraction of the pitch. 1 ≤ N ≤ [`MAX_SLITS`].
 ///
 /// [`Tunable`] vector: `[errors[0..N]]`.
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
+#[block(type_name = "encoder_slit_error", role = Sensor, ports = "u -> y")]
 pub struct EncoderSlitError {
     /// Slit pitch (unit of u, e.g. m or rad) > 0.
     pub pitch: f64,
@@ -28,6 +31,7 @@ pub struct EncoderSlitError {
     #[serde(default)]
     pub origin: f64,
     /// e_0..e_{N−1} (unit of u).
+    /// Line-position errors, 1 ≤ N ≤ 4096.
     pub errors: Vec<f64>,
 }
 
@@ -102,19 +106,5 @@ impl Tunable for EncoderSlitError {
         Self::check_errors(p)?;
         self.errors.copy_from_slice(p);
         Ok(())
-    }
-}
-
-nanomotion_core::submit_block_doc! {
-    BlockDoc {
-        type_name: "encoder_slit_error",
-        role: Role::Sensor,
-        summary: "PLF effect: optical-encoder slit errors y = u + e[⌊(u − origin)/pitch⌋ mod N] (Ch. 8–9); tunable [errors..]",
-        params: &[
-            ParamDoc { name: "pitch", doc: "slit pitch (unit of u) > 0", default: None },
-            ParamDoc { name: "origin", doc: "position of slit 0 (unit of u)", default: Some("0") },
-            ParamDoc { name: "errors", doc: "e_0..e_{N−1}, line-position errors (unit of u), 1 ≤ N ≤ 4096", default: None },
-        ],
-        ports: "u -> y",
     }
 }

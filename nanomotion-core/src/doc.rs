@@ -1,0 +1,753 @@
+//! One declaration per block: documentation, JSON Schema and parameter bounds
+//! derived from the parameter struct.
+//!
+//! A block's parameter struct is the only place its parameters are described.
+//! `#[derive(Params)]` reads
+//!
+//! - the struct's doc comment (its first paragraph is the block's one-line
+//!   summary in `nanomotion blocks`; a leading "`tag`:" is dropped),
+//! - each field's doc comment (unit and meaning),
+//! - `#[serde(default …)]`, `#[serde(rename/alias …)]`, `#[serde(skip)]` (the
+//!   default shown is the value the default function really returns),
+//! - `#[param(…)]` bounds, which become both the JSON Schema's `minimum`/`maximum`
+//!   and [`Params::check_params`], the validation `build()` calls — with exactly the
+//!   messages of [`check`](crate::block::check) (field, problem, fix),
+//! - `#[block(type_name = "…", role = …, ports = "…")]`: registers the block's
+//!   [`BlockDoc`] for `nanomotion blocks` and `nanomotion schema`.
+//!
+//! | `#[param(…)]` | check | schema |
+//! |---|---|---|
+//! | `finite` | [`check::finite`](crate::block::check::finite) (a vector: [`check::all_finite`](crate::block::check::all_finite)) | number |
+//! | `positive` | [`check::positive`](crate::block::check::positive) | `exclusiveMinimum: 0` |
+//! | `non_negative` | [`check::non_negative`](crate::block::check::non_negative) | `minimum: 0` |
+//! | `range(lo, hi)` | [`check::in_range`](crate::block::check::in_range) | `minimum`, `maximum` |
+//! | `width` | [`check::width`](crate::block::check::width) | 1 to [`MAX_WIDTH`](crate::block::MAX_WIDTH) |
+//! | `size(lo, hi)` | [`check::size`](crate::block::check::size) | `minimum`, `maximum` |
+//! | `at_least_one` | [`check::at_least_one`](crate::block::check::at_least_one) | `minimum: 1` |
+//! | `at_most = other` | [`check::ordered`](crate::block::check::ordered) (this ≤ `other`), after every field's own bounds | — |
+//! | `nested` | the field's own [`Params::check_params`], field names prefixed `field.` | the field type's schema |
+//!
+//! A bound on an `Option<T>` applies when the value is present, on a `Vec<T>` to
+//! every element (named `field[i]`). `default_doc = "…"` says in words what a
+//! default means when its value alone does not (`none` = computed from other
+//! fields); `schema = "path"` gives a field's schema by a function. Checks run in
+//! field order; cross-field rules that bounds cannot say stay in `build()`.
+//!
+//! ```
+//! use nanomotion_core::doc::Params;
+//! use serde::{Deserialize, Serialize};
+//!
+//! fn one() -> usize { 1 }
+//!
+//! /// `doc_gain`: y = k·u, element-wise.
+//! #[derive(Debug, Clone, Serialize, Deserialize, Params)]
+//! #[serde(deny_unknown_fields)]
+//! #[block(type_name = "doc_gain", role = Math, ports = "u[n] -> y[n]")]
+//! struct DocGain {
+//!     /// Gain k (unit of y per unit of u).
+//!     #[param(finite)]
+//!     k: f64,
+//!     /// Signal width n.
+//!     #[serde(default = "one")]
+//!     #[param(width)]
+//!     width: usize,
+//! }
+//!
+//! let bad = DocGain { k: 1.0, width: 0 };
+//! let e = bad.check_params().unwrap_err();
+//! assert_eq!(e.field, "width");
+//! let docs = DocGain::param_docs();
+//! assert_eq!(docs[1].default.as_deref(), Some("1"));
+//! assert_eq!(docs[1].schema["maximum"], 1024);
+//! let doc = nanomotion_core::block::block_docs()
+//!     .into_iter()
+//!     .find(|d| d.type_name == "doc_gain")
+//!     .unwrap();
+//! assert_eq!(doc.summary, "y = k·u, element-wise.");
+//! ```
+
+use crate::block::Role;
+use crate::error::ParamError;
+pub use nanomotion_derive::Params;
+use serde_json::{Map, Value, json};
+
+/// A parameter struct (or enum) described by `#[derive(Params)]`.
+pub trait Params {
+    /// Whether unknown fields are refused (`#[serde(deny_unknown_fields)]`).
+    const CLOSED: bool;
+    /// Documentation and schema of every parameter, in declaration order.
+    fn param_docs() -> Vec<ParamDoc>;
+    /// Check the declared `#[param(…)]` bounds; the error names the field and the
+    /// fix. `build()` calls it before anything else.
+    fn check_params(&self) -> Result<(), ParamError>;
+}
+
+/// A type that can describe its YAML form as a JSON Schema (derived by
+/// `#[derive(Params)]`; implement it by hand for types with a custom serde form).
+pub trait ParamSchema {
+    /// The JSON Schema (draft 7) of a value of this type.
+    fn param_schema() -> Value;
+}
+
+/// Documentation of a parameter, for `nanomotion blocks` and the schema.
+#[derive(Debug, Clone)]
+pub struct ParamDoc {
+    /// Field name in YAML.
+    pub name: &'static str,
+    /// Unit and meaning, with the thesis symbol where one exists.
+    pub doc: &'static str,
+    /// Default, if the field is optional, as shown to a reader.
+    pub default: Option<String>,
+    /// Declared bounds in words (`> 0`, `in [1, 1024]`).
+    pub bounds: Vec<String>,
+    /// JSON Schema of the value (description, default and bounds included).
+    pub schema: Value,
+    /// Whether the field must be given.
+    pub required: bool,
+    /// Other spellings the field accepts.
+    pub aliases: &'static [&'static str],
+    /// Whether the field's own fields are flattened into the block's map.
+    pub flatten: bool,
+}
+
+impl ParamDoc {
+    /// A parameter documented by hand (blocks not yet derived): no schema beyond
+    /// its description, never required by the schema (the block checks).
+    pub fn hand_written(
+        name: &'static str,
+        doc: &'static str,
+        default: Option<&'static str>,
+    ) -> Self {
+        Self {
+            name,
+            doc,
+            default: default.map(String::from),
+            bounds: Vec::new(),
+            schema: json!({ "description": doc }),
+            required: false,
+            aliases: &[],
+            flatten: false,
+        }
+    }
+}
+
+/// Documentation of a block type, registered with [`inventory`] (by
+/// `#[derive(Params)]` with `#[block(…)]`, or by hand with [`submit_block_doc!`](crate::submit_block_doc))
+/// so that `nanomotion blocks` and `nanomotion schema` list it.
+#[derive(Debug, Clone, Copy)]
+pub struct BlockDoc {
+    /// The `type:` tag.
+    pub type_name: &'static str,
+    /// The role of the block.
+    pub role: Role,
+    /// One line saying what it does.
+    pub summary: &'static str,
+    /// Port summary, e.g. `"u[n] -> y[n]"`.
+    pub ports: &'static str,
+    /// The parameters.
+    pub params: fn() -> Vec<ParamDoc>,
+    /// Whether unknown parameters are refused (`deny_unknown_fields`): the schema
+    /// then refuses them too.
+    pub closed: bool,
+}
+
+inventory::collect!(BlockDoc);
+
+impl BlockDoc {
+    /// The parameters' documentation.
+    pub fn param_docs(&self) -> Vec<ParamDoc> {
+        (self.params)()
+    }
+
+    /// The listing of `nanomotion blocks`: a header line, the ports, one line per
+    /// parameter (name, meaning, bounds, default).
+    pub fn describe(&self) -> String {
+        let mut s = format!(
+            "{} ({}): {}\n    ports: {}\n",
+            self.type_name,
+            self.role.as_str(),
+            self.summary,
+            self.ports
+        );
+        for p in self.param_docs() {
+            let mut line = format!("    {:<22} {}", p.name, p.doc);
+            if let Some(c) = choices(&p.schema) {
+                line.push_str(&format!(" [{c}]"));
+            }
+            for a in p.aliases {
+                line.push_str(&format!(" (also `{a}`)"));
+            }
+            if !p.bounds.is_empty() {
+                line.push_str(&format!(" [{}]", p.bounds.join(", ")));
+            }
+            if let Some(d) = &p.default {
+                line.push_str(&format!(" [default {d}]"));
+            }
+            s.push_str(&line);
+            s.push('\n');
+        }
+        s
+    }
+
+    /// The JSON Schema of a block of this type: `type` and the parameters; with
+    /// `entry`, also the graph entry's `name` and `rate_hz`.
+    pub fn schema(&self, entry: bool) -> Value {
+        let params = self.param_docs();
+        let mut props = Map::new();
+        let mut required = vec![json!("type")];
+        if entry {
+            props.insert(
+                "name".into(),
+                json!({
+                    "type": "string",
+                    "description": "unique block name: ASCII letters, digits, `_`, `-`",
+                    "pattern": "^[A-Za-z0-9_-]{1,100}$"
+                }),
+            );
+            props.insert(
+                "rate_hz".into(),
+                json!({
+                    "type": "number",
+                    "minimum": 1e-3,
+                    "description": "the block's rate (Hz); must divide base_rate_hz [default base_rate_hz]"
+                }),
+            );
+            required.insert(0, json!("name"));
+        }
+        props.insert(
+            "type".into(),
+            json!({ "const": self.type_name, "description": self.summary }),
+        );
+        let closed = self.closed && !params.iter().any(|p| p.flatten);
+        add_properties(&mut props, &mut required, &params);
+        json!({
+            "type": "object",
+            "title": self.type_name,
+            "description": format!("{} ({}; ports: {})", self.summary, self.role.as_str(), self.ports),
+            "properties": props,
+            "required": required,
+            "additionalProperties": !closed,
+        })
+    }
+}
+
+/// The values of an enumerated parameter (`a | b | c`), or the `kind`s of a tagged
+/// one (`{kind: a, …} | {kind: b, …}`).
+fn choices(schema: &Value) -> Option<String> {
+    let mut s = schema;
+    while let Some(a) = s.get("anyOf").and_then(Value::as_array) {
+        // an optional value: its non-null branch; a tagged enum: its variants
+        if a.len() == 2 && a[1].get("type") == Some(&json!("null")) {
+            s = &a[0];
+        } else {
+            let tags: Vec<String> = a
+                .iter()
+                .filter_map(|b| {
+                    let props = b.get("properties")?.as_object()?;
+                    props.iter().find_map(|(k, v)| {
+                        let c = v.get("const")?.as_str()?;
+                        let more = if props.len() > 1 { ", …" } else { "" };
+                        Some(format!("{{{k}: {c}{more}}}"))
+                    })
+                })
+                .collect();
+            return (tags.len() == a.len()).then(|| tags.join(" | "));
+        }
+    }
+    let values = s.get("enum")?.as_array()?;
+    Some(
+        values
+            .iter()
+            .filter_map(Value::as_str)
+            .collect::<Vec<_>>()
+            .join(" | "),
+    )
+}
+
+fn add_properties(props: &mut Map<String, Value>, required: &mut Vec<Value>, params: &[ParamDoc]) {
+    for p in params.iter().filter(|p| !p.flatten) {
+        props.insert(p.name.into(), p.schema.clone());
+        for a in p.aliases {
+            props.insert((*a).into(), p.schema.clone());
+        }
+        if p.required && p.aliases.is_empty() {
+            required.push(json!(p.name));
+        }
+    }
+}
+
+/// Register a [`BlockDoc`] by hand: for blocks whose parameters are not (yet)
+/// derived. Accepts a `BlockDoc` value, or the older literal form with a
+/// `params: &[ParamDoc { name, doc, default }]` list:
+///
+/// ```
+/// use nanomotion_core::{BlockDoc, ParamDoc, Role};
+/// nanomotion_core::submit_block_doc! {
+///     BlockDoc {
+///         type_name: "doc_example",
+///         role: Role::Math,
+///         summary: "an example",
+///         params: &[ParamDoc { name: "k", doc: "gain (-)", default: None }],
+///         ports: "u -> y",
+///     }
+/// }
+/// ```
+#[macro_export]
+macro_rules! submit_block_doc {
+    ($bd:path {
+        type_name: $t:expr,
+        role: $r:expr,
+        summary: $s:expr,
+        params: &[$($pd:path { name: $n:expr, doc: $d:expr, default: $def:expr $(,)? }),* $(,)?],
+        ports: $p:expr $(,)?
+    }) => {
+        const _: () = {
+            // The literal's type names, used (they are imported for it).
+            #[allow(dead_code)]
+            fn names() {
+                let _: ::core::option::Option<$bd> = ::core::option::Option::None;
+                $(let _: ::core::option::Option<$pd> = ::core::option::Option::None;)*
+            }
+            fn params() -> ::std::vec::Vec<$crate::ParamDoc> {
+                ::std::vec![$($crate::ParamDoc::hand_written($n, $d, $def)),*]
+            }
+            $crate::__private::inventory::submit! {
+                $crate::BlockDoc {
+                    type_name: $t,
+                    role: $r,
+                    summary: $s,
+                    ports: $p,
+                    params,
+                    closed: false,
+                }
+            }
+        };
+    };
+    ($doc:expr) => {
+        $crate::__private::inventory::submit! { $doc }
+    };
+}
+
+/// All registered block documentation, sorted by type name.
+pub fn block_docs() -> Vec<&'static BlockDoc> {
+    let mut v: Vec<&'static BlockDoc> = inventory::iter::<BlockDoc>.into_iter().collect();
+    v.sort_by_key(|d| d.type_name);
+    v
+}
+
+/// The JSON Schema (draft 7) of a whole graph file (`nanomotion schema`), with
+/// every block registered in this program (plugins and third-party crates that
+/// are linked) as a `oneOf` on `type`. The graph-level keys follow
+/// [`GraphSpec`](crate::graph::GraphSpec) and docs/graph-format.md.
+pub fn graph_schema() -> Value {
+    let docs = block_docs();
+    let inline: Vec<Value> = docs.iter().map(|d| d.schema(false)).collect();
+    let mut entries: Vec<Value> = docs.iter().map(|d| d.schema(true)).collect();
+    entries.push(json!({
+        "type": "object",
+        "title": "include",
+        "description": "`- include: FILE`: the block entries of FILE (a YAML list), relative to this file's folder",
+        "properties": { "include": { "type": "string" } },
+        "required": ["include"],
+        "additionalProperties": false,
+    }));
+    let signal =
+        json!({ "type": "string", "pattern": "^[^.]+\\.[^.]+$", "description": "`block.port`" });
+    let bounds = json!({
+        "type": "object",
+        "additionalProperties": false,
+        "properties": {
+            "gain_margin_db": { "type": "number", "description": "smallest gain margin (dB)" },
+            "phase_margin_deg": { "type": "number", "description": "smallest phase margin (degrees)" },
+            "modulus_margin_db": { "type": "number", "description": "largest allowed ‖S‖∞ (dB)" },
+            "delay_margin_s": { "type": "number", "description": "smallest delay margin (s)" },
+            "max_t_db": { "type": "number", "description": "largest allowed ‖T‖∞ (dB)" },
+            "allow_unproven": { "type": "string", "description": "let loops that cannot be analysed run, with this reason" },
+        },
+    });
+    let mut require = bounds.clone();
+    require["properties"]["loops"] = json!({
+        "type": "object",
+        "description": "per-loop bounds, keyed by the name of a block in the loop",
+        "additionalProperties": bounds,
+    });
+    require["description"] =
+        json!("stability bounds on the feedback loops, checked before the graph runs");
+    json!({
+        "$schema": "http://json-schema.org/draft-07/schema#",
+        "title": "nanomotion graph",
+        "description": "A nanomotion controller graph (docs/graph-format.md); written by `nanomotion schema`.",
+        "type": "object",
+        "additionalProperties": false,
+        "required": ["base_rate_hz", "blocks"],
+        "properties": {
+            "title": { "type": "string", "maxLength": 200, "description": "name of the experiment" },
+            "base_rate_hz": { "type": "number", "minimum": 1e-3, "maximum": 1e9, "description": "the base tick rate (Hz)" },
+            "duration_s": { "type": "number", "minimum": 0, "description": "simulated time (s); may be left out of a graph that reads data" },
+            "seed": { "type": "integer", "minimum": 0, "default": 0, "description": "seed of every random block" },
+            "strict_rates": { "type": "boolean", "default": false, "description": "refuse implicit rate transitions" },
+            "blocks": { "type": "array", "items": { "$ref": "#/definitions/block_entry" } },
+            "connections": {
+                "type": "array",
+                "items": {
+                    "type": "object",
+                    "additionalProperties": false,
+                    "required": ["from", "to"],
+                    "properties": { "from": signal, "to": signal },
+                },
+            },
+            "log": { "type": "array", "items": signal, "description": "outputs to record" },
+            "score": {
+                "type": "array",
+                "items": {
+                    "type": "object",
+                    "additionalProperties": false,
+                    "required": ["signal"],
+                    "properties": {
+                        "signal": signal,
+                        "from_s": { "type": "number", "minimum": 0, "default": 0, "description": "ignore samples before this time (s)" },
+                    },
+                },
+            },
+            "compare": {
+                "type": "array",
+                "items": {
+                    "type": "object",
+                    "additionalProperties": false,
+                    "required": ["signal", "column"],
+                    "properties": { "signal": signal, "column": { "type": "string", "description": "measured column" } },
+                },
+            },
+            "require": require,
+            "units": {
+                "type": "object",
+                "description": "unit of a signal, `block.port: unit`",
+                "additionalProperties": { "type": "string", "minLength": 1, "maxLength": 32 },
+            },
+        },
+        "definitions": {
+            "block": { "description": "a block inline (`type:` and its parameters)", "oneOf": inline },
+            "block_entry": { "description": "a block of the graph, or `include: FILE`", "oneOf": entries },
+        },
+    })
+}
+
+/// Helpers the derive's generated code calls; not a stable API.
+#[doc(hidden)]
+pub mod __derive {
+    use super::{ParamDoc, ParamSchema, add_properties};
+    use crate::error::ParamError;
+    use serde::Serialize;
+    pub use serde_json::Value;
+    use serde_json::{Map, json};
+    use std::marker::PhantomData;
+
+    pub fn number() -> Value {
+        json!({ "type": "number" })
+    }
+    pub fn unsigned() -> Value {
+        json!({ "type": "integer", "minimum": 0 })
+    }
+    pub fn integer() -> Value {
+        json!({ "type": "integer" })
+    }
+    pub fn boolean() -> Value {
+        json!({ "type": "boolean" })
+    }
+    pub fn string() -> Value {
+        json!({ "type": "string" })
+    }
+    pub fn any() -> Value {
+        json!({})
+    }
+    pub fn block_ref() -> Value {
+        json!({ "$ref": "#/definitions/block" })
+    }
+    pub fn array(items: Value) -> Value {
+        json!({ "type": "array", "items": items })
+    }
+    pub fn fixed_array(items: Value, n: usize) -> Value {
+        json!({ "type": "array", "items": items, "minItems": n, "maxItems": n })
+    }
+    pub fn nullable(inner: Value) -> Value {
+        json!({ "anyOf": [inner, { "type": "null" }] })
+    }
+    pub fn map(values: Value) -> Value {
+        json!({ "type": "object", "additionalProperties": values })
+    }
+
+    /// Autoref probe: the schema of `T` if it implements [`ParamSchema`], else
+    /// any value (a type with a custom serde form that describes nothing).
+    pub struct Probe<T: ?Sized>(PhantomData<T>);
+    impl<T: ?Sized> Probe<T> {
+        pub fn new() -> Self {
+            Self(PhantomData)
+        }
+    }
+    impl<T: ?Sized> Default for Probe<T> {
+        fn default() -> Self {
+            Self::new()
+        }
+    }
+    pub trait ViaSchema {
+        fn schema(&self) -> Value;
+    }
+    impl<T: ParamSchema + ?Sized> ViaSchema for &Probe<T> {
+        fn schema(&self) -> Value {
+            T::param_schema()
+        }
+    }
+    pub trait ViaAny {
+        fn schema(&self) -> Value;
+    }
+    impl<T: ?Sized> ViaAny for Probe<T> {
+        fn schema(&self) -> Value {
+            any()
+        }
+    }
+
+    fn num(x: f64) -> Value {
+        if x.fract() == 0.0 && x.abs() < 9.0e15 {
+            json!(x as i64)
+        } else {
+            json!(x)
+        }
+    }
+
+    fn fmt_num(x: f64) -> String {
+        if x.fract() == 0.0 && x.abs() < 9.0e15 {
+            format!("{}", x as i64)
+        } else {
+            format!("{x}")
+        }
+    }
+
+    /// Add a lower (`exclusive`: strict) and/or upper bound to `s`, into the
+    /// non-null branch of an optional value and the items of an array; its words
+    /// to `words`.
+    pub fn bound(
+        s: &mut Value,
+        words: &mut Vec<String>,
+        min: Option<f64>,
+        exclusive: bool,
+        max: Option<f64>,
+    ) {
+        let mut each = false;
+        let mut target = &mut *s;
+        loop {
+            if target.get("anyOf").is_some() {
+                target = &mut target["anyOf"][0];
+            } else if target.get("type") == Some(&json!("array")) {
+                each = true;
+                target = &mut target["items"];
+            } else {
+                break;
+            }
+        }
+        let text = match (min, max) {
+            (Some(lo), Some(hi)) => format!("{} to {}", fmt_num(lo), fmt_num(hi)),
+            (Some(lo), None) if exclusive => format!("> {}", fmt_num(lo)),
+            (Some(lo), None) => format!("≥ {}", fmt_num(lo)),
+            (None, Some(hi)) => format!("≤ {}", fmt_num(hi)),
+            (None, None) => return,
+        };
+        if let Some(o) = target.as_object_mut() {
+            if let Some(lo) = min {
+                let key = if exclusive {
+                    "exclusiveMinimum"
+                } else {
+                    "minimum"
+                };
+                o.insert(key.into(), num(lo));
+            }
+            if let Some(hi) = max {
+                o.insert("maximum".into(), num(hi));
+            }
+        }
+        words.push(if each { format!("each {text}") } else { text });
+    }
+
+    /// A default value as JSON (`None` if it cannot be written).
+    pub fn some_value<T: Serialize>(v: &T) -> Option<Value> {
+        Some(serde_json::to_value(v).unwrap_or(Value::Null))
+    }
+
+    /// A value as a reader sees it: numbers without a trailing `.0`, strings
+    /// without quotes, `none` for null.
+    pub fn show(v: &Value) -> String {
+        match v {
+            Value::Null => "none".into(),
+            Value::Bool(b) => b.to_string(),
+            Value::Number(n) => match n.as_f64() {
+                Some(x) if n.is_f64() => {
+                    if x != 0.0 && (x.abs() < 1e-3 || x.abs() >= 1e7) {
+                        format!("{x:e}")
+                    } else {
+                        fmt_num(x)
+                    }
+                }
+                _ => n.to_string(),
+            },
+            Value::String(s) => s.clone(),
+            Value::Array(a) => format!("[{}]", a.iter().map(show).collect::<Vec<_>>().join(", ")),
+            Value::Object(o) => format!(
+                "{{{}}}",
+                o.iter()
+                    .map(|(k, v)| format!("{k}: {}", show(v)))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ),
+        }
+    }
+
+    /// A parameter's documentation, from what the derive read.
+    #[allow(clippy::too_many_arguments)]
+    pub fn param(
+        name: &'static str,
+        doc: &'static str,
+        default: Option<Value>,
+        default_doc: Option<&'static str>,
+        mut schema: Value,
+        bounds: Vec<String>,
+        aliases: &'static [&'static str],
+        flatten: bool,
+    ) -> ParamDoc {
+        if let Some(o) = schema.as_object_mut() {
+            if !doc.is_empty() {
+                o.insert("description".into(), json!(doc));
+            }
+            if let Some(d) = &default
+                && !d.is_null()
+            {
+                o.insert("default".into(), d.clone());
+            }
+        }
+        ParamDoc {
+            name,
+            doc,
+            required: default.is_none(),
+            default: match (default_doc, &default) {
+                (Some(words), _) => Some(words.to_string()),
+                (None, Some(v)) => Some(show(v)),
+                (None, None) => None,
+            },
+            bounds,
+            schema,
+            aliases,
+            flatten,
+        }
+    }
+
+    /// A nested parameter struct's error, its field prefixed with `field.`.
+    pub fn nested(field: &str, r: Result<(), ParamError>) -> Result<(), ParamError> {
+        r.map_err(|mut e| {
+            e.field = format!("{field}.{}", e.field);
+            e
+        })
+    }
+
+    /// The schema of a parameter struct.
+    pub fn object(description: &str, params: &[ParamDoc], closed: bool) -> Value {
+        let mut props = Map::new();
+        let mut required = Vec::new();
+        add_properties(&mut props, &mut required, params);
+        let closed = closed && !params.iter().any(|p| p.flatten);
+        let mut s = json!({
+            "type": "object",
+            "properties": props,
+            "additionalProperties": !closed,
+        });
+        if !required.is_empty() {
+            s["required"] = Value::Array(required);
+        }
+        if !description.is_empty() {
+            s["description"] = json!(description);
+        }
+        s
+    }
+
+    /// How an enum is written (serde's representations).
+    pub enum Tagging {
+        /// `variant` or `{variant: content}`.
+        External,
+        /// `{tag: variant, ...fields}`.
+        Internal(&'static str),
+        /// The content alone.
+        Untagged,
+    }
+
+    /// One variant (or one alias of it).
+    pub struct Variant {
+        pub name: &'static str,
+        pub doc: &'static str,
+        /// The schema of the variant's data, `None` for a unit variant.
+        pub content: Option<Value>,
+    }
+
+    /// The schema of an enum.
+    pub fn enumeration(
+        description: &str,
+        tagging: Tagging,
+        variants: Vec<Variant>,
+        closed: bool,
+    ) -> Value {
+        let _ = closed;
+        let mut s = if variants.iter().all(|v| v.content.is_none())
+            && !matches!(tagging, Tagging::Internal(_))
+        {
+            json!({ "type": "string", "enum": variants.iter().map(|v| v.name).collect::<Vec<_>>() })
+        } else {
+            let branches: Vec<Value> = variants
+                .into_iter()
+                .map(|v| {
+                    let mut b = match (&tagging, v.content) {
+                        (Tagging::External, None) => json!({ "const": v.name }),
+                        (Tagging::External, Some(c)) => json!({
+                            "type": "object",
+                            "properties": { v.name: c },
+                            "required": [v.name],
+                            "additionalProperties": false,
+                        }),
+                        (Tagging::Untagged, None) => json!({ "type": "null" }),
+                        (Tagging::Untagged, Some(c)) => c,
+                        (Tagging::Internal(tag), content) => {
+                            let mut c = content.unwrap_or_else(|| {
+                                json!({ "type": "object", "properties": {}, "additionalProperties": false })
+                            });
+                            if c.get("properties").is_some() {
+                                c["properties"][*tag] = json!({ "const": v.name });
+                                let mut req = c
+                                    .get("required")
+                                    .cloned()
+                                    .unwrap_or_else(|| json!([]));
+                                if let Some(r) = req.as_array_mut() {
+                                    r.insert(0, json!(tag));
+                                }
+                                c["required"] = req;
+                                c
+                            } else {
+                                // newtype of a type without properties: only the tag is known
+                                json!({
+                                    "type": "object",
+                                    "properties": { *tag: { "const": v.name } },
+                                    "required": [tag],
+                                })
+                            }
+                        }
+                    };
+                    if !v.doc.is_empty()
+                        && let Some(o) = b.as_object_mut()
+                    {
+                        o.insert("description".into(), json!(v.doc));
+                    }
+                    b
+                })
+                .collect();
+            json!({ "anyOf": branches })
+        };
+        if !description.is_empty() {
+            s["description"] = json!(description);
+        }
+        s
+    }
+}

@@ -1,0 +1,767 @@
+//! # nanomotion-derive
+//!
+//! `#[derive(Params)]`: one declaration per block. The parameter struct (its doc
+//! comments, its `#[serde(default …)]` attributes and `#[param(…)]` bounds) is the
+//! only place a block's parameters are described; the derive turns it into
+//!
+//! - the block's documentation for `nanomotion blocks` (a `BlockDoc` registered with
+//!   `inventory` when the struct carries `#[block(…)]`),
+//! - the JSON Schema of its parameters (for `nanomotion schema` and editors),
+//! - `check_params()`, the validation of the declared bounds with the same
+//!   `nanomotion_core::block::check` messages a hand-written `build()` gave.
+//!
+//! The generated code names only `::nanomotion_core` paths, so a plugin (or a
+//! third-party crate) needs no dependency besides `nanomotion-core`, which
+//! re-exports this macro. See `nanomotion_core::doc` for the attribute reference and
+//! an example.
+
+use proc_macro::TokenStream;
+use proc_macro2::TokenStream as TokenStream2;
+use quote::{format_ident, quote};
+use syn::meta::ParseNestedMeta;
+use syn::punctuated::Punctuated;
+use syn::{
+    Attribute, Data, DeriveInput, Expr, Fields, GenericArgument, Ident, LitStr, PathArguments,
+    Token, Type, parse_macro_input,
+};
+
+/// Derive `nanomotion_core::doc::Params` (and `ParamSchema`) for a parameter struct
+/// or enum; with `#[block(type_name = "…", role = …, ports = "…")]` on a struct,
+/// also register the block's documentation. See `nanomotion_core::doc`.
+#[proc_macro_derive(Params, attributes(block, param))]
+pub fn derive_params(input: TokenStream) -> TokenStream {
+    let input = parse_macro_input!(input as DeriveInput);
+    match expand(&input) {
+        Ok(ts) => ts.into(),
+        Err(e) => e.to_compile_error().into(),
+    }
+}
+
+/// Rustdoc markup a terminal reader does not need: intra-doc links
+/// (`` [`X`](path) `` and `` [`X`] `` become `` `X` ``) and escaped brackets.
+fn plain(line: &str) -> String {
+    let mut out = String::new();
+    let mut rest = line;
+    while let Some(i) = rest.find("[`") {
+        out.push_str(&rest[..i]);
+        let after = &rest[i + 1..];
+        let Some(j) = after.find("`]") else {
+            out.push_str(&rest[i..]);
+            rest = "";
+            break;
+        };
+        out.push_str(&after[..j + 1]);
+        rest = &after[j + 2..];
+        if rest.starts_with('(')
+            && let Some(k) = rest.find(')')
+        {
+            rest = &rest[k + 1..];
+        }
+    }
+    out.push_str(rest);
+    out.replace("\\[", "[").replace("\\]", "]")
+}
+
+/// Doc comment lines of an item, trimmed, in plain text.
+fn doc_lines(attrs: &[Attribute]) -> Vec<String> {
+    let mut lines = Vec::new();
+    for a in attrs {
+        if a.path().is_ident("doc")
+            && let syn::Meta::NameValue(nv) = &a.meta
+            && let Expr::Lit(syn::ExprLit {
+                lit: syn::Lit::Str(s),
+                ..
+            }) = &nv.value
+        {
+            lines.push(plain(s.value().trim()));
+        }
+    }
+    lines
+}
+
+/// Doc comment as one line of text (paragraphs joined with a space).
+fn doc_text(attrs: &[Attribute]) -> String {
+    doc_lines(attrs)
+        .into_iter()
+        .filter(|l| !l.is_empty())
+        .collect::<Vec<_>>()
+        .join(" ")
+}
+
+/// The first paragraph of the doc comment, without a leading "`tag`: ".
+fn summary_of(attrs: &[Attribute], tag: &str) -> String {
+    let lines = doc_lines(attrs);
+    let first: Vec<String> = lines
+        .into_iter()
+        .skip_while(|l| l.is_empty())
+        .take_while(|l| !l.is_empty())
+        .collect();
+    let s = first.join(" ");
+    let prefix = format!("`{tag}`:");
+    match s.strip_prefix(&prefix) {
+        Some(rest) => rest.trim().to_string(),
+        None => s,
+    }
+}
+
+/// Consume the value of a nested meta we do not interpret.
+fn skip_meta(meta: &ParseNestedMeta) -> syn::Result<()> {
+    if meta.input.peek(Token![=]) {
+        let _: Expr = meta.value()?.parse()?;
+    } else if meta.input.peek(syn::token::Paren) {
+        let content;
+        syn::parenthesized!(content in meta.input);
+        let _: TokenStream2 = content.parse()?;
+    }
+    Ok(())
+}
+
+fn meta_name(meta: &ParseNestedMeta) -> String {
+    meta.path
+        .get_ident()
+        .map(|i| i.to_string())
+        .unwrap_or_default()
+}
+
+#[derive(Default)]
+struct SerdeContainer {
+    deny_unknown_fields: bool,
+    default: bool,
+    rename_all: Option<String>,
+    tag: Option<String>,
+    untagged: bool,
+    transparent: bool,
+}
+
+fn serde_container(attrs: &[Attribute]) -> syn::Result<SerdeContainer> {
+    let mut c = SerdeContainer::default();
+    for a in attrs.iter().filter(|a| a.path().is_ident("serde")) {
+        a.parse_nested_meta(|meta| {
+            match meta_name(&meta).as_str() {
+                "deny_unknown_fields" => c.deny_unknown_fields = true,
+                "default" => {
+                    c.default = true;
+                    skip_meta(&meta)?;
+                }
+                "untagged" => c.untagged = true,
+                "transparent" => c.transparent = true,
+                "rename_all" if meta.input.peek(Token![=]) => {
+                    let s: LitStr = meta.value()?.parse()?;
+                    c.rename_all = Some(s.value());
+                }
+                "tag" => {
+                    let s: LitStr = meta.value()?.parse()?;
+                    c.tag = Some(s.value());
+                }
+                _ => skip_meta(&meta)?,
+            }
+            Ok(())
+        })?;
+    }
+    Ok(c)
+}
+
+enum DefaultKind {
+    Trait,
+    Path(syn::ExprPath),
+}
+
+#[derive(Default)]
+struct SerdeField {
+    skip: bool,
+    default: Option<DefaultKind>,
+    rename: Option<String>,
+    aliases: Vec<String>,
+    custom: bool,
+    flatten: bool,
+}
+
+fn serde_field(attrs: &[Attribute]) -> syn::Result<SerdeField> {
+    let mut s = SerdeField::default();
+    for a in attrs.iter().filter(|a| a.path().is_ident("serde")) {
+        a.parse_nested_meta(|meta| {
+            match meta_name(&meta).as_str() {
+                "skip" | "skip_deserializing" => s.skip = true,
+                "default" => {
+                    if meta.input.peek(Token![=]) {
+                        let lit: LitStr = meta.value()?.parse()?;
+                        s.default = Some(DefaultKind::Path(lit.parse()?));
+                    } else {
+                        s.default = Some(DefaultKind::Trait);
+                    }
+                }
+                "rename" if meta.input.peek(Token![=]) => {
+                    let lit: LitStr = meta.value()?.parse()?;
+                    s.rename = Some(lit.value());
+                }
+                "alias" => {
+                    let lit: LitStr = meta.value()?.parse()?;
+                    s.aliases.push(lit.value());
+                }
+                "with" | "deserialize_with" => {
+                    s.custom = true;
+                    skip_meta(&meta)?;
+                }
+                "flatten" => s.flatten = true,
+                _ => skip_meta(&meta)?,
+            }
+            Ok(())
+        })?;
+    }
+    Ok(s)
+}
+
+/// A declared bound of a parameter.
+enum Bound {
+    Finite,
+    Positive,
+    NonNegative,
+    Range(Expr, Expr),
+    Width,
+    Size(Expr, Expr),
+    AtLeastOne,
+}
+
+#[derive(Default)]
+struct ParamAttr {
+    bounds: Vec<Bound>,
+    default_doc: Option<String>,
+    nested: bool,
+    schema: Option<syn::ExprPath>,
+    at_most: Option<Ident>,
+}
+
+fn two_exprs(meta: &ParseNestedMeta) -> syn::Result<(Expr, Expr)> {
+    let content;
+    syn::parenthesized!(content in meta.input);
+    let list = Punctuated::<Expr, Token![,]>::parse_terminated(&content)?;
+    let v: Vec<Expr> = list.into_iter().collect();
+    if v.len() != 2 {
+        return Err(meta.error("expected two bounds: (lo, hi)"));
+    }
+    Ok((v[0].clone(), v[1].clone()))
+}
+
+fn param_attr(attrs: &[Attribute]) -> syn::Result<ParamAttr> {
+    let mut p = ParamAttr::default();
+    for a in attrs.iter().filter(|a| a.path().is_ident("param")) {
+        a.parse_nested_meta(|meta| {
+            match meta_name(&meta).as_str() {
+                "finite" => p.bounds.push(Bound::Finite),
+                "positive" => p.bounds.push(Bound::Positive),
+                "non_negative" => p.bounds.push(Bound::NonNegative),
+                "width" => p.bounds.push(Bound::Width),
+                "at_least_one" => p.bounds.push(Bound::AtLeastOne),
+                "range" => {
+                    let (lo, hi) = two_exprs(&meta)?;
+                    p.bounds.push(Bound::Range(lo, hi));
+                }
+                "size" => {
+                    let (lo, hi) = two_exprs(&meta)?;
+                    p.bounds.push(Bound::Size(lo, hi));
+                }
+                "nested" => p.nested = true,
+                "default_doc" => {
+                    let lit: LitStr = meta.value()?.parse()?;
+                    p.default_doc = Some(lit.value());
+                }
+                "schema" => {
+                    let lit: LitStr = meta.value()?.parse()?;
+                    p.schema = Some(lit.parse()?);
+                }
+                "at_most" => {
+                    let id: Ident = meta.value()?.parse()?;
+                    p.at_most = Some(id);
+                }
+                other => {
+                    return Err(meta.error(format!(
+                        "unknown #[param] item `{other}`: expected finite, positive, \
+                         non_negative, range(lo, hi), width, size(lo, hi), at_least_one, \
+                         at_most = field, nested, default_doc = \"…\" or schema = \"path\""
+                    )));
+                }
+            }
+            Ok(())
+        })?;
+    }
+    Ok(p)
+}
+
+#[derive(Default)]
+struct BlockAttr {
+    type_name: Option<String>,
+    role: Option<Ident>,
+    ports: Option<String>,
+}
+
+fn block_attr(attrs: &[Attribute]) -> syn::Result<Option<BlockAttr>> {
+    let mut found = None;
+    for a in attrs.iter().filter(|a| a.path().is_ident("block")) {
+        let mut b = BlockAttr::default();
+        a.parse_nested_meta(|meta| {
+            match meta_name(&meta).as_str() {
+                "type_name" => b.type_name = Some(meta.value()?.parse::<LitStr>()?.value()),
+                "role" => b.role = Some(meta.value()?.parse()?),
+                "ports" => b.ports = Some(meta.value()?.parse::<LitStr>()?.value()),
+                other => {
+                    return Err(meta.error(format!(
+                        "unknown #[block] item `{other}`: expected type_name, role, ports"
+                    )));
+                }
+            }
+            Ok(())
+        })?;
+        if b.type_name.is_none() || b.role.is_none() || b.ports.is_none() {
+            return Err(syn::Error::new_spanned(
+                a,
+                "#[block] needs type_name = \"…\", role = Role variant, ports = \"…\"",
+            ));
+        }
+        found = Some(b);
+    }
+    Ok(found)
+}
+
+/// `Outer<Inner>`: the generic argument of a one-argument type named `outer`.
+fn generic_of<'a>(ty: &'a Type, outer: &str) -> Option<&'a Type> {
+    let Type::Path(tp) = ty else { return None };
+    let seg = tp.path.segments.last()?;
+    if seg.ident != outer {
+        return None;
+    }
+    let PathArguments::AngleBracketed(args) = &seg.arguments else {
+        return None;
+    };
+    args.args.iter().rev().find_map(|a| match a {
+        GenericArgument::Type(t) => Some(t),
+        _ => None,
+    })
+}
+
+fn last_ident(ty: &Type) -> Option<String> {
+    match ty {
+        Type::Path(tp) if tp.qself.is_none() => {
+            tp.path.segments.last().map(|s| s.ident.to_string())
+        }
+        _ => None,
+    }
+}
+
+fn is_dyn_block(ty: &Type) -> bool {
+    match ty {
+        Type::TraitObject(t) => t.bounds.iter().any(|b| match b {
+            syn::TypeParamBound::Trait(tb) => {
+                tb.path.segments.last().is_some_and(|s| s.ident == "Block")
+            }
+            _ => false,
+        }),
+        _ => false,
+    }
+}
+
+/// An expression building the JSON Schema of a value of type `ty`.
+fn schema_of(ty: &Type) -> TokenStream2 {
+    let d = quote!(::nanomotion_core::doc::__derive);
+    if is_dyn_block(ty) {
+        return quote!(#d::block_ref());
+    }
+    if let Type::Array(arr) = ty {
+        let inner = schema_of(&arr.elem);
+        let len = &arr.len;
+        return quote!(#d::fixed_array(#inner, #len));
+    }
+    if let Type::Reference(r) = ty {
+        return schema_of(&r.elem);
+    }
+    for (outer, f) in [
+        ("Option", quote!(nullable)),
+        ("Vec", quote!(array)),
+        ("VecDeque", quote!(array)),
+        ("BTreeMap", quote!(map)),
+        ("HashMap", quote!(map)),
+    ] {
+        if let Some(inner) = generic_of(ty, outer) {
+            let inner = schema_of(inner);
+            return quote!(#d::#f(#inner));
+        }
+    }
+    if let Some(inner) = generic_of(ty, "Box").or_else(|| generic_of(ty, "Arc")) {
+        return schema_of(inner);
+    }
+    match last_ident(ty).as_deref() {
+        Some("f64" | "f32") => quote!(#d::number()),
+        Some("u8" | "u16" | "u32" | "u64" | "usize") => quote!(#d::unsigned()),
+        Some("i8" | "i16" | "i32" | "i64" | "isize") => quote!(#d::integer()),
+        Some("bool") => quote!(#d::boolean()),
+        Some("String" | "str" | "PathBuf") => quote!(#d::string()),
+        _ => quote!({
+            #[allow(unused_imports)]
+            use #d::{ViaAny as _, ViaSchema as _};
+            (&&#d::Probe::<#ty>::new()).schema()
+        }),
+    }
+}
+
+/// Code checking one bound on the value `access` (an expression of type `&T`).
+fn check_of(
+    ty: &Type,
+    access: TokenStream2,
+    name: TokenStream2,
+    b: &Bound,
+    depth: usize,
+) -> TokenStream2 {
+    let c = quote!(::nanomotion_core::block::check);
+    if let Some(inner) = generic_of(ty, "Option") {
+        let v = format_ident!("__v{depth}");
+        let body = check_of(inner, quote!(#v), name, b, depth + 1);
+        return quote!(if let ::core::option::Option::Some(#v) = #access { #body });
+    }
+    let elem = generic_of(ty, "Vec").or(match ty {
+        Type::Array(a) => Some(&*a.elem),
+        _ => None,
+    });
+    if let Some(inner) = elem {
+        if matches!(b, Bound::Finite) && last_ident(inner).as_deref() == Some("f64") {
+            return quote!(#c::all_finite(#name, #access)?;);
+        }
+        let v = format_ident!("__v{depth}");
+        let i = format_ident!("__i{depth}");
+        let n = format_ident!("__n{depth}");
+        let body = check_of(inner, quote!(#v), quote!(&#n), b, depth + 1);
+        return quote!(for (#i, #v) in (#access).iter().enumerate() {
+            let #n = ::std::format!("{}[{}]", #name, #i);
+            #body
+        });
+    }
+    match b {
+        Bound::Finite => quote!(#c::finite(#name, *#access)?;),
+        Bound::Positive => quote!(#c::positive(#name, *#access)?;),
+        Bound::NonNegative => quote!(#c::non_negative(#name, *#access)?;),
+        Bound::Range(lo, hi) => quote!(#c::in_range(#name, *#access, #lo, #hi)?;),
+        Bound::Width => quote!(#c::width(#name, *#access)?;),
+        Bound::Size(lo, hi) => quote!(#c::size(#name, *#access, #lo, #hi)?;),
+        Bound::AtLeastOne => quote!(#c::at_least_one(#name, *#access)?;),
+    }
+}
+
+/// Code adding a bound to a schema `s` (a `Value` variable) and its text to `t`.
+fn schema_bound(b: &Bound) -> TokenStream2 {
+    let d = quote!(::nanomotion_core::doc::__derive);
+    match b {
+        Bound::Finite => quote!(),
+        Bound::Positive => {
+            quote!(#d::bound(&mut __s, &mut __b, ::core::option::Option::Some(0.0), true, ::core::option::Option::None);)
+        }
+        Bound::NonNegative => {
+            quote!(#d::bound(&mut __s, &mut __b, ::core::option::Option::Some(0.0), false, ::core::option::Option::None);)
+        }
+        Bound::Range(lo, hi) => {
+            quote!(#d::bound(&mut __s, &mut __b, ::core::option::Option::Some((#lo) as f64), false, ::core::option::Option::Some((#hi) as f64));)
+        }
+        Bound::Width => {
+            quote!(#d::bound(&mut __s, &mut __b, ::core::option::Option::Some(1.0), false, ::core::option::Option::Some(::nanomotion_core::block::MAX_WIDTH as f64));)
+        }
+        Bound::Size(lo, hi) => {
+            quote!(#d::bound(&mut __s, &mut __b, ::core::option::Option::Some((#lo) as f64), false, ::core::option::Option::Some((#hi) as f64));)
+        }
+        Bound::AtLeastOne => {
+            quote!(#d::bound(&mut __s, &mut __b, ::core::option::Option::Some(1.0), false, ::core::option::Option::None);)
+        }
+    }
+}
+
+fn rename(name: &str, rule: Option<&str>) -> String {
+    let words: Vec<String> = {
+        // Split a PascalCase variant or snake_case field into lower-case words.
+        let mut w = Vec::new();
+        let mut cur = String::new();
+        for ch in name.chars() {
+            if ch == '_' {
+                if !cur.is_empty() {
+                    w.push(std::mem::take(&mut cur));
+                }
+            } else if ch.is_uppercase() && !cur.is_empty() {
+                w.push(std::mem::take(&mut cur));
+                cur.extend(ch.to_lowercase());
+            } else {
+                cur.extend(ch.to_lowercase());
+            }
+        }
+        if !cur.is_empty() {
+            w.push(cur);
+        }
+        w
+    };
+    match rule {
+        Some("snake_case") => words.join("_"),
+        Some("kebab-case") => words.join("-"),
+        Some("lowercase") => name.to_lowercase(),
+        Some("UPPERCASE") => name.to_uppercase(),
+        Some("SCREAMING_SNAKE_CASE") => words.join("_").to_uppercase(),
+        _ => name.to_string(),
+    }
+}
+
+/// One parameter: its YAML name, the code of its `ParamDoc`, and its checks.
+struct FieldCode {
+    doc: TokenStream2,
+    check: TokenStream2,
+    /// `at_most` checks, run after every field's own bounds.
+    ordering: TokenStream2,
+}
+
+fn field_code(
+    f: &syn::Field,
+    container: &SerdeContainer,
+    with_checks: bool,
+) -> syn::Result<Option<FieldCode>> {
+    let d = quote!(::nanomotion_core::doc::__derive);
+    let sf = serde_field(&f.attrs)?;
+    let pa = param_attr(&f.attrs)?;
+    if sf.skip {
+        return Ok(None);
+    }
+    let ident = f
+        .ident
+        .as_ref()
+        .ok_or_else(|| syn::Error::new_spanned(f, "#[derive(Params)] needs named fields"))?;
+    let name = sf.rename.clone().unwrap_or_else(|| {
+        let s = ident.to_string();
+        s.strip_prefix("r#").unwrap_or(&s).to_string()
+    });
+    let ty = &f.ty;
+    let doc = doc_text(&f.attrs);
+    let is_option = generic_of(ty, "Option").is_some();
+    let default_value = match (&sf.default, container.default, is_option) {
+        (Some(DefaultKind::Path(p)), _, _) => quote!(#d::some_value(&#p())),
+        (Some(DefaultKind::Trait), _, _) => {
+            quote!(#d::some_value(&<#ty as ::core::default::Default>::default()))
+        }
+        (None, true, _) => {
+            quote!(#d::some_value(&<Self as ::core::default::Default>::default().#ident))
+        }
+        (None, false, true) => quote!(::core::option::Option::Some(#d::Value::Null)),
+        (None, false, false) => quote!(::core::option::Option::None),
+    };
+    let default_doc = match &pa.default_doc {
+        Some(s) => quote!(::core::option::Option::Some(#s)),
+        None => quote!(::core::option::Option::None),
+    };
+    let mut schema = match (&pa.schema, sf.custom, sf.flatten) {
+        (Some(p), _, _) => quote!(#p()),
+        (None, true, _) | (None, _, true) => quote!(#d::any()),
+        (None, false, false) => schema_of(ty),
+    };
+    if pa.nested && pa.schema.is_none() {
+        // nested parameter structs describe themselves
+        schema = schema_of(ty);
+    }
+    let bounds: Vec<TokenStream2> = pa.bounds.iter().map(schema_bound).collect();
+    let aliases = &sf.aliases;
+    let flatten = sf.flatten;
+    let doc_code = quote!({
+        let mut __s = #schema;
+        let mut __b: ::std::vec::Vec<::std::string::String> = ::std::vec::Vec::new();
+        #(#bounds)*
+        #d::param(#name, #doc, #default_value, #default_doc, __s, __b, &[#(#aliases),*], #flatten)
+    });
+    let mut check = TokenStream2::new();
+    let mut ordering = TokenStream2::new();
+    if with_checks {
+        for b in &pa.bounds {
+            check.extend(check_of(ty, quote!(&self.#ident), quote!(#name), b, 0));
+        }
+        if let Some(other) = &pa.at_most {
+            let other_name = other.to_string();
+            ordering = quote!(::nanomotion_core::block::check::ordered(#name, self.#ident, #other_name, self.#other)?;);
+        }
+        if pa.nested {
+            if let Some(inner) = generic_of(ty, "Option") {
+                let _ = inner;
+                check.extend(
+                    quote!(if let ::core::option::Option::Some(__v) = &self.#ident {
+                        #d::nested(#name, ::nanomotion_core::doc::Params::check_params(__v))?;
+                    }),
+                );
+            } else {
+                check.extend(quote!(#d::nested(#name, ::nanomotion_core::doc::Params::check_params(&self.#ident))?;));
+            }
+        }
+    }
+    Ok(Some(FieldCode {
+        doc: doc_code,
+        check,
+        ordering,
+    }))
+}
+
+fn expand(input: &DeriveInput) -> syn::Result<TokenStream2> {
+    let d = quote!(::nanomotion_core::doc::__derive);
+    let name = &input.ident;
+    let (impl_g, ty_g, where_g) = input.generics.split_for_impl();
+    let container = serde_container(&input.attrs)?;
+    let block = block_attr(&input.attrs)?;
+    let description = doc_text(&input.attrs);
+
+    let registration = match block {
+        Some(b) => {
+            if !input.generics.params.is_empty() {
+                return Err(syn::Error::new_spanned(
+                    &input.generics,
+                    "#[block] registers one concrete type: no generics",
+                ));
+            }
+            let tag = b.type_name.unwrap_or_default();
+            let role = b.role.expect("checked");
+            let ports = b.ports.unwrap_or_default();
+            let summary = summary_of(&input.attrs, &tag);
+            quote!(::nanomotion_core::__private::inventory::submit! {
+                ::nanomotion_core::BlockDoc {
+                    type_name: #tag,
+                    role: ::nanomotion_core::Role::#role,
+                    summary: #summary,
+                    ports: #ports,
+                    params: <#name as ::nanomotion_core::doc::Params>::param_docs,
+                    closed: <#name as ::nanomotion_core::doc::Params>::CLOSED,
+                }
+            })
+        }
+        None => quote!(),
+    };
+
+    let registration_placeholder = &registration;
+    let (param_docs, checks, schema) = match &input.data {
+        Data::Struct(s) => {
+            let Fields::Named(named) = &s.fields else {
+                return Err(syn::Error::new_spanned(
+                    name,
+                    "#[derive(Params)] needs a struct with named fields",
+                ));
+            };
+            if container.transparent {
+                // `#[serde(transparent)]`: the block is its one field's parameters
+                let Some(inner) = named
+                    .named
+                    .iter()
+                    .find(|f| serde_field(&f.attrs).map(|s| !s.skip).unwrap_or(false))
+                else {
+                    return Err(syn::Error::new_spanned(name, "transparent without a field"));
+                };
+                let ident = &inner.ident;
+                let ty = &inner.ty;
+                let p = quote!(::nanomotion_core::doc::Params);
+                let out = quote!(
+                    impl #impl_g #p for #name #ty_g #where_g {
+                        const CLOSED: bool = <#ty as #p>::CLOSED;
+                        fn param_docs() -> ::std::vec::Vec<::nanomotion_core::ParamDoc> {
+                            <#ty as #p>::param_docs()
+                        }
+                        fn check_params(&self) -> ::core::result::Result<(), ::nanomotion_core::ParamError> {
+                            #p::check_params(&self.#ident)
+                        }
+                    }
+                    impl #impl_g ::nanomotion_core::doc::ParamSchema for #name #ty_g #where_g {
+                        fn param_schema() -> #d::Value {
+                            <#ty as ::nanomotion_core::doc::ParamSchema>::param_schema()
+                        }
+                    }
+                );
+                return Ok(quote!(#out #registration_placeholder));
+            }
+            let mut docs = Vec::new();
+            let mut checks = Vec::new();
+            let mut orderings = Vec::new();
+            for f in &named.named {
+                if let Some(fc) = field_code(f, &container, true)? {
+                    docs.push(fc.doc);
+                    checks.push(fc.check);
+                    orderings.push(fc.ordering);
+                }
+            }
+            checks.extend(orderings);
+            let closed = container.deny_unknown_fields;
+            (
+                quote!(::std::vec![#(#docs),*]),
+                quote!(#(#checks)*),
+                quote!(#d::object(#description, &<Self as ::nanomotion_core::doc::Params>::param_docs(), #closed)),
+            )
+        }
+        Data::Enum(e) => {
+            let rule = container.rename_all.as_deref();
+            let mut variants = Vec::new();
+            for v in &e.variants {
+                let sf = serde_field(&v.attrs)?;
+                if sf.skip {
+                    continue;
+                }
+                let vname = sf
+                    .rename
+                    .clone()
+                    .unwrap_or_else(|| rename(&v.ident.to_string(), rule));
+                let mut names = vec![vname];
+                names.extend(sf.aliases.iter().cloned());
+                let vdoc = doc_text(&v.attrs);
+                let content = match &v.fields {
+                    Fields::Unit => quote!(::core::option::Option::None),
+                    Fields::Unnamed(u) if u.unnamed.len() == 1 => {
+                        let inner = schema_of(&u.unnamed[0].ty);
+                        quote!(::core::option::Option::Some(#inner))
+                    }
+                    Fields::Unnamed(_) => quote!(::core::option::Option::Some(#d::any())),
+                    Fields::Named(named) => {
+                        let vcont = serde_container(&v.attrs)?;
+                        let closed = vcont.deny_unknown_fields || container.deny_unknown_fields;
+                        let mut docs = Vec::new();
+                        for f in &named.named {
+                            if let Some(fc) = field_code(f, &vcont, false)? {
+                                docs.push(fc.doc);
+                            }
+                        }
+                        quote!(::core::option::Option::Some(#d::object(#vdoc, &[#(#docs),*], #closed)))
+                    }
+                };
+                for n in names {
+                    variants.push(quote!(#d::Variant { name: #n, doc: #vdoc, content: #content }));
+                }
+            }
+            let tagging = match (&container.tag, container.untagged) {
+                (Some(t), _) => quote!(#d::Tagging::Internal(#t)),
+                (None, true) => quote!(#d::Tagging::Untagged),
+                (None, false) => quote!(#d::Tagging::External),
+            };
+            let closed = container.deny_unknown_fields;
+            (
+                quote!(::std::vec::Vec::new()),
+                quote!(),
+                quote!(#d::enumeration(#description, #tagging, ::std::vec![#(#variants),*], #closed)),
+            )
+        }
+        Data::Union(_) => {
+            return Err(syn::Error::new_spanned(
+                name,
+                "#[derive(Params)] is for structs and enums",
+            ));
+        }
+    };
+
+    let closed = container.deny_unknown_fields;
+    Ok(quote!(
+        impl #impl_g ::nanomotion_core::doc::Params for #name #ty_g #where_g {
+            const CLOSED: bool = #closed;
+            fn param_docs() -> ::std::vec::Vec<::nanomotion_core::ParamDoc> {
+                #param_docs
+            }
+            #[allow(unused_variables, clippy::needless_borrow)]
+            fn check_params(&self) -> ::core::result::Result<(), ::nanomotion_core::ParamError> {
+                #checks
+                ::core::result::Result::Ok(())
+            }
+        }
+        impl #impl_g ::nanomotion_core::doc::ParamSchema for #name #ty_g #where_g {
+            fn param_schema() -> #d::Value {
+                #schema
+            }
+        }
+        #registration
+    ))
+}
