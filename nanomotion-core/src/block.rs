@@ -203,43 +203,6 @@ pub trait Tunable {
     fn set_params(&mut self, p: &[f64]) -> Result<(), ParamError>;
 }
 
-/// The role a block plays in a loop (for listings and documentation).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
-pub enum Role {
-    /// Reference generators and disturbance/noise sources.
-    Source,
-    /// Feedback and feed-forward controllers.
-    Controller,
-    /// Converts commands into physical drive signals (drivers, amplifiers).
-    Actuator,
-    /// The simulated physical system.
-    Plant,
-    /// Measures a physical quantity (encoders, interferometers, quantisers).
-    Sensor,
-    /// Reconstructs a quantity from measurements (velocity estimation, HOTS).
-    Estimator,
-    /// Learning filters of repetitive/iterative control (L, Q).
-    LearningFilter,
-    /// Arithmetic, routing and filtering.
-    Math,
-}
-
-impl Role {
-    /// Lower-case name of the role.
-    pub fn as_str(self) -> &'static str {
-        match self {
-            Role::Source => "source",
-            Role::Controller => "controller",
-            Role::Actuator => "actuator",
-            Role::Plant => "plant",
-            Role::Sensor => "sensor",
-            Role::Estimator => "estimator",
-            Role::LearningFilter => "learning filter",
-            Role::Math => "math",
-        }
-    }
-}
-
 /// A block of a controller graph. See the [module documentation](self).
 #[typetag::serde(tag = "type")]
 pub trait Block: Send + Debug {
@@ -357,7 +320,7 @@ impl Linearisation {
     }
 }
 
-pub use crate::doc::{BlockDoc, ParamDoc, block_docs};
+pub use crate::doc::{BlockDoc, ParamDoc, Role, block_docs};
 
 /// All block types registered with `typetag` (every linked crate), sorted.
 ///

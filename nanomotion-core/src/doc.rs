@@ -66,10 +66,46 @@
 //! assert_eq!(doc.summary, "y = k·u, element-wise.");
 //! ```
 
-use crate::block::Role;
 use crate::error::ParamError;
 pub use nanomotion_derive::Params;
 use serde_json::{Map, Value, json};
+
+/// The role a block plays in a loop (for listings and documentation).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum Role {
+    /// Reference generators and disturbance/noise sources.
+    Source,
+    /// Feedback and feed-forward controllers.
+    Controller,
+    /// Converts commands into physical drive signals (drivers, amplifiers).
+    Actuator,
+    /// The simulated physical system.
+    Plant,
+    /// Measures a physical quantity (encoders, interferometers, quantisers).
+    Sensor,
+    /// Reconstructs a quantity from measurements (velocity estimation, HOTS).
+    Estimator,
+    /// Learning filters of repetitive/iterative control (L, Q).
+    LearningFilter,
+    /// Arithmetic, routing and filtering.
+    Math,
+}
+
+impl Role {
+    /// Lower-case name of the role.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Role::Source => "source",
+            Role::Controller => "controller",
+            Role::Actuator => "actuator",
+            Role::Plant => "plant",
+            Role::Sensor => "sensor",
+            Role::Estimator => "estimator",
+            Role::LearningFilter => "learning filter",
+            Role::Math => "math",
+        }
+    }
+}
 
 /// A parameter struct (or enum) described by `#[derive(Params)]`.
 pub trait Params {

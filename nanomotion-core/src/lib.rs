@@ -65,10 +65,9 @@ pub use block::MeasuredData;
 // The derive (`nanomotion-derive`) names `::nanomotion_core` paths, in this crate too.
 extern crate self as nanomotion_core;
 
-pub use block::{
-    Block, BlockDoc, BuildContext, Linearisation, ParamDoc, Port, Role, Tick, Tunable,
-};
+pub use block::{Block, BuildContext, Linearisation, Port, Tick, Tunable};
 pub use doc::Params;
+pub use doc::{BlockDoc, ParamDoc, Role};
 pub use error::{GraphError, ParamError};
 pub use graph::{Graph, GraphSpec};
 pub use overrides::Override;
