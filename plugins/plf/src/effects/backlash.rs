@@ -7,7 +7,7 @@ use nanomotion_core::{Block, BuildContext, ParamError, Port, Role, Tick, Tunable
 use serde::{Deserialize, Serialize};
 
 /// `backlash`: PLF effect: play operator of width w: y moves only once u is w/2 past
-/// it, y₀ = u₀; tunable [width].
+/// it, y₀ = u₀; tunable `width`.
 ///
 /// Play operator of width w ≥ 0. The output follows the input only
 /// after the input has moved w/2 past it:

@@ -41,7 +41,7 @@ pub struct CreepTerm {
 #[block(type_name = "creep", role = Actuator, ports = "u -> y")]
 pub struct Creep {
     /// The terms {gain, tau_s}.
-    /// [{gain: k_i ([y]/[u]), tau_s: τ_i (s) > 0}], 1 to 4 terms.
+    /// [{gain: k_i (unit of y per unit of u), tau_s: τ_i (s) > 0}], 1 to 4 terms.
     pub terms: Vec<CreepTerm>,
     #[serde(skip)]
     a: [f64; MAX_TERMS],

@@ -10,7 +10,7 @@ use serde::{Deserialize, Serialize};
 pub const MAX_DELAY_SAMPLES: f64 = 1e6;
 
 /// `time_delay`: PLF effect: y(t) = u(t − delay_s), fractional delays by linear
-/// interpolation, samples before the start = first input; tunable [delay_s].
+/// interpolation, samples before the start = first input; tunable `delay_s`.
 ///
 /// Y(t) = u(t − τ), τ = `delay_s`. With τ/dt = n + f (n integer,
 /// 0 ≤ f < 1) the output is the linear interpolation (1 − f)·u_{k−n} + f·u_{k−n−1}
