@@ -65,8 +65,8 @@ pub struct Options {
     /// Worker threads for candidate fits (default 2).
     pub threads: usize,
     /// Let the nominal model's own parameters compete with the effects
-    /// (default true): the gain and time scale of every continuous
-    /// `state_space` block (see [`Calibration`]).
+    /// (default true): the gain and the time, damping and lag scales of
+    /// every continuous `state_space` block (see [`Calibration`]).
     pub calibrate: bool,
 }
 
