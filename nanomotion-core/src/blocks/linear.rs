@@ -454,6 +454,15 @@ pub struct StateSpaceBlock {
     #[serde(default = "unity", skip_serializing_if = "is_unity")]
     #[param(positive)]
     pub lag_scale: f64,
+    /// Calibration frequency scales of the 2nd, 3rd and 4th complex pole pair
+    /// (ranked by natural frequency) of a continuous model, each relative to
+    /// the time scale: that mode's own time scale — its poles × the scale,
+    /// damping ratio and static contribution kept (see
+    /// `lti::linalg::rescale_modes_each`); missing entries are 1 (must stay 1
+    /// for a discrete model).
+    #[serde(default, skip_serializing_if = "all_unity")]
+    #[param(positive)]
+    pub mode_frequency_scales: Vec<f64>,
     #[serde(skip)]
     core: Option<LinearCore>,
     /// The sample period the block was built for (re-realised by `set_params`).
@@ -468,6 +477,20 @@ fn unity() -> f64 {
 fn is_unity(v: &f64) -> bool {
     *v == 1.0
 }
+
+fn all_unity(v: &[f64]) -> bool {
+    v.iter().all(is_unity)
+}
+
+/// The calibration names of the pairs after the first that carry their own
+/// frequency scale (`mode_frequency_scales`, in order): at most three, since
+/// modes far above the first are weakly seen in a record and each scale
+/// costs the fit runs and the score a parameter.
+const MODE_SCALE_NAMES: [&str; 3] = [
+    "mode_2_frequency_scale",
+    "mode_3_frequency_scale",
+    "mode_4_frequency_scale",
+];
 
 impl StateSpaceBlock {
     /// A block running the model `sys` (continuous models are discretised with
@@ -491,6 +514,7 @@ impl StateSpaceBlock {
             frequency_scale: 1.0,
             damping_scale: 1.0,
             lag_scale: 1.0,
+            mode_frequency_scales: Vec::new(),
             core: None,
             built_dt: None,
         }
@@ -511,7 +535,11 @@ impl StateSpaceBlock {
             ));
         }
         self.check_params()?;
-        for (name, v) in self.continuous_scales() {
+        let mode_scales = self
+            .mode_frequency_scales
+            .iter()
+            .map(|&v| ("mode_frequency_scales", v));
+        for (name, v) in self.continuous_scales().into_iter().chain(mode_scales) {
             if self.discrete && v != 1.0 {
                 return Err(ParamError::new(
                     name,
@@ -522,16 +550,21 @@ impl StateSpaceBlock {
         }
         let lambda = self.frequency_scale;
         let a_raw = matrix_from_rows("a", &self.a, n, n)?;
-        let a = lti::linalg::rescale_modes(&a_raw, self.damping_scale, self.lag_scale).ok_or_else(
-            || {
-                ParamError::new(
-                    "damping_scale",
-                    "A's modes cannot be moved (a repeated mode: A is not diagonalisable)",
-                    "keep damping_scale and lag_scale at 1 for this model",
-                )
-            },
-        )? * lambda;
-        let b = matrix_from_rows("b", &self.b, n, m)? * (lambda * self.gain);
+        let (a, input_map) = lti::linalg::rescale_modes_each(
+            &a_raw,
+            self.damping_scale,
+            self.lag_scale,
+            &self.mode_frequency_scales,
+        )
+        .ok_or_else(|| {
+            ParamError::new(
+                "damping_scale",
+                "A's modes cannot be moved (a repeated mode: A is not diagonalisable)",
+                "keep damping_scale, lag_scale and mode_frequency_scales at 1 for this model",
+            )
+        })?;
+        let a = a * lambda;
+        let b = input_map * matrix_from_rows("b", &self.b, n, m)? * (lambda * self.gain);
         let c = matrix_from_rows("c", &self.c, p, n)?;
         let d = if self.d.is_empty() {
             DMatrix::zeros(p, m)
@@ -569,7 +602,8 @@ impl StateSpaceBlock {
     /// The calibration parameters this model offers: the gain always; the
     /// time scale of a continuous model; its damping scale when it has a
     /// complex pole pair; its lag scale when it has real poles beside
-    /// complex ones (with real poles alone the time scale moves them).
+    /// complex ones (with real poles alone the time scale moves them); a
+    /// frequency scale for each pair after the first (up to the fourth).
     fn calibration_names(&self) -> Vec<&'static str> {
         let mut v = vec!["gain"];
         if self.discrete {
@@ -584,12 +618,20 @@ impl StateSpaceBlock {
                 if kinds.lag {
                     v.push("lag_scale");
                 }
+                let higher = kinds.pairs.saturating_sub(1).min(MODE_SCALE_NAMES.len());
+                v.extend_from_slice(&MODE_SCALE_NAMES[..higher]);
             }
         }
         v
     }
 
     fn calibration_slot(&mut self, name: &str) -> &mut f64 {
+        if let Some(j) = MODE_SCALE_NAMES.iter().position(|&n| n == name) {
+            if self.mode_frequency_scales.len() <= j {
+                self.mode_frequency_scales.resize(j + 1, 1.0);
+            }
+            return &mut self.mode_frequency_scales[j];
+        }
         match name {
             "frequency_scale" => &mut self.frequency_scale,
             "damping_scale" => &mut self.damping_scale,
@@ -645,8 +687,8 @@ controller_impl!(StateSpaceBlock);
 
 /// The calibration of a plant model: `[gain]` for a discrete model; for a
 /// continuous one `[gain, frequency_scale]`, then `damping_scale` when it has
-/// a complex pole pair and `lag_scale` when it also has real poles (see the
-/// fields). A built block is re-realised at once (outside any tick: it
+/// a complex pole pair, `lag_scale` when it also has real poles and
+/// `mode_K_frequency_scale` for its pairs K = 2…4 (see the fields). A built block is re-realised at once (outside any tick: it
 /// allocates).
 impl crate::Tunable for StateSpaceBlock {
     fn param_names(&self) -> Vec<String> {
@@ -656,11 +698,13 @@ impl crate::Tunable for StateSpaceBlock {
             .collect()
     }
     fn params(&self) -> Vec<f64> {
-        let value = |n: &str| {
-            self.continuous_scales()
+        let value = |n: &str| match MODE_SCALE_NAMES.iter().position(|&m| m == n) {
+            Some(j) => self.mode_frequency_scales.get(j).copied().unwrap_or(1.0),
+            None => self
+                .continuous_scales()
                 .iter()
                 .find(|(name, _)| *name == n)
-                .map_or(self.gain, |(_, v)| *v)
+                .map_or(self.gain, |(_, v)| *v),
         };
         self.calibration_names().into_iter().map(value).collect()
     }

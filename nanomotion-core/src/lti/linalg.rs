@@ -375,6 +375,8 @@ pub struct ModeKinds {
     pub oscillatory: bool,
     /// At least one real eigenvalue away from zero.
     pub lag: bool,
+    /// Number of complex pole pairs (oscillatory modes).
+    pub pairs: usize,
 }
 
 /// Whether an eigenvalue counts as a complex pair's member (|Im λ| above
@@ -387,8 +389,13 @@ fn is_oscillatory(l: Complex<f64>) -> bool {
 pub fn mode_kinds(a: &DMatrix<f64>) -> ModeKinds {
     let ev = eigvals(a);
     let scale = ev.iter().fold(0.0f64, |m, l| m.max(l.norm()));
+    let pairs = ev
+        .iter()
+        .filter(|&&l| is_oscillatory(l) && l.im > 0.0)
+        .count();
     ModeKinds {
-        oscillatory: ev.iter().any(|&l| is_oscillatory(l)),
+        oscillatory: pairs > 0,
+        pairs,
         lag: ev
             .iter()
             .any(|&l| !is_oscillatory(l) && l.re.abs() > 1e-9 * scale.max(f64::MIN_POSITIVE)),
@@ -405,23 +412,72 @@ pub fn mode_kinds(a: &DMatrix<f64>) -> ModeKinds {
 /// integrator with a non-unit lag scale), when the scales are not positive and
 /// finite, or on non-finite entries.
 pub fn rescale_modes(a: &DMatrix<f64>, damping_scale: f64, lag_scale: f64) -> Option<DMatrix<f64>> {
+    rescale_modes_each(a, damping_scale, lag_scale, &[]).map(|(a, _)| a)
+}
+
+/// [`rescale_modes`], and then the 2nd, 3rd, … complex pair (ranked by
+/// natural frequency |λ|) given its own time scale `higher_pairs[0]`,
+/// `higher_pairs[1]`, …: that mode's term H_k(s) of the partial fractions
+/// becomes H_k(s/s_k) — its poles × s_k, its damping ratio and its static
+/// contribution kept, as the model's time scale does for every mode. Returns
+/// A' and the input map T (B ← T·B: the mode's residues × s_k). With the
+/// model's time scale this is a frequency per mode: the calibration of a
+/// model whose second mode is off by itself. Pairs beyond the list, and
+/// pairs of equal |λ| (which share a rank), keep their frequency.
+pub fn rescale_modes_each(
+    a: &DMatrix<f64>,
+    damping_scale: f64,
+    lag_scale: f64,
+    higher_pairs: &[f64],
+) -> Option<(DMatrix<f64>, DMatrix<f64>)> {
     let positive = |v: f64| v.is_finite() && v > 0.0;
-    if !a.is_square() || !positive(damping_scale) || !positive(lag_scale) {
+    if !a.is_square()
+        || !positive(damping_scale)
+        || !positive(lag_scale)
+        || !higher_pairs.iter().all(|&s| positive(s))
+    {
         return None;
     }
-    if damping_scale == 1.0 && lag_scale == 1.0 {
-        return Some(a.clone());
+    if damping_scale == 1.0 && lag_scale == 1.0 && higher_pairs.iter().all(|&s| s == 1.0) {
+        return Some((a.clone(), DMatrix::identity(a.nrows(), a.nrows())));
     }
     let n = a.nrows();
     let ev = eigvals(a);
     if ev.iter().any(|l| !l.re.is_finite() || !l.im.is_finite()) {
         return None;
     }
-    let moved: Vec<Complex<f64>> = ev
+    // A pair's rank: how many pairs have a smaller natural frequency (the
+    // conjugates share it: same |λ|, compared with a relative tolerance).
+    let upper: Vec<f64> = ev
+        .iter()
+        .filter(|&&l| is_oscillatory(l) && l.im > 0.0)
+        .map(|l| l.norm())
+        .collect();
+    let rank = |l: Complex<f64>| {
+        let r = l.norm();
+        upper.iter().filter(|&&u| u < r * (1.0 - 1e-9)).count()
+    };
+    // Per eigenvalue: its own time scale (1 but for the higher pairs).
+    let own_scale: Vec<f64> = ev
         .iter()
         .map(|&l| {
             if is_oscillatory(l) {
-                Complex::new(damping_scale * l.re, l.im)
+                rank(l)
+                    .checked_sub(1)
+                    .and_then(|j| higher_pairs.get(j))
+                    .copied()
+                    .unwrap_or(1.0)
+            } else {
+                1.0
+            }
+        })
+        .collect();
+    let moved: Vec<Complex<f64>> = ev
+        .iter()
+        .zip(&own_scale)
+        .map(|(&l, &s)| {
+            if is_oscillatory(l) {
+                Complex::new(damping_scale * l.re, l.im) * s
             } else {
                 Complex::new(lag_scale * l.re, 0.0)
             }
@@ -454,15 +510,21 @@ pub fn rescale_modes(a: &DMatrix<f64>, damping_scale: f64, lag_scale: f64) -> Op
         return None;
     }
     let lambda = DMatrix::from_diagonal(&DVector::from_vec(moved));
-    let out = &v * lambda * v_inv;
+    let out = &v * lambda * &v_inv;
     let a_scale = a.amax().max(f64::MIN_POSITIVE);
-    if out
-        .iter()
-        .any(|z| z.im.is_nan() || z.im.abs() > 1e-8 * a_scale)
-    {
+    let input_map =
+        &v * DMatrix::from_diagonal(&DVector::from_iterator(
+            n,
+            own_scale.iter().map(|&s| Complex::new(s, 0.0)),
+        )) * &v_inv;
+    let complex_part = |m: &DMatrix<Complex<f64>>, scale: f64| {
+        m.iter().any(|z| z.im.is_nan() || z.im.abs() > 1e-8 * scale)
+    };
+    let map_scale = own_scale.iter().fold(1.0f64, |m, &s| m.max(s));
+    if complex_part(&out, a_scale) || complex_part(&input_map, map_scale) {
         return None;
     }
-    Some(out.map(|z| z.re))
+    Some((out.map(|z| z.re), input_map.map(|z| z.re)))
 }
 
 /// Complex linear solve `M X = R` for a complex square `M`.
@@ -510,7 +572,8 @@ mod tests {
                 mode_kinds(&a),
                 ModeKinds {
                     oscillatory: true,
-                    lag: true
+                    lag: true,
+                    pairs: 1
                 }
             );
         }
@@ -530,10 +593,69 @@ mod tests {
             mode_kinds(&DMatrix::from_row_slice(1, 1, &[0.0])),
             ModeKinds {
                 oscillatory: false,
-                lag: false
+                lag: false,
+                pairs: 0
             }
         );
         assert_eq!(rescale_modes(&free_mass, -1.0, 1.0), None);
+    }
+
+    #[test]
+    fn rescale_modes_each_moves_one_pair_by_itself() {
+        // Two pairs (ω 10 and 40) and a lag behind a similarity T: scaling the
+        // second pair by s moves only its 2 × 2 block, A₂ → s·A₂ (both σ and
+        // ω_d × s), after the damping scale, and its inputs B₂ → s·B₂ (the
+        // time scale of that mode alone); the first pair and the lag follow
+        // `rescale_modes`. The pair ranking follows |λ|, not the order of the
+        // blocks (the faster pair is placed first).
+        let pair =
+            |w: f64, z: f64| DMatrix::from_row_slice(2, 2, &[0.0, 1.0, -w * w, -2.0 * z * w]);
+        let (slow, fast) = (pair(10.0, 0.05), pair(40.0, 0.02));
+        let (d, l, s) = (1.2, 0.9, 1.07);
+        let shift =
+            |m: &DMatrix<f64>, w: f64, z: f64| m + DMatrix::identity(2, 2) * ((d - 1.0) * (-z * w));
+        let mut blk = DMatrix::zeros(5, 5);
+        let mut want_blk = DMatrix::zeros(5, 5);
+        blk.view_mut((0, 0), (2, 2)).copy_from(&fast);
+        blk.view_mut((2, 2), (2, 2)).copy_from(&slow);
+        blk[(4, 4)] = -7.0;
+        want_blk
+            .view_mut((0, 0), (2, 2))
+            .copy_from(&(shift(&fast, 40.0, 0.02) * s));
+        want_blk
+            .view_mut((2, 2), (2, 2))
+            .copy_from(&shift(&slow, 10.0, 0.05));
+        want_blk[(4, 4)] = -7.0 * l;
+        let t = DMatrix::from_fn(5, 5, |i, j| {
+            if i == j {
+                2.0
+            } else {
+                0.1 * (i as f64 - 0.5 * j as f64)
+            }
+        });
+        let t_inv = t.clone().try_inverse().unwrap();
+        let a = &t * &blk * &t_inv;
+        let want = &t * &want_blk * &t_inv;
+        let (got, input_map) = rescale_modes_each(&a, d, l, &[s]).unwrap();
+        assert!(close(&got, &want, 1e-9), "{got} vs {want}");
+        // B ← T·B scales that mode's inputs by s: its residues × s, so its
+        // term H₂(s) becomes H₂(s/s₂) and its static contribution is kept.
+        let mut want_map = DMatrix::identity(5, 5);
+        want_map.view_mut((0, 0), (2, 2)).scale_mut(s);
+        let want_map = &t * want_map * &t_inv;
+        assert!(
+            close(&input_map, &want_map, 1e-9),
+            "{input_map} vs {want_map}"
+        );
+        assert_eq!(mode_kinds(&a).pairs, 2);
+        // Unit scales everywhere give A back; a scale beyond the pairs is unused.
+        assert_eq!(
+            rescale_modes_each(&a, 1.0, 1.0, &[1.0]).map(|(m, _)| m),
+            Some(a.clone())
+        );
+        let (only_first, _) = rescale_modes_each(&a, d, l, &[1.0, 1.3]).unwrap();
+        assert!(close(&only_first, &rescale_modes(&a, d, l).unwrap(), 1e-12));
+        assert_eq!(rescale_modes_each(&a, 1.0, 1.0, &[0.0]), None);
     }
 
     #[test]

@@ -607,6 +607,13 @@ pub fn lattice(y: &[f64]) -> Option<(f64, f64)> {
     if m_hi - m_lo >= 5f64.ln() && cut >= 3 {
         thresholds.push((0.5 * (lg[cut] + lg[cut + 1])).exp());
     }
+    // A digital reading without noise repeats its levels exactly: the spacings
+    // inside a level are zero (filtered out above), so every positive spacing
+    // is a gap between levels and any threshold below the smallest one splits.
+    let repeats = v.len() - 1 - n;
+    if repeats >= n {
+        thresholds.push(0.5 * lg[n - 1].exp());
+    }
     thresholds
         .into_iter()
         .find_map(|threshold| grid_at(&v, threshold))
@@ -1049,6 +1056,16 @@ mod tests {
             .map(|k| 1e-4 * (k as f64 / 8400.0 * 7.0).sin() + 2e-9 * rng.normal())
             .collect();
         assert_eq!(lattice(&smooth), None);
+        // A noiseless digital reading repeats its levels exactly (no spread
+        // inside a level): 41 levels of 0.05, each held for many samples.
+        let held: Vec<f64> = (0..4000)
+            .map(|k| ((k as f64 * 0.0017).sin() / 0.05).round() * 0.05)
+            .collect();
+        let (qh, oh) = lattice(&held).expect("a grid without noise");
+        assert!(
+            (qh / 0.05 - 1.0).abs() < 1e-9 && (oh.min(0.05 - oh)).abs() < 1e-9,
+            "{qh} {oh}"
+        );
         let noise: Vec<f64> = (0..8400).map(|_| rng.normal()).collect();
         assert_eq!(lattice(&noise), None);
     }
