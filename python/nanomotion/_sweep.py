@@ -80,27 +80,30 @@ def sweep(study: str | os.PathLike[str], *, engine: str = "local", out: str | os
         raise _nm.SweepError("engine=\"ray\" needs the `ray` package (fix: pip install ray)") from e
     import time
 
-    planned, todo, _hash = _nm.sweep_pending(str(path), str(out_dir), restart=restart)
-    resumed = planned - len(todo)
-    if limit is not None:
-        todo = todo[:limit]
-    start = time.perf_counter()
-    computed = 0
-    if todo:
-        if not ray.is_initialized():
-            ray.init()
-        cpus = max(1, int(ray.cluster_resources().get("CPU", 1)))
-        size = chunk_size or max(1, math.ceil(len(todo) / (4 * cpus)))
-        chunks = [todo[i:i + size] for i in range(0, len(todo), size)]
-        body = task or run_chunk
-        remote = ray.remote(num_cpus=1, max_retries=max_retries)(body)
-        pending = [remote.remote(str(path), chunk) for chunk in chunks]
-        while pending:
-            done, pending = ray.wait(pending, num_returns=1)
-            for ref in done:
-                computed += _nm.sweep_append(str(path), str(out_dir), ray.get(ref))
-    wall = time.perf_counter() - start
-    s = _nm.sweep_write(str(path), str(out_dir))
+    # The folder is locked for the whole study, as `nanomotion sweep` does: a
+    # second sweep into it (CLI, local or another driver) is refused meanwhile.
+    with _nm.sweep_lock(str(out_dir)):
+        planned, todo, _hash = _nm.sweep_pending(str(path), str(out_dir), restart=restart)
+        resumed = planned - len(todo)
+        if limit is not None:
+            todo = todo[:limit]
+        start = time.perf_counter()
+        computed = 0
+        if todo:
+            if not ray.is_initialized():
+                ray.init()
+            cpus = max(1, int(ray.cluster_resources().get("CPU", 1)))
+            size = chunk_size or max(1, math.ceil(len(todo) / (4 * cpus)))
+            chunks = [todo[i:i + size] for i in range(0, len(todo), size)]
+            body = task or run_chunk
+            remote = ray.remote(num_cpus=1, max_retries=max_retries)(body)
+            pending = [remote.remote(str(path), chunk) for chunk in chunks]
+            while pending:
+                done, pending = ray.wait(pending, num_returns=1)
+                for ref in done:
+                    computed += _nm.sweep_append(str(path), str(out_dir), ray.get(ref))
+        wall = time.perf_counter() - start
+        s = _nm.sweep_write(str(path), str(out_dir))
     s.update(resumed=resumed, computed=computed, wall_s=wall)
     return SweepSummary(**s, out=str(out_dir), engine="ray")
 

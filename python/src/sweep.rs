@@ -115,6 +115,47 @@ fn sweep_write<'py>(py: Python<'py>, path: PathBuf, out: PathBuf) -> PyResult<Bo
     summary_dict(py, &summary)
 }
 
+/// The lock of a sweep's output folder held by a Python engine for the whole
+/// study (the CLI's `FolderLock`): a second sweep into the same folder — from
+/// the CLI, `engine="local"` or another Ray driver — is refused while it is
+/// held. A context manager; released on `release()`, on leaving the `with`
+/// block, or when collected.
+#[pyclass(name = "SweepLock", module = "nanomotion._nanomotion")]
+struct SweepLock {
+    lock: Option<nanomotion::output::FolderLock>,
+}
+
+#[pymethods]
+impl SweepLock {
+    /// Release the lock (idempotent).
+    fn release(&mut self) {
+        self.lock.take();
+    }
+    /// Whether the lock is still held.
+    #[getter]
+    fn held(&self) -> bool {
+        self.lock.is_some()
+    }
+    fn __enter__(slf: PyRef<'_, Self>) -> PyRef<'_, Self> {
+        slf
+    }
+    #[pyo3(signature = (*_exc))]
+    fn __exit__(&mut self, _exc: &Bound<'_, pyo3::types::PyTuple>) -> bool {
+        self.release();
+        false
+    }
+}
+
+/// Lock the output folder `out` of a sweep (created if missing) as
+/// `nanomotion sweep` does: a folder of the user's that is not a sweep's is
+/// refused, and so is a folder another sweep is writing.
+#[pyfunction]
+fn sweep_lock(out: PathBuf) -> PyResult<SweepLock> {
+    nanomotion::output::refuse_foreign(&out, &[sweep::ROWS_FILE], "empty it").map_err(sweep_err)?;
+    let lock = nanomotion::output::FolderLock::acquire(&out).map_err(sweep_err)?;
+    Ok(SweepLock { lock: Some(lock) })
+}
+
 /// `nanomotion sweep` in-process: plan, resume, run the rest on `jobs` rayon
 /// threads (0: all cores), write the table and plots.
 #[pyfunction]
@@ -147,5 +188,7 @@ pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(sweep_append, m)?)?;
     m.add_function(wrap_pyfunction!(sweep_write, m)?)?;
     m.add_function(wrap_pyfunction!(sweep_local, m)?)?;
+    m.add_function(wrap_pyfunction!(sweep_lock, m)?)?;
+    m.add_class::<SweepLock>()?;
     Ok(())
 }

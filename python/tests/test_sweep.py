@@ -106,3 +106,21 @@ def test_bad_study_and_engine_raise_sweep_errors(tmp_path, study):
         nm.sweep(bad, out=tmp_path / "o")
     with pytest.raises(nm.SweepError, match="engine `dask`"):
         nm.sweep(study, engine="dask", out=tmp_path / "o")
+
+
+def test_a_locked_output_folder_is_refused_until_released(study, tmp_path):
+    # The Ray engine holds the folder's lock for the whole study (as the CLI
+    # does): while a lock is held, another sweep into the folder is refused
+    # with the lock named; after release it runs.
+    from nanomotion import _nanomotion as _nm
+
+    out = tmp_path / "locked"
+    with _nm.sweep_lock(str(out)) as lock:
+        assert lock.held
+        assert (out / ".nanomotion.lock").exists()
+        with pytest.raises(nm.SweepError, match="being written by another nanomotion process"):
+            nm.sweep(study, engine="local", out=out, jobs=1, limit=1)
+    assert not lock.held
+    assert not (out / ".nanomotion.lock").exists()
+    s = nm.sweep(study, engine="local", out=out, jobs=1, limit=1)
+    assert s.computed == 1
