@@ -157,8 +157,7 @@ pub const HW_INPUT: &str = "hw_input";
 pub const HW_OUTPUT: &str = "hw_output";
 
 /// `hw_input`: the device channel named like this block, sampled at the start of
-/// every tick (`y`, in `unit`). Without a device (`nanomotion run`) it holds
-/// `initial`.
+/// every tick (`y`, in `unit`). Without a device (`nanomotion run`) it outputs 0.
 #[derive(Debug, Clone, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
 #[block(type_name = "hw_input", role = Sensor, ports = "-> y")]
@@ -166,10 +165,6 @@ pub struct HwInput {
     /// SI unit of the channel (`m`), checked against the device's when both are known.
     #[serde(default)]
     pub unit: Option<String>,
-    /// Value before the first sample, and in simulations.
-    #[serde(default)]
-    #[param(finite)]
-    pub initial: f64,
 }
 
 #[typetag::serde(name = "hw_input")]
@@ -184,13 +179,9 @@ impl Block for HwInput {
     fn build(&mut self, _ctx: &BuildContext) -> Result<(), ParamError> {
         self.check_params()
     }
-    fn output(&mut self, tick: Tick, _u: &[f64], y: &mut [f64]) {
-        // The runner writes the device's sample into `y` before each tick
-        // (`Scheduler::write`); the block itself only sets the initial value.
-        if tick.k == 0 {
-            y[0] = self.initial;
-        }
-    }
+    /// Writes nothing: the runner puts the device's sample into `y` before each
+    /// tick (`Scheduler::write`), and the block holds it.
+    fn output(&mut self, _tick: Tick, _u: &[f64], _y: &mut [f64]) {}
     fn role(&self) -> Role {
         Role::Sensor
     }

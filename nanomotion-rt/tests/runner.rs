@@ -84,7 +84,8 @@ impl Device for TestDevice {
         if self.reads_ns.len() < self.reads_ns.capacity() {
             self.reads_ns.push(clock::now_ns());
         }
-        inputs[0] = self.tick as f64;
+        // Tick k reads k + 1 (so that tick 0's sample is not 0).
+        inputs[0] = (self.tick + 1) as f64;
         Ok(())
     }
     fn write(&mut self, now_ns: u64, outputs: &[f64]) -> Result<(), DeviceError> {
@@ -152,9 +153,10 @@ fn the_grid_is_held_over_ten_thousand_ticks_at_10_khz() {
     assert_eq!(report.wakeup_latency.count, n);
     assert_eq!(report.execution.count, n);
     assert_eq!(report.period.count, n - 1);
+    assert_eq!(report.period_jitter.count, n - 1);
     // Each output is what the graph computes from the input of the same tick.
     for (k, &y) in r.device().written.iter().enumerate() {
-        assert_eq!(y, 2.0 * k as f64 + 1.5, "tick {k}");
+        assert_eq!(y, 2.0 * (k + 1) as f64 + 1.5, "tick {k}");
     }
     assert_eq!(r.device().safe_calls, 1);
 }
