@@ -328,6 +328,10 @@ enum Command {
     /// real-time loop, its `hw_input`/`hw_output` blocks in shared memory
     /// (`/dev/shm/nanomotion-NAME`), until the controller leaves.
     Plant(rt_cmd::PlantArgs),
+    /// Re-run a controller graph on the hardware inputs recorded by `nanomotion rt
+    /// --record` (RUN.mcap) and check that it reproduces the recorded outputs bit
+    /// for bit.
+    Replay(rt_cmd::ReplayArgs),
     /// Print the JSON Schema of a graph file (every registered block type), for
     /// editors: `nanomotion schema > graph.schema.json` (see docs/graph-format.md).
     Schema,
@@ -431,6 +435,7 @@ fn main() -> ExitCode {
         } => sweep_cmd::sweep(&study, out, jobs, restart, limit),
         Command::Rt(a) => rt_cmd::rt(a),
         Command::Plant(a) => rt_cmd::plant(a),
+        Command::Replay(a) => rt_cmd::replay(a),
         Command::Blocks { filter } => blocks(filter.as_deref()),
         Command::Schema => serde_json::to_string_pretty(&nanomotion::core::doc::graph_schema())
             .map(|text| say!("{text}"))

@@ -52,6 +52,10 @@ pub struct Loop {
     /// Replace a non-empty output folder that does not hold a previous run.
     #[arg(long)]
     force: bool,
+    /// Record every hardware input and output sample into OUT/run.mcap (for
+    /// Foxglove/PlotJuggler and `nanomotion replay`); needs --out.
+    #[arg(long, requires = "out")]
+    record: bool,
 }
 
 /// `nanomotion rt`.
@@ -86,7 +90,8 @@ pub struct PlantArgs {
 }
 
 fn build(graph: &Path, lp: &Loop) -> Result<Scheduler, String> {
-    let mut spec = GraphSpec::from_file_with_overrides(graph, &lp.set).map_err(|e| e.to_string())?;
+    let mut spec =
+        GraphSpec::from_file_with_overrides(graph, &lp.set).map_err(|e| e.to_string())?;
     if let Some(d) = lp.duration {
         spec.duration_s = d;
     }
@@ -151,7 +156,11 @@ fn status(stop: std::sync::Arc<std::sync::atomic::AtomicBool>, rate_hz: f64) -> 
                 );
             }
             Event::Overrun { tick, late_ns } if tty => {
-                eprint!("\r  overrun at tick {tick}: {:.1} µs late{:40}\n", late_ns as f64 * 1e-3, "");
+                eprint!(
+                    "\r  overrun at tick {tick}: {:.1} µs late{:40}\n",
+                    late_ns as f64 * 1e-3,
+                    ""
+                );
             }
             _ => {}
         }
@@ -168,6 +177,7 @@ fn run_loop<D: Device>(
 ) -> Result<(TimingReport, Scheduler, nanomotion_rt::Timing), String> {
     let cfg = RtConfig {
         ticks,
+        record: lp.record,
         ..config(lp)?
     };
     let rate = sched.base_rate_hz();
@@ -187,6 +197,10 @@ fn run_loop<D: Device>(
         eprintln!();
     }
     let timing = runner.timing().clone();
+    if let (Some(folder), Some(rec)) = (&folder, runner.recording()) {
+        nanomotion_rt::write_mcap(&folder.dir().join("run.mcap"), rec)
+            .map_err(|e| e.to_string())?;
+    }
     let (sched, _device) = runner.into_parts();
     print_report(&report);
     if let Some(folder) = folder {
@@ -201,7 +215,13 @@ fn run_loop<D: Device>(
                     stability_gate: &[],
                 }))
                 .map_err(|e| e.to_string())?;
-            say!("wrote {} files to {}", files.len(), lp.out.as_ref().map_or(String::new(), |p| p.display().to_string()));
+            say!(
+                "wrote {} files to {}",
+                files.len(),
+                lp.out
+                    .as_ref()
+                    .map_or(String::new(), |p| p.display().to_string())
+            );
         }
     }
     Ok((report, sched, timing))
@@ -245,7 +265,8 @@ fn print_report(r: &TimingReport) {
             us(s.p99_ns),
             us(s.p999_ns),
             us(s.max_ns),
-            s.mean_ns.map_or("-".to_string(), |m| format!("{:.2}", m * 1e-3))
+            s.mean_ns
+                .map_or("-".to_string(), |m| format!("{:.2}", m * 1e-3))
         );
     }
 }
@@ -315,7 +336,10 @@ pub fn rt(a: RtArgs) -> Result<(), String> {
                 ));
             };
             if !(a.connect_timeout.is_finite() && a.connect_timeout >= 0.0) {
-                return Err(format!("--connect-timeout {}: must be ≥ 0 s", a.connect_timeout));
+                return Err(format!(
+                    "--connect-timeout {}: must be ≥ 0 s",
+                    a.connect_timeout
+                ));
             }
             let dev = ShmDevice::connect(
                 name,
@@ -382,5 +406,48 @@ pub fn plant(a: PlantArgs) -> Result<(), String> {
     match report.stopped {
         Stop::Completed | Stop::Interrupted | Stop::Device(DeviceError::Closed(_)) => Ok(()),
         other => Err(format!("{}: {other}", a.graph.display())),
+    }
+}
+
+/// `nanomotion replay`.
+#[derive(clap::Args, Debug)]
+pub struct ReplayArgs {
+    /// A recording written by `nanomotion rt --record` (OUT/run.mcap).
+    recording: PathBuf,
+    /// The controller graph that was recorded (YAML).
+    graph: PathBuf,
+    /// Override a graph parameter before building (repeatable): replaying with a
+    /// changed gain shows where the outputs part.
+    #[arg(long = "set", value_name = "PATH=VALUE")]
+    set: Vec<Override>,
+}
+
+/// `nanomotion replay RUN.mcap GRAPH`: the recorded inputs through the graph,
+/// outputs compared bit for bit.
+pub fn replay(a: ReplayArgs) -> Result<(), String> {
+    nanomotion_rt::link_blocks();
+    let rec = nanomotion_rt::read_mcap(&a.recording).map_err(|e| e.to_string())?;
+    let mut spec =
+        GraphSpec::from_file_with_overrides(&a.graph, &a.set).map_err(|e| e.to_string())?;
+    spec.duration_s = rec.ticks() as f64 / rec.rate_hz;
+    let (mut sched, _) = spec.build().map_err(|e| e.to_string())?;
+    let r = nanomotion_rt::replay(&mut sched, &rec).map_err(|e| e.to_string())?;
+    match &r.first {
+        None => {
+            say!(
+                "{}: replayed {} ticks through {}: all {} output samples bit-identical",
+                a.recording.display(),
+                r.ticks,
+                a.graph.display(),
+                r.compared
+            );
+            Ok(())
+        }
+        Some((tick, channel, want, got)) => Err(format!(
+            "{}: {} of {} output samples differ; first at tick {tick}, `{channel}`: recorded {want:e}, replayed {got:e} (the graph or its parameters are not the ones recorded)",
+            a.recording.display(),
+            r.mismatches,
+            r.compared
+        )),
     }
 }

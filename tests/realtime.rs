@@ -32,16 +32,20 @@ fn the_quickstart_split_in_two_processes_tracks_like_the_simulation() {
     // Two processes: the stage served by `nanomotion plant`, the PI here.
     let name = format!("test-quickstart-{}", std::process::id());
     let plant = Command::new(env!("CARGO_BIN_EXE_nanomotion"))
-        .args(["plant", &format!("{EXAMPLES}/realtime/quickstart_plant.yaml")])
+        .args([
+            "plant",
+            &format!("{EXAMPLES}/realtime/quickstart_plant.yaml"),
+        ])
         .args(["--serve", &name, "--allow-soft", "--priority", "70"])
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
         .spawn()
         .unwrap();
-    let (sched, _) = GraphSpec::from_file(format!("{EXAMPLES}/realtime/quickstart_controller.yaml"))
-        .unwrap()
-        .build()
-        .unwrap();
+    let (sched, _) =
+        GraphSpec::from_file(format!("{EXAMPLES}/realtime/quickstart_controller.yaml"))
+            .unwrap()
+            .build()
+            .unwrap();
     let device =
         ShmDevice::connect(&name, Duration::from_secs(20), Duration::from_millis(200)).unwrap();
     let cfg = RtConfig {
@@ -59,8 +63,8 @@ fn the_quickstart_split_in_two_processes_tracks_like_the_simulation() {
     let (sched, device) = runner.into_parts();
     drop(device); // detach: the plant stops
     let out = plant.wait_with_output().unwrap();
-    let plant_log = String::from_utf8_lossy(&out.stdout).into_owned()
-        + &String::from_utf8_lossy(&out.stderr);
+    let plant_log =
+        String::from_utf8_lossy(&out.stdout).into_owned() + &String::from_utf8_lossy(&out.stderr);
     assert!(out.status.success(), "plant: {plant_log}");
     assert!(
         plant_log.contains("the controller closed the connection"),
@@ -92,7 +96,10 @@ fn the_quickstart_split_in_two_processes_tracks_like_the_simulation() {
     assert_eq!(pos.len(), 8000);
     let (p, r) = (pos[7999], reference[7999]);
     assert!(r > 1.99e-5, "reference {r:e} m");
-    assert!((p - r).abs() < 2.0 * lsb + v_t, "end position {p:e} m, reference {r:e} m");
+    assert!(
+        (p - r).abs() < 2.0 * lsb + v_t,
+        "end position {p:e} m, reference {r:e} m"
+    );
 }
 
 #[test]
@@ -106,7 +113,11 @@ fn rt_writes_its_timing_report_and_refuses_a_missing_plant() {
         .output()
         .unwrap();
     let text = String::from_utf8_lossy(&out.stdout);
-    assert!(out.status.success(), "{text}{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{text}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     assert!(text.contains("24000 ticks at 40000 Hz"), "{text}");
     let timing: serde_json::Value =
         serde_json::from_slice(&std::fs::read(dir.join("timing.json")).unwrap()).unwrap();
@@ -118,12 +129,89 @@ fn rt_writes_its_timing_report_and_refuses_a_missing_plant() {
 
     // A controller whose plant is not there: named, with the fix, no files.
     let out = Command::new(env!("CARGO_BIN_EXE_nanomotion"))
-        .args(["rt", &format!("{EXAMPLES}/realtime/quickstart_controller.yaml")])
-        .args(["--device", "shm:nobody-serves-this", "--connect-timeout", "0"])
+        .args([
+            "rt",
+            &format!("{EXAMPLES}/realtime/quickstart_controller.yaml"),
+        ])
+        .args([
+            "--device",
+            "shm:nobody-serves-this",
+            "--connect-timeout",
+            "0",
+        ])
         .output()
         .unwrap();
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(!out.status.success());
-    assert!(err.contains("no plant serves `nobody-serves-this`"), "{err}");
-    assert!(err.contains("nanomotion plant PLANT.yaml --serve nobody-serves-this"), "{err}");
+    assert!(
+        err.contains("no plant serves `nobody-serves-this`"),
+        "{err}"
+    );
+    assert!(
+        err.contains("nanomotion plant PLANT.yaml --serve nobody-serves-this"),
+        "{err}"
+    );
+}
+
+#[test]
+fn a_recorded_two_process_run_replays_bit_for_bit_and_a_changed_gain_does_not() {
+    let name = format!("test-record-{}", std::process::id());
+    let dir = std::env::temp_dir().join(format!("nanomotion-rt-record-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let bin = env!("CARGO_BIN_EXE_nanomotion");
+    let plant = Command::new(bin)
+        .args([
+            "plant",
+            &format!("{EXAMPLES}/realtime/quickstart_plant.yaml"),
+        ])
+        .args(["--serve", &name, "--allow-soft", "--priority", "70"])
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let controller = format!("{EXAMPLES}/realtime/quickstart_controller.yaml");
+    let out = Command::new(bin)
+        .args(["rt", &controller, "--device", &format!("shm:{name}")])
+        .args(["--duration", "0.6", "--allow-soft", "--record", "--out"])
+        .arg(&dir)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(plant.wait_with_output().unwrap().status.success());
+    let mcap = dir.join("run.mcap");
+    let same = Command::new(bin)
+        .arg("replay")
+        .arg(&mcap)
+        .arg(&controller)
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&same.stdout);
+    assert!(
+        same.status.success(),
+        "{}",
+        String::from_utf8_lossy(&same.stderr)
+    );
+    assert!(text.contains("replayed 2400 ticks"), "{text}");
+    assert!(
+        text.contains("all 2400 output samples bit-identical"),
+        "{text}"
+    );
+    let changed = Command::new(bin)
+        .arg("replay")
+        .arg(&mcap)
+        .arg(&controller)
+        .args(["--set", "blocks.pi.kp=3.2e7"])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&changed.stderr);
+    assert!(!changed.status.success());
+    assert!(
+        err.contains("output samples differ; first at tick"),
+        "{err}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
 }

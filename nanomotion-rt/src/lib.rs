@@ -14,6 +14,8 @@
 //! - [`Device`]: the hardware boundary (read at the start of a tick, write after
 //!   it, safe state, watchdog), connected to a graph by the `hw_input` and
 //!   `hw_output` blocks of the same name.
+//! - [`record`]: every hardware sample of a run as MCAP, and a bit-exact
+//!   replay of it through the graph.
 //! - [`shm`]: a plant graph in another process (`nanomotion plant --serve`)
 //!   behind a [`ShmDevice`], over shared memory.
 //!
@@ -36,15 +38,17 @@
 pub mod clock;
 pub mod device;
 pub mod histogram;
+pub mod record;
 pub mod runner;
 pub mod shm;
 
 pub use clock::{Missing, Privileges};
 pub use device::{Channel, Device, DeviceError, HwInput, HwOutput};
 pub use histogram::{Histogram, Summary};
+pub use record::{ReplayReport, read_mcap, replay, write_mcap};
 pub use runner::{
-    Event, NoDevice, OverrunPolicy, RealtimeRunner, RtConfig, RtError, Stop, Timing, TimingReport,
-    hw_blocks,
+    Event, NoDevice, OverrunPolicy, RealtimeRunner, Recording, RtConfig, RtError, Stop, Timing,
+    TimingReport, hw_blocks,
 };
 pub use shm::{PlantInfo, ShmDevice, ShmPlant};
 

@@ -80,12 +80,16 @@ pub struct RtConfig {
     pub status_every: u64,
     /// Slots of the event ring.
     pub ring_slots: usize,
+    /// Keep every hardware input and output sample ([`Recording`], for MCAP and
+    /// replay), in memory allocated at build for the graph's duration.
+    pub record: bool,
 }
 
 impl Default for RtConfig {
     /// SCHED_FIFO 80, memory locked, no pinning, refuse without privilege, skip
-    /// overruns without limit, no spin, status every 100 ms worth of ticks
-    /// (set by [`RealtimeRunner::new`] when left at 0 here it stays 0).
+    /// overruns without limit, no spin, the graph's duration, no recording; a
+    /// status event every 100 ms of ticks ([`RealtimeRunner::new`] turns the
+    /// `status_every: 0` here into the graph's rate / 10).
     fn default() -> Self {
         Self {
             privileges: Privileges {
@@ -100,6 +104,7 @@ impl Default for RtConfig {
             ticks: None,
             status_every: 0,
             ring_slots: 1024,
+            record: false,
         }
     }
 }
@@ -257,6 +262,33 @@ pub struct TimingReport {
     pub execution: Summary,
 }
 
+/// The hardware samples of a run, tick by tick: what the `hw_input` blocks
+/// received and what the `hw_output` blocks sent.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Recording {
+    /// Title of the graph.
+    pub title: Option<String>,
+    /// Base rate of the loop (Hz).
+    pub rate_hz: f64,
+    /// Input channels recorded (the graph's `hw_input` blocks), in order.
+    pub inputs: Vec<crate::Channel>,
+    /// Output channels recorded (the `hw_output` blocks), in order.
+    pub outputs: Vec<crate::Channel>,
+    /// Wake-up time of each tick on CLOCK_MONOTONIC (ns).
+    pub t_ns: Vec<u64>,
+    /// Input samples, tick-major (`ticks × inputs.len()`).
+    pub input_values: Vec<f64>,
+    /// Output samples, tick-major (`ticks × outputs.len()`).
+    pub output_values: Vec<f64>,
+}
+
+impl Recording {
+    /// Ticks recorded.
+    pub fn ticks(&self) -> usize {
+        self.t_ns.len()
+    }
+}
+
 /// Counters of one loop (no allocation).
 #[derive(Debug, Clone, Default)]
 struct Counters {
@@ -282,6 +314,7 @@ struct LoopCore<D: Device> {
     in_buf: Vec<f64>,
     out_buf: Vec<f64>,
     timing: Timing,
+    record: Option<Recording>,
     events: rtrb::Producer<Event>,
     stop: Arc<AtomicBool>,
 }
@@ -424,6 +457,25 @@ impl<D: Device> RealtimeRunner<D> {
         let (producer, consumer) = rtrb::RingBuffer::new(cfg.ring_slots.max(1));
         let in_buf = vec![0.0; device.inputs().len()];
         let out_buf = vec![0.0; device.outputs().len()];
+        let record = cfg.record.then(|| {
+            let n = cfg
+                .ticks
+                .unwrap_or(u64::MAX)
+                .min(sched.ticks_total().saturating_sub(sched.ticks_done()))
+                as usize;
+            Recording {
+                title: sched.result().title,
+                rate_hz: rate,
+                inputs: inputs
+                    .iter()
+                    .map(|&(j, _)| device.inputs()[j].clone())
+                    .collect(),
+                outputs: device.outputs().to_vec(),
+                t_ns: Vec::with_capacity(n),
+                input_values: Vec::with_capacity(n * inputs.len()),
+                output_values: Vec::with_capacity(n * outputs.len()),
+            }
+        });
         Ok(Self {
             core: LoopCore {
                 sched,
@@ -434,6 +486,7 @@ impl<D: Device> RealtimeRunner<D> {
                 in_buf,
                 out_buf,
                 timing: Timing::default(),
+                record,
                 events: producer,
                 stop: Arc::new(AtomicBool::new(false)),
             },
@@ -502,6 +555,11 @@ impl<D: Device> RealtimeRunner<D> {
     /// The histograms of the last run.
     pub fn timing(&self) -> &Timing {
         &self.core.timing
+    }
+
+    /// The hardware samples of the last run, if recording was asked for.
+    pub fn recording(&self) -> Option<&Recording> {
+        self.core.record.as_ref()
     }
 
     /// The graph and the device back.
@@ -583,6 +641,11 @@ impl<D: Device> LoopCore<D> {
         self.timing.period_jitter.clear();
         self.timing.execution.clear();
         self.stop.store(false, Ordering::Relaxed);
+        if let Some(r) = &mut self.record {
+            r.t_ns.clear();
+            r.input_values.clear();
+            r.output_values.clear();
+        }
         let period_ns = 1.0e9 / self.sched.base_rate_hz();
         let n = self.cfg.ticks.unwrap_or_else(|| {
             self.sched
@@ -630,6 +693,15 @@ impl<D: Device> LoopCore<D> {
             self.sched.tick();
             for &(j, id) in &self.outputs {
                 self.out_buf[j] = self.sched.read(id)[0];
+            }
+            // Within the capacity reserved at build: no allocation.
+            if let Some(r) = &mut self.record
+                && r.t_ns.len() < r.t_ns.capacity()
+            {
+                r.t_ns.push(wake);
+                r.input_values
+                    .extend(self.inputs.iter().map(|&(j, _)| self.in_buf[j]));
+                r.output_values.extend_from_slice(&self.out_buf);
             }
             if let Err(e) = self.device.write(clock::now_ns(), &self.out_buf) {
                 break Stop::Device(e);

@@ -161,16 +161,23 @@ fn the_grid_is_held_over_ten_thousand_ticks_at_10_khz() {
     assert_eq!(r.device().safe_calls, 1);
 }
 
+/// Rate of the overrun tests, its period and the injected sleep (1.5 T).
+const RATE: f64 = 200.0;
+const PERIOD_NS: u64 = 5_000_000;
+const SLEEP_NS: u64 = 7_500_000;
+
 #[test]
 fn injected_overruns_are_counted_exactly_and_skip_stays_on_the_grid() {
-    // 1 kHz; write() sleeps 1.5 ms on ticks 50, 120 and 300: each of them ends
-    // after the next deadline (one overrun) and, under `skip`, the deadline in
-    // between is dropped (one missed tick) — the loop goes on at slot k + 2.
+    // 200 Hz (T = 5 ms, so that only the injected sleeps overrun, even on a
+    // loaded machine); write() sleeps 1.5 T on ticks 50, 120 and 300: each of
+    // them ends after the next deadline (one overrun) and, under `skip`, the
+    // deadline in between is dropped (one missed tick) — the loop goes on at
+    // slot k + 2.
     let n = 400;
     let sleepy = [50, 120, 300];
     let mut r = RealtimeRunner::new(
-        graph(1000.0, n),
-        TestDevice::new(n as usize, &sleepy, 1_500_000),
+        graph(RATE, n),
+        TestDevice::new(n as usize, &sleepy, SLEEP_NS),
         config(OverrunPolicy::Skip),
     )
     .unwrap();
@@ -193,7 +200,7 @@ fn injected_overruns_are_counted_exactly_and_skip_stays_on_the_grid() {
     // On the grid: the last tick started on slot n + 3.
     assert_eq!(
         rep.last_deadline_ns,
-        rep.t0_ns + (n + 2) * 1_000_000,
+        rep.t0_ns + (n + 2) * PERIOD_NS,
         "the last tick is not on the grid"
     );
 }
@@ -202,8 +209,8 @@ fn injected_overruns_are_counted_exactly_and_skip_stays_on_the_grid() {
 fn catch_up_runs_every_late_tick_and_counts_the_same_overruns() {
     let n = 400;
     let mut r = RealtimeRunner::new(
-        graph(1000.0, n),
-        TestDevice::new(n as usize, &[50, 120, 300], 1_500_000),
+        graph(RATE, n),
+        TestDevice::new(n as usize, &[50, 120, 300], SLEEP_NS),
         config(OverrunPolicy::CatchUp),
     )
     .unwrap();
@@ -211,7 +218,7 @@ fn catch_up_runs_every_late_tick_and_counts_the_same_overruns() {
     assert_eq!(rep.overruns, 3);
     assert_eq!(rep.missed_ticks, 0);
     assert_eq!((rep.ticks, rep.slots), (n, n));
-    assert_eq!(rep.last_deadline_ns, rep.t0_ns + (n - 1) * 1_000_000);
+    assert_eq!(rep.last_deadline_ns, rep.t0_ns + (n - 1) * PERIOD_NS);
 }
 
 #[test]
@@ -220,8 +227,8 @@ fn max_overruns_stops_the_loop_with_outputs_safe() {
     let mut cfg = config(OverrunPolicy::Skip);
     cfg.max_overruns = Some(1);
     let mut r = RealtimeRunner::new(
-        graph(1000.0, n),
-        TestDevice::new(n as usize, &[50, 120, 300], 1_500_000),
+        graph(RATE, n),
+        TestDevice::new(n as usize, &[50, 120, 300], SLEEP_NS),
         cfg,
     )
     .unwrap();
@@ -439,4 +446,41 @@ fn a_block_without_a_device_channel_is_refused_with_the_channels_listed() {
             .contains("unit `m` but the device channel is in `V`"),
         "{e}"
     );
+}
+
+#[test]
+fn a_recorded_run_replays_bit_for_bit_from_its_mcap_file() {
+    let n = 300u64;
+    let mut cfg = config(OverrunPolicy::Skip);
+    cfg.record = true;
+    let mut r =
+        RealtimeRunner::new(graph(2000.0, n), TestDevice::new(n as usize, &[], 0), cfg).unwrap();
+    r.run(|_| {}).unwrap();
+    let rec = r.recording().unwrap().clone();
+    assert_eq!(rec.ticks(), n as usize);
+    // What the device saw is what was recorded.
+    assert_eq!(rec.output_values, r.device().written);
+    assert_eq!(rec.inputs[0].unit.as_deref(), Some("m"));
+    let path = std::env::temp_dir().join(format!("nanomotion-rt-{}.mcap", std::process::id()));
+    nanomotion_rt::write_mcap(&path, &rec).unwrap();
+    let back = nanomotion_rt::read_mcap(&path).unwrap();
+    assert_eq!(back, rec, "the file holds every sample exactly");
+
+    let mut fresh = graph(2000.0, n);
+    let rep = nanomotion_rt::replay(&mut fresh, &back).unwrap();
+    assert_eq!((rep.ticks, rep.compared, rep.mismatches), (300, 300, 0));
+    // The same inputs through another gain: every output differs, the first
+    // difference is named.
+    let yaml = "base_rate_hz: 2000\nduration_s: 0.15\nblocks:\n  - { name: pos, type: hw_input, unit: m }\n  - { name: k, type: gain, k: 2.5 }\n  - { name: off, type: constant, value: 1.5 }\n  - { name: s, type: sum, signs: \"++\" }\n  - { name: cmd, type: hw_output }\nconnections:\n  - { from: pos.y, to: k.u }\n  - { from: k.y, to: s.in0 }\n  - { from: off.y, to: s.in1 }\n  - { from: s.y, to: cmd.u }\n";
+    let (mut other, _) = GraphSpec::from_yaml(yaml, "other.yaml")
+        .unwrap()
+        .build()
+        .unwrap();
+    let rep = nanomotion_rt::replay(&mut other, &back).unwrap();
+    assert_eq!(rep.mismatches, 300);
+    assert_eq!(
+        rep.first,
+        Some((0, "cmd".into(), 2.0 * 1.0 + 1.5, 2.5 * 1.0 + 1.5))
+    );
+    let _ = std::fs::remove_file(&path);
 }
