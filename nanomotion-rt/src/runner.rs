@@ -366,11 +366,12 @@ impl Device for NoDevice {
     }
 }
 
+/// Blocks as (name, unit).
+pub type NamedUnits = Vec<(String, Option<String>)>;
+
 /// The `hw_input` and `hw_output` blocks of a built graph: (name, unit) each,
 /// in execution order.
-pub fn hw_blocks(
-    sched: &Scheduler,
-) -> (Vec<(String, Option<String>)>, Vec<(String, Option<String>)>) {
+pub fn hw_blocks(sched: &Scheduler) -> (NamedUnits, NamedUnits) {
     let mut ins = Vec::new();
     let mut outs = Vec::new();
     for w in sched.wiring() {
@@ -738,7 +739,7 @@ impl<D: Device> LoopCore<D> {
             } else {
                 slot += 1;
             }
-            if c.ticks % self.cfg.status_every == 0 {
+            if c.ticks.is_multiple_of(self.cfg.status_every) {
                 let e = Event::Status {
                     ticks: c.ticks,
                     overruns: c.overruns,
