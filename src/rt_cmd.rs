@@ -203,26 +203,26 @@ fn run_loop<D: Device>(
     }
     let (sched, _device) = runner.into_parts();
     print_report(&report);
-    if let Some(folder) = folder {
-        if nanomotion::output::signals::interrupted().is_none() {
-            write_outputs(&folder, &report, &timing, &sched)?;
-            let title = sched.result().title;
-            let files = folder
-                .commit(Some(&Manifest {
-                    command,
-                    graph: &graph.display().to_string(),
-                    title: &title,
-                    stability_gate: &[],
-                }))
-                .map_err(|e| e.to_string())?;
-            say!(
-                "wrote {} files to {}",
-                files.len(),
-                lp.out
-                    .as_ref()
-                    .map_or(String::new(), |p| p.display().to_string())
-            );
-        }
+    if let Some(folder) = folder
+        && nanomotion::output::signals::interrupted().is_none()
+    {
+        let result = sched.result();
+        write_outputs(&folder, &report, &timing, &result.logs)?;
+        let files = folder
+            .commit(Some(&Manifest {
+                command,
+                graph: &graph.display().to_string(),
+                title: &result.title,
+                stability_gate: &[],
+            }))
+            .map_err(|e| e.to_string())?;
+        say!(
+            "wrote {} files to {}",
+            files.len(),
+            lp.out
+                .as_ref()
+                .map_or(String::new(), |p| p.display().to_string())
+        );
     }
     Ok((report, sched, timing))
 }
@@ -295,7 +295,7 @@ fn write_outputs(
     folder: &OutputFolder,
     report: &TimingReport,
     timing: &nanomotion_rt::Timing,
-    sched: &Scheduler,
+    logs: &[nanomotion::core::scheduler::SignalLog],
 ) -> Result<(), String> {
     let dir = folder.dir();
     let json = serde_json::to_string_pretty(report).map_err(|e| e.to_string())?;
@@ -318,8 +318,7 @@ fn write_outputs(
         &dir.join("timing.svg"),
     )
     .map_err(|e| e.to_string())?;
-    let result = sched.result();
-    nanomotion::output::write_csv(dir, &result.logs).map_err(|e| e.to_string())?;
+    nanomotion::output::write_csv(dir, logs).map_err(|e| e.to_string())?;
     Ok(())
 }
 
