@@ -215,3 +215,50 @@ fn a_recorded_two_process_run_replays_bit_for_bit_and_a_changed_gain_does_not() 
     );
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn rt_refuses_without_cap_sys_nice_and_runs_soft_when_allowed() {
+    // As root, drop CAP_SYS_NICE for the child (util-linux `setpriv`); the
+    // real-time priority limit (`ulimit -r`) is 0 by default, so SCHED_FIFO is
+    // refused.
+    let run = |soft: bool| {
+        let mut c = Command::new("setpriv");
+        c.args(["--inh-caps=-sys_nice", "--bounding-set=-sys_nice", "--"])
+            .arg(env!("CARGO_BIN_EXE_nanomotion"))
+            .args([
+                "rt",
+                &format!("{EXAMPLES}/quickstart.yaml"),
+                "--duration",
+                "0.6",
+            ]);
+        if soft {
+            c.arg("--allow-soft");
+        }
+        c.output().expect("setpriv (util-linux) runs")
+    };
+    let hard = run(false);
+    let err = String::from_utf8_lossy(&hard.stderr);
+    assert!(!hard.status.success());
+    assert!(err.contains("SCHED_FIFO priority 80 refused"), "{err}");
+    assert!(
+        err.contains("ulimit -r 80") && err.contains("CAP_SYS_NICE"),
+        "{err}"
+    );
+    assert!(err.contains("--allow-soft"), "{err}");
+    assert!(!String::from_utf8_lossy(&hard.stdout).contains("ticks at"));
+    let soft = run(true);
+    let out = String::from_utf8_lossy(&soft.stdout);
+    assert!(
+        soft.status.success(),
+        "{}",
+        String::from_utf8_lossy(&soft.stderr)
+    );
+    assert!(
+        out.contains("24000 ticks at 40000 Hz (SCHED_OTHER (normal priority))"),
+        "{out}"
+    );
+    assert!(
+        out.contains("soft run: SCHED_FIFO priority 80 refused"),
+        "{out}"
+    );
+}

@@ -484,3 +484,33 @@ fn a_recorded_run_replays_bit_for_bit_from_its_mcap_file() {
     );
     let _ = std::fs::remove_file(&path);
 }
+
+#[test]
+fn the_loop_thread_sleeps_without_timer_slack() {
+    // A normal-priority thread's sleeps end up to 50 µs late (the default timer
+    // slack), which made every tick of a soft 40 kHz run overrun; the loop asks
+    // for 1 ns.
+    std::thread::spawn(|| {
+        // SAFETY: prctl queries on the calling thread.
+        let before = unsafe { libc::prctl(libc::PR_GET_TIMERSLACK) };
+        assert_eq!(before, 50_000, "the default slack of a normal thread");
+        let mut r = RealtimeRunner::new(
+            graph(1000.0, 5),
+            TestDevice::new(8, &[], 0),
+            RtConfig {
+                privileges: Privileges {
+                    priority: None,
+                    cpu: None,
+                    lock_memory: false,
+                },
+                ..RtConfig::default()
+            },
+        )
+        .unwrap();
+        r.run_here().unwrap();
+        let after = unsafe { libc::prctl(libc::PR_GET_TIMERSLACK) };
+        assert_eq!(after, 1);
+    })
+    .join()
+    .unwrap();
+}
