@@ -20,6 +20,7 @@ import json
 import math
 import os
 import re
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -54,6 +55,7 @@ def nanomotion(rate, cycles, prio, cpu):
     subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL)
     with open(os.path.join(out, "timing.json")) as f:
         t = json.load(f)
+    shutil.rmtree(out)
     us = lambda ns: ns / 1000.0
     lat = t["wakeup_latency"]
     jitter = t["period_jitter"]["max_ns"]
