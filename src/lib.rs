@@ -30,6 +30,7 @@ pub use nanomotion_core::{Block, GraphSpec, Scheduler};
 pub use nanomotion_directional_rc as directional_rc;
 pub use nanomotion_mimo as mimo;
 pub use nanomotion_plf as plf;
+pub use nanomotion_rt as rt;
 pub use timestamp_encoder;
 pub use walking_piezo;
 
@@ -86,4 +87,5 @@ pub fn link_plugins() {
     let _ = std::any::type_name::<directional_rc::FrameRotation>();
     let _ = std::any::type_name::<mimo::MimoController>();
     let _ = std::any::type_name::<compensate::HysteresisInverse>();
+    nanomotion_rt::link_blocks();
 }

@@ -22,6 +22,7 @@ mod diagnose_cmd;
 mod gate_cmd;
 mod optimize_cmd;
 mod reproduce_cmd;
+mod rt_cmd;
 mod scan_image_cmd;
 mod sweep_cmd;
 mod synth_cmd;
@@ -317,6 +318,20 @@ enum Command {
         /// Show only types whose name contains this text.
         filter: Option<String>,
     },
+    /// Run a graph on the wall clock at its base rate (SCHED_FIFO, absolute
+    /// deadlines), against a device (`--device shm:NAME`: a plant served by
+    /// `nanomotion plant`); prints wake-up latency, period and execution time
+    /// (p50/p99/p99.9/max) and overruns, writes timing.json, timing.svg and the
+    /// logs. See docs/realtime.md.
+    Rt(rt_cmd::RtArgs),
+    /// Serve a plant graph to a controller in another process: runs it on its own
+    /// real-time loop, its `hw_input`/`hw_output` blocks in shared memory
+    /// (`/dev/shm/nanomotion-NAME`), until the controller leaves.
+    Plant(rt_cmd::PlantArgs),
+    /// Re-run a controller graph on the hardware inputs recorded by `nanomotion rt
+    /// --record` (RUN.mcap) and check that it reproduces the recorded outputs bit
+    /// for bit.
+    Replay(rt_cmd::ReplayArgs),
     /// Print the JSON Schema of a graph file (every registered block type), for
     /// editors: `nanomotion schema > graph.schema.json` (see docs/graph-format.md).
     Schema,
@@ -418,6 +433,9 @@ fn main() -> ExitCode {
             restart,
             limit,
         } => sweep_cmd::sweep(&study, out, jobs, restart, limit),
+        Command::Rt(a) => rt_cmd::rt(a),
+        Command::Plant(a) => rt_cmd::plant(a),
+        Command::Replay(a) => rt_cmd::replay(a),
         Command::Blocks { filter } => blocks(filter.as_deref()),
         Command::Schema => serde_json::to_string_pretty(&nanomotion::core::doc::graph_schema())
             .map(|text| say!("{text}"))

@@ -838,6 +838,15 @@ impl Scheduler {
         &self.signals[id.offset..id.offset + id.width]
     }
 
+    /// Set a signal between ticks, without any look-up: for an output that its
+    /// block holds and the outside world fills (the `hw_input` block of
+    /// `nanomotion-rt` gets a device's samples this way before each tick). A
+    /// block that computes this output overwrites it on its next due tick.
+    #[inline]
+    pub fn write(&mut self, id: SignalId, values: &[f64]) {
+        self.signals[id.offset..id.offset + id.width].copy_from_slice(values);
+    }
+
     /// Base ticks run so far.
     pub fn ticks_done(&self) -> u64 {
         self.k

@@ -1,0 +1,60 @@
+//! # nanomotion-rt
+//!
+//! Run a nanomotion graph on the wall clock, against hardware.
+//!
+//! - [`RealtimeRunner`] ticks a built [`Scheduler`](nanomotion_core::Scheduler)
+//!   on a dedicated thread at the graph's base rate: absolute deadlines
+//!   (`clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME)`), `SCHED_FIFO`, CPU
+//!   pinning and `mlockall` where permitted (refused privileges are named with
+//!   their fix; the run goes on at normal priority only if allowed), overruns
+//!   counted and handled by an [`OverrunPolicy`], a stop at too many overruns
+//!   or at a device fault with the outputs put in their safe state.
+//! - [`Timing`]: wake-up latency, period and execution time in fixed-memory
+//!   [`Histogram`]s (p50/p99/p99.9/max), reported as a [`TimingReport`].
+//! - [`Device`]: the hardware boundary (read at the start of a tick, write after
+//!   it, safe state, watchdog), connected to a graph by the `hw_input` and
+//!   `hw_output` blocks of the same name.
+//! - [`record`]: every hardware sample of a run as MCAP, and a bit-exact
+//!   replay of it through the graph.
+//! - [`shm`]: a plant graph in another process (`nanomotion plant --serve`)
+//!   behind a [`ShmDevice`], over shared memory.
+//!
+//! Nothing in a tick allocates, locks or calls the system except the sleep and
+//! the device's own I/O; events leave the loop through a wait-free ring.
+//!
+//! ```
+//! use nanomotion_core::GraphSpec;
+//! use nanomotion_rt::{NoDevice, RealtimeRunner, RtConfig};
+//! let yaml = "base_rate_hz: 1000\nduration_s: 0.02\nblocks:\n  - { name: c, type: constant, value: 1.0 }\nlog: [c.y]\n";
+//! let (sched, _) = GraphSpec::from_yaml(yaml, "doc.yaml").unwrap().build().unwrap();
+//! let mut cfg = RtConfig::default();
+//! cfg.allow_soft = true; // run even where SCHED_FIFO is not permitted
+//! let mut runner = RealtimeRunner::new(sched, NoDevice, cfg).unwrap();
+//! let report = runner.run(|_event| {}).unwrap();
+//! assert_eq!(report.ticks, 20);
+//! assert_eq!(report.wakeup_latency.count, 20);
+//! ```
+
+pub mod clock;
+pub mod device;
+pub mod histogram;
+pub mod record;
+pub mod runner;
+pub mod shm;
+
+pub use clock::{Missing, Privileges};
+pub use device::{Channel, Device, DeviceError, HwInput, HwOutput};
+pub use histogram::{Histogram, Summary};
+pub use record::{ReplayReport, read_mcap, replay, write_mcap};
+pub use runner::{
+    Event, NoDevice, OverrunPolicy, RealtimeRunner, Recording, RtConfig, RtError, Stop, Timing,
+    TimingReport, hw_blocks,
+};
+pub use shm::{PlantInfo, ShmDevice, ShmPlant};
+
+/// Make sure this crate's blocks (`hw_input`, `hw_output`) are linked into a
+/// binary that only loads YAML (typetag registers them through the linker).
+pub fn link_blocks() {
+    let _ = std::any::type_name::<HwInput>();
+    let _ = std::any::type_name::<HwOutput>();
+}

@@ -1,0 +1,318 @@
+//! Record a run's hardware samples as MCAP, and replay them through a graph.
+//!
+//! One MCAP channel per signal — `hw_input/NAME` and `hw_output/NAME` — with
+//! JSON messages `{"tick": k, "value": v, "bits": "<16 hex digits>"}` under a
+//! JSON Schema, the unit and direction in the channel metadata, `log_time` the
+//! tick's wake-up time on CLOCK_MONOTONIC. Foxglove and PlotJuggler plot
+//! `value`; [`read_mcap`] takes the exact `bits`, so a replay compares outputs
+//! bit for bit.
+//!
+//! [`replay`] feeds the recorded inputs into the `hw_input` blocks of a freshly
+//! built graph, tick by tick, and compares every `hw_output` sample with the
+//! recording. A graph is deterministic (seeded), so the same graph reproduces
+//! the recorded outputs exactly; any difference names its first tick and
+//! channel.
+
+use crate::Channel;
+use crate::device::{HW_INPUT, HW_OUTPUT};
+use crate::runner::{Recording, hw_blocks};
+use nanomotion_core::Scheduler;
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+use std::path::Path;
+
+/// Schema name of a sample message.
+const SCHEMA: &str = "nanomotion.HwSample";
+const SCHEMA_JSON: &str = r#"{"type":"object","title":"nanomotion.HwSample","properties":{"tick":{"type":"integer","description":"loop tick"},"value":{"type":"number","description":"the sample, in the channel's unit (metadata `unit`)"},"bits":{"type":"string","description":"IEEE-754 bits of value, 16 hex digits (exact)"}},"required":["tick","value","bits"]}"#;
+
+/// Reading or writing a recording failed.
+#[derive(Debug, thiserror::Error)]
+pub enum RecordError {
+    /// File or MCAP error.
+    #[error("{path}: {message}")]
+    File {
+        /// The file.
+        path: String,
+        /// What went wrong.
+        message: String,
+    },
+    /// The file is MCAP but not a nanomotion recording, or is inconsistent.
+    #[error("{path}: {message} (fix: record with `nanomotion rt GRAPH --record --out DIR`)")]
+    Content {
+        /// The file.
+        path: String,
+        /// What is wrong.
+        message: String,
+    },
+    /// The graph does not have the recorded channels.
+    #[error("{0}")]
+    Graph(String),
+}
+
+#[derive(Serialize, Deserialize)]
+struct Sample {
+    tick: u64,
+    value: Option<f64>,
+    bits: String,
+}
+
+/// Write `rec` to `path` (the file is complete or absent: written beside it and
+/// renamed).
+pub fn write_mcap(path: &Path, rec: &Recording) -> Result<(), RecordError> {
+    let err = |m: String| RecordError::File {
+        path: path.display().to_string(),
+        message: m,
+    };
+    let tmp = path.with_extension("mcap.partial");
+    let file = std::fs::File::create(&tmp).map_err(|e| err(e.to_string()))?;
+    let result = (|| -> Result<(), mcap::McapError> {
+        let mut w = mcap::WriteOptions::new()
+            .compression(None)
+            .profile("")
+            .create(std::io::BufWriter::new(file))?;
+        let schema = w.add_schema(SCHEMA, "jsonschema", SCHEMA_JSON.as_bytes())?;
+        let mut channel = |kind: &str, c: &Channel, rate: f64| {
+            let mut meta = BTreeMap::new();
+            meta.insert("direction".to_string(), kind.to_string());
+            meta.insert("rate_hz".to_string(), format!("{rate}"));
+            if let Some(u) = &c.unit {
+                meta.insert("unit".to_string(), u.clone());
+            }
+            w.add_channel(schema, &format!("{kind}/{}", c.name), "json", &meta)
+        };
+        let ins: Vec<u16> = rec
+            .inputs
+            .iter()
+            .map(|c| channel(HW_INPUT, c, rec.rate_hz))
+            .collect::<Result<_, _>>()?;
+        let outs: Vec<u16> = rec
+            .outputs
+            .iter()
+            .map(|c| channel(HW_OUTPUT, c, rec.rate_hz))
+            .collect::<Result<_, _>>()?;
+        let mut meta = BTreeMap::new();
+        meta.insert("rate_hz".to_string(), format!("{}", rec.rate_hz));
+        meta.insert("ticks".to_string(), rec.ticks().to_string());
+        if let Some(t) = &rec.title {
+            meta.insert("title".to_string(), t.clone());
+        }
+        w.write_metadata(&mcap::records::Metadata {
+            name: "nanomotion".into(),
+            metadata: meta,
+        })?;
+        let mut put = |id: u16, k: usize, t: u64, v: f64| {
+            let data = serde_json::to_vec(&Sample {
+                tick: k as u64,
+                value: v.is_finite().then_some(v),
+                bits: format!("{:016x}", v.to_bits()),
+            })
+            .expect("a sample serialises");
+            w.write_to_known_channel(
+                &mcap::records::MessageHeader {
+                    channel_id: id,
+                    sequence: k as u32,
+                    log_time: t,
+                    publish_time: t,
+                },
+                &data,
+            )
+        };
+        let (ni, no) = (rec.inputs.len(), rec.outputs.len());
+        for (k, &t) in rec.t_ns.iter().enumerate() {
+            for (i, &id) in ins.iter().enumerate() {
+                put(id, k, t, rec.input_values[k * ni + i])?;
+            }
+            for (i, &id) in outs.iter().enumerate() {
+                put(id, k, t, rec.output_values[k * no + i])?;
+            }
+        }
+        w.finish()?;
+        Ok(())
+    })();
+    match result {
+        Ok(()) => std::fs::rename(&tmp, path).map_err(|e| err(e.to_string())),
+        Err(e) => {
+            let _ = std::fs::remove_file(&tmp);
+            Err(err(e.to_string()))
+        }
+    }
+}
+
+/// Read a recording written by [`write_mcap`].
+pub fn read_mcap(path: &Path) -> Result<Recording, RecordError> {
+    let p = path.display().to_string();
+    let bytes = std::fs::read(path).map_err(|e| RecordError::File {
+        path: p.clone(),
+        message: e.to_string(),
+    })?;
+    let content = |m: String| RecordError::Content {
+        path: p.clone(),
+        message: m,
+    };
+    let mut rec = Recording::default();
+    let mut ticks = None;
+    for m in mcap::read::LinearReader::new(&bytes).map_err(|e| content(e.to_string()))? {
+        if let mcap::records::Record::Metadata(md) = m.map_err(|e| content(e.to_string()))?
+            && md.name == "nanomotion"
+        {
+            rec.rate_hz = md
+                .metadata
+                .get("rate_hz")
+                .and_then(|r| r.parse().ok())
+                .ok_or_else(|| content("metadata `rate_hz` missing".into()))?;
+            ticks = md
+                .metadata
+                .get("ticks")
+                .and_then(|t| t.parse::<usize>().ok());
+            rec.title = md.metadata.get("title").cloned();
+        }
+    }
+    let ticks = ticks.ok_or_else(|| content("no `nanomotion` metadata record".into()))?;
+    // Channel id -> (is input, index).
+    let mut index: BTreeMap<u16, (bool, usize)> = BTreeMap::new();
+    let mut samples: Vec<(bool, usize, u64, u64, f64)> = Vec::new();
+    for m in mcap::MessageStream::new(&bytes).map_err(|e| content(e.to_string()))? {
+        let m = m.map_err(|e| content(e.to_string()))?;
+        let ch = &m.channel;
+        let (is_in, i) = match index.get(&ch.id) {
+            Some(&x) => x,
+            None => {
+                let (kind, name) = ch
+                    .topic
+                    .split_once('/')
+                    .ok_or_else(|| content(format!("topic `{}` is not KIND/NAME", ch.topic)))?;
+                let c = Channel {
+                    name: name.into(),
+                    unit: ch.metadata.get("unit").cloned(),
+                };
+                let x = match kind {
+                    HW_INPUT => {
+                        rec.inputs.push(c);
+                        (true, rec.inputs.len() - 1)
+                    }
+                    HW_OUTPUT => {
+                        rec.outputs.push(c);
+                        (false, rec.outputs.len() - 1)
+                    }
+                    other => return Err(content(format!("unknown channel kind `{other}`"))),
+                };
+                index.insert(ch.id, x);
+                x
+            }
+        };
+        let s: Sample = serde_json::from_slice(&m.data)
+            .map_err(|e| content(format!("{} message {}: {e}", ch.topic, m.sequence)))?;
+        let bits = u64::from_str_radix(&s.bits, 16).map_err(|e| {
+            content(format!(
+                "{} tick {}: bits `{}`: {e}",
+                ch.topic, s.tick, s.bits
+            ))
+        })?;
+        samples.push((is_in, i, s.tick, m.log_time, f64::from_bits(bits)));
+    }
+    let (ni, no) = (rec.inputs.len(), rec.outputs.len());
+    rec.t_ns = vec![0; ticks];
+    rec.input_values = vec![f64::NAN; ticks * ni];
+    rec.output_values = vec![f64::NAN; ticks * no];
+    let mut seen = vec![0u32; ticks * (ni + no)];
+    for (is_in, i, k, t, v) in samples {
+        let k = k as usize;
+        if k >= ticks {
+            return Err(content(format!(
+                "sample of tick {k} beyond the {ticks} ticks recorded"
+            )));
+        }
+        rec.t_ns[k] = t;
+        if is_in {
+            rec.input_values[k * ni + i] = v;
+            seen[k * (ni + no) + i] += 1;
+        } else {
+            rec.output_values[k * no + i] = v;
+            seen[k * (ni + no) + ni + i] += 1;
+        }
+    }
+    if let Some(j) = seen.iter().position(|&c| c != 1) {
+        return Err(content(format!(
+            "tick {} has {} samples of one channel, expected 1",
+            j / (ni + no).max(1),
+            seen[j]
+        )));
+    }
+    Ok(rec)
+}
+
+/// The result of a replay.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ReplayReport {
+    /// Ticks replayed.
+    pub ticks: usize,
+    /// Output samples compared.
+    pub compared: usize,
+    /// Output samples whose bits differ.
+    pub mismatches: usize,
+    /// The first difference: (tick, channel, recorded, replayed).
+    pub first: Option<(usize, String, f64, f64)>,
+}
+
+/// Replay `rec` through `sched` (freshly built, at the recorded rate, at least
+/// as long as the recording) and compare every output sample bit for bit.
+pub fn replay(sched: &mut Scheduler, rec: &Recording) -> Result<ReplayReport, RecordError> {
+    if sched.base_rate_hz() != rec.rate_hz {
+        return Err(RecordError::Graph(format!(
+            "the graph runs at {} Hz, the recording at {} Hz (fix: replay with the graph that was recorded, or `--set base_rate_hz={}`)",
+            sched.base_rate_hz(),
+            rec.rate_hz,
+            rec.rate_hz
+        )));
+    }
+    let (hw_in, hw_out) = hw_blocks(sched);
+    let find = |list: &[Channel], name: &str, kind: &str| {
+        list.iter().position(|c| c.name == name).ok_or_else(|| {
+            RecordError::Graph(format!(
+                "block `{name}` ({kind}) has no recorded channel (recorded: {})",
+                list.iter()
+                    .map(|c| c.name.as_str())
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ))
+        })
+    };
+    let id = |name: &str| {
+        sched
+            .signal_id(&format!("{name}.y"))
+            .ok_or_else(|| RecordError::Graph(format!("signal {name}.y not found")))
+    };
+    let ins = hw_in
+        .iter()
+        .map(|(n, _)| Ok((find(&rec.inputs, n, HW_INPUT)?, id(n)?)))
+        .collect::<Result<Vec<_>, RecordError>>()?;
+    let outs = hw_out
+        .iter()
+        .map(|(n, _)| Ok((find(&rec.outputs, n, HW_OUTPUT)?, id(n)?, n.clone())))
+        .collect::<Result<Vec<_>, RecordError>>()?;
+    let (ni, no) = (rec.inputs.len(), rec.outputs.len());
+    let mut report = ReplayReport {
+        ticks: rec.ticks(),
+        compared: 0,
+        mismatches: 0,
+        first: None,
+    };
+    for k in 0..rec.ticks() {
+        for &(i, sid) in &ins {
+            sched.write(sid, &rec.input_values[k * ni + i..k * ni + i + 1]);
+        }
+        sched.tick();
+        for (i, sid, name) in &outs {
+            let got = sched.read(*sid)[0];
+            let want = rec.output_values[k * no + i];
+            report.compared += 1;
+            if got.to_bits() != want.to_bits() {
+                report.mismatches += 1;
+                if report.first.is_none() {
+                    report.first = Some((k, name.clone(), want, got));
+                }
+            }
+        }
+    }
+    Ok(report)
+}

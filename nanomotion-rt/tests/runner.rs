@@ -1,0 +1,516 @@
+//! Acceptance tests of the real-time runner: the grid is held against
+//! CLOCK_MONOTONIC, injected overruns are counted exactly under both policies,
+//! `max_overruns` and the watchdog stop the loop with outputs safe, a refused
+//! privilege is refused unless soft running is allowed, and ticks do not allocate.
+
+use nanomotion_core::GraphSpec;
+use nanomotion_rt::clock::{self, Privileges};
+use nanomotion_rt::{
+    Channel, Device, DeviceError, OverrunPolicy, PlantInfo, RealtimeRunner, RtConfig, RtError,
+    ShmDevice, ShmPlant, Stop,
+};
+use std::time::Duration;
+
+/// A loop of `rate_hz` for `ticks` ticks: one input `pos` (m), one output `cmd`
+/// = 2·pos + 1.5.
+fn graph(rate_hz: f64, ticks: u64) -> nanomotion_core::Scheduler {
+    nanomotion_rt::link_blocks();
+    let yaml = format!(
+        "base_rate_hz: {rate_hz}\nduration_s: {}\nblocks:\n  - {{ name: pos, type: hw_input, unit: m }}\n  - {{ name: k, type: gain, k: 2.0 }}\n  - {{ name: off, type: constant, value: 1.5 }}\n  - {{ name: s, type: sum, signs: \"++\" }}\n  - {{ name: cmd, type: hw_output }}\nconnections:\n  - {{ from: pos.y, to: k.u }}\n  - {{ from: k.y, to: s.in0 }}\n  - {{ from: off.y, to: s.in1 }}\n  - {{ from: s.y, to: cmd.u }}\nlog: [cmd.y]\n",
+        ticks as f64 / rate_hz
+    );
+    let (s, _) = GraphSpec::from_yaml(&yaml, "test.yaml")
+        .unwrap()
+        .build()
+        .unwrap();
+    assert_eq!(s.ticks_total(), ticks);
+    s
+}
+
+fn config(policy: OverrunPolicy) -> RtConfig {
+    RtConfig {
+        privileges: Privileges {
+            priority: Some(50),
+            cpu: None,
+            lock_memory: false,
+        },
+        allow_soft: true,
+        overrun: policy,
+        ..RtConfig::default()
+    }
+}
+
+/// A device that records when each tick read it, and can sleep 1.5 periods in
+/// `write` on chosen ticks.
+struct TestDevice {
+    inputs: Vec<Channel>,
+    outputs: Vec<Channel>,
+    reads_ns: Vec<u64>,
+    written: Vec<f64>,
+    sleep_on: Vec<u64>,
+    sleep_ns: u64,
+    tick: u64,
+    safe_calls: u32,
+    last_output: f64,
+}
+
+impl TestDevice {
+    fn new(capacity: usize, sleep_on: &[u64], sleep_ns: u64) -> Self {
+        Self {
+            inputs: vec![Channel::new("pos", Some("m"))],
+            outputs: vec![Channel::new("cmd", None)],
+            reads_ns: Vec::with_capacity(capacity),
+            written: Vec::with_capacity(capacity),
+            sleep_on: sleep_on.to_vec(),
+            sleep_ns,
+            tick: 0,
+            safe_calls: 0,
+            last_output: f64::NAN,
+        }
+    }
+}
+
+impl Device for TestDevice {
+    fn name(&self) -> &str {
+        "test"
+    }
+    fn inputs(&self) -> &[Channel] {
+        &self.inputs
+    }
+    fn outputs(&self) -> &[Channel] {
+        &self.outputs
+    }
+    fn read(&mut self, _now_ns: u64, inputs: &mut [f64]) -> Result<(), DeviceError> {
+        if self.reads_ns.len() < self.reads_ns.capacity() {
+            self.reads_ns.push(clock::now_ns());
+        }
+        // Tick k reads k + 1 (so that tick 0's sample is not 0).
+        inputs[0] = (self.tick + 1) as f64;
+        Ok(())
+    }
+    fn write(&mut self, now_ns: u64, outputs: &[f64]) -> Result<(), DeviceError> {
+        if self.written.len() < self.written.capacity() {
+            self.written.push(outputs[0]);
+        }
+        self.last_output = outputs[0];
+        if self.sleep_on.contains(&self.tick) {
+            clock::sleep_until(now_ns + self.sleep_ns, 0);
+        }
+        self.tick += 1;
+        Ok(())
+    }
+    fn safe_state(&mut self) -> Result<(), DeviceError> {
+        self.safe_calls += 1;
+        self.last_output = 0.0;
+        Ok(())
+    }
+}
+
+#[test]
+fn the_grid_is_held_over_ten_thousand_ticks_at_10_khz() {
+    // Catch-up keeps tick k on slot k, so tick k must start at t0 + k·T
+    // exactly plus a wake-up latency that does not grow: an absolute deadline.
+    // (A relative sleep would add each latency to the schedule: ~10⁴ × tens
+    // of µs of drift over this run.)
+    let n = 10_000u64;
+    let rate = 10_000.0;
+    let mut cfg = config(OverrunPolicy::CatchUp);
+    cfg.privileges.lock_memory = true;
+    let mut r =
+        RealtimeRunner::new(graph(rate, n), TestDevice::new(n as usize, &[], 0), cfg).unwrap();
+    let report = r.run(|_| {}).unwrap();
+    assert_eq!(report.stopped, Stop::Completed);
+    assert_eq!(report.ticks, n);
+    assert_eq!(report.slots, n);
+    let reads = &r.device().reads_ns;
+    assert_eq!(reads.len(), n as usize);
+    let period_ns = 1.0e9 / rate;
+    let late: Vec<i64> = reads
+        .iter()
+        .enumerate()
+        .map(|(k, &t)| t as i64 - (report.t0_ns + (k as f64 * period_ns).round() as u64) as i64)
+        .collect();
+    // Never before its deadline.
+    assert!(late.iter().all(|&l| l >= 0), "a tick started early");
+    let median = |v: &[i64]| {
+        let mut v = v.to_vec();
+        v.sort_unstable();
+        v[v.len() / 2]
+    };
+    let first = median(&late[..1000]);
+    let last = median(&late[late.len() - 1000..]);
+    assert!(
+        (last - first).abs() < 50_000,
+        "lateness drifted from {first} ns to {last} ns"
+    );
+    // The last tick started at its grid time (plus its latency only).
+    let expected_last = report.t0_ns + ((n - 1) as f64 * period_ns).round() as u64;
+    assert_eq!(report.last_deadline_ns, expected_last);
+    // Mean period over the run equals T to within the jitter of two ticks.
+    let mean = (reads[n as usize - 1] - reads[0]) as f64 / (n - 1) as f64;
+    assert!((mean - period_ns).abs() < 100.0, "mean period {mean} ns");
+    // The histograms saw every tick; the period one every consecutive pair.
+    assert_eq!(report.wakeup_latency.count, n);
+    assert_eq!(report.execution.count, n);
+    assert_eq!(report.period.count, n - 1);
+    assert_eq!(report.period_jitter.count, n - 1);
+    // Each output is what the graph computes from the input of the same tick.
+    for (k, &y) in r.device().written.iter().enumerate() {
+        assert_eq!(y, 2.0 * (k + 1) as f64 + 1.5, "tick {k}");
+    }
+    assert_eq!(r.device().safe_calls, 1);
+}
+
+/// Rate of the overrun tests, its period and the injected sleep (1.5 T).
+const RATE: f64 = 200.0;
+const PERIOD_NS: u64 = 5_000_000;
+const SLEEP_NS: u64 = 7_500_000;
+
+#[test]
+fn injected_overruns_are_counted_exactly_and_skip_stays_on_the_grid() {
+    // 200 Hz (T = 5 ms, so that only the injected sleeps overrun, even on a
+    // loaded machine); write() sleeps 1.5 T on ticks 50, 120 and 300: each of
+    // them ends after the next deadline (one overrun) and, under `skip`, the
+    // deadline in between is dropped (one missed tick) — the loop goes on at
+    // slot k + 2.
+    let n = 400;
+    let sleepy = [50, 120, 300];
+    let mut r = RealtimeRunner::new(
+        graph(RATE, n),
+        TestDevice::new(n as usize, &sleepy, SLEEP_NS),
+        config(OverrunPolicy::Skip),
+    )
+    .unwrap();
+    let mut events = Vec::new();
+    let rep = r.run(|e| events.push(e)).unwrap();
+    assert_eq!(rep.stopped, Stop::Completed);
+    assert_eq!(rep.overruns, 3);
+    assert_eq!(rep.missed_ticks, 3);
+    assert_eq!(rep.ticks, n);
+    assert_eq!(rep.slots, n + 3);
+    assert_eq!(r.scheduler().ticks_done(), n);
+    let overrun_ticks: Vec<u64> = events
+        .iter()
+        .filter_map(|e| match e {
+            nanomotion_rt::Event::Overrun { tick, .. } => Some(*tick),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(overrun_ticks, sleepy);
+    // On the grid: the last tick started on slot n + 3.
+    assert_eq!(
+        rep.last_deadline_ns,
+        rep.t0_ns + (n + 2) * PERIOD_NS,
+        "the last tick is not on the grid"
+    );
+}
+
+#[test]
+fn catch_up_runs_every_late_tick_and_counts_the_same_overruns() {
+    let n = 400;
+    let mut r = RealtimeRunner::new(
+        graph(RATE, n),
+        TestDevice::new(n as usize, &[50, 120, 300], SLEEP_NS),
+        config(OverrunPolicy::CatchUp),
+    )
+    .unwrap();
+    let rep = r.run(|_| {}).unwrap();
+    assert_eq!(rep.overruns, 3);
+    assert_eq!(rep.missed_ticks, 0);
+    assert_eq!((rep.ticks, rep.slots), (n, n));
+    assert_eq!(rep.last_deadline_ns, rep.t0_ns + (n - 1) * PERIOD_NS);
+}
+
+#[test]
+fn max_overruns_stops_the_loop_with_outputs_safe() {
+    let n = 400;
+    let mut cfg = config(OverrunPolicy::Skip);
+    cfg.max_overruns = Some(1);
+    let mut r = RealtimeRunner::new(
+        graph(RATE, n),
+        TestDevice::new(n as usize, &[50, 120, 300], SLEEP_NS),
+        cfg,
+    )
+    .unwrap();
+    let rep = r.run(|_| {}).unwrap();
+    assert_eq!(rep.stopped, Stop::MaxOverruns);
+    assert_eq!(rep.overruns, 2);
+    // Ticks 0..=120 ran; the second overrun (tick 120) stopped the loop.
+    assert_eq!(rep.ticks, 121);
+    assert_eq!(r.device().safe_calls, 1);
+    assert_eq!(r.device().last_output, 0.0);
+    assert!(rep.safe_state_ok);
+}
+
+#[test]
+fn the_watchdog_stops_the_loop_when_the_plant_falls_silent() {
+    // A plant (this process, another thread) publishes for 40 ms and then
+    // stops; the controller's watchdog (20 ms) stops the loop, whose safe state
+    // drives the plant's input to 0 V.
+    nanomotion_rt::link_blocks();
+    let name = format!("test-watchdog-{}", std::process::id());
+    let info = PlantInfo {
+        title: None,
+        rate_hz: 1000.0,
+        to_plant: vec![Channel::new("cmd", None)],
+        from_plant: vec![Channel::new("pos", Some("m"))],
+    };
+    let mut plant = ShmPlant::serve(&name, info, Duration::from_secs(1)).unwrap();
+    let dev = ShmDevice::connect(&name, Duration::from_secs(1), Duration::from_millis(20)).unwrap();
+    let mut r = RealtimeRunner::new(graph(1000.0, 2000), dev, config(OverrunPolicy::Skip)).unwrap();
+    let plant_thread = std::thread::spawn(move || {
+        let mut seen = Vec::new();
+        let mut cmd = [0.0];
+        for i in 0..40 {
+            plant.write(clock::now_ns(), &[i as f64 * 1e-9]).unwrap();
+            plant.peek_commands(&mut cmd);
+            seen.push(cmd[0]);
+            std::thread::sleep(Duration::from_millis(1));
+        }
+        // Silent from here; wait for the controller to stop.
+        std::thread::sleep(Duration::from_millis(200));
+        plant.peek_commands(&mut cmd);
+        (seen, cmd[0])
+    });
+    let rep = r.run(|_| {}).unwrap();
+    let (seen, after) = plant_thread.join().unwrap();
+    match &rep.stopped {
+        Stop::Device(DeviceError::Watchdog {
+            limit_ms,
+            silent_ms,
+            ..
+        }) => {
+            assert_eq!(*limit_ms, 20.0);
+            assert!(*silent_ms > 20.0);
+        }
+        other => panic!("expected a watchdog stop, got {other:?}"),
+    }
+    // Stopped about 20 ms after the last heartbeat (≈ 40 ms in), long before
+    // the 2 s run would have ended.
+    assert!(rep.ticks > 20 && rep.ticks < 200, "{} ticks", rep.ticks);
+    // While running, the plant saw cmd = 2·pos + 1.5 ≥ 1.5; after: the safe 0.
+    assert!(seen.iter().skip(5).all(|&c| c >= 1.5), "{seen:?}");
+    assert_eq!(after, 0.0);
+    assert!(rep.safe_state_ok);
+}
+
+/// Drop CAP_SYS_NICE from the calling thread (threads it starts inherit it).
+fn drop_sys_nice() {
+    #[repr(C)]
+    struct Header {
+        version: u32,
+        pid: i32,
+    }
+    #[repr(C)]
+    #[derive(Clone, Copy, Default)]
+    struct Data {
+        effective: u32,
+        permitted: u32,
+        inheritable: u32,
+    }
+    const VERSION_3: u32 = 0x2008_0522;
+    const CAP_SYS_NICE: u32 = 23;
+    let mut h = Header {
+        version: VERSION_3,
+        pid: 0,
+    };
+    let mut d = [Data::default(); 2];
+    // SAFETY: capget/capset with a v3 header and two data words, as documented.
+    unsafe {
+        assert_eq!(libc::syscall(libc::SYS_capget, &mut h, d.as_mut_ptr()), 0);
+        d[0].effective &= !(1 << CAP_SYS_NICE);
+        d[0].permitted &= !(1 << CAP_SYS_NICE);
+        d[0].inheritable &= !(1 << CAP_SYS_NICE);
+        assert_eq!(libc::syscall(libc::SYS_capset, &mut h, d.as_ptr()), 0);
+        // And no real-time priority through the resource limit either.
+        let lim = libc::rlimit {
+            rlim_cur: 0,
+            rlim_max: libc::RLIM_INFINITY,
+        };
+        let mut old = libc::rlimit {
+            rlim_cur: 0,
+            rlim_max: 0,
+        };
+        libc::getrlimit(libc::RLIMIT_RTPRIO, &mut old);
+        libc::setrlimit(
+            libc::RLIMIT_RTPRIO,
+            &libc::rlimit {
+                rlim_max: old.rlim_max,
+                ..lim
+            },
+        );
+    }
+}
+
+#[test]
+fn without_the_privilege_the_run_is_refused_unless_soft_running_is_allowed() {
+    std::thread::spawn(|| {
+        drop_sys_nice();
+        let hard = RtConfig {
+            privileges: Privileges {
+                priority: Some(80),
+                cpu: None,
+                lock_memory: false,
+            },
+            ..RtConfig::default()
+        };
+        let mut r =
+            RealtimeRunner::new(graph(1000.0, 20), TestDevice::new(32, &[], 0), hard.clone())
+                .unwrap();
+        match r.run(|_| {}) {
+            Err(RtError::Privilege(missing)) => {
+                assert_eq!(missing.len(), 1);
+                assert_eq!(missing[0].what, "SCHED_FIFO priority 80");
+                let msg = RtError::Privilege(missing).to_string();
+                for needle in ["ulimit -r", "CAP_SYS_NICE", "--allow-soft"] {
+                    assert!(msg.contains(needle), "{needle} missing from: {msg}");
+                }
+            }
+            other => panic!("expected a refusal, got {other:?}"),
+        }
+        assert_eq!(r.scheduler().ticks_done(), 0, "nothing ran");
+        let soft = RtConfig {
+            allow_soft: true,
+            ..hard
+        };
+        let mut r =
+            RealtimeRunner::new(graph(1000.0, 20), TestDevice::new(32, &[], 0), soft).unwrap();
+        let rep = r.run(|_| {}).unwrap();
+        assert_eq!(rep.ticks, 20);
+        assert_eq!(rep.scheduling, "SCHED_OTHER (normal priority)");
+        assert_eq!(rep.missing_privileges.len(), 1);
+    })
+    .join()
+    .unwrap();
+}
+
+#[test]
+fn a_granted_priority_is_what_the_kernel_reports() {
+    // As root (this project's machines and CI) SCHED_FIFO is granted; elsewhere
+    // the refusal is reported instead. Either way the report tells the truth.
+    let mut r = RealtimeRunner::new(
+        graph(1000.0, 10),
+        TestDevice::new(32, &[], 0),
+        config(OverrunPolicy::Skip),
+    )
+    .unwrap();
+    let rep = r.run(|_| {}).unwrap();
+    if rep.missing_privileges.is_empty() {
+        assert_eq!(rep.scheduling, "SCHED_FIFO 50");
+    } else {
+        assert_eq!(rep.scheduling, "SCHED_OTHER (normal priority)");
+    }
+}
+
+#[test]
+fn ticks_do_not_allocate() {
+    // The loop's allocations (the report's strings, at the end) do not depend
+    // on how many ticks ran: none per tick.
+    let count = |n: u64| {
+        let mut r = RealtimeRunner::new(
+            graph(20_000.0, n),
+            TestDevice::new(n as usize, &[], 0),
+            RtConfig {
+                privileges: Privileges {
+                    priority: None,
+                    cpu: None,
+                    lock_memory: false,
+                },
+                ..RtConfig::default()
+            },
+        )
+        .unwrap();
+        let info = allocation_counter::measure(|| {
+            let rep = r.run_here().unwrap();
+            assert_eq!(rep.ticks, n);
+        });
+        info.count_total
+    };
+    assert_eq!(count(100), count(4000));
+}
+
+#[test]
+fn a_block_without_a_device_channel_is_refused_with_the_channels_listed() {
+    nanomotion_rt::link_blocks();
+    let mut d = TestDevice::new(1, &[], 0);
+    d.inputs = vec![Channel::new("gap", Some("m"))];
+    let e = RealtimeRunner::new(graph(1000.0, 10), d, config(OverrunPolicy::Skip)).unwrap_err();
+    let msg = e.to_string();
+    assert!(msg.contains("block `pos` (hw_input)"), "{msg}");
+    assert!(msg.contains("gap"), "{msg}");
+    let mut d = TestDevice::new(1, &[], 0);
+    d.inputs = vec![Channel::new("pos", Some("V"))];
+    let e = RealtimeRunner::new(graph(1000.0, 10), d, config(OverrunPolicy::Skip)).unwrap_err();
+    assert!(
+        e.to_string()
+            .contains("unit `m` but the device channel is in `V`"),
+        "{e}"
+    );
+}
+
+#[test]
+fn a_recorded_run_replays_bit_for_bit_from_its_mcap_file() {
+    let n = 300u64;
+    let mut cfg = config(OverrunPolicy::Skip);
+    cfg.record = true;
+    let mut r =
+        RealtimeRunner::new(graph(2000.0, n), TestDevice::new(n as usize, &[], 0), cfg).unwrap();
+    r.run(|_| {}).unwrap();
+    let rec = r.recording().unwrap().clone();
+    assert_eq!(rec.ticks(), n as usize);
+    // What the device saw is what was recorded.
+    assert_eq!(rec.output_values, r.device().written);
+    assert_eq!(rec.inputs[0].unit.as_deref(), Some("m"));
+    let path = std::env::temp_dir().join(format!("nanomotion-rt-{}.mcap", std::process::id()));
+    nanomotion_rt::write_mcap(&path, &rec).unwrap();
+    let back = nanomotion_rt::read_mcap(&path).unwrap();
+    assert_eq!(back, rec, "the file holds every sample exactly");
+
+    let mut fresh = graph(2000.0, n);
+    let rep = nanomotion_rt::replay(&mut fresh, &back).unwrap();
+    assert_eq!((rep.ticks, rep.compared, rep.mismatches), (300, 300, 0));
+    // The same inputs through another gain: every output differs, the first
+    // difference is named.
+    let yaml = "base_rate_hz: 2000\nduration_s: 0.15\nblocks:\n  - { name: pos, type: hw_input, unit: m }\n  - { name: k, type: gain, k: 2.5 }\n  - { name: off, type: constant, value: 1.5 }\n  - { name: s, type: sum, signs: \"++\" }\n  - { name: cmd, type: hw_output }\nconnections:\n  - { from: pos.y, to: k.u }\n  - { from: k.y, to: s.in0 }\n  - { from: off.y, to: s.in1 }\n  - { from: s.y, to: cmd.u }\n";
+    let (mut other, _) = GraphSpec::from_yaml(yaml, "other.yaml")
+        .unwrap()
+        .build()
+        .unwrap();
+    let rep = nanomotion_rt::replay(&mut other, &back).unwrap();
+    assert_eq!(rep.mismatches, 300);
+    assert_eq!(
+        rep.first,
+        Some((0, "cmd".into(), 2.0 * 1.0 + 1.5, 2.5 * 1.0 + 1.5))
+    );
+    let _ = std::fs::remove_file(&path);
+}
+
+#[test]
+fn the_loop_thread_sleeps_without_timer_slack() {
+    // A normal-priority thread's sleeps end up to 50 µs late (the default timer
+    // slack), which made every tick of a soft 40 kHz run overrun; the loop asks
+    // for 1 ns.
+    std::thread::spawn(|| {
+        // SAFETY: prctl queries on the calling thread.
+        let before = unsafe { libc::prctl(libc::PR_GET_TIMERSLACK) };
+        assert_eq!(before, 50_000, "the default slack of a normal thread");
+        let mut r = RealtimeRunner::new(
+            graph(1000.0, 5),
+            TestDevice::new(8, &[], 0),
+            RtConfig {
+                privileges: Privileges {
+                    priority: None,
+                    cpu: None,
+                    lock_memory: false,
+                },
+                ..RtConfig::default()
+            },
+        )
+        .unwrap();
+        r.run_here().unwrap();
+        let after = unsafe { libc::prctl(libc::PR_GET_TIMERSLACK) };
+        assert_eq!(after, 1);
+    })
+    .join()
+    .unwrap();
+}

@@ -1,0 +1,452 @@
+//! `nanomotion rt` (a graph on the wall clock, against a device) and
+//! `nanomotion plant` (a plant graph served to a controller in another process),
+//! on top of the `nanomotion-rt` crate. See docs/realtime.md.
+
+use nanomotion::core::graph::GraphSpec;
+use nanomotion::core::{Override, Scheduler};
+use nanomotion::output::{Manifest, OutputFolder};
+use nanomotion::plot::{Figure, Scale, Series, draw_svg_panels};
+use nanomotion_rt::clock::Privileges;
+use nanomotion_rt::{
+    Device, DeviceError, Event, Histogram, NoDevice, OverrunPolicy, PlantInfo, RealtimeRunner,
+    RtConfig, ShmDevice, ShmPlant, Stop, TimingReport, hw_blocks,
+};
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+/// Real-time settings shared by `rt` and `plant`.
+#[derive(clap::Args, Debug)]
+pub struct Loop {
+    /// Override the graph's duration (s): the number of ticks the loop runs.
+    #[arg(long)]
+    duration: Option<f64>,
+    /// Pin the loop thread to this CPU (see isolcpus in docs/realtime.md).
+    #[arg(long)]
+    cpu: Option<usize>,
+    /// SCHED_FIFO priority of the loop thread (1–99).
+    #[arg(long, default_value_t = 80, value_parser = clap::value_parser!(u8).range(1..=99))]
+    priority: u8,
+    /// Run at normal priority when SCHED_FIFO or memory locking is refused
+    /// (without it the run is refused, naming what is missing).
+    #[arg(long)]
+    allow_soft: bool,
+    /// Overruns: `skip` the missed deadlines and stay on the grid, or `catch-up`.
+    #[arg(long, default_value = "skip", value_name = "skip|catch-up")]
+    overrun: OverrunPolicy,
+    /// Stop (outputs safe) after more than N overruns.
+    #[arg(long, value_name = "N")]
+    max_overruns: Option<u64>,
+    /// Busy-wait the last µs before each deadline (lower latency, one CPU busy).
+    #[arg(long, default_value_t = 0.0, value_name = "US")]
+    spin_us: f64,
+    /// Stop when the other side has been silent this long (ms).
+    #[arg(long, default_value_t = 50.0, value_name = "MS")]
+    watchdog_ms: f64,
+    /// Override a graph parameter by dotted path before building (repeatable),
+    /// e.g. `--set base_rate_hz=20000`.
+    #[arg(long = "set", value_name = "PATH=VALUE")]
+    set: Vec<Override>,
+    /// Output folder: timing.json, timing.svg and the logged signals (CSV).
+    #[arg(long, short)]
+    out: Option<PathBuf>,
+    /// Replace a non-empty output folder that does not hold a previous run.
+    #[arg(long)]
+    force: bool,
+    /// Record every hardware input and output sample into OUT/run.mcap (for
+    /// Foxglove/PlotJuggler and `nanomotion replay`); needs --out.
+    #[arg(long, requires = "out")]
+    record: bool,
+}
+
+/// `nanomotion rt`.
+#[derive(clap::Args, Debug)]
+pub struct RtArgs {
+    /// The graph file (YAML); its `hw_input`/`hw_output` blocks are the device's
+    /// channels by name.
+    graph: PathBuf,
+    /// The device: `shm:NAME` (a plant served by `nanomotion plant --serve NAME`);
+    /// without it the graph runs on the wall clock alone (no hw blocks allowed).
+    #[arg(long, value_name = "shm:NAME")]
+    device: Option<String>,
+    /// How long to wait for the plant to appear (s).
+    #[arg(long, default_value_t = 10.0, value_name = "S")]
+    connect_timeout: f64,
+    #[command(flatten)]
+    lp: Loop,
+}
+
+/// `nanomotion plant`.
+#[derive(clap::Args, Debug)]
+pub struct PlantArgs {
+    /// The plant graph (YAML): `hw_input` blocks are what the controller drives,
+    /// `hw_output` blocks what it measures.
+    graph: PathBuf,
+    /// Serve the plant under this name (`/dev/shm/nanomotion-NAME`); a controller
+    /// connects with `nanomotion rt CONTROLLER.yaml --device shm:NAME`.
+    #[arg(long, value_name = "NAME")]
+    serve: String,
+    #[command(flatten)]
+    lp: Loop,
+}
+
+fn build(graph: &Path, lp: &Loop) -> Result<Scheduler, String> {
+    let mut spec =
+        GraphSpec::from_file_with_overrides(graph, &lp.set).map_err(|e| e.to_string())?;
+    if let Some(d) = lp.duration {
+        spec.duration_s = d;
+    }
+    let (sched, report) = spec.build().map_err(|e| e.to_string())?;
+    for r in &report.rate_transitions {
+        tell!("note: rate transition {r}");
+    }
+    Ok(sched)
+}
+
+fn config(lp: &Loop) -> Result<RtConfig, String> {
+    if !(lp.spin_us.is_finite() && (0.0..=1000.0).contains(&lp.spin_us)) {
+        return Err(format!(
+            "--spin-us {}: must be within 0..=1000 µs (fix: e.g. --spin-us 5)",
+            lp.spin_us
+        ));
+    }
+    Ok(RtConfig {
+        privileges: Privileges {
+            priority: Some(lp.priority),
+            cpu: lp.cpu,
+            lock_memory: true,
+        },
+        allow_soft: lp.allow_soft,
+        overrun: lp.overrun,
+        max_overruns: lp.max_overruns,
+        spin_ns: (lp.spin_us * 1e3) as u64,
+        ..RtConfig::default()
+    })
+}
+
+fn watchdog(lp: &Loop) -> Result<Duration, String> {
+    if !(lp.watchdog_ms.is_finite() && lp.watchdog_ms > 0.0 && lp.watchdog_ms <= 60_000.0) {
+        return Err(format!(
+            "--watchdog-ms {}: must be in (0, 60000] (fix: e.g. --watchdog-ms 50)",
+            lp.watchdog_ms
+        ));
+    }
+    Ok(Duration::from_secs_f64(lp.watchdog_ms * 1e-3))
+}
+
+/// Print a status line on a terminal (stderr) for each status event; pass
+/// Ctrl-C on to the loop.
+fn status(stop: std::sync::Arc<std::sync::atomic::AtomicBool>, rate_hz: f64) -> impl FnMut(Event) {
+    let tty = std::io::IsTerminal::is_terminal(&std::io::stderr());
+    move |e| {
+        if nanomotion::output::signals::interrupted().is_some() {
+            stop.store(true, std::sync::atomic::Ordering::Relaxed);
+        }
+        match e {
+            Event::Status {
+                ticks,
+                overruns,
+                worst_latency_ns,
+                worst_execution_ns,
+            } if tty => {
+                eprint!(
+                    "\r  t {:>8.2} s  ticks {ticks:>10}  overruns {overruns:>5}  worst wake-up {:>8.1} µs  worst tick {:>8.1} µs   ",
+                    ticks as f64 / rate_hz,
+                    worst_latency_ns as f64 * 1e-3,
+                    worst_execution_ns as f64 * 1e-3
+                );
+            }
+            Event::Overrun { tick, late_ns } if tty => {
+                eprint!(
+                    "\r  overrun at tick {tick}: {:.1} µs late{:40}\n",
+                    late_ns as f64 * 1e-3,
+                    ""
+                );
+            }
+            _ => {}
+        }
+    }
+}
+
+fn run_loop<D: Device>(
+    graph: &Path,
+    sched: Scheduler,
+    device: D,
+    lp: &Loop,
+    command: &str,
+    ticks: Option<u64>,
+) -> Result<(TimingReport, Scheduler, nanomotion_rt::Timing), String> {
+    let cfg = RtConfig {
+        ticks,
+        record: lp.record,
+        ..config(lp)?
+    };
+    let rate = sched.base_rate_hz();
+    let folder = match &lp.out {
+        Some(out) => Some(OutputFolder::prepare(out, lp.force).map_err(|e| e.to_string())?),
+        None => None,
+    };
+    let mut runner = RealtimeRunner::new(sched, device, cfg).map_err(|e| e.to_string())?;
+    let stop = runner.stop_handle();
+    say!(
+        "{}: {command} at {rate} Hz on the wall clock, device {}",
+        graph.display(),
+        runner.device().name()
+    );
+    let report = runner.run(status(stop, rate)).map_err(|e| e.to_string())?;
+    if std::io::IsTerminal::is_terminal(&std::io::stderr()) {
+        eprintln!();
+    }
+    let timing = runner.timing().clone();
+    if let (Some(folder), Some(rec)) = (&folder, runner.recording()) {
+        nanomotion_rt::write_mcap(&folder.dir().join("run.mcap"), rec)
+            .map_err(|e| e.to_string())?;
+    }
+    let (sched, _device) = runner.into_parts();
+    print_report(&report);
+    if let Some(folder) = folder
+        && nanomotion::output::signals::interrupted().is_none()
+    {
+        let result = sched.result();
+        write_outputs(&folder, &report, &timing, &result.logs)?;
+        let files = folder
+            .commit(Some(&Manifest {
+                command,
+                graph: &graph.display().to_string(),
+                title: &result.title,
+                stability_gate: &[],
+            }))
+            .map_err(|e| e.to_string())?;
+        say!(
+            "wrote {} files to {}",
+            files.len(),
+            lp.out
+                .as_ref()
+                .map_or(String::new(), |p| p.display().to_string())
+        );
+    }
+    Ok((report, sched, timing))
+}
+
+fn print_report(r: &TimingReport) {
+    say!(
+        "{} ticks at {} Hz ({}), {}; overruns {}, missed ticks {} (policy {}), events dropped {}",
+        r.ticks,
+        r.rate_hz,
+        r.scheduling,
+        r.stop,
+        r.overruns,
+        r.missed_ticks,
+        r.overrun_policy,
+        r.events_dropped
+    );
+    for m in &r.missing_privileges {
+        say!("soft run: {m}");
+    }
+    say!(
+        "{:<18} {:>10} {:>10} {:>10} {:>10} {:>10}",
+        "µs",
+        "p50",
+        "p99",
+        "p99.9",
+        "max",
+        "mean"
+    );
+    let us = |v: Option<u64>| v.map_or("-".to_string(), |v| format!("{:.2}", v as f64 * 1e-3));
+    for (name, s) in [
+        ("wake-up latency", &r.wakeup_latency),
+        ("period", &r.period),
+        ("|period − T|", &r.period_jitter),
+        ("execution", &r.execution),
+    ] {
+        say!(
+            "{:<18} {:>10} {:>10} {:>10} {:>10} {:>10}",
+            name,
+            us(s.p50_ns),
+            us(s.p99_ns),
+            us(s.p999_ns),
+            us(s.max_ns),
+            s.mean_ns
+                .map_or("-".to_string(), |m| format!("{:.2}", m * 1e-3))
+        );
+    }
+}
+
+/// The fraction of ticks at or above each bucket (an exceedance curve: the
+/// tail that a histogram's linear axis hides), in µs against log10(fraction).
+fn exceedance(label: &str, h: &Histogram) -> Series {
+    let n = h.count().max(1) as f64;
+    let mut above = h.count();
+    let (mut x, mut y) = (Vec::new(), Vec::new());
+    for (lo, hi, c) in h.buckets() {
+        x.push(lo.max(1) as f64 * 1e-3);
+        y.push((above as f64 / n).log10());
+        above -= c;
+        x.push(hi.max(1) as f64 * 1e-3);
+        y.push(((above.max(1)) as f64 / n).log10().min(0.0));
+    }
+    Series {
+        label: label.into(),
+        x,
+        y,
+    }
+}
+
+fn write_outputs(
+    folder: &OutputFolder,
+    report: &TimingReport,
+    timing: &nanomotion_rt::Timing,
+    logs: &[nanomotion::core::scheduler::SignalLog],
+) -> Result<(), String> {
+    let dir = folder.dir();
+    let json = serde_json::to_string_pretty(report).map_err(|e| e.to_string())?;
+    std::fs::write(dir.join("timing.json"), json + "\n")
+        .map_err(|e| format!("{}: {e}", dir.join("timing.json").display()))?;
+    let panel = |title: &str, h: &Histogram| Figure {
+        title: format!("{title} ({} ticks)", h.count()),
+        x_label: "µs".into(),
+        y_label: "log10 fraction of ticks ≥ x".into(),
+        y_unit: None,
+        x_scale: Scale::Log,
+        series: vec![exceedance(title, h)],
+    };
+    draw_svg_panels(
+        &[
+            panel("wake-up latency", &timing.wakeup_latency),
+            panel("|period − T|", &timing.period_jitter),
+            panel("execution time", &timing.execution),
+        ],
+        &dir.join("timing.svg"),
+    )
+    .map_err(|e| e.to_string())?;
+    nanomotion::output::write_csv(dir, logs).map_err(|e| e.to_string())?;
+    Ok(())
+}
+
+/// `nanomotion rt GRAPH [--device shm:NAME]`.
+pub fn rt(a: RtArgs) -> Result<(), String> {
+    nanomotion_rt::link_blocks();
+    let sched = build(&a.graph, &a.lp)?;
+    let (report, sched, _) = match a.device.as_deref() {
+        None => run_loop(&a.graph, sched, NoDevice, &a.lp, "rt", None)?,
+        Some(d) => {
+            let Some(name) = d.strip_prefix("shm:") else {
+                return Err(format!(
+                    "--device {d}: unknown device (fix: `shm:NAME` for a plant served by `nanomotion plant --serve NAME`)"
+                ));
+            };
+            if !(a.connect_timeout.is_finite() && a.connect_timeout >= 0.0) {
+                return Err(format!(
+                    "--connect-timeout {}: must be ≥ 0 s",
+                    a.connect_timeout
+                ));
+            }
+            let dev = ShmDevice::connect(
+                name,
+                Duration::from_secs_f64(a.connect_timeout),
+                watchdog(&a.lp)?,
+            )
+            .map_err(|e| e.to_string())?;
+            run_loop(&a.graph, sched, dev, &a.lp, "rt", None)?
+        }
+    };
+    print_scores(&sched);
+    match report.stopped {
+        Stop::Completed | Stop::Interrupted => Ok(()),
+        other => Err(format!("{}: {other}", a.graph.display())),
+    }
+}
+
+fn print_scores(sched: &Scheduler) {
+    for s in sched.result().scores {
+        say!(
+            "score {:<28} rms {:.4e} max |.| {:.4e} {}",
+            s.signal,
+            s.rms,
+            s.max_abs,
+            s.unit.as_deref().unwrap_or("")
+        );
+    }
+}
+
+/// `nanomotion plant GRAPH --serve NAME`.
+pub fn plant(a: PlantArgs) -> Result<(), String> {
+    nanomotion_rt::link_blocks();
+    let mut lp = a.lp;
+    // Without --duration the plant runs until the controller leaves.
+    let ticks = lp.duration.take();
+    let sched = build(&a.graph, &lp)?;
+    let (to_plant, from_plant) = hw_blocks(&sched);
+    let channel = |(name, unit): (String, Option<String>)| nanomotion_rt::Channel { name, unit };
+    let info = PlantInfo {
+        title: sched.result().title,
+        rate_hz: sched.base_rate_hz(),
+        to_plant: to_plant.into_iter().map(channel).collect(),
+        from_plant: from_plant.into_iter().map(channel).collect(),
+    };
+    if info.to_plant.is_empty() && info.from_plant.is_empty() {
+        return Err(format!(
+            "{}: the plant graph has no hw_input or hw_output block, nothing to serve (fix: `- {{ name: drive, type: hw_input }}` for what the controller drives, `- {{ name: position, type: hw_output }}` for what it measures)",
+            a.graph.display()
+        ));
+    }
+    let rate = sched.base_rate_hz();
+    let device = ShmPlant::serve(&a.serve, info, watchdog(&lp)?).map_err(|e| e.to_string())?;
+    say!(
+        "serving `{}` ({} in, {} out): connect with `nanomotion rt CONTROLLER.yaml --device shm:{}`",
+        a.serve,
+        device.inputs().len(),
+        device.outputs().len(),
+        a.serve
+    );
+    // Logs hold the graph's duration; a longer plant run drops (and counts)
+    // the samples beyond it, without allocating.
+    let ticks = ticks.map_or(u64::MAX, |d| (d * rate).round() as u64);
+    let (report, _, _) = run_loop(&a.graph, sched, device, &lp, "plant", Some(ticks))?;
+    match report.stopped {
+        Stop::Completed | Stop::Interrupted | Stop::Device(DeviceError::Closed(_)) => Ok(()),
+        other => Err(format!("{}: {other}", a.graph.display())),
+    }
+}
+
+/// `nanomotion replay`.
+#[derive(clap::Args, Debug)]
+pub struct ReplayArgs {
+    /// A recording written by `nanomotion rt --record` (OUT/run.mcap).
+    recording: PathBuf,
+    /// The controller graph that was recorded (YAML).
+    graph: PathBuf,
+    /// Override a graph parameter before building (repeatable): replaying with a
+    /// changed gain shows where the outputs part.
+    #[arg(long = "set", value_name = "PATH=VALUE")]
+    set: Vec<Override>,
+}
+
+/// `nanomotion replay RUN.mcap GRAPH`: the recorded inputs through the graph,
+/// outputs compared bit for bit.
+pub fn replay(a: ReplayArgs) -> Result<(), String> {
+    nanomotion_rt::link_blocks();
+    let rec = nanomotion_rt::read_mcap(&a.recording).map_err(|e| e.to_string())?;
+    let mut spec =
+        GraphSpec::from_file_with_overrides(&a.graph, &a.set).map_err(|e| e.to_string())?;
+    spec.duration_s = rec.ticks() as f64 / rec.rate_hz;
+    let (mut sched, _) = spec.build().map_err(|e| e.to_string())?;
+    let r = nanomotion_rt::replay(&mut sched, &rec).map_err(|e| e.to_string())?;
+    match &r.first {
+        None => {
+            say!(
+                "{}: replayed {} ticks through {}: all {} output samples bit-identical",
+                a.recording.display(),
+                r.ticks,
+                a.graph.display(),
+                r.compared
+            );
+            Ok(())
+        }
+        Some((tick, channel, want, got)) => Err(format!(
+            "{}: {} of {} output samples differ; first at tick {tick}, `{channel}`: recorded {want:e}, replayed {got:e} (the graph or its parameters are not the ones recorded)",
+            a.recording.display(),
+            r.mismatches,
+            r.compared
+        )),
+    }
+}

@@ -1,0 +1,264 @@
+//! The quickstart loop split in two processes — the controller here, the stage
+//! in `nanomotion plant` — tracks like the single-process simulation; `nanomotion
+//! rt` writes its timing report.
+
+use nanomotion::core::graph::GraphSpec;
+use nanomotion::rt::clock::Privileges;
+use nanomotion::rt::{OverrunPolicy, RealtimeRunner, RtConfig, ShmDevice, Stop};
+use std::process::{Command, Stdio};
+use std::time::Duration;
+
+const EXAMPLES: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/examples");
+
+/// rms and mean of the `i`-th score's signal, from its log, after `from_s`.
+fn err_stats(sched: &nanomotion::core::Scheduler, signal: &str, from_s: f64) -> (f64, f64, f64) {
+    let r = sched.result();
+    let s = r.scores.iter().find(|s| s.signal == signal).unwrap();
+    assert_eq!(s.from_s, from_s);
+    (s.rms, s.mean, s.max_abs)
+}
+
+#[test]
+fn the_quickstart_split_in_two_processes_tracks_like_the_simulation() {
+    nanomotion::link_plugins();
+    // Single process: the quickstart as simulated.
+    let (mut single, _) = GraphSpec::from_file(format!("{EXAMPLES}/quickstart.yaml"))
+        .unwrap()
+        .build()
+        .unwrap();
+    single.run(|_| {});
+    let (rms1, _, _) = err_stats(&single, "err.y", 0.5);
+
+    // Two processes: the stage served by `nanomotion plant`, the PI here.
+    let name = format!("test-quickstart-{}", std::process::id());
+    let plant = Command::new(env!("CARGO_BIN_EXE_nanomotion"))
+        .args([
+            "plant",
+            &format!("{EXAMPLES}/realtime/quickstart_plant.yaml"),
+        ])
+        .args(["--serve", &name, "--allow-soft", "--priority", "70"])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let (sched, _) =
+        GraphSpec::from_file(format!("{EXAMPLES}/realtime/quickstart_controller.yaml"))
+            .unwrap()
+            .build()
+            .unwrap();
+    let device =
+        ShmDevice::connect(&name, Duration::from_secs(20), Duration::from_millis(200)).unwrap();
+    let cfg = RtConfig {
+        privileges: Privileges {
+            priority: Some(80),
+            cpu: None,
+            lock_memory: false,
+        },
+        allow_soft: true,
+        overrun: OverrunPolicy::CatchUp,
+        ..RtConfig::default()
+    };
+    let mut runner = RealtimeRunner::new(sched, device, cfg).unwrap();
+    let report = runner.run(|_| {}).unwrap();
+    let (sched, device) = runner.into_parts();
+    drop(device); // detach: the plant stops
+    let out = plant.wait_with_output().unwrap();
+    let plant_log =
+        String::from_utf8_lossy(&out.stdout).into_owned() + &String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "plant: {plant_log}");
+    assert!(
+        plant_log.contains("the controller closed the connection"),
+        "{plant_log}"
+    );
+    assert_eq!(report.stopped, Stop::Completed);
+    assert_eq!(report.ticks, 8000);
+    assert_eq!(report.device_latency_ticks, 1);
+
+    // The loop is type 2 (the stage integrates f_α, the PI integrates the
+    // error): the ramp is tracked without a steady error in both set-ups.
+    // The split adds a transport delay below one controller sample T = 250 µs
+    // (the plant publishes every 25 µs), which moves the measured position by
+    // less than v·T = 2.5 nm, and the encoder's 5 nm quantisation then
+    // rounds differently: the rms error may differ by at most lsb + v·T.
+    let (rms2, mean2, _) = err_stats(&sched, "err.y", 0.5);
+    let lsb = 5e-9;
+    let v_t = 1e-5 / 4000.0;
+    assert!(
+        (rms2 - rms1).abs() <= lsb + v_t,
+        "two processes: rms {rms2:e} m, one process: {rms1:e} m"
+    );
+    assert!(mean2.abs() <= lsb, "steady error {mean2:e} m");
+    // And the loop really was closed: the position followed the 10 µm/s ramp
+    // to about 20 µm.
+    let (pos, _, rate) = sched.log_view("position.y").unwrap();
+    let (reference, _, _) = sched.log_view("ref.y").unwrap();
+    assert_eq!(rate, 4000.0);
+    assert_eq!(pos.len(), 8000);
+    let (p, r) = (pos[7999], reference[7999]);
+    assert!(r > 1.99e-5, "reference {r:e} m");
+    assert!(
+        (p - r).abs() < 2.0 * lsb + v_t,
+        "end position {p:e} m, reference {r:e} m"
+    );
+}
+
+#[test]
+fn rt_writes_its_timing_report_and_refuses_a_missing_plant() {
+    let dir = std::env::temp_dir().join(format!("nanomotion-rt-cli-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let out = Command::new(env!("CARGO_BIN_EXE_nanomotion"))
+        .args(["rt", &format!("{EXAMPLES}/quickstart.yaml")])
+        .args(["--duration", "0.6", "--allow-soft", "--out"])
+        .arg(&dir)
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{text}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(text.contains("24000 ticks at 40000 Hz"), "{text}");
+    let timing: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.join("timing.json")).unwrap()).unwrap();
+    assert_eq!(timing["ticks"], 24000);
+    assert_eq!(timing["wakeup_latency"]["count"], 24000);
+    assert_eq!(timing["period_ns"], 25_000.0);
+    assert!(dir.join("timing.svg").exists());
+    let _ = std::fs::remove_dir_all(&dir);
+
+    // A controller whose plant is not there: named, with the fix, no files.
+    let out = Command::new(env!("CARGO_BIN_EXE_nanomotion"))
+        .args([
+            "rt",
+            &format!("{EXAMPLES}/realtime/quickstart_controller.yaml"),
+        ])
+        .args([
+            "--device",
+            "shm:nobody-serves-this",
+            "--connect-timeout",
+            "0",
+        ])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert!(
+        err.contains("no plant serves `nobody-serves-this`"),
+        "{err}"
+    );
+    assert!(
+        err.contains("nanomotion plant PLANT.yaml --serve nobody-serves-this"),
+        "{err}"
+    );
+}
+
+#[test]
+fn a_recorded_two_process_run_replays_bit_for_bit_and_a_changed_gain_does_not() {
+    let name = format!("test-record-{}", std::process::id());
+    let dir = std::env::temp_dir().join(format!("nanomotion-rt-record-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let bin = env!("CARGO_BIN_EXE_nanomotion");
+    let plant = Command::new(bin)
+        .args([
+            "plant",
+            &format!("{EXAMPLES}/realtime/quickstart_plant.yaml"),
+        ])
+        .args(["--serve", &name, "--allow-soft", "--priority", "70"])
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let controller = format!("{EXAMPLES}/realtime/quickstart_controller.yaml");
+    let out = Command::new(bin)
+        .args(["rt", &controller, "--device", &format!("shm:{name}")])
+        .args(["--duration", "0.6", "--allow-soft", "--record", "--out"])
+        .arg(&dir)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(plant.wait_with_output().unwrap().status.success());
+    let mcap = dir.join("run.mcap");
+    let same = Command::new(bin)
+        .arg("replay")
+        .arg(&mcap)
+        .arg(&controller)
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&same.stdout);
+    assert!(
+        same.status.success(),
+        "{}",
+        String::from_utf8_lossy(&same.stderr)
+    );
+    assert!(text.contains("replayed 2400 ticks"), "{text}");
+    assert!(
+        text.contains("all 2400 output samples bit-identical"),
+        "{text}"
+    );
+    let changed = Command::new(bin)
+        .arg("replay")
+        .arg(&mcap)
+        .arg(&controller)
+        .args(["--set", "blocks.pi.kp=3.2e7"])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&changed.stderr);
+    assert!(!changed.status.success());
+    assert!(
+        err.contains("output samples differ; first at tick"),
+        "{err}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn rt_refuses_without_cap_sys_nice_and_runs_soft_when_allowed() {
+    // As root, drop CAP_SYS_NICE for the child (util-linux `setpriv`); the
+    // real-time priority limit (`ulimit -r`) is 0 by default, so SCHED_FIFO is
+    // refused.
+    let run = |soft: bool| {
+        let mut c = Command::new("setpriv");
+        c.args(["--inh-caps=-sys_nice", "--bounding-set=-sys_nice", "--"])
+            .arg(env!("CARGO_BIN_EXE_nanomotion"))
+            .args([
+                "rt",
+                &format!("{EXAMPLES}/quickstart.yaml"),
+                "--duration",
+                "0.6",
+            ]);
+        if soft {
+            c.arg("--allow-soft");
+        }
+        c.output().expect("setpriv (util-linux) runs")
+    };
+    let hard = run(false);
+    let err = String::from_utf8_lossy(&hard.stderr);
+    assert!(!hard.status.success());
+    assert!(err.contains("SCHED_FIFO priority 80 refused"), "{err}");
+    assert!(
+        err.contains("ulimit -r 80") && err.contains("CAP_SYS_NICE"),
+        "{err}"
+    );
+    assert!(err.contains("--allow-soft"), "{err}");
+    assert!(!String::from_utf8_lossy(&hard.stdout).contains("ticks at"));
+    let soft = run(true);
+    let out = String::from_utf8_lossy(&soft.stdout);
+    assert!(
+        soft.status.success(),
+        "{}",
+        String::from_utf8_lossy(&soft.stderr)
+    );
+    assert!(
+        out.contains("24000 ticks at 40000 Hz (SCHED_OTHER (normal priority))"),
+        "{out}"
+    );
+    assert!(
+        out.contains("soft run: SCHED_FIFO priority 80 refused"),
+        "{out}"
+    );
+}
