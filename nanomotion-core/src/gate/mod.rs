@@ -75,7 +75,7 @@ pub use crate::learning::{LearningCheck, LearningModel};
 pub use crate::require::{Bounds, Require};
 
 use crate::block::{Block, Role};
-use crate::lti::{Complex, StateSpace, hinfnorm, stability_margins};
+use crate::lti::{Complex, FrequencyEvaluator, StateSpace, hinfnorm, stability_margins};
 use crate::scheduler::{BlockWiring, Scheduler};
 use assemble::{Edge, Part, compose, lift};
 use nalgebra::DMatrix;
@@ -1133,7 +1133,7 @@ fn loop_measures(l: &StateSpace, out: &mut PointAnalysis) {
 const NYQUIST_RADIUS: f64 = 1.0 + 1e-9;
 
 /// det(I + L(z)).
-fn det_i_plus_l(l: &StateSpace, z: Complex<f64>) -> Complex<f64> {
+fn det_i_plus_l(l: &FrequencyEvaluator, z: Complex<f64>) -> Complex<f64> {
     let g = l.evalfr(z);
     let n = g.nrows();
     let m = DMatrix::<Complex<f64>>::identity(n, n) + g;
@@ -1146,7 +1146,9 @@ fn nyquist_count(l: &StateSpace) -> Nyquist {
         .iter()
         .filter(|p| p.norm() > NYQUIST_RADIUS)
         .count();
-    let f = |theta: f64| det_i_plus_l(l, Complex::from_polar(NYQUIST_RADIUS, theta));
+    // `l` was built by `StateSpace::new`, so it is valid.
+    let ev = FrequencyEvaluator::new(l);
+    let f = |theta: f64| det_i_plus_l(&ev, Complex::from_polar(NYQUIST_RADIUS, theta));
     // Arg increments, subdividing where the phase moves more than 0.5 rad.
     let n0 = 1024;
     let mut total = 0.0;

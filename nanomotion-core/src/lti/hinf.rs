@@ -7,7 +7,7 @@
 //! bilinear map s = (z − 1)/(z + 1) (z = e^{jθ} ↔ s = j·tan(θ/2)).
 
 use super::discretise::bilinear_d2c_unit;
-use super::{Complex, LtiError, StateSpace};
+use super::{Complex, FrequencyEvaluator, LtiError, StateSpace};
 use nalgebra::DMatrix;
 use std::f64::consts::PI;
 
@@ -23,9 +23,9 @@ pub struct HinfNorm {
 }
 
 /// Largest singular value of G(jν) of a continuous model (ν = ∞ gives σ̄(D)).
-fn sigma_max(sys: &StateSpace, nu: f64) -> f64 {
+fn sigma_max(sys: &FrequencyEvaluator, nu: f64) -> f64 {
     let g = if nu.is_infinite() {
-        sys.d.map(|v| Complex::new(v, 0.0))
+        sys.feedthrough().map(|v| Complex::new(v, 0.0))
     } else {
         sys.evalfr(Complex::new(0.0, nu))
     };
@@ -71,13 +71,14 @@ pub fn hinfnorm(sys: &StateSpace) -> Result<HinfNorm, LtiError> {
 fn hinf_continuous(sys: &StateSpace) -> HinfNorm {
     const TOL: f64 = 1e-10;
     let n = sys.nstates();
+    let ev = FrequencyEvaluator::new(sys);
     // Lower bound: D (ω = ∞), DC, pole frequencies and a coarse log grid.
     let mut best = HinfNorm {
-        norm: sigma_max(sys, f64::INFINITY),
+        norm: sigma_max(&ev, f64::INFINITY),
         peak_rad_s: f64::INFINITY,
     };
     let consider = |w: f64, best: &mut HinfNorm| {
-        let s = sigma_max(sys, w);
+        let s = sigma_max(&ev, w);
         if s > best.norm {
             *best = HinfNorm {
                 norm: s,
@@ -166,7 +167,7 @@ fn hinf_continuous(sys: &StateSpace) -> HinfNorm {
             (best.peak_rad_s * ratio).ln(),
         );
         let g = 0.5 * (5f64.sqrt() - 1.0);
-        let f = |x: f64| sigma_max(sys, x.exp());
+        let f = |x: f64| sigma_max(&ev, x.exp());
         let (mut x1, mut x2) = (b - g * (b - a), a + g * (b - a));
         let (mut f1, mut f2) = (f(x1), f(x2));
         for _ in 0..80 {

@@ -28,6 +28,15 @@ fn common_dt(s1: &StateSpace, s2: &StateSpace) -> Result<Option<f64>, LtiError> 
     }
 }
 
+/// s = jω for a continuous model (`dt` = `None`), z = e^{jωT} for a discrete
+/// one: where angular frequency `w_rad_s` (rad/s) is evaluated.
+pub(crate) fn frequency_point(dt: Option<f64>, w_rad_s: f64) -> Complex<f64> {
+    match dt {
+        None => Complex::new(0.0, w_rad_s),
+        Some(t) => Complex::from_polar(1.0, w_rad_s * t),
+    }
+}
+
 fn to_complex(m: &DMatrix<f64>) -> DMatrix<Complex<f64>> {
     m.map(|v| Complex::new(v, 0.0))
 }
@@ -321,21 +330,29 @@ impl StateSpace {
     /// The point of the s- or z-plane where frequency `w_rad_s` (rad/s) is
     /// evaluated: s = jω (continuous) or z = e^{jωT} (discrete).
     pub fn frequency_point(&self, w_rad_s: f64) -> Complex<f64> {
-        match self.dt {
-            None => Complex::new(0.0, w_rad_s),
-            Some(t) => Complex::from_polar(1.0, w_rad_s * t),
-        }
+        frequency_point(self.dt, w_rad_s)
     }
 
     /// Frequency response G(jω) (continuous) or G(e^{jωT}) (discrete) at the
     /// angular frequencies `w_rad_s` (rad/s): one p×m complex matrix per frequency.
     /// NaN matrices for an inconsistent hand-built model (see
     /// [`StateSpace::evalfr`]; [`StateSpace::try_freqresp`] gives the error).
+    ///
+    /// A is reduced once to Hessenberg form, so each point costs O(n²) per
+    /// input ([`FrequencyEvaluator`](super::FrequencyEvaluator)).
     pub fn freqresp(&self, w_rad_s: &[f64]) -> Vec<DMatrix<Complex<f64>>> {
-        w_rad_s
-            .iter()
-            .map(|&w| self.evalfr(self.frequency_point(w)))
-            .collect()
+        match self.frequency_evaluator() {
+            Ok(ev) => w_rad_s.iter().map(|&w| ev.at(w)).collect(),
+            Err(_) => w_rad_s.iter().map(|_| self.nan_response()).collect(),
+        }
+    }
+
+    fn nan_response(&self) -> DMatrix<Complex<f64>> {
+        DMatrix::from_element(
+            self.noutputs(),
+            self.ninputs(),
+            Complex::new(f64::NAN, f64::NAN),
+        )
     }
 
     /// Frequency response at `w_rad_s` (rad/s) (see [`StateSpace::freqresp`]),
@@ -360,7 +377,10 @@ impl StateSpace {
     /// MIMO model, the (0, 0) entry (NaN as for
     /// [`StateSpace::freqresp_siso_at`]).
     pub fn freqresp_siso(&self, w_rad_s: &[f64]) -> Vec<Complex<f64>> {
-        w_rad_s.iter().map(|&w| self.freqresp_siso_at(w)).collect()
+        match self.frequency_evaluator() {
+            Ok(ev) => w_rad_s.iter().map(|&w| ev.siso_at(w)).collect(),
+            Err(_) => vec![Complex::new(f64::NAN, f64::NAN); w_rad_s.len()],
+        }
     }
 
     /// Checked SISO frequency response at `w_rad_s` (rad/s): a
