@@ -16,13 +16,35 @@ use std::hint::black_box;
 /// former 200-state cap of margins and norms).
 const LOOP_STATES: [usize; 5] = [7, 39, 99, 199, 399];
 
-/// A unity-feedback loop `ref → err → k → plant → err` whose plant is a
-/// discrete `state_space` block of `n` states: ⌊n/2⌋ lightly damped
-/// resonances (|z| = 0.98, spread over 0.05 … 2.5 rad per sample) and a real
-/// pole for odd `n`, in modal form behind the orthogonal similarity
-/// Q = I − 2vvᵀ/vᵀv (so A is dense), with residues small enough that the
-/// loop is stable with k = 0.5 (|k P| < 1 everywhere).
+/// Most states of one generated `state_space` block (the block allows 256).
+const STATES_PER_BLOCK: usize = 200;
+
+/// A unity-feedback loop `ref → err → k → plant0 → plant1 → … → err` of `n`
+/// states whose plant is a series of discrete `state_space` blocks of at most
+/// [`STATES_PER_BLOCK`] states each (one block up to 200 states).
 fn loop_yaml(n: usize) -> String {
+    let sizes: Vec<usize> = (0..n.div_ceil(STATES_PER_BLOCK))
+        .map(|i| (n - i * STATES_PER_BLOCK).min(STATES_PER_BLOCK))
+        .collect();
+    let mut blocks = String::new();
+    let mut connections = String::from("  - { from: err.y, to: k.u }\n");
+    let mut from = "k".to_string();
+    for (i, &size) in sizes.iter().enumerate() {
+        let _ = write!(blocks, "  - name: plant{i}\n{}", plant_yaml(size));
+        let _ = writeln!(connections, "  - {{ from: {from}.y, to: plant{i}.u }}");
+        from = format!("plant{i}");
+    }
+    format!(
+        "title: generated loop of {n} states (benches/stability_gate.rs)\nbase_rate_hz: 1000\nduration_s: 0.1\nblocks:\n  - {{ name: ref, type: constant, value: 1.0 }}\n  - {{ name: err, type: sum, signs: \"+-\" }}\n  - {{ name: k, type: gain, k: 0.5 }}\n{blocks}connections:\n  - {{ from: ref.y, to: err.in0 }}\n  - {{ from: {from}.y, to: err.in1 }}\n{connections}"
+    )
+}
+
+/// The fields of a discrete `state_space` block of `n` states: ⌊n/2⌋ lightly
+/// damped resonances (|z| = 0.98, spread over 0.05 … 2.5 rad per sample) and
+/// a real pole for odd `n`, in modal form behind the orthogonal similarity
+/// Q = I − 2vvᵀ/vᵀv (so A is dense), with residues small enough that
+/// |P| < 1 at every frequency (so the loop is stable with k = 0.5).
+fn plant_yaml(n: usize) -> String {
     let pairs = n / 2;
     let mut a = vec![vec![0.0; n]; n];
     let mut b = vec![0.0; n];
@@ -79,7 +101,7 @@ fn loop_yaml(n: usize) -> String {
     };
     let col: Vec<Vec<f64>> = b.iter().map(|&x| vec![x]).collect();
     format!(
-        "title: generated loop of {n} states (benches/stability_gate.rs)\nbase_rate_hz: 1000\nduration_s: 0.1\nblocks:\n  - {{ name: ref, type: constant, value: 1.0 }}\n  - {{ name: err, type: sum, signs: \"+-\" }}\n  - {{ name: k, type: gain, k: 0.5 }}\n  - name: plant\n    type: state_space\n    discrete: true\n    a: {}\n    b: {}\n    c: {}\n    d: [[0.0]]\nconnections:\n  - {{ from: ref.y, to: err.in0 }}\n  - {{ from: plant.y, to: err.in1 }}\n  - {{ from: err.y, to: k.u }}\n  - {{ from: k.y, to: plant.u }}\n",
+        "    type: state_space\n    discrete: true\n    a: {}\n    b: {}\n    c: {}\n    d: [[0.0]]\n",
         rows(&a),
         rows(&col),
         rows(&[c]),

@@ -2,17 +2,7 @@
 //! versions move fast, so everything else goes through these two functions.
 
 use crate::error::GraphError;
-use crate::graph::MAX_GRAPH_FILE_BYTES;
 use serde::de::DeserializeOwned;
-
-/// Most values (scalars, lists and maps, keys included) one YAML text may
-/// hold: one per 4 bytes of the largest graph file ([`MAX_GRAPH_FILE_BYTES`],
-/// 64 MiB), i.e. 16 777 216. A generated graph takes 6–7 bytes per value (a
-/// chain of 100 000 `gain` blocks: 4.6 MiB, 1.2 million values), so the size
-/// bound is the one a real graph meets; the value bound keeps the parser's
-/// memory (each value is buffered before its block is built) in proportion to
-/// the file.
-pub const MAX_VALUES: usize = (MAX_GRAPH_FILE_BYTES / 4) as usize;
 
 /// Parse YAML text into `T`. `origin` (a file name) prefixes error messages, which
 /// carry line and column and a snippet of the offending text.
@@ -20,18 +10,9 @@ pub const MAX_VALUES: usize = (MAX_GRAPH_FILE_BYTES / 4) as usize;
 /// Non-finite floats (`.nan`, `.inf`) are let through the parser on purpose (typetag
 /// buffers maps and would otherwise report them without a location): every block
 /// validates its own fields and names the one that is not finite.
-///
-/// The parser's budget allows [`MAX_VALUES`] values, so a graph file within
-/// the documented size bound ([`MAX_GRAPH_FILE_BYTES`]) is not refused for its
-/// number of values unless most of them are one or two characters long.
 pub fn from_str<T: DeserializeOwned>(text: &str, origin: &str) -> Result<T, GraphError> {
     let opts = serde_saphyr::options!(
         non_finite_float_policy: serde_saphyr::NonFiniteFloatPolicy::PassThrough,
-        budget: serde_saphyr::budget!(
-            max_nodes: MAX_VALUES,
-            // A scalar is one event, a list or a map two (start and end).
-            max_events: 2 * MAX_VALUES + 16,
-        ),
     );
     serde_saphyr::from_str_with_options(text, opts).map_err(|e| {
         // Inside a map the parser buffers (a block entry, a tagged config), an

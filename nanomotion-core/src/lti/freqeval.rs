@@ -31,6 +31,12 @@ pub struct FrequencyEvaluator {
     cq: DMatrix<f64>,
     d: DMatrix<f64>,
     dt: Option<f64>,
+    /// The model as given, for the points near one of its poles.
+    model: StateSpace,
+    /// Eigenvalues of A.
+    poles: Vec<Complex<f64>>,
+    /// ‖A‖₁.
+    a_norm: f64,
 }
 
 impl StateSpace {
@@ -84,6 +90,9 @@ impl FrequencyEvaluator {
             cq,
             d: sys.d.clone(),
             dt: sys.dt,
+            model: sys.clone(),
+            poles: super::linalg::eigvals(&sys.a),
+            a_norm: super::linalg::norm_1(&sys.a),
         }
     }
 
@@ -110,19 +119,36 @@ impl FrequencyEvaluator {
         if n == 0 {
             return g;
         }
-        let Some(sol) = self.solve(x) else {
+        if self.near_a_pole(x) {
+            return self.model.evalfr(x);
+        }
+        let Some((xr, xi)) = self.solve(x) else {
             return DMatrix::from_element(p, m, Complex::new(f64::NAN, f64::NAN));
         };
         for j in 0..m {
             for i in 0..p {
                 let mut acc = Complex::new(0.0, 0.0);
                 for k in 0..n {
-                    acc += sol[k * m + j] * self.cq[(i, k)];
+                    acc += Complex::new(xr[k * m + j], xi[k * m + j]) * self.cq[(i, k)];
                 }
                 g[(i, j)] += acc;
             }
         }
         g
+    }
+
+    /// Whether `x` is so near an eigenvalue of A that the Hessenberg form's
+    /// round-off (a perturbation of A of about ε‖A‖, spread over all its
+    /// entries, which splits a repeated eigenvalue by √(ε‖A‖)) could move a
+    /// pole across it: within 10⁻⁴ relative or 10⁻⁶‖A‖. There the dense LU of
+    /// the model as given is used, which keeps its exact zeros (a double
+    /// integrator's Jordan block stays one): the Nyquist contour passes
+    /// poles on the unit circle at a distance of 10⁻⁹.
+    fn near_a_pole(&self, x: Complex<f64>) -> bool {
+        let abs = 1e-6 * self.a_norm;
+        self.poles
+            .iter()
+            .any(|p| (x - p).norm() <= 1e-4 * x.norm().max(p.norm()) + abs)
     }
 
     /// G at angular frequency `w_rad_s` (rad/s): s = jω, or z = e^{jωT} for a
@@ -145,61 +171,114 @@ impl FrequencyEvaluator {
         super::ss::frequency_point(self.dt, w_rad_s)
     }
 
-    /// X = (xI − H)⁻¹ Qᵀ B (row-major n × m) by the LU of the Hessenberg
-    /// matrix xI − H with partial pivoting; `None` when a pivot is exactly
-    /// zero (x an eigenvalue, as the dense LU's refusal).
-    fn solve(&self, x: Complex<f64>) -> Option<Vec<Complex<f64>>> {
+    /// X = (xI − H)⁻¹ Qᵀ B (row-major n × m, real and imaginary parts
+    /// apart so that the row operations vectorise) by the LU of the
+    /// Hessenberg matrix xI − H with partial pivoting; `None` when a pivot is
+    /// exactly zero (x an eigenvalue, as the dense LU's refusal).
+    fn solve(&self, x: Complex<f64>) -> Option<(Vec<f64>, Vec<f64>)> {
         let (n, m) = (self.n, self.ninputs());
-        let mut u: Vec<Complex<f64>> = self.h.iter().map(|&v| Complex::new(-v, 0.0)).collect();
+        let mut ur: Vec<f64> = self.h.iter().map(|&v| -v).collect();
+        let mut ui = vec![0.0; n * n];
         for i in 0..n {
-            u[i * n + i] += x;
+            ur[i * n + i] += x.re;
+            ui[i * n + i] += x.im;
         }
-        let mut r: Vec<Complex<f64>> = self.qb.iter().map(|&v| Complex::new(v, 0.0)).collect();
+        let mut rr = self.qb.clone();
+        let mut ri = vec![0.0; n * m];
         // Elimination: only row k + 1 has an entry below the diagonal in column k.
         for k in 0..n.saturating_sub(1) {
-            let (top, bottom) = u.split_at_mut((k + 1) * n);
-            let row_k = &mut top[k * n + k..k * n + n];
-            let row_k1 = &mut bottom[k..n];
-            if row_k1[0].norm_sqr() > row_k[0].norm_sqr() {
-                row_k.swap_with_slice(row_k1);
-                let (rt, rb) = r.split_at_mut((k + 1) * m);
-                rt[k * m..].swap_with_slice(&mut rb[..m]);
+            let len = n - k;
+            let (a, b) = (k * n + k, (k + 1) * n + k);
+            let (top_r, bot_r) = ur.split_at_mut(b);
+            let (top_i, bot_i) = ui.split_at_mut(b);
+            let (pr, pi) = (&mut top_r[a..a + len], &mut top_i[a..a + len]);
+            let (qr, qi) = (&mut bot_r[..len], &mut bot_i[..len]);
+            let (rtop_r, rbot_r) = rr.split_at_mut((k + 1) * m);
+            let (rtop_i, rbot_i) = ri.split_at_mut((k + 1) * m);
+            let (sr, si) = (&mut rtop_r[k * m..], &mut rtop_i[k * m..]);
+            let (tr, ti) = (&mut rbot_r[..m], &mut rbot_i[..m]);
+            if qr[0] * qr[0] + qi[0] * qi[0] > pr[0] * pr[0] + pi[0] * pi[0] {
+                pr.swap_with_slice(qr);
+                pi.swap_with_slice(qi);
+                sr.swap_with_slice(tr);
+                si.swap_with_slice(ti);
             }
-            if row_k[0] == Complex::new(0.0, 0.0) {
+            let pivot = Complex::new(pr[0], pi[0]);
+            if pivot == Complex::new(0.0, 0.0) {
                 // Both candidates zero: column k is already eliminated.
                 continue;
             }
-            let l = row_k1[0] / row_k[0];
-            row_k1[0] = Complex::new(0.0, 0.0);
-            for j in 1..row_k.len() {
-                let v = row_k[j];
-                row_k1[j] -= l * v;
-            }
-            let (rt, rb) = r.split_at_mut((k + 1) * m);
-            for j in 0..m {
-                rb[j] -= l * rt[k * m + j];
-            }
+            let l = Complex::new(qr[0], qi[0]) / pivot;
+            qr[0] = 0.0;
+            qi[0] = 0.0;
+            axpy_complex(l, &pr[1..], &pi[1..], &mut qr[1..], &mut qi[1..]);
+            axpy_complex(l, sr, si, tr, ti);
         }
-        // Back substitution with the upper triangle.
+        // Back substitution with the upper triangle, row by row.
+        let mut acc_r = vec![0.0; m];
+        let mut acc_i = vec![0.0; m];
         for i in (0..n).rev() {
-            let piv = u[i * n + i];
+            let piv = Complex::new(ur[i * n + i], ui[i * n + i]);
             if piv == Complex::new(0.0, 0.0) {
                 return None;
             }
-            let (head, tail) = r.split_at_mut((i + 1) * m);
-            let ri = &mut head[i * m..];
-            for (jj, uij) in u[i * n + i + 1..i * n + n].iter().enumerate() {
-                let xj = &tail[jj * m..jj * m + m];
-                for (a, b) in ri.iter_mut().zip(xj) {
-                    *a -= uij * b;
-                }
+            let (row_r, row_i) = (&ur[i * n + i + 1..i * n + n], &ui[i * n + i + 1..i * n + n]);
+            for j in 0..m {
+                let (d_r, d_i) = if m == 1 {
+                    dot_complex(row_r, row_i, &rr[i + 1..], &ri[i + 1..])
+                } else {
+                    let xr: Vec<f64> = (i + 1..n).map(|jj| rr[jj * m + j]).collect();
+                    let xi: Vec<f64> = (i + 1..n).map(|jj| ri[jj * m + j]).collect();
+                    dot_complex(row_r, row_i, &xr, &xi)
+                };
+                acc_r[j] = d_r;
+                acc_i[j] = d_i;
             }
-            for a in ri.iter_mut() {
-                *a /= piv;
+            for j in 0..m {
+                let v = (Complex::new(rr[i * m + j], ri[i * m + j])
+                    - Complex::new(acc_r[j], acc_i[j]))
+                    / piv;
+                rr[i * m + j] = v.re;
+                ri[i * m + j] = v.im;
             }
         }
-        Some(r)
+        Some((rr, ri))
     }
+}
+
+/// y ← y − l·x for complex vectors kept as real and imaginary parts.
+fn axpy_complex(l: Complex<f64>, xr: &[f64], xi: &[f64], yr: &mut [f64], yi: &mut [f64]) {
+    let (lr, li) = (l.re, l.im);
+    for (((yr, yi), &xr), &xi) in yr.iter_mut().zip(yi.iter_mut()).zip(xr).zip(xi) {
+        *yr -= lr * xr - li * xi;
+        *yi -= lr * xi + li * xr;
+    }
+}
+
+/// Σ aⱼ·bⱼ for complex vectors kept as real and imaginary parts, in four
+/// interleaved partial sums (so that it vectorises; the order is fixed, so
+/// the result is the same on every run).
+fn dot_complex(ar: &[f64], ai: &[f64], br: &[f64], bi: &[f64]) -> (f64, f64) {
+    let (mut sr, mut si) = ([0.0f64; 4], [0.0f64; 4]);
+    let chunks = ar
+        .chunks_exact(4)
+        .zip(ai.chunks_exact(4))
+        .zip(br.chunks_exact(4))
+        .zip(bi.chunks_exact(4));
+    for (((xr, xi), yr), yi) in chunks {
+        for l in 0..4 {
+            sr[l] += xr[l] * yr[l] - xi[l] * yi[l];
+            si[l] += xr[l] * yi[l] + xi[l] * yr[l];
+        }
+    }
+    for j in ar.len() - ar.len() % 4..ar.len() {
+        sr[0] += ar[j] * br[j] - ai[j] * bi[j];
+        si[0] += ar[j] * bi[j] + ai[j] * br[j];
+    }
+    (
+        (sr[0] + sr[1]) + (sr[2] + sr[3]),
+        (si[0] + si[1]) + (si[2] + si[3]),
+    )
 }
 
 #[cfg(test)]
@@ -215,7 +294,10 @@ mod tests {
         for i in 0..n {
             mat[(i, i)] += x;
         }
-        let sol = mat.lu().solve(&sys.b.map(|v| Complex::new(v, 0.0))).unwrap();
+        let sol = mat
+            .lu()
+            .solve(&sys.b.map(|v| Complex::new(v, 0.0)))
+            .unwrap();
         sys.c.map(|v| Complex::new(v, 0.0)) * sol + sys.d.map(|v| Complex::new(v, 0.0))
     }
 
@@ -277,10 +359,7 @@ mod tests {
                     let x = match (k, dt) {
                         (0, None) => Complex::new(0.0, 0.0),
                         (0, Some(_)) => Complex::new(1.0, 0.0),
-                        _ => Complex::new(
-                            rng.uniform_in(-3.0, 3.0),
-                            rng.uniform_in(-30.0, 30.0),
-                        ),
+                        _ => Complex::new(rng.uniform_in(-3.0, 3.0), rng.uniform_in(-30.0, 30.0)),
                     };
                     let (got, want) = (ev.evalfr(x), dense(&sys, x));
                     let err = (&got - &want).iter().map(|v| v.norm()).fold(0.0, f64::max);
@@ -373,7 +452,10 @@ mod tests {
     fn static_and_singular_points() {
         let gain = StateSpace::gain(DMatrix::from_element(2, 3, 1.5), Some(0.1));
         let ev = gain.frequency_evaluator().unwrap();
-        assert_eq!(ev.at(3.0), DMatrix::from_element(2, 3, Complex::new(1.5, 0.0)));
+        assert_eq!(
+            ev.at(3.0),
+            DMatrix::from_element(2, 3, Complex::new(1.5, 0.0))
+        );
         // An integrator 1/s: exactly singular at s = 0, like the dense LU.
         let integ = StateSpace::new(
             DMatrix::zeros(1, 1),

@@ -89,8 +89,8 @@ pub mod tf;
 pub mod zpetc;
 
 pub use discretise::{C2dMethod, c2d};
-pub use freqeval::FrequencyEvaluator;
 pub use filters::{SosCascade, butter_lowpass, fir_lowpass, fir2ss, sos_freqresp, sos2ss, ss2sos};
+pub use freqeval::FrequencyEvaluator;
 pub use hinf::{HinfNorm, hinfnorm};
 pub use hinfsyn::{HinfSyn, HinfSynOptions, augw, hinfsyn, lft};
 pub use lmi::{LmiConstraint, LmiError, LmiOptions, LmiProblem, LmiSolution, LmiStatus, LmiVar};

@@ -337,22 +337,13 @@ impl StateSpace {
     /// angular frequencies `w_rad_s` (rad/s): one p×m complex matrix per frequency.
     /// NaN matrices for an inconsistent hand-built model (see
     /// [`StateSpace::evalfr`]; [`StateSpace::try_freqresp`] gives the error).
-    ///
-    /// A is reduced once to Hessenberg form, so each point costs O(n²) per
-    /// input ([`FrequencyEvaluator`](super::FrequencyEvaluator)).
+    /// (A dense LU per point; for many points of a large model,
+    /// [`StateSpace::frequency_evaluator`] costs O(n²) per point.)
     pub fn freqresp(&self, w_rad_s: &[f64]) -> Vec<DMatrix<Complex<f64>>> {
-        match self.frequency_evaluator() {
-            Ok(ev) => w_rad_s.iter().map(|&w| ev.at(w)).collect(),
-            Err(_) => w_rad_s.iter().map(|_| self.nan_response()).collect(),
-        }
-    }
-
-    fn nan_response(&self) -> DMatrix<Complex<f64>> {
-        DMatrix::from_element(
-            self.noutputs(),
-            self.ninputs(),
-            Complex::new(f64::NAN, f64::NAN),
-        )
+        w_rad_s
+            .iter()
+            .map(|&w| self.evalfr(self.frequency_point(w)))
+            .collect()
     }
 
     /// Frequency response at `w_rad_s` (rad/s) (see [`StateSpace::freqresp`]),
@@ -377,10 +368,7 @@ impl StateSpace {
     /// MIMO model, the (0, 0) entry (NaN as for
     /// [`StateSpace::freqresp_siso_at`]).
     pub fn freqresp_siso(&self, w_rad_s: &[f64]) -> Vec<Complex<f64>> {
-        match self.frequency_evaluator() {
-            Ok(ev) => w_rad_s.iter().map(|&w| ev.siso_at(w)).collect(),
-            Err(_) => vec![Complex::new(f64::NAN, f64::NAN); w_rad_s.len()],
-        }
+        w_rad_s.iter().map(|&w| self.freqresp_siso_at(w)).collect()
     }
 
     /// Checked SISO frequency response at `w_rad_s` (rad/s): a
