@@ -32,7 +32,7 @@ use crate::scheduler::{
     Gather, LogChannel, Node, Parts, RATE_TRANSITION_PREFIX, RateTransition, Scheduler, ScoreAcc,
     ScoreChannel,
 };
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, HashMap};
 use std::fmt::Write as _;
 use std::sync::Arc;
 
@@ -77,6 +77,11 @@ impl GraphSpec {
         compile(self, None, None, true)
     }
 }
+
+/// Block name → index in the blocks being compiled: built once, so each look-up
+/// of a connection, unit or log is O(1) and the whole build O(N log N) in the
+/// number of blocks (it was a linear search per look-up, O(N²)).
+type NameIndex = HashMap<String, usize>;
 
 /// A block while compiling.
 struct Pending {
@@ -143,7 +148,7 @@ fn compile(
         return Err(setting("blocks", "is empty", "add at least one block"));
     }
     check_planned_memory(&blocks, base_rate_hz)?;
-    let (mut pending, block_bytes) = build_blocks(
+    let (mut pending, mut index, block_bytes) = build_blocks(
         blocks,
         base_rate_hz,
         seed,
@@ -154,13 +159,14 @@ fn compile(
     let mut report = BuildReport::default();
     connect(
         &mut pending,
+        &mut index,
         &connections,
         strict_rates,
         connection_lines.as_ref(),
         &mut report,
     )?;
     let order = execution_order(&pending)?;
-    assign_units(&mut pending, &units)?;
+    assign_units(&mut pending, &index, &units)?;
     let layout = lay_out(pending, &order, &mut report);
 
     let mut rec = Recorder::new(&layout, base_rate_hz, n_ticks, chunk_ticks, block_bytes);
@@ -328,8 +334,8 @@ fn check_planned_memory(blocks: &[BlockSpec], base_rate_hz: f64) -> Result<(), G
     Ok(())
 }
 
-/// Phase 3: names, rates, build. Returns the built blocks and the heap memory
-/// they hold.
+/// Phase 3: names, rates, build. Returns the built blocks, their name index and
+/// the heap memory they hold.
 fn build_blocks(
     blocks: Vec<BlockSpec>,
     base_rate_hz: f64,
@@ -337,9 +343,10 @@ fn build_blocks(
     data: &Data,
     base_dir: &Option<std::path::PathBuf>,
     placeholder_data: bool,
-) -> Result<(Vec<Pending>, usize), GraphError> {
+) -> Result<(Vec<Pending>, NameIndex, usize), GraphError> {
     let base_dt = 1.0 / base_rate_hz;
     let mut pending: Vec<Pending> = Vec::with_capacity(blocks.len());
+    let mut index = NameIndex::with_capacity(blocks.len());
     let mut block_bytes = 0usize;
     for b in blocks {
         if !valid_block_name(&b.name) {
@@ -359,7 +366,7 @@ fn build_blocks(
                 ),
             ));
         }
-        if pending.iter().any(|p| p.name == b.name) {
+        if index.contains_key(&b.name) {
             return Err(GraphError::DuplicateName { name: b.name });
         }
         let rate_hz = b.rate_hz.unwrap_or(base_rate_hz);
@@ -426,6 +433,7 @@ fn build_blocks(
             ));
         }
         let feedthrough = block.direct_feedthrough();
+        index.insert(b.name.clone(), pending.len());
         pending.push(Pending {
             sources: vec![None; inputs.len()],
             name: b.name,
@@ -439,23 +447,24 @@ fn build_blocks(
             feedthrough,
         });
     }
-    Ok((pending, block_bytes))
+    Ok((pending, index, block_bytes))
 }
 
 /// Phase 4: the connections (an error names the entry's line when it is known),
 /// then every input must have a source.
 fn connect(
     pending: &mut Vec<Pending>,
+    index: &mut NameIndex,
     connections: &[Connection],
     strict_rates: bool,
     lines: Option<&(String, Vec<usize>)>,
     report: &mut BuildReport,
 ) -> Result<(), GraphError> {
-    for (index, c) in connections.iter().enumerate() {
-        connect_one(pending, index, c, strict_rates, report).map_err(|e| match lines {
-            Some((origin, lines)) if index < lines.len() => GraphError::At {
+    for (k, c) in connections.iter().enumerate() {
+        connect_one(pending, index, k, c, strict_rates, report).map_err(|e| match lines {
+            Some((origin, lines)) if k < lines.len() => GraphError::At {
                 origin: origin.clone(),
-                line: lines[index],
+                line: lines[k],
                 source: Box::new(e),
             },
             _ => e,
@@ -478,13 +487,14 @@ fn connect(
 /// different rates through a rate transition.
 fn connect_one(
     pending: &mut Vec<Pending>,
+    names: &mut NameIndex,
     index: usize,
     c: &Connection,
     strict_rates: bool,
     report: &mut BuildReport,
 ) -> Result<(), GraphError> {
-    let (sb, sp) = resolve(pending, &c.from, index, Direction::Output)?;
-    let (db, dp) = resolve(pending, &c.to, index, Direction::Input)?;
+    let (sb, sp) = resolve(pending, names, &c.from, index, Direction::Output)?;
+    let (db, dp) = resolve(pending, names, &c.to, index, Direction::Input)?;
     let fw = pending[sb].outputs[sp].width;
     let tw = pending[db].inputs[dp].width;
     if fw != tw {
@@ -513,7 +523,10 @@ fn connect_one(
                 to_hz: pending[db].rate_hz,
             });
         }
-        (rate_transition(pending, (sb, sp), db, index, c, report)?, 0)
+        (
+            rate_transition(pending, names, (sb, sp), db, index, c, report)?,
+            0,
+        )
     } else {
         (sb, sp)
     };
@@ -526,6 +539,7 @@ fn connect_one(
 /// Returns its index.
 fn rate_transition(
     pending: &mut Vec<Pending>,
+    names: &mut NameIndex,
     (sb, sp): (usize, usize),
     db: usize,
     index: usize,
@@ -551,7 +565,7 @@ fn rate_transition(
     );
     tracing::info!(target: "nanomotion_core::graph", "rate transition {note}");
     report.rate_transitions.push(note);
-    if let Some(i) = pending.iter().position(|p| p.name == name) {
+    if let Some(&i) = names.get(&name) {
         return Ok(i);
     }
     let mut block: Box<dyn Block> = Box::new(RateTransition::new(fw));
@@ -561,6 +575,7 @@ fn rate_transition(
         type_name: "rate_transition".into(),
         source,
     })?;
+    names.insert(name.clone(), pending.len());
     pending.push(Pending {
         sources: vec![Some((sb, sp, index))],
         name,
@@ -615,6 +630,7 @@ fn execution_order(pending: &[Pending]) -> Result<Vec<usize>, GraphError> {
 /// then units taken from an input's source.
 fn assign_units(
     pending: &mut [Pending],
+    index: &NameIndex,
     units: &BTreeMap<String, String>,
 ) -> Result<(), GraphError> {
     for (reference, unit) in units {
@@ -626,7 +642,7 @@ fn assign_units(
         let (b, port) = reference
             .split_once('.')
             .ok_or_else(|| bad("write signals as `block.port`".into()))?;
-        let Some(p) = pending.iter_mut().find(|p| p.name == b) else {
+        let Some(p) = index.get(b).map(|&i| &mut pending[i]) else {
             return Err(bad(format!("there is no block `{b}`")));
         };
         let Some(o) = p.outputs.iter_mut().find(|o| o.name == port) else {
@@ -640,30 +656,31 @@ fn assign_units(
         }
         o.unit = Some(unit.clone());
     }
-    // Repeat until settled: chains of pass-through blocks in any order, loops
-    // included.
-    let n = pending.len();
-    for _ in 0..n.max(1) {
-        let mut changed = false;
-        for i in 0..n {
-            for o in 0..pending[i].outputs.len() {
-                if pending[i].outputs[o].unit.is_some() {
-                    continue;
-                }
-                let Some(k) = pending[i].outputs[o].unit_from_input else {
-                    continue;
-                };
-                let Some(Some((s, sp, _))) = pending[i].sources.get(k).copied() else {
-                    continue;
-                };
-                if let Some(u) = pending[s].outputs[sp].unit.clone() {
-                    pending[i].outputs[o].unit = Some(u);
-                    changed = true;
-                }
+    // Each output without a unit that takes its input's unit waits on that
+    // input's source; from every output with a unit, pass it on along these
+    // waits (chains of pass-through blocks in any order, loops included; each
+    // output is visited once).
+    let mut waiting: HashMap<(usize, usize), Vec<(usize, usize)>> = HashMap::new();
+    let mut ready: Vec<(usize, usize)> = Vec::new();
+    for (i, p) in pending.iter().enumerate() {
+        for (o, port) in p.outputs.iter().enumerate() {
+            if port.unit.is_some() {
+                ready.push((i, o));
+            } else if let Some(k) = port.unit_from_input
+                && let Some(Some((s, sp, _))) = p.sources.get(k).copied()
+            {
+                waiting.entry((s, sp)).or_default().push((i, o));
             }
         }
-        if !changed {
-            break;
+    }
+    while let Some((s, sp)) = ready.pop() {
+        let Some(takers) = waiting.remove(&(s, sp)) else {
+            continue;
+        };
+        let unit = pending[s].outputs[sp].unit.clone();
+        for (i, o) in takers {
+            pending[i].outputs[o].unit = unit.clone();
+            ready.push((i, o));
         }
     }
     Ok(())
@@ -758,6 +775,10 @@ fn lay_out(mut pending: Vec<Pending>, order: &[usize], report: &mut BuildReport)
 /// reserved.
 struct Recorder<'a> {
     layout: &'a Layout,
+    /// Block name → index in `layout`.
+    names: HashMap<&'a str, usize>,
+    /// Signal reference → index in `logs`.
+    log_index: HashMap<String, usize>,
     base_rate_hz: f64,
     n_ticks: u64,
     chunk_ticks: Option<u64>,
@@ -777,6 +798,13 @@ impl<'a> Recorder<'a> {
     ) -> Self {
         Self {
             layout,
+            names: layout
+                .names
+                .iter()
+                .enumerate()
+                .map(|(i, n)| (n.as_str(), i))
+                .collect(),
+            log_index: HashMap::new(),
             base_rate_hz,
             n_ticks,
             chunk_ticks,
@@ -803,7 +831,7 @@ impl<'a> Recorder<'a> {
             .split_once('.')
             .ok_or_else(|| bad("write signals as `block.port`".into()))?;
         let names = &self.layout.names;
-        let Some(bi) = names.iter().position(|n| n == b) else {
+        let Some(&bi) = self.names.get(b) else {
             let hint = nearest(b, names.iter().map(String::as_str))
                 .map(|s| format!("; did you mean `{s}`?"))
                 .unwrap_or_default();
@@ -822,7 +850,7 @@ impl<'a> Recorder<'a> {
 
     /// The log of `reference`, added if new. Returns its index.
     fn channel(&mut self, reference: &str, section: &'static str) -> Result<usize, GraphError> {
-        if let Some(i) = self.logs.iter().position(|l| l.name == reference) {
+        if let Some(&i) = self.log_index.get(reference) {
             return Ok(i);
         }
         let (bi, offset, width, unit) = self.lookup(reference, section)?;
@@ -848,6 +876,8 @@ impl<'a> Recorder<'a> {
                 "log and score fewer signals, shorten duration_s, or give the logged blocks a lower rate_hz (`nanomotion run` streams logs to disk when the graph has no `compare:`; from Rust use GraphSpec::build_streamed)",
             ));
         }
+        self.log_index
+            .insert(reference.to_string(), self.logs.len());
         self.logs.push(LogChannel {
             name: reference.to_string(),
             countdown: 0,
@@ -911,6 +941,7 @@ enum Direction {
 
 fn resolve(
     pending: &[Pending],
+    names: &NameIndex,
     reference: &str,
     index: usize,
     dir: Direction,
@@ -921,7 +952,7 @@ fn resolve(
             index,
             reference: reference.to_string(),
         })?;
-    let Some(bi) = pending.iter().position(|p| p.name == b) else {
+    let Some(&bi) = names.get(b) else {
         let mut hint = nearest(b, pending.iter().map(|p| p.name.as_str()))
             .map(|s| format!("; did you mean `{s}`?"))
             .unwrap_or_default();
@@ -990,6 +1021,9 @@ fn find_cycle(pending: &[Pending], indegree: &[usize]) -> String {
     // Follow feed-through sources backwards from any blocked node until a repeat.
     let start = indegree.iter().position(|&d| d > 0).unwrap_or(0);
     let mut path = vec![start];
+    // Position of each block on `path` (usize::MAX: not on it).
+    let mut on_path = vec![usize::MAX; pending.len()];
+    on_path[start] = 0;
     let mut cur = start;
     loop {
         let next = pending[cur]
@@ -999,7 +1033,8 @@ fn find_cycle(pending: &[Pending], indegree: &[usize]) -> String {
             .map(|&(s, _, _)| s)
             .find(|&s| indegree[s] > 0 && pending[s].feedthrough);
         let Some(next) = next else { break };
-        if let Some(pos) = path.iter().position(|&p| p == next) {
+        if on_path[next] != usize::MAX {
+            let pos = on_path[next];
             let mut cycle: Vec<&str> = path[pos..]
                 .iter()
                 .rev()
@@ -1008,6 +1043,7 @@ fn find_cycle(pending: &[Pending], indegree: &[usize]) -> String {
             cycle.push(cycle[0]);
             return cycle.join(" -> ");
         }
+        on_path[next] = path.len();
         path.push(next);
         cur = next;
     }
@@ -1015,4 +1051,63 @@ fn find_cycle(pending: &[Pending], indegree: &[usize]) -> String {
         .map(|&i| pending[i].name.as_str())
         .collect::<Vec<_>>()
         .join(" <- ")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Issue #29: the build of a generated chain was quadratic in the number
+    /// of blocks (a linear name search per connection, unit and log; the
+    /// unit pass swept every block once per block of a chain written back to
+    /// front). 20 000 `delay` blocks written back to front (240 000 YAML
+    /// values, under the parser's budget of 250 000): order, wiring, the unit
+    /// passed along the whole chain, and the errors that name blocks.
+    #[test]
+    fn a_chain_of_20000_blocks_builds_with_its_unit_passed_along() {
+        let n = 20_000;
+        let mut yaml = String::from("base_rate_hz: 1000\nduration_s: 0.002\nblocks:\n");
+        for i in (1..n).rev() {
+            let _ = writeln!(yaml, "  - {{ name: b{i}, type: delay, d: 1 }}");
+        }
+        yaml.push_str("  - { name: b0, type: constant, value: 2.0 }\nconnections:\n");
+        for i in 1..n {
+            let _ = writeln!(yaml, "  - {{ from: b{}.y, to: b{i}.u }}", i - 1);
+        }
+        let _ = writeln!(yaml, "units: {{ b0.y: m }}\nlog: [b{}.y]", n - 1);
+        let spec = GraphSpec::from_yaml(&yaml, "chain.yaml").unwrap();
+        let (sched, report) = spec.build().unwrap();
+        // Execution order is the order written (a delay has no feed-through).
+        assert_eq!(report.order.len(), n);
+        assert_eq!(report.order[0], format!("b{}", n - 1));
+        assert_eq!(report.order[n - 1], "b0");
+        let wiring = sched.wiring();
+        assert!(
+            wiring
+                .iter()
+                .all(|w| w.outputs[0].unit.as_deref() == Some("m"))
+        );
+        // Block i reads block i − 1.
+        let at = |name: &str| wiring.iter().position(|w| w.name == name).unwrap();
+        assert_eq!(wiring[at("b7")].sources, vec![(at("b6"), 0)]);
+        // A duplicate name and an unknown one are still found, by name.
+        let dup = yaml.replace("name: b17,", "name: b16,");
+        let e = GraphSpec::from_yaml(&dup, "dup.yaml")
+            .unwrap()
+            .build()
+            .err()
+            .unwrap();
+        assert!(
+            matches!(e, GraphError::DuplicateName { ref name } if name == "b16"),
+            "{e}"
+        );
+        let unknown = yaml.replace("from: b16.y", "from: b16x.y");
+        let e = GraphSpec::from_yaml(&unknown, "unknown.yaml")
+            .unwrap()
+            .build()
+            .err()
+            .unwrap()
+            .to_string();
+        assert!(e.contains("b16x") && e.contains("did you mean"), "{e}");
+    }
 }

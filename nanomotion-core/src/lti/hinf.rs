@@ -7,7 +7,7 @@
 //! bilinear map s = (z − 1)/(z + 1) (z = e^{jθ} ↔ s = j·tan(θ/2)).
 
 use super::discretise::bilinear_d2c_unit;
-use super::{Complex, LtiError, StateSpace};
+use super::{Complex, FrequencyEvaluator, LtiError, StateSpace};
 use nalgebra::DMatrix;
 use std::f64::consts::PI;
 
@@ -22,12 +22,16 @@ pub struct HinfNorm {
     pub peak_rad_s: f64,
 }
 
-/// Largest singular value of G(jν) of a continuous model (ν = ∞ gives σ̄(D)).
-fn sigma_max(sys: &StateSpace, nu: f64) -> f64 {
+/// Largest singular value of G(jν) of a continuous model (ν = ∞ gives σ̄(D)),
+/// from the Hessenberg reduction `ev` (O(n²)), or, with `dense`, from a dense
+/// LU of (jνI − A) (O(n³), the value the norm reports).
+fn sigma_max(ev: &FrequencyEvaluator, dense: Option<&StateSpace>, nu: f64) -> f64 {
     let g = if nu.is_infinite() {
-        sys.d.map(|v| Complex::new(v, 0.0))
-    } else {
+        ev.feedthrough().map(|v| Complex::new(v, 0.0))
+    } else if let Some(sys) = dense {
         sys.evalfr(Complex::new(0.0, nu))
+    } else {
+        ev.evalfr(Complex::new(0.0, nu))
     };
     if g.nrows() == 1 && g.ncols() == 1 {
         return g[(0, 0)].norm();
@@ -71,13 +75,16 @@ pub fn hinfnorm(sys: &StateSpace) -> Result<HinfNorm, LtiError> {
 fn hinf_continuous(sys: &StateSpace) -> HinfNorm {
     const TOL: f64 = 1e-10;
     let n = sys.nstates();
+    let ev = FrequencyEvaluator::new(sys);
     // Lower bound: D (ω = ∞), DC, pole frequencies and a coarse log grid.
     let mut best = HinfNorm {
-        norm: sigma_max(sys, f64::INFINITY),
+        norm: sigma_max(&ev, None, f64::INFINITY),
         peak_rad_s: f64::INFINITY,
     };
-    let consider = |w: f64, best: &mut HinfNorm| {
-        let s = sigma_max(sys, w);
+    let consider = |w: f64, best: &mut HinfNorm| raise(&ev, sys, best, w);
+    // The Hamiltonian's frequencies are few: evaluated by the dense LU alone.
+    let consider_exact = |w: f64, best: &mut HinfNorm| {
+        let s = sigma_max(&ev, Some(sys), w);
         if s > best.norm {
             *best = HinfNorm {
                 norm: s,
@@ -111,6 +118,11 @@ fn hinf_continuous(sys: &StateSpace) -> HinfNorm {
     if best.norm == 0.0 {
         return best;
     }
+    // A good start: the grid's peak refined first, so that the first
+    // Hamiltonian test usually confirms it (one 2n × 2n eigenvalue problem
+    // instead of one per iteration from the coarse grid's value).
+    let ratio = (hi / lo).powf(1.0 / (npts - 1) as f64);
+    refine_peak(&ev, sys, &mut best, ratio);
     // Bruinsma–Steinbuch iteration.
     let (p, m) = (sys.noutputs(), sys.ninputs());
     let dtd = sys.d.transpose() * &sys.d;
@@ -147,47 +159,71 @@ fn hinf_continuous(sys: &StateSpace) -> HinfNorm {
         let before = best.norm;
         for w in omegas.windows(2) {
             let mid = 0.5 * (w[0] + w[1]).abs();
-            consider(mid, &mut best);
+            consider_exact(mid, &mut best);
         }
         for &w in &omegas {
-            consider(w.abs(), &mut best);
+            consider_exact(w.abs(), &mut best);
         }
         if best.norm <= before * (1.0 + TOL) {
             break;
         }
     }
-    // Safety net against an imaginary-axis eigenvalue missed by round-off: a
-    // golden-section search of σ̄ between the neighbouring grid frequencies
+    // Safety net against an imaginary-axis eigenvalue missed by round-off
     // (only ever raises the bound).
-    if best.peak_rad_s.is_finite() && best.peak_rad_s > 0.0 {
-        let ratio = (hi / lo).powf(1.0 / (npts - 1) as f64);
-        let (mut a, mut b) = (
-            (best.peak_rad_s / ratio).ln(),
-            (best.peak_rad_s * ratio).ln(),
-        );
-        let g = 0.5 * (5f64.sqrt() - 1.0);
-        let f = |x: f64| sigma_max(sys, x.exp());
-        let (mut x1, mut x2) = (b - g * (b - a), a + g * (b - a));
-        let (mut f1, mut f2) = (f(x1), f(x2));
-        for _ in 0..80 {
-            if f1 > f2 {
-                b = x2;
-                x2 = x1;
-                f2 = f1;
-                x1 = b - g * (b - a);
-                f1 = f(x1);
-            } else {
-                a = x1;
-                x1 = x2;
-                f1 = f2;
-                x2 = a + g * (b - a);
-                f2 = f(x2);
-            }
-        }
-        consider(x1.exp(), &mut best);
-        consider(x2.exp(), &mut best);
-    }
+    refine_peak(&ev, sys, &mut best, ratio);
     best
+}
+
+/// A golden-section search of σ̄ on log ω between `best.peak_rad_s / ratio`
+/// and `best.peak_rad_s · ratio` (the neighbouring grid frequencies); raises
+/// `best` to what it finds. Nothing to do for a peak at 0 or infinity.
+fn refine_peak(ev: &FrequencyEvaluator, sys: &StateSpace, best: &mut HinfNorm, ratio: f64) {
+    if !(best.peak_rad_s.is_finite() && best.peak_rad_s > 0.0) {
+        return;
+    }
+    let (mut a, mut b) = (
+        (best.peak_rad_s / ratio).ln(),
+        (best.peak_rad_s * ratio).ln(),
+    );
+    let g = 0.5 * (5f64.sqrt() - 1.0);
+    let f = |x: f64| sigma_max(ev, None, x.exp());
+    let (mut x1, mut x2) = (b - g * (b - a), a + g * (b - a));
+    let (mut f1, mut f2) = (f(x1), f(x2));
+    for _ in 0..80 {
+        if f1 > f2 {
+            b = x2;
+            x2 = x1;
+            f2 = f1;
+            x1 = b - g * (b - a);
+            f1 = f(x1);
+        } else {
+            a = x1;
+            x1 = x2;
+            f1 = f2;
+            x2 = a + g * (b - a);
+            f2 = f(x2);
+        }
+    }
+    raise(ev, sys, best, x1.exp());
+    raise(ev, sys, best, x2.exp());
+}
+
+/// `best` raised to σ̄(G(jw)) if that is larger: searched with the O(n²)
+/// Hessenberg evaluation `ev`, every raise confirmed by the dense LU of `sys`
+/// (the Hessenberg form's round-off is normwise in ‖A‖; a stiff closed loop
+/// with near pole–zero cancellations, as an H∞ design's, can exceed the
+/// dense LU's there, and the norm must not be raised by round-off).
+fn raise(ev: &FrequencyEvaluator, sys: &StateSpace, best: &mut HinfNorm, w: f64) {
+    if sigma_max(ev, None, w) <= best.norm {
+        return;
+    }
+    let s = sigma_max(ev, Some(sys), w);
+    if s > best.norm {
+        *best = HinfNorm {
+            norm: s,
+            peak_rad_s: w,
+        };
+    }
 }
 
 #[cfg(test)]

@@ -92,11 +92,12 @@ pub fn stability_margins(l: &StateSpace) -> Result<Margins, LtiError> {
     let grid: Vec<f64> = (0..n)
         .map(|i| w_lo * (ratio * i as f64 / (n - 1) as f64).exp())
         .collect();
-    let resp: Vec<Complex<f64>> = grid.iter().map(|&w| l.freqresp_siso_at(w)).collect();
+    let ev = l.frequency_evaluator()?;
+    let eval = |w: f64| ev.siso_at(w);
+    let resp: Vec<Complex<f64>> = grid.iter().map(|&w| eval(w)).collect();
     if resp.iter().any(|c| !c.re.is_finite() || !c.im.is_finite()) {
         return Err(LtiError::Domain("the loop gain is not finite on the imaginary axis / unit circle (pole on it); shift it slightly or remove it".into()));
     }
-    let eval = |w: f64| l.freqresp_siso_at(w);
     // Bisection on log ω of a sign change of f.
     let refine = |mut a: f64, mut b: f64, f: &dyn Fn(f64) -> f64| {
         let fa0 = f(a);

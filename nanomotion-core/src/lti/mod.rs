@@ -75,6 +75,7 @@ use thiserror::Error;
 pub mod balred;
 pub mod discretise;
 pub mod filters;
+pub mod freqeval;
 pub mod hinf;
 pub mod hinfsyn;
 pub mod linalg;
@@ -89,6 +90,7 @@ pub mod zpetc;
 
 pub use discretise::{C2dMethod, c2d};
 pub use filters::{SosCascade, butter_lowpass, fir_lowpass, fir2ss, sos_freqresp, sos2ss, ss2sos};
+pub use freqeval::FrequencyEvaluator;
 pub use hinf::{HinfNorm, hinfnorm};
 pub use hinfsyn::{HinfSyn, HinfSynOptions, augw, hinfsyn, lft};
 pub use lmi::{LmiConstraint, LmiError, LmiOptions, LmiProblem, LmiSolution, LmiStatus, LmiVar};

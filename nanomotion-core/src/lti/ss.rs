@@ -28,6 +28,15 @@ fn common_dt(s1: &StateSpace, s2: &StateSpace) -> Result<Option<f64>, LtiError> 
     }
 }
 
+/// s = jω for a continuous model (`dt` = `None`), z = e^{jωT} for a discrete
+/// one: where angular frequency `w_rad_s` (rad/s) is evaluated.
+pub(crate) fn frequency_point(dt: Option<f64>, w_rad_s: f64) -> Complex<f64> {
+    match dt {
+        None => Complex::new(0.0, w_rad_s),
+        Some(t) => Complex::from_polar(1.0, w_rad_s * t),
+    }
+}
+
 fn to_complex(m: &DMatrix<f64>) -> DMatrix<Complex<f64>> {
     m.map(|v| Complex::new(v, 0.0))
 }
@@ -321,16 +330,15 @@ impl StateSpace {
     /// The point of the s- or z-plane where frequency `w_rad_s` (rad/s) is
     /// evaluated: s = jω (continuous) or z = e^{jωT} (discrete).
     pub fn frequency_point(&self, w_rad_s: f64) -> Complex<f64> {
-        match self.dt {
-            None => Complex::new(0.0, w_rad_s),
-            Some(t) => Complex::from_polar(1.0, w_rad_s * t),
-        }
+        frequency_point(self.dt, w_rad_s)
     }
 
     /// Frequency response G(jω) (continuous) or G(e^{jωT}) (discrete) at the
     /// angular frequencies `w_rad_s` (rad/s): one p×m complex matrix per frequency.
     /// NaN matrices for an inconsistent hand-built model (see
     /// [`StateSpace::evalfr`]; [`StateSpace::try_freqresp`] gives the error).
+    /// (A dense LU per point; for many points of a large model,
+    /// [`StateSpace::frequency_evaluator`] costs O(n²) per point.)
     pub fn freqresp(&self, w_rad_s: &[f64]) -> Vec<DMatrix<Complex<f64>>> {
         w_rad_s
             .iter()
