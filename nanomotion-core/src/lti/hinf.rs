@@ -181,29 +181,12 @@ fn refine_peak(ev: &FrequencyEvaluator, sys: &StateSpace, best: &mut HinfNorm, r
     if !(best.peak_rad_s.is_finite() && best.peak_rad_s > 0.0) {
         return;
     }
-    let (mut a, mut b) = (
+    let (_, _, x1, x2) = super::linalg::golden_section_max(
+        |x| sigma_max(ev, None, x.exp()),
         (best.peak_rad_s / ratio).ln(),
         (best.peak_rad_s * ratio).ln(),
+        80,
     );
-    let g = 0.5 * (5f64.sqrt() - 1.0);
-    let f = |x: f64| sigma_max(ev, None, x.exp());
-    let (mut x1, mut x2) = (b - g * (b - a), a + g * (b - a));
-    let (mut f1, mut f2) = (f(x1), f(x2));
-    for _ in 0..80 {
-        if f1 > f2 {
-            b = x2;
-            x2 = x1;
-            f2 = f1;
-            x1 = b - g * (b - a);
-            f1 = f(x1);
-        } else {
-            a = x1;
-            x1 = x2;
-            f1 = f2;
-            x2 = a + g * (b - a);
-            f2 = f(x2);
-        }
-    }
     raise(ev, sys, best, x1.exp());
     raise(ev, sys, best, x2.exp());
 }

@@ -527,6 +527,38 @@ pub fn rescale_modes_each(
     Some((out.map(|z| z.re), input_map.map(|z| z.re)))
 }
 
+/// The bracket a golden-section search for a maximum of `f` on [a, b]
+/// leaves after `iterations` steps: `(a, b, x1, x2)`, the interval and its
+/// two interior points (x1 < x2). `f` is unimodal on [a, b] for the result to
+/// mean the maximum; each step shrinks the interval by 0.618 with one call.
+pub fn golden_section_max(
+    mut f: impl FnMut(f64) -> f64,
+    a: f64,
+    b: f64,
+    iterations: usize,
+) -> (f64, f64, f64, f64) {
+    let g = 0.5 * (5f64.sqrt() - 1.0);
+    let (mut a, mut b) = (a, b);
+    let (mut x1, mut x2) = (b - g * (b - a), a + g * (b - a));
+    let (mut f1, mut f2) = (f(x1), f(x2));
+    for _ in 0..iterations {
+        if f1 > f2 {
+            b = x2;
+            x2 = x1;
+            f2 = f1;
+            x1 = b - g * (b - a);
+            f1 = f(x1);
+        } else {
+            a = x1;
+            x1 = x2;
+            f1 = f2;
+            x2 = a + g * (b - a);
+            f2 = f(x2);
+        }
+    }
+    (a, b, x1, x2)
+}
+
 /// Complex linear solve `M X = R` for a complex square `M`.
 pub fn solve_complex(
     m: DMatrix<Complex<f64>>,
@@ -656,6 +688,15 @@ mod tests {
         let (only_first, _) = rescale_modes_each(&a, d, l, &[1.0, 1.3]).unwrap();
         assert!(close(&only_first, &rescale_modes(&a, d, l).unwrap(), 1e-12));
         assert_eq!(rescale_modes_each(&a, 1.0, 1.0, &[0.0]), None);
+    }
+
+    #[test]
+    fn golden_section_finds_the_peak_of_a_parabola() {
+        // −(x − 0.3)² on [−1, 2]: the bracket closes on 0.3 as 0.618ⁿ.
+        let (a, b, x1, x2) = golden_section_max(|x| -(x - 0.3) * (x - 0.3), -1.0, 2.0, 60);
+        assert!(a <= x1 && x1 <= x2 && x2 <= b);
+        assert!((b - a) < 3.0 * 0.62f64.powi(60));
+        assert!((0.5 * (a + b) - 0.3).abs() < 1e-10);
     }
 
     #[test]

@@ -1707,25 +1707,12 @@ fn refine_line(r: &[f64], f0: f64) -> f64 {
         re * re + im * im
     };
     let bin = 1.0 / n as f64;
-    let (mut a, mut b) = ((f0 - bin).max(0.5 * bin), (f0 + bin).min(0.5));
-    let g = 0.5 * (5f64.sqrt() - 1.0);
-    let (mut c, mut d) = (b - g * (b - a), a + g * (b - a));
-    let (mut pc, mut pd) = (power(c), power(d));
-    for _ in 0..30 {
-        if pc > pd {
-            b = d;
-            d = c;
-            pd = pc;
-            c = b - g * (b - a);
-            pc = power(c);
-        } else {
-            a = c;
-            c = d;
-            pc = pd;
-            d = a + g * (b - a);
-            pd = power(d);
-        }
-    }
+    let (a, b, _, _) = nanomotion_core::lti::linalg::golden_section_max(
+        &power,
+        (f0 - bin).max(0.5 * bin),
+        (f0 + bin).min(0.5),
+        30,
+    );
     let f = 0.5 * (a + b);
     if power(f) >= power(f0) { f } else { f0 }
 }
