@@ -390,13 +390,14 @@ fn closed_pipe(args: &[&str]) -> ExitStatus {
 fn every_subcommand_ends_quietly_on_a_closed_pipe_and_writes_its_files() {
     let dir = scratch("pipe");
     let d = |n: &str| dir.join(n).display().to_string();
-    let (run, diag, synth, sweep, opt, fid) = (
+    let (run, diag, synth, sweep, opt, fid, rt) = (
         d("run"),
         d("diag"),
         d("synth"),
         d("sweep"),
         d("opt"),
         d("fid"),
+        d("rt"),
     );
     let cases: Vec<(Vec<&str>, Option<&str>)> = vec![
         (
@@ -460,6 +461,18 @@ fn every_subcommand_ends_quietly_on_a_closed_pipe_and_writes_its_files() {
         (
             vec!["scan-image", &run, "--image", "a=ref.y,ref.y,ref.y"],
             None,
+        ),
+        (
+            vec![
+                "rt",
+                "examples/quickstart.yaml",
+                "--duration",
+                "0.6",
+                "--allow-soft",
+                "--out",
+                &rt,
+            ],
+            Some("timing.json"),
         ),
         (vec!["no-such-command"], None),
     ];
