@@ -136,16 +136,16 @@ fn example_is_generated_diagnosed_and_compensated_from_the_command_line() {
     // Bad input, each refused with the place and the fix, nothing written.
     let bad = scratch("compensate_example_bad");
     let b = bad.display().to_string();
-    let (ok, _, stderr) = cli(&[
-        "compensate",
-        &aug,
-        "examples/compensate/controller.yaml",
-        "--report",
-        "no/such/report.json",
-        "--out",
-        &b,
-    ]);
-    assert!(!ok);
+    // The example's compensate command with `extra` options: refused; its stderr.
+    let refused = |extra: &[&str]| {
+        let mut args = vec!["compensate", &aug, "examples/compensate/controller.yaml"];
+        args.extend_from_slice(extra);
+        args.extend_from_slice(&["--out", &b]);
+        let (ok, _, stderr) = cli(&args);
+        assert!(!ok, "{args:?} was not refused");
+        stderr
+    };
+    let stderr = refused(&["--report", "no/such/report.json"]);
     assert!(
         stderr.contains("no/such/report.json") && stderr.contains("fix:"),
         "{stderr}"
@@ -167,16 +167,7 @@ fn example_is_generated_diagnosed_and_compensated_from_the_command_line() {
     )
     .unwrap();
     let wr = wrong_report.display().to_string();
-    let (ok, _, stderr) = cli(&[
-        "compensate",
-        &aug,
-        "examples/compensate/controller.yaml",
-        "--report",
-        &wr,
-        "--out",
-        &b,
-    ]);
-    assert!(!ok);
+    let stderr = refused(&["--report", &wr]);
     assert!(
         stderr.contains("plf_nothing") && stderr.contains("fix:"),
         "{stderr}"
@@ -187,16 +178,7 @@ fn example_is_generated_diagnosed_and_compensated_from_the_command_line() {
         r#"{"steps": [{"effect": "wobble", "block": {"name": "plf_hysteresis", "type": "hysteresis"}, "site": ""}]}"#,
     )
     .unwrap();
-    let (ok, _, stderr) = cli(&[
-        "compensate",
-        &aug,
-        "examples/compensate/controller.yaml",
-        "--report",
-        &wr,
-        "--out",
-        &b,
-    ]);
-    assert!(!ok);
+    let stderr = refused(&["--report", &wr]);
     assert!(
         stderr.contains("wobble")
             && stderr.contains("fix:")
@@ -207,16 +189,7 @@ fn example_is_generated_diagnosed_and_compensated_from_the_command_line() {
     let not_block = wrong.join("ref.yaml");
     std::fs::write(&not_block, "amplitude: 1.0e-5\n").unwrap();
     let nb = not_block.display().to_string();
-    let (ok, _, stderr) = cli(&[
-        "compensate",
-        &aug,
-        "examples/compensate/controller.yaml",
-        "--reference",
-        &nb,
-        "--out",
-        &b,
-    ]);
-    assert!(!ok);
+    let stderr = refused(&["--reference", &nb]);
     assert!(
         stderr.contains("ref.yaml") && stderr.contains("fix:"),
         "{stderr}"
