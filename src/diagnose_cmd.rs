@@ -180,6 +180,12 @@ fn print_report(r: &Report) {
             },
             fmt(&c.params)
         );
+        if !c.held.is_empty() {
+            say!(
+                "     held at the nominal, the data do not determine them (σ ≥ the value; the fit went to {})",
+                fmt(&c.held)
+            );
+        }
         if c.accepted && !c.final_params.is_empty() && c.final_params != c.params {
             say!(
                 "     in model_augmented.yaml (after the later joint refits): {}",

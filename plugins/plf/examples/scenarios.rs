@@ -4,7 +4,7 @@
 //! quotes its output:
 //!
 //! ```text
-//! cargo run --release -p nanomotion-plf --example scenarios -- [COUNT] [--tune] [--csv FILE] [--visibility-only]
+//! cargo run --release -p nanomotion-plf --example scenarios -- [COUNT] [--tune] [--hidden EFFECT] [--csv FILE] [--visibility-only | --labels-only]
 //! ```
 //!
 //! COUNT held-out records (default 300) from seed 0 on; `--tune` takes the
@@ -12,7 +12,9 @@
 //! `--csv` writes one row per record. `--visibility-only` runs no diagnosis:
 //! it prints `seed,visibility` of the same records ([`scenario::visibility`]:
 //! what the hidden effects change over the noise), for
-//! `tools/scenario_table.py --visibility`.
+//! `tools/scenario_table.py --visibility`. `--hidden EFFECT` keeps only records
+//! hiding that effect (`none`: the effect-free ones); `--labels-only` prints
+//! `seed,hidden,family` of the records and diagnoses nothing.
 //!
 //! Scoring: a record is *named correctly* when every hidden effect is named and
 //! nothing else (an effect-free record: nothing named); *padding* is a named
@@ -39,11 +41,21 @@ fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let tune = args.iter().any(|a| a == "--tune");
     let visibility_only = args.iter().any(|a| a == "--visibility-only");
+    let labels_only = args.iter().any(|a| a == "--labels-only");
+    let hidden_only = args
+        .iter()
+        .position(|a| a == "--hidden")
+        .and_then(|i| args.get(i + 1).cloned());
     let csv_path = args
         .iter()
         .position(|a| a == "--csv")
         .and_then(|i| args.get(i + 1).cloned());
-    let count: usize = args.iter().find_map(|a| a.parse().ok()).unwrap_or(300);
+    let count: usize = args
+        .iter()
+        .enumerate()
+        .find(|(i, _)| *i == 0 || !matches!(args[i - 1].as_str(), "--csv" | "--hidden"))
+        .and_then(|(_, a)| a.parse().ok())
+        .unwrap_or(300);
     let mut csv = String::from(
         "seed,plant,loop,excitation,noise,nominal,rate_hz,unit,hidden,found,correct,holdout_cut_percent,calibrated,seconds\n",
     );
@@ -60,6 +72,16 @@ fn main() {
         let (hidden, family) = scenario::labels(seed);
         seed += 1;
         if (family.split() == scenario::Split::Tune) != tune {
+            continue;
+        }
+        if let Some(h) = &hidden_only
+            && !(hidden.contains(&h.as_str()) || (h == "none" && hidden.is_empty()))
+        {
+            continue;
+        }
+        if labels_only {
+            println!("{},{},{family:?}", seed - 1, hidden.join("+"));
+            records += 1;
             continue;
         }
         if visibility_only {
@@ -187,7 +209,7 @@ fn main() {
         );
         let _ = std::io::stderr().flush();
     }
-    if visibility_only {
+    if visibility_only || labels_only {
         return;
     }
     let pct = |a: usize, b: usize| {

@@ -258,6 +258,9 @@ pub struct Calibration {
     pub p_value: f64,
     /// Share of the mean square above the noise floor it removed (%).
     pub excess_cut_percent: f64,
+    /// Scales the data do not determine (σ ≥ the value), held at the
+    /// nominal: `block.parameter` → the value the fit drove them to.
+    pub held: BTreeMap<String, f64>,
 }
 
 /// Data behind a plot (the CLI draws it).
@@ -736,10 +739,12 @@ pub fn diagnose_records(
         // per cent off is a nominal error, which a flexible effect would
         // otherwise be named for; an effect that also moves a gain and a time
         // scale a little (creep, a delay) is named when it predicts better —
-        // on the penalised score *and* significantly (p < AMBIGUOUS_P) on the
-        // held-out data: every identified nominal is somewhat off, so when
-        // the data cannot tell the two apart, a nominal error is the likelier
-        // (and simpler) explanation, and the effect is still tried next step.
+        // on the penalised score *and* significantly on the held-out data, at
+        // the level it must beat the nominal at (α over the candidates: the
+        // best of many always beats the calibration a little): every
+        // identified nominal is somewhat off, so when the data cannot tell the
+        // two apart, a nominal error is the likelier (and simpler)
+        // explanation, and the effect is still tried next step.
         if opts.calibrate
             && !calibration.as_ref().is_some_and(|c| c.accepted)
             && let Some((mut cal, calibrated, cal_ms)) = calibrate(&ctx, &cur, &mut runs)?
@@ -753,7 +758,7 @@ pub fn diagnose_records(
             let (cal_residual, win_residual) =
                 holdout_weighted_vectors(&ctx, &calibrated.residual, &win.residual);
             let (effect_vs_cal, _) = stats::improvement_test(&cal_residual, &win_residual, 200);
-            cal.accepted = (cal_score < best_score || effect_vs_cal.p_value >= AMBIGUOUS_P)
+            cal.accepted = (cal_score < best_score || effect_vs_cal.p_value >= level)
                 && !at_floor
                 && cal.p_value < level
                 && cut >= opts.min_excess_cut;
@@ -1110,40 +1115,38 @@ fn calibrate(
     if free.is_empty() {
         return Ok(None);
     }
-    // (estimation cost, calibrated graph, σ of the parameters, residuals)
-    type Best = (f64, GraphSpec, Vec<f64>, Vec<Vec<f64>>);
-    let mut best: Option<Best> = None;
-    for start in [1.0, 0.92, 1.08] {
-        let mut start_spec = surgery::clone_spec(&spec)?;
-        for b in start_spec.blocks.iter_mut() {
-            if free.iter().any(|f| f.block == b.name)
-                && let Some(t) = b.block.tunable_mut()
-            {
-                let mut p = t.params();
-                p[1] *= start;
-                t.set_params(&p)
-                    .map_err(|e| PlfError::Model(format!("block `{}`: {e}", b.name)))?;
+    // A scale the data do not determine (its σ at least its value: a
+    // damping the record cannot see, an amplifier pole sent far above the
+    // band) is not calibrated: left free, it wanders to absurd values and
+    // absorbs an effect. It is held at the nominal, reported with the value
+    // it went to, and the rest refitted.
+    let mut best = None;
+    let mut held = BTreeMap::new();
+    while !free.is_empty() {
+        let Some(fit) = fit_calibration(ctx, &spec, &free, runs)? else {
+            return Ok(None);
+        };
+        let undetermined: Vec<usize> = (0..free.len())
+            .filter(|&k| {
+                let value = param_value(&fit.1, &free[k]).unwrap_or(f64::NAN);
+                !fit.2.get(k).is_some_and(|s| s.abs() < value.abs())
+            })
+            .collect();
+        if undetermined.is_empty() {
+            best = Some(fit);
+            break;
+        }
+        for &k in &undetermined {
+            if let Some(v) = param_value(&fit.1, &free[k]) {
+                held.insert(param_key(&fit.1, &free[k]), v);
             }
         }
-        let mut ev = Evaluator::over(surgery::clone_spec(&start_spec)?, ctx.records, &free, 0)?;
-        ev.set_weights(&ctx.weights);
-        let mut z0 = vec![0.0; free.len()];
-        scan_mode_scales(&mut ev, &spec, &free, &mut z0, ctx.n_est);
-        let Some(fit) = levenberg_marquardt(&mut ev, &z0, ctx.n_est, 25) else {
-            continue;
-        };
-        *runs += fit.runs + 1;
-        let mut fitted = surgery::clone_spec(&start_spec)?;
-        ev.export(&fit.z, &mut fitted)?;
-        if !ev.run(&fit.z, ctx.n) {
-            continue;
-        }
-        if best.as_ref().is_none_or(|b| fit.cost < b.0) {
-            let residual = (0..ev.outputs())
-                .map(|i| ev.residual(i, 0..ctx.n))
-                .collect();
-            best = Some((fit.cost, fitted, fit.std, residual));
-        }
+        free = free
+            .into_iter()
+            .enumerate()
+            .filter(|(k, _)| !undetermined.contains(k))
+            .map(|(_, f)| f)
+            .collect();
     }
     let Some((_, fitted, std, residual)) = best else {
         return Ok(None);
@@ -1155,10 +1158,9 @@ fn calibrate(
     let mut params = BTreeMap::new();
     let mut uncertainty = BTreeMap::new();
     for (k, f) in free.iter().enumerate() {
-        let block = fitted.blocks.iter().find(|b| b.name == f.block);
-        if let Some(t) = block.and_then(|b| b.block.tunable()) {
-            let key = format!("{}.{}", f.block, t.param_names()[f.index]);
-            params.insert(key.clone(), t.params()[f.index]);
+        if let Some(v) = param_value(&fitted, f) {
+            let key = param_key(&fitted, f);
+            params.insert(key.clone(), v);
             if let Some(s) = std.get(k).filter(|s| s.is_finite()) {
                 uncertainty.insert(key, *s);
             }
@@ -1176,9 +1178,79 @@ fn calibrate(
         cut_percent: 100.0 * (1.0 - (after_ms / before_ms).sqrt()),
         p_value: test.p_value,
         excess_cut_percent: f64::NAN,
+        held,
     };
     let calibrated = evaluate_current(ctx, fitted, free, runs)?;
     Ok(Some((cal, calibrated, after_ms)))
+}
+
+/// The value of the tunable parameter `f` in `spec`.
+fn param_value(spec: &GraphSpec, f: &FreeParam) -> Option<f64> {
+    spec.blocks
+        .iter()
+        .find(|b| b.name == f.block)
+        .and_then(|b| b.block.tunable())
+        .and_then(|t| t.params().get(f.index).copied())
+}
+
+/// `block.parameter` of the tunable parameter `f` in `spec`.
+fn param_key(spec: &GraphSpec, f: &FreeParam) -> String {
+    let name = spec
+        .blocks
+        .iter()
+        .find(|b| b.name == f.block)
+        .and_then(|b| b.block.tunable())
+        .and_then(|t| t.param_names().get(f.index).cloned())
+        .unwrap_or_else(|| format!("#{}", f.index));
+    format!("{}.{name}", f.block)
+}
+
+/// (estimation cost, calibrated graph, σ of the parameters, residuals)
+type CalibrationFit = (f64, GraphSpec, Vec<f64>, Vec<Vec<f64>>);
+
+/// The best of the calibration fits of `free` from the three starts (see
+/// [`calibrate`]); `None` when no fit runs.
+fn fit_calibration(
+    ctx: &Ctx<'_>,
+    spec: &GraphSpec,
+    free: &[FreeParam],
+    runs: &mut usize,
+) -> Result<Option<CalibrationFit>, PlfError> {
+    let mut best: Option<CalibrationFit> = None;
+    for start in [1.0, 0.92, 1.08] {
+        let mut start_spec = surgery::clone_spec(spec)?;
+        for b in start_spec.blocks.iter_mut() {
+            // The time scale (parameter 1) is started off 1 only while free.
+            if free.iter().any(|f| f.block == b.name && f.index == 1)
+                && let Some(t) = b.block.tunable_mut()
+            {
+                let mut p = t.params();
+                p[1] *= start;
+                t.set_params(&p)
+                    .map_err(|e| PlfError::Model(format!("block `{}`: {e}", b.name)))?;
+            }
+        }
+        let mut ev = Evaluator::over(surgery::clone_spec(&start_spec)?, ctx.records, free, 0)?;
+        ev.set_weights(&ctx.weights);
+        let mut z0 = vec![0.0; free.len()];
+        scan_mode_scales(&mut ev, spec, free, &mut z0, ctx.n_est);
+        let Some(fit) = levenberg_marquardt(&mut ev, &z0, ctx.n_est, 25) else {
+            continue;
+        };
+        *runs += fit.runs + 1;
+        let mut fitted = surgery::clone_spec(&start_spec)?;
+        ev.export(&fit.z, &mut fitted)?;
+        if !ev.run(&fit.z, ctx.n) {
+            continue;
+        }
+        if best.as_ref().is_none_or(|b| fit.cost < b.0) {
+            let residual = (0..ev.outputs())
+                .map(|i| ev.residual(i, 0..ctx.n))
+                .collect();
+            best = Some((fit.cost, fitted, fit.std, residual));
+        }
+    }
+    Ok(best)
 }
 
 /// Start each per-mode frequency scale (`mode_K_frequency_scale`) of the
@@ -2007,12 +2079,22 @@ fn enumerate(ctx: &Ctx<'_>, cur: &Current, opts: &Options) -> Result<Vec<Cand>, 
             let measured: Vec<f64> = r.iter().zip(yhat).map(|(r, m)| r + m).collect();
             let grid = stats::lattice(&measured)
                 .map(|(lsb, offset)| json!({"type": "quantizer", "lsb": lsb, "offset": offset}));
+            // When noise after the rounding hides the grid, the rounding error
+            // still shows: a sawtooth of period lsb in the (model) position,
+            // whose fundamental gives the lsb and the grid's offset. At least
+            // eight levels, at most 10⁵, over the range travelled. Only a start:
+            // the held-out test judges the fit, so the line need not be
+            // significant by itself.
+            let sawtooth = stats::spatial_line(r, yhat, range(yhat) * 1e-5, range(yhat) / 8.0).map(
+                |l| json!({"type": "quantizer", "lsb": l.period, "offset": l.rounding_offset()}),
+            );
             out.push(Cand {
                 effect: "quantization",
                 site: out_site.clone(),
                 output: Some(i),
                 starts: grid
                     .into_iter()
+                    .chain(sawtooth)
                     .chain(
                         [0.5, 0.8, 1.0, 1.3]
                             .iter()

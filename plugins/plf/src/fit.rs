@@ -766,14 +766,29 @@ fn finish<P: Problem>(
     let dz = ev.dtheta_dz(&z);
     let mut std = vec![f64::NAN; p];
     if have_jac && n > p {
+        // σ² (JᵀJ)⁻¹ through the eigen-decomposition JᵀJ = Q Λ Qᵀ, so that a
+        // direction the data do not see (λ ≈ 0: a parameter without effect,
+        // or two that trade off exactly) makes the σ of the parameters in it
+        // infinite, and leaves the others' finite.
         let sigma2 = cost / (n - p) as f64;
-        if let Some(inv) = (jac.transpose() * jac).try_inverse() {
-            for i in 0..p {
-                let v = sigma2 * inv[(i, i)];
-                if v >= 0.0 {
-                    std[i] = v.sqrt() * dz[i].abs();
+        let eig = (jac.transpose() * jac).symmetric_eigen();
+        let top = eig.eigenvalues.iter().copied().fold(0.0f64, f64::max);
+        let tiny = top * 1e-12;
+        for (i, s) in std.iter_mut().enumerate() {
+            let (mut var, mut unseen) = (0.0, 0.0);
+            for (k, &l) in eig.eigenvalues.iter().enumerate() {
+                let q2 = eig.eigenvectors[(i, k)].powi(2);
+                if l > tiny {
+                    var += q2 / l;
+                } else {
+                    unseen += q2;
                 }
             }
+            *s = if top <= 0.0 || unseen > 1e-6 {
+                f64::INFINITY
+            } else {
+                (sigma2 * var).sqrt() * dz[i].abs()
+            };
         }
     }
     Fit {

@@ -419,6 +419,140 @@ pub fn fisher_g(x: &[f64]) -> (Test, f64) {
     )
 }
 
+/// A line of `r` periodic in the position `pos` (not in time): what a
+/// rounding error (period = the lsb), a slit error (period = slits × pitch)
+/// or a cogging force leaves in a residual.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SpatialLine {
+    /// Spatial period (unit of `pos`).
+    pub period: f64,
+    /// Phase φ of the fundamental: r ≈ A·cos(2π(pos − origin)/period + φ).
+    pub phase: f64,
+    /// The position the phase is counted from (the smallest one).
+    pub origin: f64,
+    /// The line's power over its neighbourhood's mean (the statistic), and
+    /// the chance of so strong a line in noise over the frequencies searched.
+    pub test: Test,
+}
+
+impl SpatialLine {
+    /// The offset o ∈ [0, period) of a rounding grid o + k·period whose
+    /// error q·round((x − o)/q) + o − x left this line. That error's
+    /// fundamental is −(q/π)·sin(2π(x − o)/q) = (q/π)·cos(2π(x − o)/q + π/2),
+    /// so φ = π/2 − 2π(o − origin)/q.
+    pub fn rounding_offset(&self) -> f64 {
+        let q = self.period;
+        (self.origin + q * (0.5 * PI - self.phase) / (2.0 * PI)).rem_euclid(q)
+    }
+}
+
+/// The strongest line of `r` as a function of the position `pos`, with a
+/// period in [`min_period`, `max_period`]: the residual is summed in 8 or
+/// more bins per shortest period over the range travelled (at most 2²⁰ bins;
+/// shorter periods are not searched), the binned sums transformed (FFT), the
+/// line taken where the power stands highest over its neighbourhood and
+/// refined off the grid by a golden-section search of
+/// |Σ rₖ e^{−i2πf(posₖ − origin)}| over ± one bin, on the samples themselves.
+/// `None` when fewer than 64 samples, no range or no period in the interval.
+/// O(N + B log B) for N samples and B bins.
+pub fn spatial_line(
+    r: &[f64],
+    pos: &[f64],
+    min_period: f64,
+    max_period: f64,
+) -> Option<SpatialLine> {
+    use rustfft::{FftPlanner, num_complex::Complex};
+    let n = r.len().min(pos.len());
+    let (r, pos) = (&r[..n], &pos[..n]);
+    if n < 64 || r.iter().chain(pos).any(|v| !v.is_finite()) {
+        return None;
+    }
+    let lo = pos.iter().copied().fold(f64::INFINITY, f64::min);
+    let span = pos.iter().copied().fold(f64::NEG_INFINITY, f64::max) - lo;
+    if span <= 0.0 || min_period <= 0.0 || max_period < min_period {
+        return None;
+    }
+    const MAX_BINS: usize = 1 << 20;
+    let j_lo = ((span / max_period).ceil() as usize).max(1);
+    let j_hi = ((span / min_period).floor().min((MAX_BINS / 8) as f64)) as usize;
+    if j_hi < j_lo {
+        return None;
+    }
+    let bins = (8 * j_hi).next_power_of_two().max(1024);
+    let m = mean(r);
+    let mut buf = vec![Complex::new(0.0, 0.0); bins];
+    for (v, p) in r.iter().zip(pos) {
+        let b = (((p - lo) / span) * bins as f64) as usize;
+        buf[b.min(bins - 1)].re += v - m;
+    }
+    FftPlanner::new().plan_fft_forward(bins).process(&mut buf);
+    // A residual's continuum is red (a model error smooth in the position
+    // dominates the few-cycle end), so a line is judged against its own
+    // neighbourhood: the power at j over the mean power at 0.85j–1.15j (the
+    // line's ±2 bins left out), which is exponential with mean 1 under noise;
+    // p = m·e^{−ratio} over the m frequencies searched (Bonferroni).
+    let power: Vec<f64> = buf[..=(j_hi * 23 / 20 + 3).min(bins / 2)]
+        .iter()
+        .map(|c| c.norm_sqr())
+        .collect();
+    let mut prefix = vec![0.0; power.len() + 1];
+    for (i, p) in power.iter().enumerate() {
+        prefix[i + 1] = prefix[i] + p;
+    }
+    let sum = |a: usize, b: usize| prefix[b] - prefix[a];
+    let mut best: Option<(f64, usize)> = None;
+    for j in j_lo..=j_hi {
+        let (a, b) = ((j * 17 / 20).max(1), (j * 23 / 20 + 1).min(power.len()));
+        let (la, lb) = (j.saturating_sub(2).max(a), (j + 3).min(b));
+        let count = (b - a) - (lb - la);
+        if count < 4 {
+            continue;
+        }
+        let background = (sum(a, b) - sum(la, lb)) / count as f64;
+        if background <= 0.0 {
+            continue;
+        }
+        let ratio = power[j] / background;
+        if best.is_none_or(|(r, _)| ratio > r) {
+            best = Some((ratio, j));
+        }
+    }
+    let (ratio, j) = best?;
+    let p_value = ((j_hi - j_lo + 1) as f64 * (-ratio).exp()).min(1.0);
+    // The line off the grid: the sum over the samples themselves.
+    let sum_at = |f: f64| {
+        let (mut re, mut im) = (0.0, 0.0);
+        let w = 2.0 * PI * f;
+        for (v, p) in r.iter().zip(pos) {
+            let (s, c) = (w * (p - lo)).sin_cos();
+            re += (v - m) * c;
+            im -= (v - m) * s;
+        }
+        (re, im)
+    };
+    let j = j as f64;
+    let (a, b, _, _) = nanomotion_core::lti::linalg::golden_section_max(
+        |f| {
+            let (re, im) = sum_at(f);
+            re * re + im * im
+        },
+        (j - 1.0).max(0.5) / span,
+        (j + 1.0) / span,
+        40,
+    );
+    let f = 0.5 * (a + b);
+    let (re, im) = sum_at(f);
+    Some(SpatialLine {
+        period: 1.0 / f,
+        phase: im.atan2(re),
+        origin: lo,
+        test: Test {
+            statistic: ratio,
+            p_value,
+        },
+    })
+}
+
 /// Test whether residual `better` is smaller than `worse` on held-out data: the
 /// candidate changed the model output by δ = worse − better, and the held-out
 /// sum of squares drops by ΔSSE = 2·Σ r δ − Σ δ² (r = `worse`). If the candidate
@@ -716,6 +850,33 @@ fn grid_at(v: &[f64], threshold: f64) -> Option<(f64, f64)> {
 mod tests {
     use super::*;
     use nanomotion_core::rng::Rng;
+
+    #[test]
+    fn a_rounding_error_is_a_line_in_the_position_with_the_lsb_and_offset() {
+        // y = o + q·round((x − o)/q) + noise, the model position x known: the
+        // residual y − x is a sawtooth of period q in x whatever the noise after
+        // the rounding, and its fundamental's phase gives o (closed form in
+        // `rounding_offset`).
+        let (q, o) = (0.0137, 0.0041);
+        let mut rng = Rng::new(7);
+        let x: Vec<f64> = (0..20_000)
+            .map(|k| 0.8 * (k as f64 * 1.3e-3).sin() + 0.05 * (k as f64 * 0.031).sin())
+            .collect();
+        let r: Vec<f64> = x
+            .iter()
+            .map(|x| o + q * ((x - o) / q).round() - x + 0.6 * q * rng.normal())
+            .collect();
+        let line = spatial_line(&r, &x, 1e-4, 0.2).expect("a line");
+        assert!(line.test.p_value < 1e-6, "{line:?}");
+        assert!((line.period / q - 1.0).abs() < 2e-4, "{line:?}");
+        let off = line.rounding_offset();
+        let d = (off - o).rem_euclid(q).min((o - off).rem_euclid(q));
+        assert!(d < 0.02 * q, "offset {off} vs {o}");
+        // Noise alone: no significant line.
+        let white: Vec<f64> = (0..20_000).map(|_| rng.normal()).collect();
+        let none = spatial_line(&white, &x, 1e-4, 0.2).expect("searched");
+        assert!(none.test.p_value > 1e-3, "{none:?}");
+    }
 
     #[test]
     fn special_functions_match_closed_forms() {
