@@ -5,7 +5,8 @@
 //! 1. sleep until the absolute deadline `t0 + slot · T` (`clock_nanosleep`,
 //!    `TIMER_ABSTIME`), optionally spinning the last few µs;
 //! 2. [`Device::read`] into the `hw_input` signals ([`Scheduler::write`]);
-//! 3. [`Scheduler::tick`];
+//! 3. [`Scheduler::tick`] (or, with [`RtConfig::block_timing`],
+//!    [`Scheduler::tick_probed`] timing each block into its own histogram);
 //! 4. the `hw_output` signals into [`Device::write`];
 //! 5. timing into fixed-memory histograms; an overrun (the tick ended after the
 //!    next deadline) is counted and handled by the [`OverrunPolicy`].
@@ -19,7 +20,7 @@ use crate::clock::{self, BadCpu, Missing, Privileges};
 use crate::device::{Device, DeviceError, HW_INPUT, HW_OUTPUT};
 use crate::histogram::{Histogram, Summary};
 use nanomotion_core::Scheduler;
-use nanomotion_core::scheduler::SignalId;
+use nanomotion_core::scheduler::{SignalId, TickProbe};
 use serde::{Deserialize, Serialize};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -83,6 +84,9 @@ pub struct RtConfig {
     /// Keep every hardware input and output sample ([`Recording`], for MCAP and
     /// replay), in memory allocated at build for the graph's duration.
     pub record: bool,
+    /// Time every block of every tick ([`Timing::blocks`]): two clock reads per
+    /// block phase, in a histogram per block allocated at build.
+    pub block_timing: bool,
 }
 
 impl Default for RtConfig {
@@ -105,6 +109,7 @@ impl Default for RtConfig {
             status_every: 0,
             ring_slots: 1024,
             record: false,
+            block_timing: false,
         }
     }
 }
@@ -208,6 +213,66 @@ pub struct Timing {
     pub period_jitter: Histogram,
     /// Start of the tick to the end of [`Device::write`] (ns).
     pub execution: Histogram,
+    /// Time each block (execution order, [`Scheduler::block_names`]) spent in
+    /// the ticks it was due, gathering its inputs and computing (ns); empty
+    /// unless [`RtConfig::block_timing`].
+    pub blocks: Vec<Histogram>,
+}
+
+/// One block's execution time in a [`TimingReport`].
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct BlockTime {
+    /// The block's name (inserted rate transitions start with `rt:`).
+    pub name: String,
+    /// Its time per tick it was due (ns): `count` is the number of those ticks.
+    #[serde(flatten)]
+    pub time: Summary,
+}
+
+/// Per-block execution time of the current tick, in memory allocated at build:
+/// the [`TickProbe`] of a run with [`RtConfig::block_timing`].
+#[derive(Debug)]
+struct BlockClock {
+    /// When the current phase began (ns).
+    start: u64,
+    /// Time of each block in this tick so far (ns).
+    spent: Box<[u64]>,
+    /// Whether each block was due in this tick.
+    ran: Box<[bool]>,
+}
+
+impl BlockClock {
+    fn new(blocks: usize) -> Self {
+        Self {
+            start: 0,
+            spent: vec![0; blocks].into_boxed_slice(),
+            ran: vec![false; blocks].into_boxed_slice(),
+        }
+    }
+
+    /// Record the tick's times into `hist` (one per block) and start afresh.
+    #[inline]
+    fn flush(&mut self, hist: &mut [Histogram]) {
+        for ((spent, ran), h) in self.spent.iter_mut().zip(self.ran.iter_mut()).zip(hist) {
+            if *ran {
+                h.record(*spent);
+                *spent = 0;
+                *ran = false;
+            }
+        }
+    }
+}
+
+impl TickProbe for BlockClock {
+    #[inline]
+    fn enter(&mut self, _block: usize) {
+        self.start = clock::now_ns();
+    }
+    #[inline]
+    fn leave(&mut self, block: usize) {
+        self.spent[block] += clock::now_ns().saturating_sub(self.start);
+        self.ran[block] = true;
+    }
 }
 
 /// What a run measured: printed, and written as `timing.json`.
@@ -260,6 +325,10 @@ pub struct TimingReport {
     pub period_jitter: Summary,
     /// Execution time per tick, device I/O included (ns).
     pub execution: Summary,
+    /// Execution time of each block, in execution order (with
+    /// [`RtConfig::block_timing`]; otherwise empty and left out of the JSON).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub blocks: Vec<BlockTime>,
 }
 
 /// The hardware samples of a run, tick by tick: what the `hw_input` blocks
@@ -314,6 +383,8 @@ struct LoopCore<D: Device> {
     in_buf: Vec<f64>,
     out_buf: Vec<f64>,
     timing: Timing,
+    /// Per-block timing, when asked for.
+    block_clock: Option<BlockClock>,
     record: Option<Recording>,
     events: rtrb::Producer<Event>,
     stop: Arc<AtomicBool>,
@@ -477,6 +548,13 @@ impl<D: Device> RealtimeRunner<D> {
                 output_values: Vec::with_capacity(n * outputs.len()),
             }
         });
+        let n_blocks = sched.block_names().len();
+        let (block_clock, block_hists) = if cfg.block_timing {
+            let hists = (0..n_blocks).map(|_| Histogram::new()).collect();
+            (Some(BlockClock::new(n_blocks)), hists)
+        } else {
+            (None, Vec::new())
+        };
         Ok(Self {
             core: LoopCore {
                 sched,
@@ -486,7 +564,11 @@ impl<D: Device> RealtimeRunner<D> {
                 outputs,
                 in_buf,
                 out_buf,
-                timing: Timing::default(),
+                timing: Timing {
+                    blocks: block_hists,
+                    ..Timing::default()
+                },
+                block_clock,
                 record,
                 events: producer,
                 stop: Arc::new(AtomicBool::new(false)),
@@ -646,6 +728,7 @@ impl<D: Device> LoopCore<D> {
         self.timing.period.clear();
         self.timing.period_jitter.clear();
         self.timing.execution.clear();
+        self.timing.blocks.iter_mut().for_each(Histogram::clear);
         self.stop.store(false, Ordering::Relaxed);
         if let Some(r) = &mut self.record {
             r.t_ns.clear();
@@ -696,7 +779,13 @@ impl<D: Device> LoopCore<D> {
             for &(j, id) in &self.inputs {
                 self.sched.write(id, &self.in_buf[j..j + 1]);
             }
-            self.sched.tick();
+            match &mut self.block_clock {
+                None => self.sched.tick(),
+                Some(probe) => {
+                    self.sched.tick_probed(probe);
+                    probe.flush(&mut self.timing.blocks);
+                }
+            }
             for &(j, id) in &self.outputs {
                 self.out_buf[j] = self.sched.read(id)[0];
             }
@@ -786,6 +875,16 @@ impl<D: Device> LoopCore<D> {
             period: self.timing.period.summary(),
             period_jitter: self.timing.period_jitter.summary(),
             execution: self.timing.execution.summary(),
+            blocks: self
+                .sched
+                .block_names()
+                .iter()
+                .zip(&self.timing.blocks)
+                .map(|(name, h)| BlockTime {
+                    name: name.clone(),
+                    time: h.summary(),
+                })
+                .collect(),
             stopped: stop,
         })
     }
