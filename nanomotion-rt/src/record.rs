@@ -7,6 +7,10 @@
 //! `value`; [`read_mcap`] takes the exact `bits`, so a replay compares outputs
 //! bit for bit.
 //!
+//! A simulated run (`nanomotion run --record`) is recorded the same way by a
+//! [`SimRecorder`]: the `hw_input`/`hw_output` signals taken from the run's
+//! logs, `log_time` the simulated time of the tick.
+//!
 //! [`replay`] feeds the recorded inputs into the `hw_input` blocks of a freshly
 //! built graph, tick by tick, and compares every `hw_output` sample with the
 //! recording. A graph is deterministic (seeded), so the same graph reproduces
@@ -17,6 +21,8 @@ use crate::Channel;
 use crate::device::{HW_INPUT, HW_OUTPUT};
 use crate::runner::{Recording, hw_blocks};
 use nanomotion_core::Scheduler;
+use nanomotion_core::graph::GraphSpec;
+use nanomotion_core::scheduler::LogChunk;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -315,4 +321,103 @@ pub fn replay(sched: &mut Scheduler, rec: &Recording) -> Result<ReplayReport, Re
         }
     }
     Ok(report)
+}
+
+/// The log entries (`NAME.y`) of every `hw_input` and `hw_output` block of
+/// `spec`, in graph order: what a [`SimRecorder`] needs logged.
+pub fn hw_log_names(spec: &GraphSpec) -> Vec<String> {
+    spec.blocks
+        .iter()
+        .filter(|b| matches!(b.block.typetag_name(), HW_INPUT | HW_OUTPUT))
+        .map(|b| format!("{}.y", b.name))
+        .collect()
+}
+
+/// Collects the hardware samples of a simulated run from its log chunks
+/// ([`Scheduler::run_streamed`]) into a [`Recording`] for [`write_mcap`]: each
+/// `hw_input` and `hw_output` block's `y` on every base tick, at simulated time
+/// `k·T`. Without a device, a `hw_input` block holds 0, so what is recorded is
+/// the graph's response to zero inputs — and [`replay`] reproduces it bit for bit.
+#[derive(Debug)]
+pub struct SimRecorder {
+    rec: Recording,
+    /// Log names of the inputs, then of the outputs.
+    logs: Vec<String>,
+    /// Samples of each, in the order of `logs`.
+    values: Vec<Vec<f64>>,
+}
+
+impl SimRecorder {
+    /// For `sched`, built from a spec whose `log:` holds [`hw_log_names`].
+    /// Refuses a graph without `hw_input`/`hw_output` blocks, a hw block not at
+    /// the base rate (a recording holds one sample per base tick) and one that
+    /// is not logged.
+    pub fn new(sched: &Scheduler) -> Result<Self, RecordError> {
+        let (ins, outs) = hw_blocks(sched);
+        if ins.is_empty() && outs.is_empty() {
+            return Err(RecordError::Graph(
+                "nothing to record: the graph has no hw_input or hw_output block (fix: record a controller or plant graph, e.g. examples/realtime/quickstart_controller.yaml, or leave out --record)".into(),
+            ));
+        }
+        for w in sched.wiring() {
+            if matches!(w.type_name.as_str(), HW_INPUT | HW_OUTPUT) && w.period != 1 {
+                return Err(RecordError::Graph(format!(
+                    "block `{}` ({}) runs every {} base ticks; a recording holds one sample per base tick (fix: leave out its `rate_hz`)",
+                    w.name, w.type_name, w.period
+                )));
+            }
+        }
+        let channel = |(name, unit): &(String, Option<String>)| Channel {
+            name: name.clone(),
+            unit: unit.clone(),
+        };
+        let logs: Vec<String> = ins
+            .iter()
+            .chain(&outs)
+            .map(|(n, _)| format!("{n}.y"))
+            .collect();
+        if let Some(missing) = logs.iter().find(|l| sched.log_view(l).is_none()) {
+            return Err(RecordError::Graph(format!(
+                "`{missing}` is not logged (fix: add it to `log:`; `hw_log_names` lists what a recording needs)"
+            )));
+        }
+        Ok(Self {
+            rec: Recording {
+                title: sched.result().title,
+                rate_hz: sched.base_rate_hz(),
+                inputs: ins.iter().map(channel).collect(),
+                outputs: outs.iter().map(channel).collect(),
+                ..Recording::default()
+            },
+            values: vec![Vec::new(); logs.len()],
+            logs,
+        })
+    }
+
+    /// Take the hw samples out of one batch of log chunks.
+    pub fn take(&mut self, chunks: &[LogChunk<'_>]) {
+        for c in chunks {
+            if let Some(i) = self.logs.iter().position(|l| l == c.name) {
+                self.values[i].extend_from_slice(c.data);
+            }
+        }
+    }
+
+    /// The recording: every base tick that every channel has a sample of.
+    pub fn finish(self) -> Recording {
+        let Self {
+            mut rec, values, ..
+        } = self;
+        let n = values.iter().map(Vec::len).min().unwrap_or(0);
+        let ni = rec.inputs.len();
+        let period_ns = 1.0e9 / rec.rate_hz;
+        rec.t_ns = (0..n)
+            .map(|k| (k as f64 * period_ns).round() as u64)
+            .collect();
+        for k in 0..n {
+            rec.input_values.extend(values[..ni].iter().map(|v| v[k]));
+            rec.output_values.extend(values[ni..].iter().map(|v| v[k]));
+        }
+        rec
+    }
 }

@@ -20,47 +20,12 @@ use crate::clock::{self, BadCpu, Missing, Privileges};
 use crate::device::{Device, DeviceError, HW_INPUT, HW_OUTPUT};
 use crate::histogram::{Histogram, Summary};
 use nanomotion_core::Scheduler;
+pub use nanomotion_core::graph::OverrunPolicy;
+use nanomotion_core::graph::RealtimeSpec;
 use nanomotion_core::scheduler::{SignalId, TickProbe};
-use serde::{Deserialize, Serialize};
+use serde::Serialize;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
-
-/// What to do when a tick ends after the next deadline.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum OverrunPolicy {
-    /// Drop the ticks whose deadlines have passed and go on at the next deadline
-    /// still ahead: the loop stays on its grid, the graph's time falls behind the
-    /// wall clock by the skipped ticks (counted as `missed_ticks`).
-    #[default]
-    Skip,
-    /// Run the late ticks back to back, without sleeping, until the loop is on
-    /// its grid again: no tick is lost, some run late.
-    CatchUp,
-}
-
-impl std::str::FromStr for OverrunPolicy {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
-        match s {
-            "skip" => Ok(Self::Skip),
-            "catch-up" => Ok(Self::CatchUp),
-            _ => Err(format!(
-                "unknown overrun policy `{s}` (fix: `skip` or `catch-up`)"
-            )),
-        }
-    }
-}
-
-impl OverrunPolicy {
-    /// The CLI/JSON spelling.
-    pub fn as_str(self) -> &'static str {
-        match self {
-            Self::Skip => "skip",
-            Self::CatchUp => "catch-up",
-        }
-    }
-}
 
 /// How to run the loop.
 #[derive(Debug, Clone, PartialEq)]
@@ -110,6 +75,19 @@ impl Default for RtConfig {
             ring_slots: 1024,
             record: false,
             block_timing: false,
+        }
+    }
+}
+
+impl RtConfig {
+    /// With the overrun policy and limit of `settings` (a graph's `realtime:`
+    /// section, already [overridden](RealtimeSpec::overridden_by) by the command
+    /// line's); what it leaves out keeps [`RtConfig::default`]'s value.
+    pub fn with_settings(self, settings: RealtimeSpec) -> Self {
+        Self {
+            overrun: settings.overrun.unwrap_or_default(),
+            max_overruns: settings.max_overruns,
+            ..self
         }
     }
 }
@@ -292,6 +270,8 @@ pub struct TimingReport {
     pub missed_ticks: u64,
     /// The overrun policy.
     pub overrun_policy: &'static str,
+    /// The overrun limit (`null`: none).
+    pub max_overruns: Option<u64>,
     /// Why the loop stopped, in words.
     pub stop: String,
     /// Why the loop stopped (typed; not in the JSON, which has `stop`).
@@ -856,6 +836,7 @@ impl<D: Device> LoopCore<D> {
             overruns: c.overruns,
             missed_ticks: c.missed,
             overrun_policy: self.cfg.overrun.as_str(),
+            max_overruns: self.cfg.max_overruns,
             stop: stop.to_string(),
             safe_state_ok,
             scheduling: match policy {

@@ -6,8 +6,8 @@
 use nanomotion_core::GraphSpec;
 use nanomotion_rt::clock::{self, Privileges};
 use nanomotion_rt::{
-    Channel, Device, DeviceError, OverrunPolicy, PlantInfo, RealtimeRunner, RtConfig, RtError,
-    ShmDevice, ShmPlant, Stop,
+    Channel, Device, DeviceError, OverrunPolicy, PlantInfo, RealtimeRunner, RealtimeSpec, RtConfig,
+    RtError, ShmDevice, ShmPlant, Stop,
 };
 use std::time::Duration;
 
@@ -628,4 +628,75 @@ fn the_loop_thread_sleeps_without_timer_slack() {
     })
     .join()
     .unwrap();
+}
+
+#[test]
+fn the_graph_sets_the_overrun_policy_and_limit_and_a_bad_value_is_named() {
+    nanomotion_rt::link_blocks();
+    let yaml = |section: &str| format!("base_rate_hz: {RATE}\nduration_s: 2\n{section}{LOOP}");
+    let spec = GraphSpec::from_yaml(
+        &yaml("realtime:\n  overrun: catch-up\n  max_overruns: 1\n"),
+        "rt.yaml",
+    )
+    .unwrap();
+    let settings = spec.realtime.unwrap();
+    assert_eq!(
+        settings,
+        RealtimeSpec {
+            overrun: Some(OverrunPolicy::CatchUp),
+            max_overruns: Some(1),
+        }
+    );
+    // The command line replaces the graph's settings field by field.
+    let cli = RealtimeSpec {
+        overrun: Some(OverrunPolicy::Skip),
+        max_overruns: None,
+    };
+    assert_eq!(
+        settings.overridden_by(cli),
+        RealtimeSpec {
+            overrun: Some(OverrunPolicy::Skip),
+            max_overruns: Some(1),
+        }
+    );
+    // Run with the graph's settings: catch-up (no tick missed) and a limit of
+    // one overrun, so the second injected overrun (tick 120) stops the loop.
+    let (sched, _) = spec.build().unwrap();
+    let cfg = config(OverrunPolicy::Skip).with_settings(settings);
+    let mut r =
+        RealtimeRunner::new(sched, TestDevice::new(400, &[50, 120, 300], SLEEP_NS), cfg).unwrap();
+    let rep = r.run(|_| {}).unwrap();
+    assert_eq!(rep.stopped, Stop::MaxOverruns);
+    assert_eq!((rep.overruns, rep.ticks, rep.missed_ticks), (2, 121, 0));
+    assert_eq!(
+        (rep.overrun_policy, rep.max_overruns),
+        ("catch-up", Some(1))
+    );
+    assert_eq!(r.device().safe_calls, 1);
+
+    // Bad values: a typed error naming the file, the line and the field, with
+    // the fix; never a silent default.
+    let err = |section: &str| {
+        GraphSpec::from_yaml(&yaml(section), "rt.yaml")
+            .unwrap_err()
+            .to_string()
+    };
+    let e = err("realtime:\n  overrun: skp\n");
+    assert!(e.contains("rt.yaml") && e.contains("line 4"), "{e}");
+    assert!(e.contains("unknown overrun policy `skp`"), "{e}");
+    assert!(e.contains("fix: `skip` or `catch-up`"), "{e}");
+    assert!(!e.contains("block type"), "{e}");
+    for bad in ["-1", "2.5", "many"] {
+        let e = err(&format!("realtime:\n  max_overruns: {bad}\n"));
+        assert!(e.contains("line 4"), "{e}");
+        assert!(
+            e.contains("max_overruns must be a whole number ≥ 0 (fix: e.g. `max_overruns: 0`"),
+            "{e}"
+        );
+    }
+    let e = err("realtime:\n  max_overrun: 3\n");
+    assert!(
+        e.contains("unknown field `max_overrun`") && e.contains("line 4"),
+        "{e}"
+    );
 }
