@@ -24,11 +24,28 @@ pub struct Args {
     pub force: bool,
 }
 
+/// A measured record: a recording of `nanomotion rt --record` or `run
+/// --record` (`.mcap`: a column per hardware channel), else a data file
+/// ([`Dataset::from_file`]: CSV or `.mat`).
+fn load_record(path: &Path) -> Result<Dataset, String> {
+    let is_mcap = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .is_some_and(|e| e.eq_ignore_ascii_case("mcap"));
+    if is_mcap {
+        let rec = nanomotion_rt::read_mcap(path).map_err(|e| e.to_string())?;
+        rec.to_dataset(&path.display().to_string())
+            .map_err(|e| e.to_string())
+    } else {
+        Dataset::from_file(path).map_err(|e| e.to_string())
+    }
+}
+
 pub fn run(a: Args) -> Result<(), String> {
     let spec = GraphSpec::from_file(&a.model).map_err(|e| e.to_string())?;
-    let mut records = vec![Dataset::from_file(&a.data).map_err(|e| e.to_string())?];
+    let mut records = vec![load_record(&a.data)?];
     for v in &a.validation {
-        records.push(Dataset::from_file(v).map_err(|e| e.to_string())?);
+        records.push(load_record(v)?);
     }
     let data = &records[0];
     let out = a.out.clone().unwrap_or_else(|| {

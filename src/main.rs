@@ -216,7 +216,9 @@ enum Command {
     Diagnose {
         /// The nominal model graph (YAML) with `data_column` inputs and `compare:` entries.
         model: PathBuf,
-        /// The measured record (CSV with a `t` or `t_s` column, or MATLAB v5 `.mat`).
+        /// The measured record (CSV with a `t` or `t_s` column, MATLAB v5 `.mat`,
+        /// or a recording `RUN.mcap` of `nanomotion rt --record`/`run --record`,
+        /// its hardware channels as columns).
         data: PathBuf,
         /// Further records (same columns and rate, other excitations): DATA then
         /// estimates every parameter and these are held out whole — an effect is

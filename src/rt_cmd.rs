@@ -209,11 +209,15 @@ fn run_loop<D: Device>(
         eprintln!();
     }
     let timing = runner.timing().clone();
-    if let (Some(folder), Some(rec)) = (&folder, runner.recording()) {
+    let recording = runner.take_recording();
+    let (sched, device) = runner.into_parts();
+    // Let the device go before writing anything, so that the other side (a
+    // plant's watchdog) sees the end now, not after the files are written.
+    drop(device);
+    if let (Some(folder), Some(rec)) = (&folder, &recording) {
         nanomotion_rt::write_mcap(&folder.dir().join("run.mcap"), rec)
             .map_err(|e| e.to_string())?;
     }
-    let (sched, _device) = runner.into_parts();
     print_report(&report);
     if let Some(folder) = folder
         && nanomotion::output::signals::interrupted().is_none()

@@ -190,8 +190,8 @@ fn a_recorded_two_process_run_replays_bit_for_bit_and_a_changed_gain_does_not() 
             &format!("{EXAMPLES}/realtime/quickstart_plant.yaml"),
         ])
         .args(["--serve", &name, "--allow-soft", "--priority", "70"])
-        .stdout(Stdio::null())
-        .stderr(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
         .spawn()
         .unwrap();
     let controller = format!("{EXAMPLES}/realtime/quickstart_controller.yaml");
@@ -206,7 +206,13 @@ fn a_recorded_two_process_run_replays_bit_for_bit_and_a_changed_gain_does_not() 
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
-    assert!(plant.wait_with_output().unwrap().status.success());
+    let plant = plant.wait_with_output().unwrap();
+    assert!(
+        plant.status.success(),
+        "plant: {}{}",
+        String::from_utf8_lossy(&plant.stdout),
+        String::from_utf8_lossy(&plant.stderr)
+    );
     let mcap = dir.join("run.mcap");
     let same = Command::new(bin)
         .arg("replay")
@@ -447,5 +453,110 @@ fn a_simulated_run_records_its_hw_samples_and_replays_bit_for_bit() {
         "{err}"
     );
     assert!(!none.exists());
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn diagnose_reads_a_recording_as_its_measured_data_like_the_same_csv() {
+    use nanomotion::core::data::Dataset;
+    use nanomotion::rt::{Channel, Recording};
+    // The diagnose example's record (u: drive force, y: measured position,
+    // 2 kHz) as a recording would hold it: y read from the stage (hw_input),
+    // u written to it (hw_output), ticks on the grid from a CLOCK_MONOTONIC origin.
+    let dir = std::env::temp_dir().join(format!("nanomotion-diagnose-mcap-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let csv_path = format!("{EXAMPLES}/diagnose/record.csv");
+    let csv = Dataset::from_file(&csv_path).unwrap();
+    let n = csv.len();
+    let rec = Recording {
+        title: None,
+        rate_hz: csv.rate_hz(),
+        inputs: vec![Channel::new("y", Some("m"))],
+        outputs: vec![Channel::new("u", Some("N"))],
+        t_ns: (0..n as u64).map(|k| 987_654_321 + k * 500_000).collect(),
+        input_values: csv.column("y").unwrap().to_vec(),
+        output_values: csv.column("u").unwrap().to_vec(),
+    };
+    let mcap = dir.join("run.mcap");
+    nanomotion::rt::write_mcap(&mcap, &rec).unwrap();
+    // Read back as data: the CSV's columns, bit for bit, at its rate.
+    let back = nanomotion::rt::read_mcap(&mcap)
+        .unwrap()
+        .to_dataset("run.mcap")
+        .unwrap();
+    assert_eq!(back.rate_hz(), csv.rate_hz());
+    for c in ["u", "y"] {
+        assert_eq!(back.column(c), csv.column(c), "column {c}");
+    }
+    // `diagnose` on the recording gives the report it gives on the CSV.
+    let bin = env!("CARGO_BIN_EXE_nanomotion");
+    let model = format!("{EXAMPLES}/diagnose/model.yaml");
+    let report = |data: &str, out: &str| {
+        let o = Command::new(bin)
+            .args(["diagnose", &model, data, "--out"])
+            .arg(dir.join(out))
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        std::fs::read_to_string(dir.join(out).join("report.json"))
+            .unwrap()
+            .replace(&mcap.display().to_string(), "DATA")
+            .replace(&csv_path, "DATA")
+    };
+    let from_mcap = report(&mcap.display().to_string(), "a");
+    let from_csv = report(&csv_path, "b");
+    // The effect hidden in the example's data (a Bouc–Wen input hysteresis,
+    // tests/diagnose_example.rs) is named from the recording.
+    assert!(from_mcap.contains("\"hysteresis\""), "{from_mcap}");
+    assert_eq!(from_mcap, from_csv);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn rt_lets_its_plant_go_before_writing_its_files() {
+    // When the controller's loop ends, the plant must see the connection close
+    // at once. `rt` used to keep the device until its files were written
+    // (a 2 s recording takes longer than 20 ms), so a plant with a 20 ms
+    // watchdog stopped on it and failed.
+    let name = format!("test-letgo-{}", std::process::id());
+    let dir = std::env::temp_dir().join(format!("nanomotion-rt-letgo-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let bin = env!("CARGO_BIN_EXE_nanomotion");
+    let plant = Command::new(bin)
+        .args([
+            "plant",
+            &format!("{EXAMPLES}/realtime/quickstart_plant.yaml"),
+        ])
+        .args(["--serve", &name, "--allow-soft", "--priority", "70"])
+        .args(["--watchdog-ms", "20"])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let out = Command::new(bin)
+        .args([
+            "rt",
+            &format!("{EXAMPLES}/realtime/quickstart_controller.yaml"),
+        ])
+        .args(["--device", &format!("shm:{name}"), "--duration", "2"])
+        .args(["--allow-soft", "--record", "--out"])
+        .arg(&dir)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(dir.join("run.mcap").exists());
+    let plant = plant.wait_with_output().unwrap();
+    let log = String::from_utf8_lossy(&plant.stdout).into_owned()
+        + &String::from_utf8_lossy(&plant.stderr);
+    assert!(plant.status.success(), "plant: {log}");
+    assert!(
+        log.contains("the controller closed the connection"),
+        "{log}"
+    );
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -11,6 +11,9 @@
 //! [`SimRecorder`]: the `hw_input`/`hw_output` signals taken from the run's
 //! logs, `log_time` the simulated time of the tick.
 //!
+//! [`Recording::to_dataset`] reads a recording as measured data (a column per
+//! channel), for `nanomotion diagnose MODEL RUN.mcap`.
+//!
 //! [`replay`] feeds the recorded inputs into the `hw_input` blocks of a freshly
 //! built graph, tick by tick, and compares every `hw_output` sample with the
 //! recording. A graph is deterministic (seeded), so the same graph reproduces
@@ -53,6 +56,9 @@ pub enum RecordError {
     /// The graph does not have the recorded channels.
     #[error("{0}")]
     Graph(String),
+    /// The recording cannot be read as uniformly sampled data.
+    #[error(transparent)]
+    Data(#[from] nanomotion_core::data::DataError),
 }
 
 #[derive(Serialize, Deserialize)]
@@ -419,5 +425,72 @@ impl SimRecorder {
             rec.output_values.extend(values[ni..].iter().map(|v| v[k]));
         }
         rec
+    }
+}
+
+impl Recording {
+    /// The recording as measured data ([`Dataset`](nanomotion_core::data::Dataset)):
+    /// one column per channel, named like it (the inputs, then the outputs),
+    /// sample k at `t = k·T` from 0. `origin` (the file) prefixes errors.
+    ///
+    /// Refused, naming the tick and the fix, when the samples are not on the
+    /// loop's grid: when tick k did not wake nearest to `t₀ + k·T` (a deadline
+    /// was skipped, or the tick woke more than half a period late), the data is
+    /// not uniformly sampled and would mislead a fit. So are a recording of
+    /// fewer than [`MIN_SAMPLES`](nanomotion_core::data::MIN_SAMPLES) ticks, a
+    /// non-finite sample and a channel name used twice (by the dataset itself).
+    pub fn to_dataset(&self, origin: &str) -> Result<nanomotion_core::data::Dataset, RecordError> {
+        use nanomotion_core::data::{DataError, Dataset, MIN_SAMPLES};
+        if self.ticks() < MIN_SAMPLES {
+            return Err(DataError::new(
+                origin,
+                format!(
+                    "holds {} ticks, fewer than the {MIN_SAMPLES} a dataset needs",
+                    self.ticks()
+                ),
+                "record a longer run",
+            )
+            .into());
+        }
+        let period_ns = 1.0e9 / self.rate_hz;
+        if let Some(&t0) = self.t_ns.first() {
+            for (k, &t) in self.t_ns.iter().enumerate() {
+                let slot = ((t as f64 - t0 as f64) / period_ns).round();
+                if slot != k as f64 {
+                    return Err(DataError::new(
+                        origin,
+                        format!(
+                            "tick {k} woke at {:.1} µs, nearest to grid slot {slot}, not {k}: the loop skipped deadlines or woke more than half a period (T = {:.1} µs) late, so the samples are not uniform in time",
+                            (t as f64 - t0 as f64) * 1e-3,
+                            period_ns * 1e-3
+                        ),
+                        "record a run without overruns (`nanomotion rt ... --max-overruns 0 --record`; see docs/realtime.md for a CPU of its own), or use the part before this tick",
+                    )
+                    .into());
+                }
+            }
+        }
+        let column = |values: &[f64], j: usize, width: usize| -> Vec<f64> {
+            values
+                .iter()
+                .skip(j)
+                .step_by(width.max(1))
+                .copied()
+                .collect()
+        };
+        let (ni, no) = (self.inputs.len(), self.outputs.len());
+        let columns = self
+            .inputs
+            .iter()
+            .enumerate()
+            .map(|(j, c)| (c.name.clone(), column(&self.input_values, j, ni)))
+            .chain(
+                self.outputs
+                    .iter()
+                    .enumerate()
+                    .map(|(j, c)| (c.name.clone(), column(&self.output_values, j, no))),
+            )
+            .collect();
+        Ok(Dataset::from_columns(origin, self.rate_hz, 0.0, columns)?)
     }
 }

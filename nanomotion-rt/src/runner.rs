@@ -625,6 +625,12 @@ impl<D: Device> RealtimeRunner<D> {
         self.core.record.as_ref()
     }
 
+    /// The hardware samples of the last run, taken out of the runner (to
+    /// write them after the device is let go); a further run records nothing.
+    pub fn take_recording(&mut self) -> Option<Recording> {
+        self.core.record.take()
+    }
+
     /// The graph and the device back.
     pub fn into_parts(self) -> (Scheduler, D) {
         (self.core.sched, self.core.device)

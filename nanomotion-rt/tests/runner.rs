@@ -700,3 +700,45 @@ fn the_graph_sets_the_overrun_policy_and_limit_and_a_bad_value_is_named() {
         "{e}"
     );
 }
+
+#[test]
+fn a_recording_reads_as_data_only_when_its_ticks_are_on_the_grid() {
+    // 40 ticks at 1 kHz from an arbitrary CLOCK_MONOTONIC origin, each woken
+    // up to 0.2 ms late (within half a period of its slot).
+    let n = 40u64;
+    let mut rec = nanomotion_rt::Recording {
+        title: None,
+        rate_hz: 1000.0,
+        inputs: vec![Channel::new("pos", Some("m"))],
+        outputs: vec![Channel::new("cmd", None)],
+        t_ns: (0..n)
+            .map(|k| 5_000_000 + k * 1_000_000 + (k % 3) * 100_000)
+            .collect(),
+        input_values: (0..n).map(|k| k as f64).collect(),
+        output_values: (0..n).map(|k| 2.0 * k as f64 + 1.5).collect(),
+    };
+    let d = rec.to_dataset("r.mcap").unwrap();
+    assert_eq!(d.names(), ["pos", "cmd"]);
+    assert_eq!((d.len(), d.rate_hz(), d.t0_s()), (40, 1000.0, 0.0));
+    assert_eq!(d.column("pos").unwrap(), rec.input_values.as_slice());
+    assert_eq!(d.column("cmd").unwrap()[7], 15.5);
+    // Tick 20 woke one period later than its slot (a skipped deadline): the
+    // samples are no longer uniform in time; refused, naming the tick.
+    let mut skipped = rec.clone();
+    skipped.t_ns[20..].iter_mut().for_each(|t| *t += 1_000_000);
+    let e = skipped.to_dataset("r.mcap").unwrap_err().to_string();
+    assert!(e.starts_with("r.mcap"), "{e}");
+    assert!(
+        e.contains("tick 20 woke") && e.contains("grid slot 21, not 20"),
+        "{e}"
+    );
+    assert!(e.contains("--max-overruns 0"), "{e}");
+    // A non-finite sample is named by its column, never passed on.
+    rec.output_values[3] = f64::NAN;
+    let e = rec.to_dataset("r.mcap").unwrap_err().to_string();
+    assert!(e.contains("cmd") && e.contains("sample 3 is NaN"), "{e}");
+    // Too short for a dataset.
+    rec.t_ns.truncate(5);
+    let e = rec.to_dataset("r.mcap").unwrap_err().to_string();
+    assert!(e.contains("holds 5 ticks, fewer than the 16"), "{e}");
+}
