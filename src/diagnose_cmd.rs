@@ -24,21 +24,10 @@ pub struct Args {
     pub force: bool,
 }
 
-/// A measured record: a recording of `nanomotion rt --record` or `run
-/// --record` (`.mcap`: a column per hardware channel), else a data file
-/// ([`Dataset::from_file`]: CSV or `.mat`).
+/// A measured record: a data file (CSV, `.mat`) or a recording (`.mcap`: a
+/// column per hardware channel).
 fn load_record(path: &Path) -> Result<Dataset, String> {
-    let is_mcap = path
-        .extension()
-        .and_then(|e| e.to_str())
-        .is_some_and(|e| e.eq_ignore_ascii_case("mcap"));
-    if is_mcap {
-        let rec = nanomotion_rt::read_mcap(path).map_err(|e| e.to_string())?;
-        rec.to_dataset(&path.display().to_string())
-            .map_err(|e| e.to_string())
-    } else {
-        Dataset::from_file(path).map_err(|e| e.to_string())
-    }
+    nanomotion_rt::load_dataset(path, None).map_err(|e| e.to_string())
 }
 
 pub fn run(a: Args) -> Result<(), String> {

@@ -133,7 +133,8 @@ enum Command {
         /// Write no files, print the metrics only.
         #[arg(long)]
         no_files: bool,
-        /// Measured data (CSV with a `t_s` column, or MATLAB v5 `.mat`): played by
+        /// Measured data (CSV with a `t_s` column, MATLAB v5 `.mat`, or a recording
+        /// `RUN.mcap`, its hardware channels as columns): played by
         /// `data_column` blocks and compared with the graph's `compare:` signals
         /// (rms, max, fit %, `comparison.json`, `compare_*.svg`). The duration
         /// becomes the data's length unless --duration is given. Give it twice to
@@ -501,8 +502,7 @@ fn load_data(
     }
     let mut merged: Option<nanomotion::core::data::Dataset> = None;
     for path in files {
-        let d = nanomotion::core::data::Dataset::from_file_with_rate(path, data_rate)
-            .map_err(|e| e.to_string())?;
+        let d = nanomotion_rt::load_dataset(path, data_rate).map_err(|e| e.to_string())?;
         merged = Some(match merged {
             None => d,
             Some(m) => m.merge(d).map_err(|e| e.to_string())?,

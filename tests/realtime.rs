@@ -504,6 +504,21 @@ fn diagnose_reads_a_recording_as_its_measured_data_like_the_same_csv() {
             .replace(&mcap.display().to_string(), "DATA")
             .replace(&csv_path, "DATA")
     };
+    // `run --data` too: the same comparison of the model with the recording
+    // as with the CSV.
+    let compared = |data: &str| {
+        let o = Command::new(bin)
+            .args(["run", &model, "--no-files", "--data", data])
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let text = String::from_utf8_lossy(&o.stdout).into_owned();
+        text.lines()
+            .find(|l| l.starts_with("stage.y"))
+            .unwrap_or_else(|| panic!("no comparison line in {text}"))
+            .to_string()
+    };
+    assert_eq!(compared(&mcap.display().to_string()), compared(&csv_path));
     let from_mcap = report(&mcap.display().to_string(), "a");
     let from_csv = report(&csv_path, "b");
     // The effect hidden in the example's data (a Bouc–Wen input hysteresis,
@@ -517,8 +532,10 @@ fn diagnose_reads_a_recording_as_its_measured_data_like_the_same_csv() {
 fn rt_lets_its_plant_go_before_writing_its_files() {
     // When the controller's loop ends, the plant must see the connection close
     // at once. `rt` used to keep the device until its files were written
-    // (a 2 s recording takes longer than 20 ms), so a plant with a 20 ms
-    // watchdog stopped on it and failed.
+    // (an 8 s recording takes longer than 100 ms here), so a plant with a
+    // 100 ms watchdog stopped on it and failed; with the device let go at the
+    // end of the loop (the loop thread wakes the caller at once), it ends
+    // cleanly.
     let name = format!("test-letgo-{}", std::process::id());
     let dir = std::env::temp_dir().join(format!("nanomotion-rt-letgo-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
@@ -529,7 +546,7 @@ fn rt_lets_its_plant_go_before_writing_its_files() {
             &format!("{EXAMPLES}/realtime/quickstart_plant.yaml"),
         ])
         .args(["--serve", &name, "--allow-soft", "--priority", "70"])
-        .args(["--watchdog-ms", "20"])
+        .args(["--watchdog-ms", "100"])
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
         .spawn()
@@ -539,7 +556,7 @@ fn rt_lets_its_plant_go_before_writing_its_files() {
             "rt",
             &format!("{EXAMPLES}/realtime/quickstart_controller.yaml"),
         ])
-        .args(["--device", &format!("shm:{name}"), "--duration", "2"])
+        .args(["--device", &format!("shm:{name}"), "--duration", "8"])
         .args(["--allow-soft", "--record", "--out"])
         .arg(&dir)
         .output()

@@ -47,7 +47,9 @@ pub use clock::{Missing, Privileges};
 pub use device::{Channel, Device, DeviceError, HwInput, HwOutput};
 pub use histogram::{Histogram, Summary};
 pub use nanomotion_core::graph::RealtimeSpec;
-pub use record::{ReplayReport, SimRecorder, hw_log_names, read_mcap, replay, write_mcap};
+pub use record::{
+    ReplayReport, SimRecorder, hw_log_names, load_dataset, read_mcap, replay, write_mcap,
+};
 pub use runner::{
     BlockTime, Event, NoDevice, OverrunPolicy, RealtimeRunner, Recording, RtConfig, RtError, Stop,
     Timing, TimingReport, hw_blocks,

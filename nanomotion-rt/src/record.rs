@@ -12,7 +12,8 @@
 //! logs, `log_time` the simulated time of the tick.
 //!
 //! [`Recording::to_dataset`] reads a recording as measured data (a column per
-//! channel), for `nanomotion diagnose MODEL RUN.mcap`.
+//! channel); [`load_dataset`] reads a `.mcap` recording or a data file, for
+//! `nanomotion diagnose MODEL RUN.mcap` and `run`/`check --data RUN.mcap`.
 //!
 //! [`replay`] feeds the recorded inputs into the `hw_input` blocks of a freshly
 //! built graph, tick by tick, and compares every `hw_output` sample with the
@@ -493,4 +494,35 @@ impl Recording {
             .collect();
         Ok(Dataset::from_columns(origin, self.rate_hz, 0.0, columns)?)
     }
+}
+
+/// Measured data from `path`: a recording (`.mcap`, [`Recording::to_dataset`])
+/// or a data file ([`Dataset::from_file_with_rate`](nanomotion_core::data::Dataset::from_file_with_rate):
+/// CSV, `.mat`). A sample rate given for a recording must be the recorded one.
+pub fn load_dataset(
+    path: &Path,
+    rate_hz: Option<f64>,
+) -> Result<nanomotion_core::data::Dataset, RecordError> {
+    let is_mcap = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .is_some_and(|e| e.eq_ignore_ascii_case("mcap"));
+    if !is_mcap {
+        return Ok(nanomotion_core::data::Dataset::from_file_with_rate(
+            path, rate_hz,
+        )?);
+    }
+    let rec = read_mcap(path)?;
+    if let Some(r) = rate_hz
+        && r != rec.rate_hz
+    {
+        return Err(RecordError::Content {
+            path: path.display().to_string(),
+            message: format!(
+                "recorded at {} Hz, but a rate of {r} Hz was given (leave the rate out: a recording carries its own)",
+                rec.rate_hz
+            ),
+        });
+    }
+    rec.to_dataset(&path.display().to_string())
 }

@@ -569,17 +569,27 @@ impl<D: Device> RealtimeRunner<D> {
     pub fn run(&mut self, mut on_event: impl FnMut(Event)) -> Result<TimingReport, RtError> {
         let core = &mut self.core;
         let events = &mut self.events;
+        // The loop thread wakes this one when it ends, so that the caller
+        // learns of the end (and can let the device go) at once, not at the
+        // next 20 ms poll.
+        let waiter = std::thread::current();
+        let done = AtomicBool::new(false);
         std::thread::scope(|s| {
             let handle = std::thread::Builder::new()
                 .name("nanomotion-rt".into())
                 .stack_size(8 << 20)
-                .spawn_scoped(s, || core.run_loop())
+                .spawn_scoped(s, || {
+                    let r = core.run_loop();
+                    done.store(true, Ordering::Release);
+                    waiter.unpark();
+                    r
+                })
                 .map_err(|e| RtError::Thread(e.to_string()))?;
-            while !handle.is_finished() {
+            while !done.load(Ordering::Acquire) && !handle.is_finished() {
                 while let Ok(e) = events.pop() {
                     on_event(e);
                 }
-                std::thread::sleep(std::time::Duration::from_millis(20));
+                std::thread::park_timeout(std::time::Duration::from_millis(20));
             }
             let r = handle
                 .join()
