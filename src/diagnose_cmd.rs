@@ -24,11 +24,17 @@ pub struct Args {
     pub force: bool,
 }
 
+/// A measured record: a data file (CSV, `.mat`) or a recording (`.mcap`: a
+/// column per hardware channel).
+fn load_record(path: &Path) -> Result<Dataset, String> {
+    nanomotion_rt::load_dataset(path, None).map_err(|e| e.to_string())
+}
+
 pub fn run(a: Args) -> Result<(), String> {
     let spec = GraphSpec::from_file(&a.model).map_err(|e| e.to_string())?;
-    let mut records = vec![Dataset::from_file(&a.data).map_err(|e| e.to_string())?];
+    let mut records = vec![load_record(&a.data)?];
     for v in &a.validation {
-        records.push(Dataset::from_file(v).map_err(|e| e.to_string())?);
+        records.push(load_record(v)?);
     }
     let data = &records[0];
     let out = a.out.clone().unwrap_or_else(|| {

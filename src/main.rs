@@ -133,7 +133,8 @@ enum Command {
         /// Write no files, print the metrics only.
         #[arg(long)]
         no_files: bool,
-        /// Measured data (CSV with a `t_s` column, or MATLAB v5 `.mat`): played by
+        /// Measured data (CSV with a `t_s` column, MATLAB v5 `.mat`, or a recording
+        /// `RUN.mcap`, its hardware channels as columns): played by
         /// `data_column` blocks and compared with the graph's `compare:` signals
         /// (rms, max, fit %, `comparison.json`, `compare_*.svg`). The duration
         /// becomes the data's length unless --duration is given. Give it twice to
@@ -153,6 +154,11 @@ enum Command {
         /// YAML; list entries by index, `blocks.stage.den.0`). See docs/sweep.md.
         #[arg(long = "set", value_name = "PATH=VALUE")]
         set: Vec<nanomotion::core::Override>,
+        /// Record every `hw_input`/`hw_output` sample into OUT/run.mcap, as
+        /// `nanomotion rt --record` does (for Foxglove/PlotJuggler and
+        /// `nanomotion replay`); the hw signals are logged too.
+        #[arg(long, conflicts_with = "no_files")]
+        record: bool,
     },
     /// Validate a graph without running it: parse, build every block, resolve ports,
     /// rates and execution order, report inserted rate transitions, and analyse every
@@ -211,7 +217,9 @@ enum Command {
     Diagnose {
         /// The nominal model graph (YAML) with `data_column` inputs and `compare:` entries.
         model: PathBuf,
-        /// The measured record (CSV with a `t` or `t_s` column, or MATLAB v5 `.mat`).
+        /// The measured record (CSV with a `t` or `t_s` column, MATLAB v5 `.mat`,
+        /// or a recording `RUN.mcap` of `nanomotion rt --record`/`run --record`,
+        /// its hardware channels as columns).
         data: PathBuf,
         /// Further records (same columns and rate, other excitations): DATA then
         /// estimates every parameter and these are held out whole — an effect is
@@ -358,8 +366,10 @@ fn main() -> ExitCode {
             data_rate,
             allow_unproven,
             set,
+            record,
         } => run(RunArgs {
             set,
+            record,
             graph,
             out,
             force,
@@ -492,8 +502,7 @@ fn load_data(
     }
     let mut merged: Option<nanomotion::core::data::Dataset> = None;
     for path in files {
-        let d = nanomotion::core::data::Dataset::from_file_with_rate(path, data_rate)
-            .map_err(|e| e.to_string())?;
+        let d = nanomotion_rt::load_dataset(path, data_rate).map_err(|e| e.to_string())?;
         merged = Some(match merged {
             None => d,
             Some(m) => m.merge(d).map_err(|e| e.to_string())?,
@@ -564,6 +573,7 @@ struct RunArgs {
     data_rate: Option<f64>,
     allow_unproven: bool,
     set: Vec<nanomotion::core::Override>,
+    record: bool,
 }
 
 fn run(args: RunArgs) -> Result<(), String> {
@@ -578,8 +588,16 @@ fn run(args: RunArgs) -> Result<(), String> {
         data_rate,
         allow_unproven,
         set,
+        record,
     } = args;
     let mut spec = GraphSpec::from_file_with_overrides(&graph, &set).map_err(|e| e.to_string())?;
+    if record {
+        for name in nanomotion_rt::hw_log_names(&spec) {
+            if !spec.log.contains(&name) {
+                spec.log.push(name);
+            }
+        }
+    }
     if let Some(s) = seed {
         spec.seed = s;
     }
@@ -606,6 +624,11 @@ fn run(args: RunArgs) -> Result<(), String> {
         (None, false) => spec.build(),
     }
     .map_err(|e| e.to_string())?;
+    let mut recorder = if record {
+        Some(nanomotion_rt::SimRecorder::new(&sched).map_err(|e| e.to_string())?)
+    } else {
+        None
+    };
     let gate_lines =
         gate_cmd::before_run(&gate_cmd::analyse(&sched, require.as_ref()), allow_unproven)?;
     for r in &report.rate_transitions {
@@ -637,12 +660,17 @@ fn run(args: RunArgs) -> Result<(), String> {
     let start = Instant::now();
     let mut bar: Option<ProgressBar> = None;
     let result = sched.run_streamed(
-        |chunks| match &mut writer {
-            Some(w) => w.chunk(chunks),
-            None => match nanomotion::output::signals::interrupted() {
-                Some(signal) => Err(nanomotion::output::OutputError::Interrupted { signal }),
-                None => Ok(()),
-            },
+        |chunks| {
+            if let Some(r) = &mut recorder {
+                r.take(chunks);
+            }
+            match &mut writer {
+                Some(w) => w.chunk(chunks),
+                None => match nanomotion::output::signals::interrupted() {
+                    Some(signal) => Err(nanomotion::output::OutputError::Interrupted { signal }),
+                    None => Ok(()),
+                },
+            }
         },
         |fraction| {
             // Show a bar only for runs that last more than a second.
@@ -761,6 +789,11 @@ fn run(args: RunArgs) -> Result<(), String> {
             .map_err(|e| e.to_string())?;
         if let Some(b) = wbar {
             b.finish_and_clear();
+        }
+        if let Some(r) = recorder {
+            let path = dir.join("run.mcap");
+            nanomotion_rt::write_mcap(&path, &r.finish()).map_err(|e| e.to_string())?;
+            files.push(path);
         }
         if let Some(d) = &data
             && !comparisons.is_empty()

@@ -9,7 +9,7 @@ use nanomotion::plot::{Figure, Scale, Series, draw_svg_panels};
 use nanomotion_rt::clock::Privileges;
 use nanomotion_rt::{
     Device, DeviceError, Event, Histogram, NoDevice, OverrunPolicy, PlantInfo, RealtimeRunner,
-    RtConfig, ShmDevice, ShmPlant, Stop, TimingReport, hw_blocks,
+    RealtimeSpec, RtConfig, ShmDevice, ShmPlant, Stop, TimingReport, hw_blocks,
 };
 use std::path::{Path, PathBuf};
 use std::time::Duration;
@@ -30,10 +30,12 @@ pub struct Loop {
     /// (without it the run is refused, naming what is missing).
     #[arg(long)]
     allow_soft: bool,
-    /// Overruns: `skip` the missed deadlines and stay on the grid, or `catch-up`.
-    #[arg(long, default_value = "skip", value_name = "skip|catch-up")]
-    overrun: OverrunPolicy,
-    /// Stop (outputs safe) after more than N overruns.
+    /// Overruns: `skip` the missed deadlines and stay on the grid, or `catch-up`
+    /// (default: the graph's `realtime: { overrun }`, else skip).
+    #[arg(long, value_name = "skip|catch-up")]
+    overrun: Option<OverrunPolicy>,
+    /// Stop (outputs safe) after more than N overruns (default: the graph's
+    /// `realtime: { max_overruns }`, else never).
     #[arg(long, value_name = "N")]
     max_overruns: Option<u64>,
     /// Busy-wait the last µs before each deadline (lower latency, one CPU busy).
@@ -56,6 +58,10 @@ pub struct Loop {
     /// Foxglove/PlotJuggler and `nanomotion replay`); needs --out.
     #[arg(long, requires = "out")]
     record: bool,
+    /// Time every block of every tick: p50/p99/p99.9/max per block in the
+    /// summary and timing.json (costs two clock reads per block and tick).
+    #[arg(long)]
+    block_timing: bool,
 }
 
 /// `nanomotion rt`.
@@ -89,20 +95,23 @@ pub struct PlantArgs {
     lp: Loop,
 }
 
-fn build(graph: &Path, lp: &Loop) -> Result<Scheduler, String> {
+/// The graph built, and its `realtime:` settings.
+fn build(graph: &Path, lp: &Loop) -> Result<(Scheduler, RealtimeSpec), String> {
     let mut spec =
         GraphSpec::from_file_with_overrides(graph, &lp.set).map_err(|e| e.to_string())?;
     if let Some(d) = lp.duration {
         spec.duration_s = d;
     }
+    let settings = spec.realtime.unwrap_or_default();
     let (sched, report) = spec.build().map_err(|e| e.to_string())?;
     for r in &report.rate_transitions {
         tell!("note: rate transition {r}");
     }
-    Ok(sched)
+    Ok((sched, settings))
 }
 
-fn config(lp: &Loop) -> Result<RtConfig, String> {
+/// The loop's configuration: the command line's settings over the graph's.
+fn config(lp: &Loop, graph: RealtimeSpec) -> Result<RtConfig, String> {
     if !(lp.spin_us.is_finite() && (0.0..=1000.0).contains(&lp.spin_us)) {
         return Err(format!(
             "--spin-us {}: must be within 0..=1000 µs (fix: e.g. --spin-us 5)",
@@ -116,11 +125,14 @@ fn config(lp: &Loop) -> Result<RtConfig, String> {
             lock_memory: true,
         },
         allow_soft: lp.allow_soft,
+        spin_ns: (lp.spin_us * 1e3) as u64,
+        block_timing: lp.block_timing,
+        ..RtConfig::default()
+    }
+    .with_settings(graph.overridden_by(RealtimeSpec {
         overrun: lp.overrun,
         max_overruns: lp.max_overruns,
-        spin_ns: (lp.spin_us * 1e3) as u64,
-        ..RtConfig::default()
-    })
+    })))
 }
 
 fn watchdog(lp: &Loop) -> Result<Duration, String> {
@@ -169,7 +181,7 @@ fn status(stop: std::sync::Arc<std::sync::atomic::AtomicBool>, rate_hz: f64) -> 
 
 fn run_loop<D: Device>(
     graph: &Path,
-    sched: Scheduler,
+    (sched, settings): (Scheduler, RealtimeSpec),
     device: D,
     lp: &Loop,
     command: &str,
@@ -178,7 +190,7 @@ fn run_loop<D: Device>(
     let cfg = RtConfig {
         ticks,
         record: lp.record,
-        ..config(lp)?
+        ..config(lp, settings)?
     };
     let rate = sched.base_rate_hz();
     let folder = match &lp.out {
@@ -197,11 +209,15 @@ fn run_loop<D: Device>(
         eprintln!();
     }
     let timing = runner.timing().clone();
-    if let (Some(folder), Some(rec)) = (&folder, runner.recording()) {
+    let recording = runner.take_recording();
+    let (sched, device) = runner.into_parts();
+    // Let the device go before writing anything, so that the other side (a
+    // plant's watchdog) sees the end now, not after the files are written.
+    drop(device);
+    if let (Some(folder), Some(rec)) = (&folder, &recording) {
         nanomotion_rt::write_mcap(&folder.dir().join("run.mcap"), rec)
             .map_err(|e| e.to_string())?;
     }
-    let (sched, _device) = runner.into_parts();
     print_report(&report);
     if let Some(folder) = folder
         && nanomotion::output::signals::interrupted().is_none()
@@ -229,7 +245,7 @@ fn run_loop<D: Device>(
 
 fn print_report(r: &TimingReport) {
     say!(
-        "{} ticks at {} Hz ({}), {}; overruns {}, missed ticks {} (policy {}), events dropped {}",
+        "{} ticks at {} Hz ({}), {}; overruns {}, missed ticks {} (policy {}, limit {}), events dropped {}",
         r.ticks,
         r.rate_hz,
         r.scheduling,
@@ -237,13 +253,22 @@ fn print_report(r: &TimingReport) {
         r.overruns,
         r.missed_ticks,
         r.overrun_policy,
+        r.max_overruns.map_or("none".to_string(), |m| m.to_string()),
         r.events_dropped
     );
     for m in &r.missing_privileges {
         say!("soft run: {m}");
     }
+    // The first column fits the longest row name (`  block NAME`).
+    let w = r
+        .blocks
+        .iter()
+        .map(|b| b.name.chars().count() + 8)
+        .max()
+        .unwrap_or(0)
+        .max(18);
     say!(
-        "{:<18} {:>10} {:>10} {:>10} {:>10} {:>10}",
+        "{:<w$} {:>10} {:>10} {:>10} {:>10} {:>10}",
         "µs",
         "p50",
         "p99",
@@ -252,14 +277,22 @@ fn print_report(r: &TimingReport) {
         "mean"
     );
     let us = |v: Option<u64>| v.map_or("-".to_string(), |v| format!("{:.2}", v as f64 * 1e-3));
+    let blocks = r
+        .blocks
+        .iter()
+        .map(|b| (format!("  block {}", b.name), &b.time));
     for (name, s) in [
         ("wake-up latency", &r.wakeup_latency),
         ("period", &r.period),
         ("|period − T|", &r.period_jitter),
         ("execution", &r.execution),
-    ] {
+    ]
+    .into_iter()
+    .map(|(n, s)| (n.to_string(), s))
+    .chain(blocks)
+    {
         say!(
-            "{:<18} {:>10} {:>10} {:>10} {:>10} {:>10}",
+            "{:<w$} {:>10} {:>10} {:>10} {:>10} {:>10}",
             name,
             us(s.p50_ns),
             us(s.p99_ns),
@@ -325,9 +358,9 @@ fn write_outputs(
 /// `nanomotion rt GRAPH [--device shm:NAME]`.
 pub fn rt(a: RtArgs) -> Result<(), String> {
     nanomotion_rt::link_blocks();
-    let sched = build(&a.graph, &a.lp)?;
+    let built = build(&a.graph, &a.lp)?;
     let (report, sched, _) = match a.device.as_deref() {
-        None => run_loop(&a.graph, sched, NoDevice, &a.lp, "rt", None)?,
+        None => run_loop(&a.graph, built, NoDevice, &a.lp, "rt", None)?,
         Some(d) => {
             let Some(name) = d.strip_prefix("shm:") else {
                 return Err(format!(
@@ -346,7 +379,7 @@ pub fn rt(a: RtArgs) -> Result<(), String> {
                 watchdog(&a.lp)?,
             )
             .map_err(|e| e.to_string())?;
-            run_loop(&a.graph, sched, dev, &a.lp, "rt", None)?
+            run_loop(&a.graph, built, dev, &a.lp, "rt", None)?
         }
     };
     print_scores(&sched);
@@ -374,7 +407,7 @@ pub fn plant(a: PlantArgs) -> Result<(), String> {
     let mut lp = a.lp;
     // Without --duration the plant runs until the controller leaves.
     let ticks = lp.duration.take();
-    let sched = build(&a.graph, &lp)?;
+    let (sched, settings) = build(&a.graph, &lp)?;
     let (to_plant, from_plant) = hw_blocks(&sched);
     let channel = |(name, unit): (String, Option<String>)| nanomotion_rt::Channel { name, unit };
     let info = PlantInfo {
@@ -401,7 +434,14 @@ pub fn plant(a: PlantArgs) -> Result<(), String> {
     // Logs hold the graph's duration; a longer plant run drops (and counts)
     // the samples beyond it, without allocating.
     let ticks = ticks.map_or(u64::MAX, |d| (d * rate).round() as u64);
-    let (report, _, _) = run_loop(&a.graph, sched, device, &lp, "plant", Some(ticks))?;
+    let (report, _, _) = run_loop(
+        &a.graph,
+        (sched, settings),
+        device,
+        &lp,
+        "plant",
+        Some(ticks),
+    )?;
     match report.stopped {
         Stop::Completed | Stop::Interrupted | Stop::Device(DeviceError::Closed(_)) => Ok(()),
         other => Err(format!("{}: {other}", a.graph.display())),

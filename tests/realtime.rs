@@ -108,7 +108,13 @@ fn rt_writes_its_timing_report_and_refuses_a_missing_plant() {
     let _ = std::fs::remove_dir_all(&dir);
     let out = Command::new(env!("CARGO_BIN_EXE_nanomotion"))
         .args(["rt", &format!("{EXAMPLES}/quickstart.yaml")])
-        .args(["--duration", "0.6", "--allow-soft", "--out"])
+        .args([
+            "--duration",
+            "0.6",
+            "--allow-soft",
+            "--block-timing",
+            "--out",
+        ])
         .arg(&dir)
         .output()
         .unwrap();
@@ -125,6 +131,25 @@ fn rt_writes_its_timing_report_and_refuses_a_missing_plant() {
     assert_eq!(timing["wakeup_latency"]["count"], 24000);
     assert_eq!(timing["period_ns"], 25_000.0);
     assert!(dir.join("timing.svg").exists());
+    // --block-timing: every block of the graph, in execution order, timed on
+    // each tick it was due (24000 / its period in base ticks).
+    let (sched, _) = GraphSpec::from_file(format!("{EXAMPLES}/quickstart.yaml"))
+        .unwrap()
+        .build()
+        .unwrap();
+    let blocks = timing["blocks"].as_array().unwrap();
+    assert_eq!(blocks.len(), sched.block_names().len());
+    let mut mean_sum = 0.0;
+    for (b, w) in blocks.iter().zip(sched.wiring()) {
+        assert_eq!(b["name"], w.name.as_str());
+        assert_eq!(b["count"], 24000 / w.period, "{}", w.name);
+        assert!(b["p50_ns"].as_u64().unwrap() <= b["max_ns"].as_u64().unwrap());
+        mean_sum += b["mean_ns"].as_f64().unwrap() * b["count"].as_f64().unwrap() / 24000.0;
+        // And in the printed summary.
+        assert!(text.contains(&format!("  block {}", w.name)), "{text}");
+    }
+    // The blocks run inside the tick: their time per tick is at most the tick's.
+    assert!(mean_sum <= timing["execution"]["mean_ns"].as_f64().unwrap());
     let _ = std::fs::remove_dir_all(&dir);
 
     // A controller whose plant is not there: named, with the fix, no files.
@@ -165,8 +190,8 @@ fn a_recorded_two_process_run_replays_bit_for_bit_and_a_changed_gain_does_not() 
             &format!("{EXAMPLES}/realtime/quickstart_plant.yaml"),
         ])
         .args(["--serve", &name, "--allow-soft", "--priority", "70"])
-        .stdout(Stdio::null())
-        .stderr(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
         .spawn()
         .unwrap();
     let controller = format!("{EXAMPLES}/realtime/quickstart_controller.yaml");
@@ -181,7 +206,13 @@ fn a_recorded_two_process_run_replays_bit_for_bit_and_a_changed_gain_does_not() 
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
-    assert!(plant.wait_with_output().unwrap().status.success());
+    let plant = plant.wait_with_output().unwrap();
+    assert!(
+        plant.status.success(),
+        "plant: {}{}",
+        String::from_utf8_lossy(&plant.stdout),
+        String::from_utf8_lossy(&plant.stderr)
+    );
     let mcap = dir.join("run.mcap");
     let same = Command::new(bin)
         .arg("replay")
@@ -261,4 +292,288 @@ fn rt_refuses_without_cap_sys_nice_and_runs_soft_when_allowed() {
         out.contains("soft run: SCHED_FIFO priority 80 refused"),
         "{out}"
     );
+}
+
+#[test]
+fn rt_takes_the_overrun_policy_from_the_graph_and_the_command_line_over_it() {
+    let dir = std::env::temp_dir().join(format!("nanomotion-rt-policy-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let graph = |section: &str| {
+        let path = dir.join("loop.yaml");
+        std::fs::write(
+            &path,
+            format!("base_rate_hz: 1000\nduration_s: 0.05\n{section}blocks:\n  - {{ name: c, type: constant, value: 1.0 }}\nlog: [c.y]\n"),
+        )
+        .unwrap();
+        path
+    };
+    let rt = |path: &std::path::Path, extra: &[&str]| {
+        let out = dir.join("out");
+        let o = Command::new(env!("CARGO_BIN_EXE_nanomotion"))
+            .arg("rt")
+            .arg(path)
+            .args(["--allow-soft", "--force", "--out"])
+            .arg(&out)
+            .args(extra)
+            .output()
+            .unwrap();
+        let timing = std::fs::read(out.join("timing.json"))
+            .ok()
+            .map(|b| serde_json::from_slice::<serde_json::Value>(&b).unwrap());
+        let _ = std::fs::remove_dir_all(&out);
+        (o, timing)
+    };
+    let with_section = graph("realtime:\n  overrun: catch-up\n  max_overruns: 7\n");
+    let (o, t) = rt(&with_section, &[]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let t = t.unwrap();
+    assert_eq!(
+        (t["overrun_policy"].as_str(), t["max_overruns"].as_u64()),
+        (Some("catch-up"), Some(7))
+    );
+    assert!(String::from_utf8_lossy(&o.stdout).contains("(policy catch-up, limit 7)"));
+    // Each flag replaces its own setting only.
+    let (o, t) = rt(&with_section, &["--overrun", "skip"]);
+    assert!(o.status.success());
+    let t = t.unwrap();
+    assert_eq!(
+        (t["overrun_policy"].as_str(), t["max_overruns"].as_u64()),
+        (Some("skip"), Some(7))
+    );
+    let (_, t) = rt(&with_section, &["--max-overruns", "2"]);
+    let t = t.unwrap();
+    assert_eq!(
+        (t["overrun_policy"].as_str(), t["max_overruns"].as_u64()),
+        (Some("catch-up"), Some(2))
+    );
+    // Without the section: skip, no limit.
+    let (_, t) = rt(&graph(""), &[]);
+    let t = t.unwrap();
+    assert_eq!(t["overrun_policy"], "skip");
+    assert!(t["max_overruns"].is_null());
+    // A bad value: refused before running, the file, line and field named.
+    let bad = graph("realtime:\n  overrun: later\n");
+    let (o, t) = rt(&bad, &[]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && t.is_none());
+    assert!(err.contains("loop.yaml: line 4 column 12: unknown overrun policy `later` (fix: `skip` or `catch-up`)"), "{err}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn a_simulated_run_records_its_hw_samples_and_replays_bit_for_bit() {
+    let dir = std::env::temp_dir().join(format!("nanomotion-run-record-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let bin = env!("CARGO_BIN_EXE_nanomotion");
+    let controller = format!("{EXAMPLES}/realtime/quickstart_controller.yaml");
+    let out = Command::new(bin)
+        .args(["run", &controller, "--duration", "0.6", "--record", "--out"])
+        .arg(&dir)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let rec = nanomotion::rt::read_mcap(&dir.join("run.mcap")).unwrap();
+    assert_eq!((rec.ticks(), rec.rate_hz), (2400, 4000.0));
+    let names = |c: &[nanomotion::rt::Channel]| {
+        c.iter()
+            .map(|c| (c.name.clone(), c.unit.clone()))
+            .collect::<Vec<_>>()
+    };
+    assert_eq!(names(&rec.inputs), [("position".into(), Some("m".into()))]);
+    assert_eq!(names(&rec.outputs)[0].0, "drive");
+    // Simulated time, one sample per tick of T = 250 µs.
+    assert!(
+        rec.t_ns
+            .iter()
+            .enumerate()
+            .all(|(k, &t)| t == k as u64 * 250_000)
+    );
+    // Without a device the hw_input holds 0; the outputs are what the graph
+    // computes from that, tick by tick (the same graph ticked here).
+    assert!(rec.input_values.iter().all(|&v| v == 0.0));
+    let mut spec = GraphSpec::from_file(&controller).unwrap();
+    spec.duration_s = 0.6;
+    let (mut sched, _) = spec.build().unwrap();
+    let drive = sched.signal_id("drive.y").unwrap();
+    for (k, want) in rec.output_values.iter().enumerate() {
+        sched.tick();
+        assert_eq!(sched.read(drive)[0].to_bits(), want.to_bits(), "tick {k}");
+    }
+    assert!(
+        rec.output_values.iter().any(|&v| v != 0.0),
+        "the PI drove something"
+    );
+    // `nanomotion replay` reproduces it, and parts from it with another gain.
+    let same = Command::new(bin)
+        .arg("replay")
+        .arg(dir.join("run.mcap"))
+        .arg(&controller)
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&same.stdout);
+    assert!(
+        same.status.success(),
+        "{}",
+        String::from_utf8_lossy(&same.stderr)
+    );
+    assert!(
+        text.contains("all 2400 output samples bit-identical"),
+        "{text}"
+    );
+    let changed = Command::new(bin)
+        .arg("replay")
+        .arg(dir.join("run.mcap"))
+        .arg(&controller)
+        .args(["--set", "blocks.pi.kp=3.2e7"])
+        .output()
+        .unwrap();
+    assert!(!changed.status.success());
+    // A graph without hw blocks has nothing to record: refused before running,
+    // no folder written.
+    let none = dir.join("none");
+    let refused = Command::new(bin)
+        .args([
+            "run",
+            &format!("{EXAMPLES}/quickstart.yaml"),
+            "--record",
+            "--out",
+        ])
+        .arg(&none)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&refused.stderr);
+    assert!(!refused.status.success());
+    assert!(
+        err.contains("nothing to record: the graph has no hw_input or hw_output block"),
+        "{err}"
+    );
+    assert!(!none.exists());
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn diagnose_reads_a_recording_as_its_measured_data_like_the_same_csv() {
+    use nanomotion::core::data::Dataset;
+    use nanomotion::rt::{Channel, Recording};
+    // The diagnose example's record (u: drive force, y: measured position,
+    // 2 kHz) as a recording would hold it: y read from the stage (hw_input),
+    // u written to it (hw_output), ticks on the grid from a CLOCK_MONOTONIC origin.
+    let dir = std::env::temp_dir().join(format!("nanomotion-diagnose-mcap-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let csv_path = format!("{EXAMPLES}/diagnose/record.csv");
+    let csv = Dataset::from_file(&csv_path).unwrap();
+    let n = csv.len();
+    let rec = Recording {
+        title: None,
+        rate_hz: csv.rate_hz(),
+        inputs: vec![Channel::new("y", Some("m"))],
+        outputs: vec![Channel::new("u", Some("N"))],
+        t_ns: (0..n as u64).map(|k| 987_654_321 + k * 500_000).collect(),
+        input_values: csv.column("y").unwrap().to_vec(),
+        output_values: csv.column("u").unwrap().to_vec(),
+    };
+    let mcap = dir.join("run.mcap");
+    nanomotion::rt::write_mcap(&mcap, &rec).unwrap();
+    // Read back as data: the CSV's columns, bit for bit, at its rate.
+    let back = nanomotion::rt::read_mcap(&mcap)
+        .unwrap()
+        .to_dataset("run.mcap")
+        .unwrap();
+    assert_eq!(back.rate_hz(), csv.rate_hz());
+    for c in ["u", "y"] {
+        assert_eq!(back.column(c), csv.column(c), "column {c}");
+    }
+    // `diagnose` on the recording gives the report it gives on the CSV.
+    let bin = env!("CARGO_BIN_EXE_nanomotion");
+    let model = format!("{EXAMPLES}/diagnose/model.yaml");
+    let report = |data: &str, out: &str| {
+        let o = Command::new(bin)
+            .args(["diagnose", &model, data, "--out"])
+            .arg(dir.join(out))
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        std::fs::read_to_string(dir.join(out).join("report.json"))
+            .unwrap()
+            .replace(&mcap.display().to_string(), "DATA")
+            .replace(&csv_path, "DATA")
+    };
+    // `run --data` too: the same comparison of the model with the recording
+    // as with the CSV.
+    let compared = |data: &str| {
+        let o = Command::new(bin)
+            .args(["run", &model, "--no-files", "--data", data])
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let text = String::from_utf8_lossy(&o.stdout).into_owned();
+        text.lines()
+            .find(|l| l.starts_with("stage.y"))
+            .unwrap_or_else(|| panic!("no comparison line in {text}"))
+            .to_string()
+    };
+    assert_eq!(compared(&mcap.display().to_string()), compared(&csv_path));
+    let from_mcap = report(&mcap.display().to_string(), "a");
+    let from_csv = report(&csv_path, "b");
+    // The effect hidden in the example's data (a Bouc–Wen input hysteresis,
+    // tests/diagnose_example.rs) is named from the recording.
+    assert!(from_mcap.contains("\"hysteresis\""), "{from_mcap}");
+    assert_eq!(from_mcap, from_csv);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn rt_lets_its_plant_go_before_writing_its_files() {
+    // When the controller's loop ends, the plant must see the connection close
+    // at once. `rt` used to keep the device until its files were written
+    // (an 8 s recording takes longer than 100 ms here), so a plant with a
+    // 100 ms watchdog stopped on it and failed; with the device let go at the
+    // end of the loop (the loop thread wakes the caller at once), it ends
+    // cleanly.
+    let name = format!("test-letgo-{}", std::process::id());
+    let dir = std::env::temp_dir().join(format!("nanomotion-rt-letgo-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let bin = env!("CARGO_BIN_EXE_nanomotion");
+    let plant = Command::new(bin)
+        .args([
+            "plant",
+            &format!("{EXAMPLES}/realtime/quickstart_plant.yaml"),
+        ])
+        .args(["--serve", &name, "--allow-soft", "--priority", "70"])
+        .args(["--watchdog-ms", "100"])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let out = Command::new(bin)
+        .args([
+            "rt",
+            &format!("{EXAMPLES}/realtime/quickstart_controller.yaml"),
+        ])
+        .args(["--device", &format!("shm:{name}"), "--duration", "8"])
+        .args(["--allow-soft", "--record", "--out"])
+        .arg(&dir)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(dir.join("run.mcap").exists());
+    let plant = plant.wait_with_output().unwrap();
+    let log = String::from_utf8_lossy(&plant.stdout).into_owned()
+        + &String::from_utf8_lossy(&plant.stderr);
+    assert!(plant.status.success(), "plant: {log}");
+    assert!(
+        log.contains("the controller closed the connection"),
+        "{log}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
 }

@@ -455,6 +455,15 @@ pub fn graph_schema() -> Value {
                 },
             },
             "require": require,
+            "realtime": {
+                "type": "object",
+                "additionalProperties": false,
+                "description": "how the graph runs on the wall clock (`nanomotion rt`, `nanomotion plant`); the command line's --overrun and --max-overruns replace these",
+                "properties": {
+                    "overrun": { "enum": ["skip", "catch-up"], "default": "skip", "description": "a tick that ends after the next deadline: skip the missed deadlines (stay on the grid) or catch up (run the late ticks back to back)" },
+                    "max_overruns": { "type": "integer", "minimum": 0, "description": "stop the loop, outputs safe, after more than this many overruns (absent: never)" },
+                },
+            },
             "units": {
                 "type": "object",
                 "description": "unit of a signal, `block.port: unit`",

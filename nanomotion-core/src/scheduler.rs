@@ -158,6 +158,27 @@ pub(crate) struct Parts {
     pub chunk_ticks: Option<u64>,
 }
 
+/// Told where each block's work in a tick begins and ends
+/// ([`Scheduler::tick_probed`]): `enter(i)` before block `i` (execution order,
+/// as in [`Scheduler::block_names`]) gathers its inputs and computes, `leave(i)`
+/// after — once for its output phase and, for a block without feed-through,
+/// once more for its update phase. Called on the ticking thread: an
+/// implementation must not allocate, lock or block.
+pub trait TickProbe {
+    /// Block `block` starts a phase.
+    fn enter(&mut self, block: usize);
+    /// Block `block` ends it.
+    fn leave(&mut self, block: usize);
+}
+
+/// No probe: what [`Scheduler::tick`] uses (both calls compile to nothing).
+impl TickProbe for () {
+    #[inline(always)]
+    fn enter(&mut self, _block: usize) {}
+    #[inline(always)]
+    fn leave(&mut self, _block: usize) {}
+}
+
 /// A handle to an output signal, resolved once with [`Scheduler::signal_id`] and
 /// read every tick with [`Scheduler::read`] without any look-up.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -323,6 +344,15 @@ impl Scheduler {
     /// are gathered by copies whose indices were resolved at build time.
     #[inline]
     pub fn tick(&mut self) {
+        self.tick_probed(&mut ());
+    }
+
+    /// [`Scheduler::tick`] with `probe` told when each due block starts and
+    /// ends its output phase and its update phase (input gathering included),
+    /// e.g. to time every block. `tick` is this with the empty probe `()`,
+    /// which compiles to nothing.
+    #[inline]
+    pub fn tick_probed<P: TickProbe>(&mut self, probe: &mut P) {
         let Self {
             blocks,
             nodes,
@@ -334,7 +364,7 @@ impl Scheduler {
             ..
         } = self;
         // Phase 1: outputs in topological order.
-        for (node, block) in nodes.iter_mut().zip(blocks.iter_mut()) {
+        for (i, (node, block)) in nodes.iter_mut().zip(blocks.iter_mut()).enumerate() {
             if node.countdown != 0 {
                 node.countdown -= 1;
                 node.due = false;
@@ -347,6 +377,7 @@ impl Scheduler {
                 t: node.k_local as f64 * node.dt,
                 dt: node.dt,
             };
+            probe.enter(i);
             if node.feedthrough {
                 gather(&gathers[node.gathers.clone()], signals, inputs);
                 block.output(
@@ -362,6 +393,7 @@ impl Scheduler {
                     &mut signals[node.outputs.clone()],
                 );
             }
+            probe.leave(i);
         }
         // Phase 2: state updates of blocks without feed-through, with this sample's
         // inputs (all outputs of this sample exist now).
@@ -370,6 +402,7 @@ impl Scheduler {
             if !node.due {
                 continue;
             }
+            probe.enter(i);
             gather(&gathers[node.gathers.clone()], signals, inputs);
             let tick = Tick {
                 k: node.k_local,
@@ -378,6 +411,7 @@ impl Scheduler {
             };
             blocks[i].update(tick, &inputs[node.inputs.clone()]);
             node.k_local += 1;
+            probe.leave(i);
         }
         // Phase 3: logging into preallocated buffers (capacity reserved at build).
         for log in logs.iter_mut() {

@@ -9,7 +9,8 @@
 //!   their fix; the run goes on at normal priority only if allowed), overruns
 //!   counted and handled by an [`OverrunPolicy`], a stop at too many overruns
 //!   or at a device fault with the outputs put in their safe state.
-//! - [`Timing`]: wake-up latency, period and execution time in fixed-memory
+//! - [`Timing`]: wake-up latency, period and execution time — per tick and,
+//!   when asked ([`RtConfig::block_timing`]), per block — in fixed-memory
 //!   [`Histogram`]s (p50/p99/p99.9/max), reported as a [`TimingReport`].
 //! - [`Device`]: the hardware boundary (read at the start of a tick, write after
 //!   it, safe state, watchdog), connected to a graph by the `hw_input` and
@@ -45,10 +46,13 @@ pub mod shm;
 pub use clock::{Missing, Privileges};
 pub use device::{Channel, Device, DeviceError, HwInput, HwOutput};
 pub use histogram::{Histogram, Summary};
-pub use record::{ReplayReport, read_mcap, replay, write_mcap};
+pub use nanomotion_core::graph::RealtimeSpec;
+pub use record::{
+    ReplayReport, SimRecorder, hw_log_names, load_dataset, read_mcap, replay, write_mcap,
+};
 pub use runner::{
-    Event, NoDevice, OverrunPolicy, RealtimeRunner, Recording, RtConfig, RtError, Stop, Timing,
-    TimingReport, hw_blocks,
+    BlockTime, Event, NoDevice, OverrunPolicy, RealtimeRunner, Recording, RtConfig, RtError, Stop,
+    Timing, TimingReport, hw_blocks,
 };
 pub use shm::{PlantInfo, ShmDevice, ShmPlant};
 

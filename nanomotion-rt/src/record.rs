@@ -7,6 +7,14 @@
 //! `value`; [`read_mcap`] takes the exact `bits`, so a replay compares outputs
 //! bit for bit.
 //!
+//! A simulated run (`nanomotion run --record`) is recorded the same way by a
+//! [`SimRecorder`]: the `hw_input`/`hw_output` signals taken from the run's
+//! logs, `log_time` the simulated time of the tick.
+//!
+//! [`Recording::to_dataset`] reads a recording as measured data (a column per
+//! channel); [`load_dataset`] reads a `.mcap` recording or a data file, for
+//! `nanomotion diagnose MODEL RUN.mcap` and `run`/`check --data RUN.mcap`.
+//!
 //! [`replay`] feeds the recorded inputs into the `hw_input` blocks of a freshly
 //! built graph, tick by tick, and compares every `hw_output` sample with the
 //! recording. A graph is deterministic (seeded), so the same graph reproduces
@@ -17,6 +25,8 @@ use crate::Channel;
 use crate::device::{HW_INPUT, HW_OUTPUT};
 use crate::runner::{Recording, hw_blocks};
 use nanomotion_core::Scheduler;
+use nanomotion_core::graph::GraphSpec;
+use nanomotion_core::scheduler::LogChunk;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -47,6 +57,9 @@ pub enum RecordError {
     /// The graph does not have the recorded channels.
     #[error("{0}")]
     Graph(String),
+    /// The recording cannot be read as uniformly sampled data.
+    #[error(transparent)]
+    Data(#[from] nanomotion_core::data::DataError),
 }
 
 #[derive(Serialize, Deserialize)]
@@ -315,4 +328,201 @@ pub fn replay(sched: &mut Scheduler, rec: &Recording) -> Result<ReplayReport, Re
         }
     }
     Ok(report)
+}
+
+/// The log entries (`NAME.y`) of every `hw_input` and `hw_output` block of
+/// `spec`, in graph order: what a [`SimRecorder`] needs logged.
+pub fn hw_log_names(spec: &GraphSpec) -> Vec<String> {
+    spec.blocks
+        .iter()
+        .filter(|b| matches!(b.block.typetag_name(), HW_INPUT | HW_OUTPUT))
+        .map(|b| format!("{}.y", b.name))
+        .collect()
+}
+
+/// Collects the hardware samples of a simulated run from its log chunks
+/// ([`Scheduler::run_streamed`]) into a [`Recording`] for [`write_mcap`]: each
+/// `hw_input` and `hw_output` block's `y` on every base tick, at simulated time
+/// `k·T`. Without a device, a `hw_input` block holds 0, so what is recorded is
+/// the graph's response to zero inputs — and [`replay`] reproduces it bit for bit.
+#[derive(Debug)]
+pub struct SimRecorder {
+    rec: Recording,
+    /// Log names of the inputs, then of the outputs.
+    logs: Vec<String>,
+    /// Samples of each, in the order of `logs`.
+    values: Vec<Vec<f64>>,
+}
+
+impl SimRecorder {
+    /// For `sched`, built from a spec whose `log:` holds [`hw_log_names`].
+    /// Refuses a graph without `hw_input`/`hw_output` blocks, a hw block not at
+    /// the base rate (a recording holds one sample per base tick) and one that
+    /// is not logged.
+    pub fn new(sched: &Scheduler) -> Result<Self, RecordError> {
+        let (ins, outs) = hw_blocks(sched);
+        if ins.is_empty() && outs.is_empty() {
+            return Err(RecordError::Graph(
+                "nothing to record: the graph has no hw_input or hw_output block (fix: record a controller or plant graph, e.g. examples/realtime/quickstart_controller.yaml, or leave out --record)".into(),
+            ));
+        }
+        for w in sched.wiring() {
+            if matches!(w.type_name.as_str(), HW_INPUT | HW_OUTPUT) && w.period != 1 {
+                return Err(RecordError::Graph(format!(
+                    "block `{}` ({}) runs every {} base ticks; a recording holds one sample per base tick (fix: leave out its `rate_hz`)",
+                    w.name, w.type_name, w.period
+                )));
+            }
+        }
+        let channel = |(name, unit): &(String, Option<String>)| Channel {
+            name: name.clone(),
+            unit: unit.clone(),
+        };
+        let logs: Vec<String> = ins
+            .iter()
+            .chain(&outs)
+            .map(|(n, _)| format!("{n}.y"))
+            .collect();
+        if let Some(missing) = logs.iter().find(|l| sched.log_view(l).is_none()) {
+            return Err(RecordError::Graph(format!(
+                "`{missing}` is not logged (fix: add it to `log:`; `hw_log_names` lists what a recording needs)"
+            )));
+        }
+        Ok(Self {
+            rec: Recording {
+                title: sched.result().title,
+                rate_hz: sched.base_rate_hz(),
+                inputs: ins.iter().map(channel).collect(),
+                outputs: outs.iter().map(channel).collect(),
+                ..Recording::default()
+            },
+            values: vec![Vec::new(); logs.len()],
+            logs,
+        })
+    }
+
+    /// Take the hw samples out of one batch of log chunks.
+    pub fn take(&mut self, chunks: &[LogChunk<'_>]) {
+        for c in chunks {
+            if let Some(i) = self.logs.iter().position(|l| l == c.name) {
+                self.values[i].extend_from_slice(c.data);
+            }
+        }
+    }
+
+    /// The recording: every base tick that every channel has a sample of.
+    pub fn finish(self) -> Recording {
+        let Self {
+            mut rec, values, ..
+        } = self;
+        let n = values.iter().map(Vec::len).min().unwrap_or(0);
+        let ni = rec.inputs.len();
+        let period_ns = 1.0e9 / rec.rate_hz;
+        rec.t_ns = (0..n)
+            .map(|k| (k as f64 * period_ns).round() as u64)
+            .collect();
+        for k in 0..n {
+            rec.input_values.extend(values[..ni].iter().map(|v| v[k]));
+            rec.output_values.extend(values[ni..].iter().map(|v| v[k]));
+        }
+        rec
+    }
+}
+
+impl Recording {
+    /// The recording as measured data ([`Dataset`](nanomotion_core::data::Dataset)):
+    /// one column per channel, named like it (the inputs, then the outputs),
+    /// sample k at `t = k·T` from 0. `origin` (the file) prefixes errors.
+    ///
+    /// Refused, naming the tick and the fix, when the samples are not on the
+    /// loop's grid: when tick k did not wake nearest to `t₀ + k·T` (a deadline
+    /// was skipped, or the tick woke more than half a period late), the data is
+    /// not uniformly sampled and would mislead a fit. So are a recording of
+    /// fewer than [`MIN_SAMPLES`](nanomotion_core::data::MIN_SAMPLES) ticks, a
+    /// non-finite sample and a channel name used twice (by the dataset itself).
+    pub fn to_dataset(&self, origin: &str) -> Result<nanomotion_core::data::Dataset, RecordError> {
+        use nanomotion_core::data::{DataError, Dataset, MIN_SAMPLES};
+        if self.ticks() < MIN_SAMPLES {
+            return Err(DataError::new(
+                origin,
+                format!(
+                    "holds {} ticks, fewer than the {MIN_SAMPLES} a dataset needs",
+                    self.ticks()
+                ),
+                "record a longer run",
+            )
+            .into());
+        }
+        let period_ns = 1.0e9 / self.rate_hz;
+        if let Some(&t0) = self.t_ns.first() {
+            for (k, &t) in self.t_ns.iter().enumerate() {
+                let slot = ((t as f64 - t0 as f64) / period_ns).round();
+                if slot != k as f64 {
+                    return Err(DataError::new(
+                        origin,
+                        format!(
+                            "tick {k} woke at {:.1} µs, nearest to grid slot {slot}, not {k}: the loop skipped deadlines or woke more than half a period (T = {:.1} µs) late, so the samples are not uniform in time",
+                            (t as f64 - t0 as f64) * 1e-3,
+                            period_ns * 1e-3
+                        ),
+                        "record a run without overruns (`nanomotion rt ... --max-overruns 0 --record`; see docs/realtime.md for a CPU of its own), or use the part before this tick",
+                    )
+                    .into());
+                }
+            }
+        }
+        let column = |values: &[f64], j: usize, width: usize| -> Vec<f64> {
+            values
+                .iter()
+                .skip(j)
+                .step_by(width.max(1))
+                .copied()
+                .collect()
+        };
+        let (ni, no) = (self.inputs.len(), self.outputs.len());
+        let columns = self
+            .inputs
+            .iter()
+            .enumerate()
+            .map(|(j, c)| (c.name.clone(), column(&self.input_values, j, ni)))
+            .chain(
+                self.outputs
+                    .iter()
+                    .enumerate()
+                    .map(|(j, c)| (c.name.clone(), column(&self.output_values, j, no))),
+            )
+            .collect();
+        Ok(Dataset::from_columns(origin, self.rate_hz, 0.0, columns)?)
+    }
+}
+
+/// Measured data from `path`: a recording (`.mcap`, [`Recording::to_dataset`])
+/// or a data file ([`Dataset::from_file_with_rate`](nanomotion_core::data::Dataset::from_file_with_rate):
+/// CSV, `.mat`). A sample rate given for a recording must be the recorded one.
+pub fn load_dataset(
+    path: &Path,
+    rate_hz: Option<f64>,
+) -> Result<nanomotion_core::data::Dataset, RecordError> {
+    let is_mcap = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .is_some_and(|e| e.eq_ignore_ascii_case("mcap"));
+    if !is_mcap {
+        return Ok(nanomotion_core::data::Dataset::from_file_with_rate(
+            path, rate_hz,
+        )?);
+    }
+    let rec = read_mcap(path)?;
+    if let Some(r) = rate_hz
+        && r != rec.rate_hz
+    {
+        return Err(RecordError::Content {
+            path: path.display().to_string(),
+            message: format!(
+                "recorded at {} Hz, but a rate of {r} Hz was given (leave the rate out: a recording carries its own)",
+                rec.rate_hz
+            ),
+        });
+    }
+    rec.to_dataset(&path.display().to_string())
 }

@@ -5,7 +5,8 @@
 //! 1. sleep until the absolute deadline `t0 + slot · T` (`clock_nanosleep`,
 //!    `TIMER_ABSTIME`), optionally spinning the last few µs;
 //! 2. [`Device::read`] into the `hw_input` signals ([`Scheduler::write`]);
-//! 3. [`Scheduler::tick`];
+//! 3. [`Scheduler::tick`] (or, with [`RtConfig::block_timing`],
+//!    [`Scheduler::tick_probed`] timing each block into its own histogram);
 //! 4. the `hw_output` signals into [`Device::write`];
 //! 5. timing into fixed-memory histograms; an overrun (the tick ended after the
 //!    next deadline) is counted and handled by the [`OverrunPolicy`].
@@ -19,47 +20,12 @@ use crate::clock::{self, BadCpu, Missing, Privileges};
 use crate::device::{Device, DeviceError, HW_INPUT, HW_OUTPUT};
 use crate::histogram::{Histogram, Summary};
 use nanomotion_core::Scheduler;
-use nanomotion_core::scheduler::SignalId;
-use serde::{Deserialize, Serialize};
+pub use nanomotion_core::graph::OverrunPolicy;
+use nanomotion_core::graph::RealtimeSpec;
+use nanomotion_core::scheduler::{SignalId, TickProbe};
+use serde::Serialize;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
-
-/// What to do when a tick ends after the next deadline.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum OverrunPolicy {
-    /// Drop the ticks whose deadlines have passed and go on at the next deadline
-    /// still ahead: the loop stays on its grid, the graph's time falls behind the
-    /// wall clock by the skipped ticks (counted as `missed_ticks`).
-    #[default]
-    Skip,
-    /// Run the late ticks back to back, without sleeping, until the loop is on
-    /// its grid again: no tick is lost, some run late.
-    CatchUp,
-}
-
-impl std::str::FromStr for OverrunPolicy {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
-        match s {
-            "skip" => Ok(Self::Skip),
-            "catch-up" => Ok(Self::CatchUp),
-            _ => Err(format!(
-                "unknown overrun policy `{s}` (fix: `skip` or `catch-up`)"
-            )),
-        }
-    }
-}
-
-impl OverrunPolicy {
-    /// The CLI/JSON spelling.
-    pub fn as_str(self) -> &'static str {
-        match self {
-            Self::Skip => "skip",
-            Self::CatchUp => "catch-up",
-        }
-    }
-}
 
 /// How to run the loop.
 #[derive(Debug, Clone, PartialEq)]
@@ -83,6 +49,9 @@ pub struct RtConfig {
     /// Keep every hardware input and output sample ([`Recording`], for MCAP and
     /// replay), in memory allocated at build for the graph's duration.
     pub record: bool,
+    /// Time every block of every tick ([`Timing::blocks`]): two clock reads per
+    /// block phase, in a histogram per block allocated at build.
+    pub block_timing: bool,
 }
 
 impl Default for RtConfig {
@@ -105,6 +74,20 @@ impl Default for RtConfig {
             status_every: 0,
             ring_slots: 1024,
             record: false,
+            block_timing: false,
+        }
+    }
+}
+
+impl RtConfig {
+    /// With the overrun policy and limit of `settings` (a graph's `realtime:`
+    /// section, already [overridden](RealtimeSpec::overridden_by) by the command
+    /// line's); what it leaves out keeps [`RtConfig::default`]'s value.
+    pub fn with_settings(self, settings: RealtimeSpec) -> Self {
+        Self {
+            overrun: settings.overrun.unwrap_or_default(),
+            max_overruns: settings.max_overruns,
+            ..self
         }
     }
 }
@@ -208,6 +191,66 @@ pub struct Timing {
     pub period_jitter: Histogram,
     /// Start of the tick to the end of [`Device::write`] (ns).
     pub execution: Histogram,
+    /// Time each block (execution order, [`Scheduler::block_names`]) spent in
+    /// the ticks it was due, gathering its inputs and computing (ns); empty
+    /// unless [`RtConfig::block_timing`].
+    pub blocks: Vec<Histogram>,
+}
+
+/// One block's execution time in a [`TimingReport`].
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct BlockTime {
+    /// The block's name (inserted rate transitions start with `rt:`).
+    pub name: String,
+    /// Its time per tick it was due (ns): `count` is the number of those ticks.
+    #[serde(flatten)]
+    pub time: Summary,
+}
+
+/// Per-block execution time of the current tick, in memory allocated at build:
+/// the [`TickProbe`] of a run with [`RtConfig::block_timing`].
+#[derive(Debug)]
+struct BlockClock {
+    /// When the current phase began (ns).
+    start: u64,
+    /// Time of each block in this tick so far (ns).
+    spent: Box<[u64]>,
+    /// Whether each block was due in this tick.
+    ran: Box<[bool]>,
+}
+
+impl BlockClock {
+    fn new(blocks: usize) -> Self {
+        Self {
+            start: 0,
+            spent: vec![0; blocks].into_boxed_slice(),
+            ran: vec![false; blocks].into_boxed_slice(),
+        }
+    }
+
+    /// Record the tick's times into `hist` (one per block) and start afresh.
+    #[inline]
+    fn flush(&mut self, hist: &mut [Histogram]) {
+        for ((spent, ran), h) in self.spent.iter_mut().zip(self.ran.iter_mut()).zip(hist) {
+            if *ran {
+                h.record(*spent);
+                *spent = 0;
+                *ran = false;
+            }
+        }
+    }
+}
+
+impl TickProbe for BlockClock {
+    #[inline]
+    fn enter(&mut self, _block: usize) {
+        self.start = clock::now_ns();
+    }
+    #[inline]
+    fn leave(&mut self, block: usize) {
+        self.spent[block] += clock::now_ns().saturating_sub(self.start);
+        self.ran[block] = true;
+    }
 }
 
 /// What a run measured: printed, and written as `timing.json`.
@@ -227,6 +270,8 @@ pub struct TimingReport {
     pub missed_ticks: u64,
     /// The overrun policy.
     pub overrun_policy: &'static str,
+    /// The overrun limit (`null`: none).
+    pub max_overruns: Option<u64>,
     /// Why the loop stopped, in words.
     pub stop: String,
     /// Why the loop stopped (typed; not in the JSON, which has `stop`).
@@ -260,6 +305,10 @@ pub struct TimingReport {
     pub period_jitter: Summary,
     /// Execution time per tick, device I/O included (ns).
     pub execution: Summary,
+    /// Execution time of each block, in execution order (with
+    /// [`RtConfig::block_timing`]; otherwise empty and left out of the JSON).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub blocks: Vec<BlockTime>,
 }
 
 /// The hardware samples of a run, tick by tick: what the `hw_input` blocks
@@ -314,6 +363,8 @@ struct LoopCore<D: Device> {
     in_buf: Vec<f64>,
     out_buf: Vec<f64>,
     timing: Timing,
+    /// Per-block timing, when asked for.
+    block_clock: Option<BlockClock>,
     record: Option<Recording>,
     events: rtrb::Producer<Event>,
     stop: Arc<AtomicBool>,
@@ -477,6 +528,13 @@ impl<D: Device> RealtimeRunner<D> {
                 output_values: Vec::with_capacity(n * outputs.len()),
             }
         });
+        let n_blocks = sched.block_names().len();
+        let (block_clock, block_hists) = if cfg.block_timing {
+            let hists = (0..n_blocks).map(|_| Histogram::new()).collect();
+            (Some(BlockClock::new(n_blocks)), hists)
+        } else {
+            (None, Vec::new())
+        };
         Ok(Self {
             core: LoopCore {
                 sched,
@@ -486,7 +544,11 @@ impl<D: Device> RealtimeRunner<D> {
                 outputs,
                 in_buf,
                 out_buf,
-                timing: Timing::default(),
+                timing: Timing {
+                    blocks: block_hists,
+                    ..Timing::default()
+                },
+                block_clock,
                 record,
                 events: producer,
                 stop: Arc::new(AtomicBool::new(false)),
@@ -507,17 +569,27 @@ impl<D: Device> RealtimeRunner<D> {
     pub fn run(&mut self, mut on_event: impl FnMut(Event)) -> Result<TimingReport, RtError> {
         let core = &mut self.core;
         let events = &mut self.events;
+        // The loop thread wakes this one when it ends, so that the caller
+        // learns of the end (and can let the device go) at once, not at the
+        // next 20 ms poll.
+        let waiter = std::thread::current();
+        let done = AtomicBool::new(false);
         std::thread::scope(|s| {
             let handle = std::thread::Builder::new()
                 .name("nanomotion-rt".into())
                 .stack_size(8 << 20)
-                .spawn_scoped(s, || core.run_loop())
+                .spawn_scoped(s, || {
+                    let r = core.run_loop();
+                    done.store(true, Ordering::Release);
+                    waiter.unpark();
+                    r
+                })
                 .map_err(|e| RtError::Thread(e.to_string()))?;
-            while !handle.is_finished() {
+            while !done.load(Ordering::Acquire) && !handle.is_finished() {
                 while let Ok(e) = events.pop() {
                     on_event(e);
                 }
-                std::thread::sleep(std::time::Duration::from_millis(20));
+                std::thread::park_timeout(std::time::Duration::from_millis(20));
             }
             let r = handle
                 .join()
@@ -561,6 +633,12 @@ impl<D: Device> RealtimeRunner<D> {
     /// The hardware samples of the last run, if recording was asked for.
     pub fn recording(&self) -> Option<&Recording> {
         self.core.record.as_ref()
+    }
+
+    /// The hardware samples of the last run, taken out of the runner (to
+    /// write them after the device is let go); a further run records nothing.
+    pub fn take_recording(&mut self) -> Option<Recording> {
+        self.core.record.take()
     }
 
     /// The graph and the device back.
@@ -646,6 +724,7 @@ impl<D: Device> LoopCore<D> {
         self.timing.period.clear();
         self.timing.period_jitter.clear();
         self.timing.execution.clear();
+        self.timing.blocks.iter_mut().for_each(Histogram::clear);
         self.stop.store(false, Ordering::Relaxed);
         if let Some(r) = &mut self.record {
             r.t_ns.clear();
@@ -696,7 +775,13 @@ impl<D: Device> LoopCore<D> {
             for &(j, id) in &self.inputs {
                 self.sched.write(id, &self.in_buf[j..j + 1]);
             }
-            self.sched.tick();
+            match &mut self.block_clock {
+                None => self.sched.tick(),
+                Some(probe) => {
+                    self.sched.tick_probed(probe);
+                    probe.flush(&mut self.timing.blocks);
+                }
+            }
             for &(j, id) in &self.outputs {
                 self.out_buf[j] = self.sched.read(id)[0];
             }
@@ -767,6 +852,7 @@ impl<D: Device> LoopCore<D> {
             overruns: c.overruns,
             missed_ticks: c.missed,
             overrun_policy: self.cfg.overrun.as_str(),
+            max_overruns: self.cfg.max_overruns,
             stop: stop.to_string(),
             safe_state_ok,
             scheduling: match policy {
@@ -786,6 +872,16 @@ impl<D: Device> LoopCore<D> {
             period: self.timing.period.summary(),
             period_jitter: self.timing.period_jitter.summary(),
             execution: self.timing.execution.summary(),
+            blocks: self
+                .sched
+                .block_names()
+                .iter()
+                .zip(&self.timing.blocks)
+                .map(|(name, h)| BlockTime {
+                    name: name.clone(),
+                    time: h.summary(),
+                })
+                .collect(),
             stopped: stop,
         })
     }

@@ -6,17 +6,45 @@
 use nanomotion_core::GraphSpec;
 use nanomotion_rt::clock::{self, Privileges};
 use nanomotion_rt::{
-    Channel, Device, DeviceError, OverrunPolicy, PlantInfo, RealtimeRunner, RtConfig, RtError,
-    ShmDevice, ShmPlant, Stop,
+    Channel, Device, DeviceError, OverrunPolicy, PlantInfo, RealtimeRunner, RealtimeSpec, RtConfig,
+    RtError, ShmDevice, ShmPlant, Stop,
 };
 use std::time::Duration;
+
+/// A test block that busy-waits `ns` on the wall clock in every output phase
+/// and passes its input through: a block of known execution time.
+#[derive(Debug, serde::Serialize, serde::Deserialize)]
+struct Spin {
+    ns: u64,
+}
+
+#[typetag::serde(name = "test_spin")]
+impl nanomotion_core::Block for Spin {
+    fn inputs(&self) -> Vec<nanomotion_core::Port> {
+        vec![nanomotion_core::Port::new("u", 1)]
+    }
+    fn outputs(&self) -> Vec<nanomotion_core::Port> {
+        vec![nanomotion_core::Port::new("y", 1)]
+    }
+    fn output(&mut self, _t: nanomotion_core::Tick, u: &[f64], y: &mut [f64]) {
+        let end = clock::now_ns() + self.ns;
+        while clock::now_ns() < end {
+            std::hint::spin_loop();
+        }
+        y[0] = u[0];
+    }
+}
+
+/// The blocks and connections of [`graph`]: one input `pos` (m), one output
+/// `cmd` = 2·pos + 1.5.
+const LOOP: &str = "blocks:\n  - { name: pos, type: hw_input, unit: m }\n  - { name: k, type: gain, k: 2.0 }\n  - { name: off, type: constant, value: 1.5 }\n  - { name: s, type: sum, signs: \"++\" }\n  - { name: cmd, type: hw_output }\nconnections:\n  - { from: pos.y, to: k.u }\n  - { from: k.y, to: s.in0 }\n  - { from: off.y, to: s.in1 }\n  - { from: s.y, to: cmd.u }\nlog: [cmd.y]\n";
 
 /// A loop of `rate_hz` for `ticks` ticks: one input `pos` (m), one output `cmd`
 /// = 2·pos + 1.5.
 fn graph(rate_hz: f64, ticks: u64) -> nanomotion_core::Scheduler {
     nanomotion_rt::link_blocks();
     let yaml = format!(
-        "base_rate_hz: {rate_hz}\nduration_s: {}\nblocks:\n  - {{ name: pos, type: hw_input, unit: m }}\n  - {{ name: k, type: gain, k: 2.0 }}\n  - {{ name: off, type: constant, value: 1.5 }}\n  - {{ name: s, type: sum, signs: \"++\" }}\n  - {{ name: cmd, type: hw_output }}\nconnections:\n  - {{ from: pos.y, to: k.u }}\n  - {{ from: k.y, to: s.in0 }}\n  - {{ from: off.y, to: s.in1 }}\n  - {{ from: s.y, to: cmd.u }}\nlog: [cmd.y]\n",
+        "base_rate_hz: {rate_hz}\nduration_s: {}\n{LOOP}",
         ticks as f64 / rate_hz
     );
     let (s, _) = GraphSpec::from_yaml(&yaml, "test.yaml")
@@ -405,8 +433,8 @@ fn a_granted_priority_is_what_the_kernel_reports() {
 #[test]
 fn ticks_do_not_allocate() {
     // The loop's allocations (the report's strings, at the end) do not depend
-    // on how many ticks ran: none per tick.
-    let count = |n: u64| {
+    // on how many ticks ran: none per tick, with per-block timing off or on.
+    let count = |n: u64, block_timing: bool| {
         let mut r = RealtimeRunner::new(
             graph(20_000.0, n),
             TestDevice::new(n as usize, &[], 0),
@@ -416,6 +444,7 @@ fn ticks_do_not_allocate() {
                     cpu: None,
                     lock_memory: false,
                 },
+                block_timing,
                 ..RtConfig::default()
             },
         )
@@ -423,10 +452,96 @@ fn ticks_do_not_allocate() {
         let info = allocation_counter::measure(|| {
             let rep = r.run_here().unwrap();
             assert_eq!(rep.ticks, n);
+            assert_eq!(rep.blocks.len(), if block_timing { 5 } else { 0 });
         });
         info.count_total
     };
-    assert_eq!(count(100), count(4000));
+    assert_eq!(count(100, false), count(4000, false));
+    assert_eq!(count(100, true), count(4000, true));
+}
+
+#[test]
+fn per_block_timing_shows_a_spinning_block_and_adds_up_to_the_tick() {
+    // The loop of `graph` with a block that spins 40 µs between `pos` and the
+    // gain, and a 100 Hz constant (due on every 10th of the 1 kHz ticks).
+    nanomotion_rt::link_blocks();
+    const SPIN_NS: u64 = 40_000;
+    let n = 400u64;
+    let yaml = format!(
+        "base_rate_hz: 1000\nduration_s: {}\n{}",
+        n as f64 / 1000.0,
+        LOOP.replace(
+            "  - { name: k,",
+            &format!("  - {{ name: spin, type: test_spin, ns: {SPIN_NS} }}\n  - {{ name: slow, type: constant, value: 0.0, rate_hz: 100 }}\n  - {{ name: k,")
+        )
+        .replace("{ from: pos.y, to: k.u }", "{ from: pos.y, to: spin.u }\n  - { from: spin.y, to: k.u }")
+    );
+    let (sched, _) = GraphSpec::from_yaml(&yaml, "spin.yaml")
+        .unwrap()
+        .build()
+        .unwrap();
+    let names = sched.block_names().to_vec();
+    let cfg = RtConfig {
+        block_timing: true,
+        ..config(OverrunPolicy::CatchUp)
+    };
+    let mut r = RealtimeRunner::new(sched, TestDevice::new(n as usize, &[], 0), cfg).unwrap();
+    let rep = r.run(|_| {}).unwrap();
+    assert_eq!(rep.ticks, n);
+    // One entry per block, in execution order; each counts the ticks it was due.
+    let listed: Vec<&str> = rep.blocks.iter().map(|b| b.name.as_str()).collect();
+    assert_eq!(listed, names);
+    for b in &rep.blocks {
+        let due = if b.name == "slow" { n / 10 } else { n };
+        assert_eq!(b.time.count, due, "{}", b.name);
+    }
+    let time = |name: &str| rep.blocks.iter().find(|b| b.name == name).unwrap().time;
+    // The spinning block shows its 40 µs: never less (exact minimum), and a
+    // median within one histogram bucket (3.1 %) plus 5 µs of scheduling noise.
+    let spin = time("spin");
+    assert!(spin.min_ns.unwrap() >= SPIN_NS, "{spin:?}");
+    let p50 = spin.p50_ns.unwrap();
+    assert!(
+        p50 >= SPIN_NS && p50 as f64 <= SPIN_NS as f64 * (1.0 + 1.0 / 32.0) + 5_000.0,
+        "{spin:?}"
+    );
+    // Its neighbours are not charged for it: the gain (one multiplication and
+    // two clock reads) takes a small fraction of it.
+    let gain = time("k");
+    assert!(gain.p50_ns.unwrap() < SPIN_NS / 10, "{gain:?}");
+    // The blocks run inside the tick: the mean is exact and additive, so the
+    // blocks' means add up to at most the tick's mean execution time (which
+    // also holds the device I/O); no block's worst tick exceeds the worst
+    // whole tick.
+    let per_tick: f64 = rep
+        .blocks
+        .iter()
+        .map(|b| b.time.mean_ns.unwrap() * b.time.count as f64 / n as f64)
+        .sum();
+    let exec = rep.execution;
+    assert!(per_tick <= exec.mean_ns.unwrap(), "{per_tick} > {exec:?}");
+    assert!(per_tick >= SPIN_NS as f64);
+    for b in &rep.blocks {
+        assert!(b.time.max_ns <= exec.max_ns, "{}: {:?}", b.name, b.time);
+    }
+    // And the timing changes nothing computed: cmd = 2·pos + 1.5.
+    for (k, &y) in r.device().written.iter().enumerate() {
+        assert_eq!(y, 2.0 * (k + 1) as f64 + 1.5, "tick {k}");
+    }
+}
+
+#[test]
+fn without_block_timing_the_report_has_no_blocks() {
+    let mut r = RealtimeRunner::new(
+        graph(1000.0, 20),
+        TestDevice::new(32, &[], 0),
+        config(OverrunPolicy::Skip),
+    )
+    .unwrap();
+    let rep = r.run(|_| {}).unwrap();
+    assert!(rep.blocks.is_empty() && r.timing().blocks.is_empty());
+    let json = serde_json::to_value(&rep).unwrap();
+    assert!(json.get("blocks").is_none(), "{json}");
 }
 
 #[test]
@@ -513,4 +628,117 @@ fn the_loop_thread_sleeps_without_timer_slack() {
     })
     .join()
     .unwrap();
+}
+
+#[test]
+fn the_graph_sets_the_overrun_policy_and_limit_and_a_bad_value_is_named() {
+    nanomotion_rt::link_blocks();
+    let yaml = |section: &str| format!("base_rate_hz: {RATE}\nduration_s: 2\n{section}{LOOP}");
+    let spec = GraphSpec::from_yaml(
+        &yaml("realtime:\n  overrun: catch-up\n  max_overruns: 1\n"),
+        "rt.yaml",
+    )
+    .unwrap();
+    let settings = spec.realtime.unwrap();
+    assert_eq!(
+        settings,
+        RealtimeSpec {
+            overrun: Some(OverrunPolicy::CatchUp),
+            max_overruns: Some(1),
+        }
+    );
+    // The command line replaces the graph's settings field by field.
+    let cli = RealtimeSpec {
+        overrun: Some(OverrunPolicy::Skip),
+        max_overruns: None,
+    };
+    assert_eq!(
+        settings.overridden_by(cli),
+        RealtimeSpec {
+            overrun: Some(OverrunPolicy::Skip),
+            max_overruns: Some(1),
+        }
+    );
+    // Run with the graph's settings: catch-up (no tick missed) and a limit of
+    // one overrun, so the second injected overrun (tick 120) stops the loop.
+    let (sched, _) = spec.build().unwrap();
+    let cfg = config(OverrunPolicy::Skip).with_settings(settings);
+    let mut r =
+        RealtimeRunner::new(sched, TestDevice::new(400, &[50, 120, 300], SLEEP_NS), cfg).unwrap();
+    let rep = r.run(|_| {}).unwrap();
+    assert_eq!(rep.stopped, Stop::MaxOverruns);
+    assert_eq!((rep.overruns, rep.ticks, rep.missed_ticks), (2, 121, 0));
+    assert_eq!(
+        (rep.overrun_policy, rep.max_overruns),
+        ("catch-up", Some(1))
+    );
+    assert_eq!(r.device().safe_calls, 1);
+
+    // Bad values: a typed error naming the file, the line and the field, with
+    // the fix; never a silent default.
+    let err = |section: &str| {
+        GraphSpec::from_yaml(&yaml(section), "rt.yaml")
+            .unwrap_err()
+            .to_string()
+    };
+    let e = err("realtime:\n  overrun: skp\n");
+    assert!(e.contains("rt.yaml") && e.contains("line 4"), "{e}");
+    assert!(e.contains("unknown overrun policy `skp`"), "{e}");
+    assert!(e.contains("fix: `skip` or `catch-up`"), "{e}");
+    assert!(!e.contains("block type"), "{e}");
+    for bad in ["-1", "2.5", "many"] {
+        let e = err(&format!("realtime:\n  max_overruns: {bad}\n"));
+        assert!(e.contains("line 4"), "{e}");
+        assert!(
+            e.contains("max_overruns must be a whole number ≥ 0 (fix: e.g. `max_overruns: 0`"),
+            "{e}"
+        );
+    }
+    let e = err("realtime:\n  max_overrun: 3\n");
+    assert!(
+        e.contains("unknown field `max_overrun`") && e.contains("line 4"),
+        "{e}"
+    );
+}
+
+#[test]
+fn a_recording_reads_as_data_only_when_its_ticks_are_on_the_grid() {
+    // 40 ticks at 1 kHz from an arbitrary CLOCK_MONOTONIC origin, each woken
+    // up to 0.2 ms late (within half a period of its slot).
+    let n = 40u64;
+    let mut rec = nanomotion_rt::Recording {
+        title: None,
+        rate_hz: 1000.0,
+        inputs: vec![Channel::new("pos", Some("m"))],
+        outputs: vec![Channel::new("cmd", None)],
+        t_ns: (0..n)
+            .map(|k| 5_000_000 + k * 1_000_000 + (k % 3) * 100_000)
+            .collect(),
+        input_values: (0..n).map(|k| k as f64).collect(),
+        output_values: (0..n).map(|k| 2.0 * k as f64 + 1.5).collect(),
+    };
+    let d = rec.to_dataset("r.mcap").unwrap();
+    assert_eq!(d.names(), ["pos", "cmd"]);
+    assert_eq!((d.len(), d.rate_hz(), d.t0_s()), (40, 1000.0, 0.0));
+    assert_eq!(d.column("pos").unwrap(), rec.input_values.as_slice());
+    assert_eq!(d.column("cmd").unwrap()[7], 15.5);
+    // Tick 20 woke one period later than its slot (a skipped deadline): the
+    // samples are no longer uniform in time; refused, naming the tick.
+    let mut skipped = rec.clone();
+    skipped.t_ns[20..].iter_mut().for_each(|t| *t += 1_000_000);
+    let e = skipped.to_dataset("r.mcap").unwrap_err().to_string();
+    assert!(e.starts_with("r.mcap"), "{e}");
+    assert!(
+        e.contains("tick 20 woke") && e.contains("grid slot 21, not 20"),
+        "{e}"
+    );
+    assert!(e.contains("--max-overruns 0"), "{e}");
+    // A non-finite sample is named by its column, never passed on.
+    rec.output_values[3] = f64::NAN;
+    let e = rec.to_dataset("r.mcap").unwrap_err().to_string();
+    assert!(e.contains("cmd") && e.contains("sample 3 is NaN"), "{e}");
+    // Too short for a dataset.
+    rec.t_ns.truncate(5);
+    let e = rec.to_dataset("r.mcap").unwrap_err().to_string();
+    assert!(e.contains("holds 5 ticks, fewer than the 16"), "{e}");
 }

@@ -133,6 +133,7 @@ fn compile(
         score,
         compare,
         require: _,
+        realtime: _,
         units,
         connection_lines,
         base_dir,

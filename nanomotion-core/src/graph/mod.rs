@@ -48,5 +48,5 @@ pub use load::{MAX_SUGGEST_BYTES, edit_distance, is_near};
 pub use spec::{
     BlockSpec, BuildReport, CompareSpec, Connection, Graph, GraphSpec, LOG_CHUNK_TICKS,
     MAX_BLOCK_NAME_CHARS, MAX_GRAPH_BYTES, MAX_GRAPH_FILE_BYTES, MAX_RATE_HZ, MAX_TICKS,
-    MAX_TITLE_CHARS, MIN_RATE_HZ, ScoreSpec, valid_block_name,
+    MAX_TITLE_CHARS, MIN_RATE_HZ, OverrunPolicy, RealtimeSpec, ScoreSpec, valid_block_name,
 };

@@ -55,6 +55,121 @@ pub struct CompareSpec {
     pub column: String,
 }
 
+/// What to do when a tick on the wall clock ends after the next deadline
+/// (`realtime: { overrun: … }`, `nanomotion rt --overrun`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum OverrunPolicy {
+    /// Drop the ticks whose deadlines have passed and go on at the next deadline
+    /// still ahead: the loop stays on its grid, the graph's time falls behind the
+    /// wall clock by the skipped ticks (counted as missed ticks).
+    #[default]
+    Skip,
+    /// Run the late ticks back to back, without sleeping, until the loop is on
+    /// its grid again: no tick is lost, some run late.
+    CatchUp,
+}
+
+impl std::str::FromStr for OverrunPolicy {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "skip" => Ok(Self::Skip),
+            "catch-up" => Ok(Self::CatchUp),
+            _ => Err(format!(
+                "unknown overrun policy `{s}` (fix: `skip` or `catch-up`)"
+            )),
+        }
+    }
+}
+
+impl OverrunPolicy {
+    /// The spelling in YAML, on the command line and in JSON.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::Skip => "skip",
+            Self::CatchUp => "catch-up",
+        }
+    }
+}
+
+impl Serialize for OverrunPolicy {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        s.serialize_str(self.as_str())
+    }
+}
+
+/// Read through [`FromStr`](std::str::FromStr), so that a bad value gets its
+/// own message and fix (not the block-type hint of an unknown `type:`).
+impl<'de> Deserialize<'de> for OverrunPolicy {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        let s = String::deserialize(d)?;
+        s.parse().map_err(serde::de::Error::custom)
+    }
+}
+
+/// The `realtime:` section of a graph: how it runs on the wall clock. Every
+/// field is optional; the command line's `--overrun` and `--max-overruns`
+/// replace the graph's.
+///
+/// ```yaml
+/// realtime:
+///   overrun: catch-up     # or skip (the default)
+///   max_overruns: 0       # stop, outputs safe, at the first overrun
+/// ```
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RealtimeSpec {
+    /// What to do when a tick ends after the next deadline.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub overrun: Option<OverrunPolicy>,
+    /// Stop the loop (outputs to their safe values) after more than this many
+    /// overruns; absent: never.
+    #[serde(
+        default,
+        skip_serializing_if = "Option::is_none",
+        deserialize_with = "max_overruns"
+    )]
+    pub max_overruns: Option<u64>,
+}
+
+/// `max_overruns`: a whole number ≥ 0, or a message naming the field and the fix.
+fn max_overruns<'de, D: serde::Deserializer<'de>>(d: D) -> Result<Option<u64>, D::Error> {
+    struct Count;
+    const FIX: &str = "max_overruns must be a whole number ≥ 0 (fix: e.g. `max_overruns: 0` to stop at the first overrun, or leave it out for no limit)";
+    impl serde::de::Visitor<'_> for Count {
+        type Value = Option<u64>;
+        fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+            f.write_str(FIX)
+        }
+        fn visit_u64<E: serde::de::Error>(self, v: u64) -> Result<Self::Value, E> {
+            Ok(Some(v))
+        }
+        fn visit_i64<E: serde::de::Error>(self, v: i64) -> Result<Self::Value, E> {
+            u64::try_from(v)
+                .map(Some)
+                .map_err(|_| E::custom(format!("{v}: {FIX}")))
+        }
+        fn visit_f64<E: serde::de::Error>(self, v: f64) -> Result<Self::Value, E> {
+            Err(E::custom(format!("{v}: {FIX}")))
+        }
+        fn visit_str<E: serde::de::Error>(self, v: &str) -> Result<Self::Value, E> {
+            Err(E::custom(format!("`{v}`: {FIX}")))
+        }
+    }
+    d.deserialize_any(Count)
+}
+
+impl RealtimeSpec {
+    /// These settings, each replaced by `over`'s where `over` has one (the
+    /// command line over the graph file).
+    pub fn overridden_by(self, over: RealtimeSpec) -> RealtimeSpec {
+        RealtimeSpec {
+            overrun: over.overrun.or(self.overrun),
+            max_overruns: over.max_overruns.or(self.max_overruns),
+        }
+    }
+}
+
 /// A whole graph as written in YAML.
 #[derive(Debug, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -98,6 +213,10 @@ pub struct GraphSpec {
     /// stability gate ([`crate::gate`]) before the graph runs.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub require: Option<Require>,
+    /// How the graph runs on the wall clock (`nanomotion rt`, `nanomotion
+    /// plant`, the `nanomotion-rt` crate); a simulation ignores it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub realtime: Option<RealtimeSpec>,
     /// Where each connection is in the file (origin, 1-based lines), when it
     /// was read from YAML in block style; connection errors then name the line.
     #[serde(skip)]
@@ -176,6 +295,7 @@ impl GraphSpec {
             score: Vec::new(),
             compare: Vec::new(),
             require: None,
+            realtime: None,
             units: std::collections::BTreeMap::new(),
             connection_lines: None,
             base_dir: None,
