@@ -78,7 +78,16 @@ fn add_type_suggestion(e: GraphError) -> GraphError {
         if let Some(end) = rest.find('`') {
             let bad = rest[..end].to_string();
             let known = crate::block::parse_expected_list(&message);
-            if let Some(best) = nearest(&bad, known.iter().map(String::as_str)) {
+            // Another field's choice (`discretisation: zohh`, `overrun: …`)
+            // lists its own variants, not the block types: serde's message
+            // already names them, and "did you mean" picks among those.
+            let types = crate::block::registered_types();
+            let is_block_type = !known.is_empty() && known.iter().all(|k| types.contains(k));
+            if !is_block_type {
+                if let Some(best) = nearest(&bad, known.iter().map(String::as_str)) {
+                    message = format!("{message}\nhint: did you mean `{best}`?");
+                }
+            } else if let Some(best) = nearest(&bad, known.iter().map(String::as_str)) {
                 message = format!(
                     "{message}\nhint: unknown block type `{bad}`; did you mean `{best}`? (`nanomotion blocks` lists all types)"
                 );
@@ -184,6 +193,30 @@ mod tests {
         let start = std::time::Instant::now();
         assert_eq!(super::nearest(&a, [b.as_str()].into_iter()), None);
         assert!(start.elapsed().as_secs_f64() < 0.1);
+    }
+    /// A misspelt choice of a block's own field (`discretisation: zohh`) was
+    /// hinted as an "unknown block type"; only a misspelt `type:` is one.
+    #[test]
+    fn a_misspelt_choice_is_not_called_a_block_type() {
+        let graph = |disc: &str, ty: &str| {
+            format!(
+                "base_rate_hz: 1000\nduration_s: 1\nblocks:\n  - {{ name: p, type: {ty}, a: [[-1.0]], b: [[1.0]], c: [[1.0]], discretisation: {disc} }}\n"
+            )
+        };
+        let e = super::GraphSpec::from_yaml(&graph("zohh", "state_space"), "g.yaml")
+            .err()
+            .expect("refused")
+            .to_string();
+        assert!(e.contains("did you mean `zoh`"), "{e}");
+        assert!(!e.contains("block type"), "{e}");
+        let e = super::GraphSpec::from_yaml(&graph("zoh", "state_spac"), "g.yaml")
+            .err()
+            .expect("refused")
+            .to_string();
+        assert!(
+            e.contains("unknown block type `state_spac`; did you mean `state_space`"),
+            "{e}"
+        );
     }
     /// Audit D21: a wrong-type value inside a block named neither the field nor
     /// its line (the parser pointed at the entry's first line and the next one).
