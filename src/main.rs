@@ -447,7 +447,7 @@ fn main() -> ExitCode {
         Command::Plant(a) => rt_cmd::plant(a),
         Command::Replay(a) => rt_cmd::replay(a),
         Command::Blocks { filter } => blocks(filter.as_deref()),
-        Command::Schema => serde_json::to_string_pretty(&nanomotion::core::doc::graph_schema())
+        Command::Schema => serde_json::to_string_pretty(&nanomotion::core::graph::graph_schema())
             .map(|text| say!("{text}"))
             .map_err(|e| e.to_string()),
         Command::Reproduce {

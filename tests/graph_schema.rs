@@ -2,7 +2,7 @@
 //! parameter structs. Every shipped example graph validates against it; files
 //! with a typo'd parameter or a value outside a declared bound do not.
 
-use nanomotion::core::doc::graph_schema;
+use nanomotion::core::graph::graph_schema;
 use serde_json::Value;
 use std::path::{Path, PathBuf};
 
@@ -56,17 +56,20 @@ fn every_shipped_graph_validates_against_the_schema() {
     yaml_files(&root.join("plugins"), &mut files);
     let (mut graphs, mut block_lists) = (0, 0);
     let mut failures = Vec::new();
+    let mut validated = Vec::new();
     for path in &files {
         let doc = read_yaml(path);
         let errs = match &doc {
             // a graph
             Value::Object(m) if m.contains_key("blocks") => {
                 graphs += 1;
+                validated.push(path.strip_prefix(root).unwrap().to_path_buf());
                 errors(&v, &doc)
             }
             // a list of block entries (the target of `- include:`)
             Value::Array(entries) => {
                 block_lists += 1;
+                validated.push(path.strip_prefix(root).unwrap().to_path_buf());
                 let wrapped = serde_json::json!({ "base_rate_hz": 1.0, "blocks": entries });
                 errors(&v, &wrapped)
             }
@@ -82,6 +85,19 @@ fn every_shipped_graph_validates_against_the_schema() {
     // list); a glob that found nothing must not pass.
     assert!(graphs >= 20, "only {graphs} graphs found");
     assert!(block_lists >= 1, "no block list found");
+    // Subfolders of examples/ (one and two levels down) and the plugins' own
+    // example graphs are read too, not only examples/*.yaml.
+    for nested in [
+        "examples/compensate/controller.yaml",
+        "examples/realtime/quickstart_plant.yaml",
+        "examples/mimo/synthesised/controller.yaml",
+    ] {
+        assert!(
+            validated.iter().any(|p| p == Path::new(nested)),
+            "{nested} was not validated"
+        );
+    }
+    assert!(validated.iter().any(|p| p.starts_with("plugins")));
 }
 
 #[test]
@@ -130,6 +146,42 @@ fn schema_refuses_unknown_parameters_and_values_outside_declared_bounds() {
     let mut g = graph("type: gain, k: 1");
     g["sead"] = 1.into();
     assert!(!v.is_valid(&g));
+}
+
+/// The graph level of the schema is `GraphSpec` with the compiler's limits:
+/// what the schema refuses there, building the graph refuses too, naming the key.
+#[test]
+fn graph_level_limits_are_the_compilers() {
+    use nanomotion::core::graph::{GraphSpec, MAX_RATE_HZ, MAX_TITLE_CHARS};
+    let v = validator();
+    let text = |settings: &str| {
+        format!(
+            "{settings}\nduration_s: 0.01\nblocks:\n  - {{ name: c, type: constant, value: 1 }}\n"
+        )
+    };
+    let ok = text("base_rate_hz: 1000");
+    assert!(v.is_valid(&nanomotion::core::yaml::to_json_value(&ok, "t").unwrap()));
+    GraphSpec::from_yaml(&ok, "t").unwrap().build().unwrap();
+    let long_title = format!(
+        "base_rate_hz: 1000\ntitle: {}",
+        "x".repeat(MAX_TITLE_CHARS + 1)
+    );
+    for (bad, key) in [
+        (
+            text(&format!("base_rate_hz: {:e}", 2.0 * MAX_RATE_HZ)),
+            "base_rate_hz",
+        ),
+        (text("base_rate_hz: 0"), "base_rate_hz"),
+        (text(&long_title), "title"),
+    ] {
+        let doc = nanomotion::core::yaml::to_json_value(&bad, "t").unwrap();
+        assert!(!v.is_valid(&doc), "the schema accepts {bad}");
+        let e = match GraphSpec::from_yaml(&bad, "t") {
+            Ok(g) => g.build().map(|_| ()).expect_err("build refuses it too"),
+            Err(e) => e,
+        };
+        assert!(e.to_string().contains(key), "{key}: {e}");
+    }
 }
 
 #[test]

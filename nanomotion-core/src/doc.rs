@@ -225,31 +225,15 @@ impl BlockDoc {
         s
     }
 
-    /// The JSON Schema of a block of this type: `type` and the parameters; with
-    /// `entry`, also the graph entry's `name` and `rate_hz`.
-    pub fn schema(&self, entry: bool) -> Value {
+    /// The JSON Schema of a block of this type: the keys `entry` (a graph's block
+    /// entry has `name` and `rate_hz`: [`BlockSpec`](crate::graph::BlockSpec)'s
+    /// fields; none for a block written inline), `type` and the parameters.
+    pub fn schema(&self, entry: &[ParamDoc]) -> Value {
         let params = self.param_docs();
         let mut props = Map::new();
-        let mut required = vec![json!("type")];
-        if entry {
-            props.insert(
-                "name".into(),
-                json!({
-                    "type": "string",
-                    "description": "unique block name: ASCII letters, digits, `_`, `-`",
-                    "pattern": "^[A-Za-z0-9_-]{1,100}$"
-                }),
-            );
-            props.insert(
-                "rate_hz".into(),
-                json!({
-                    "type": "number",
-                    "minimum": 1e-3,
-                    "description": "the block's rate (Hz); must divide base_rate_hz [default base_rate_hz]"
-                }),
-            );
-            required.insert(0, json!("name"));
-        }
+        let mut required = Vec::new();
+        add_properties(&mut props, &mut required, entry);
+        required.push(json!("type"));
         props.insert(
             "type".into(),
             json!({ "const": self.type_name, "description": self.summary }),
@@ -369,112 +353,6 @@ pub fn block_docs() -> Vec<&'static BlockDoc> {
     let mut v: Vec<&'static BlockDoc> = inventory::iter::<BlockDoc>.into_iter().collect();
     v.sort_by_key(|d| d.type_name);
     v
-}
-
-/// The JSON Schema (draft 7) of a whole graph file (`nanomotion schema`), with
-/// every block registered in this program (plugins and third-party crates that
-/// are linked) as a `oneOf` on `type`. The graph-level keys follow
-/// [`GraphSpec`](crate::graph::GraphSpec) and docs/graph-format.md.
-pub fn graph_schema() -> Value {
-    let docs = block_docs();
-    let inline: Vec<Value> = docs.iter().map(|d| d.schema(false)).collect();
-    let mut entries: Vec<Value> = docs.iter().map(|d| d.schema(true)).collect();
-    entries.push(json!({
-        "type": "object",
-        "title": "include",
-        "description": "`- include: FILE`: the block entries of FILE (a YAML list), relative to this file's folder",
-        "properties": { "include": { "type": "string" } },
-        "required": ["include"],
-        "additionalProperties": false,
-    }));
-    let signal =
-        json!({ "type": "string", "pattern": "^[^.]+\\.[^.]+$", "description": "`block.port`" });
-    let bounds = json!({
-        "type": "object",
-        "additionalProperties": false,
-        "properties": {
-            "gain_margin_db": { "type": "number", "description": "smallest gain margin (dB)" },
-            "phase_margin_deg": { "type": "number", "description": "smallest phase margin (degrees)" },
-            "modulus_margin_db": { "type": "number", "description": "largest allowed ‖S‖∞ (dB)" },
-            "delay_margin_s": { "type": "number", "description": "smallest delay margin (s)" },
-            "max_t_db": { "type": "number", "description": "largest allowed ‖T‖∞ (dB)" },
-            "allow_unproven": { "type": "string", "description": "let loops that cannot be analysed run, with this reason" },
-        },
-    });
-    let mut require = bounds.clone();
-    require["properties"]["loops"] = json!({
-        "type": "object",
-        "description": "per-loop bounds, keyed by the name of a block in the loop",
-        "additionalProperties": bounds,
-    });
-    require["description"] =
-        json!("stability bounds on the feedback loops, checked before the graph runs");
-    json!({
-        "$schema": "http://json-schema.org/draft-07/schema#",
-        "title": "nanomotion graph",
-        "description": "A nanomotion controller graph (docs/graph-format.md); written by `nanomotion schema`.",
-        "type": "object",
-        "additionalProperties": false,
-        "required": ["base_rate_hz", "blocks"],
-        "properties": {
-            "title": { "type": "string", "maxLength": 200, "description": "name of the experiment" },
-            "base_rate_hz": { "type": "number", "minimum": 1e-3, "maximum": 1e9, "description": "the base tick rate (Hz)" },
-            "duration_s": { "type": "number", "minimum": 0, "description": "simulated time (s); may be left out of a graph that reads data" },
-            "seed": { "type": "integer", "minimum": 0, "default": 0, "description": "seed of every random block" },
-            "strict_rates": { "type": "boolean", "default": false, "description": "refuse implicit rate transitions" },
-            "blocks": { "type": "array", "items": { "$ref": "#/definitions/block_entry" } },
-            "connections": {
-                "type": "array",
-                "items": {
-                    "type": "object",
-                    "additionalProperties": false,
-                    "required": ["from", "to"],
-                    "properties": { "from": signal, "to": signal },
-                },
-            },
-            "log": { "type": "array", "items": signal, "description": "outputs to record" },
-            "score": {
-                "type": "array",
-                "items": {
-                    "type": "object",
-                    "additionalProperties": false,
-                    "required": ["signal"],
-                    "properties": {
-                        "signal": signal,
-                        "from_s": { "type": "number", "minimum": 0, "default": 0, "description": "ignore samples before this time (s)" },
-                    },
-                },
-            },
-            "compare": {
-                "type": "array",
-                "items": {
-                    "type": "object",
-                    "additionalProperties": false,
-                    "required": ["signal", "column"],
-                    "properties": { "signal": signal, "column": { "type": "string", "description": "measured column" } },
-                },
-            },
-            "require": require,
-            "realtime": {
-                "type": "object",
-                "additionalProperties": false,
-                "description": "how the graph runs on the wall clock (`nanomotion rt`, `nanomotion plant`); the command line's --overrun and --max-overruns replace these",
-                "properties": {
-                    "overrun": { "enum": ["skip", "catch-up"], "default": "skip", "description": "a tick that ends after the next deadline: skip the missed deadlines (stay on the grid) or catch up (run the late ticks back to back)" },
-                    "max_overruns": { "type": "integer", "minimum": 0, "description": "stop the loop, outputs safe, after more than this many overruns (absent: never)" },
-                },
-            },
-            "units": {
-                "type": "object",
-                "description": "unit of a signal, `block.port: unit`",
-                "additionalProperties": { "type": "string", "minLength": 1, "maxLength": 32 },
-            },
-        },
-        "definitions": {
-            "block": { "description": "a block inline (`type:` and its parameters)", "oneOf": inline },
-            "block_entry": { "description": "a block of the graph, or `include: FILE`", "oneOf": entries },
-        },
-    })
 }
 
 /// Helpers the derive's generated code calls; not a stable API.

@@ -1,13 +1,14 @@
 //! The `require:` section of a graph: bounds every feedback loop must meet, for
 //! the whole graph and per loop.
 
+use crate::Params;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 
 /// Bounds on one loop (or, at the top of `require:`, on every loop). Every
 /// field is optional; an absent bound is not checked. Stability itself is
 /// always required.
-#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
 pub struct Bounds {
     /// Smallest gain margin (dB): 1/|L| at every phase crossover.
@@ -43,25 +44,26 @@ pub struct Bounds {
 ///   loops:
 ///     pi: { phase_margin_deg: 45 }
 /// ```
-#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
 pub struct Require {
-    /// See [`Bounds::gain_margin_db`].
+    /// Smallest gain margin (dB) of every loop ([`Bounds::gain_margin_db`]).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub gain_margin_db: Option<f64>,
-    /// See [`Bounds::phase_margin_deg`].
+    /// Smallest phase margin (degrees) of every loop ([`Bounds::phase_margin_deg`]).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub phase_margin_deg: Option<f64>,
-    /// See [`Bounds::modulus_margin_db`].
+    /// Largest allowed ‖S‖∞ (dB) of every loop ([`Bounds::modulus_margin_db`]).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub modulus_margin_db: Option<f64>,
-    /// See [`Bounds::delay_margin_s`].
+    /// Smallest delay margin (s) of every loop ([`Bounds::delay_margin_s`]).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub delay_margin_s: Option<f64>,
-    /// See [`Bounds::max_t_db`].
+    /// Largest allowed ‖T‖∞ (dB) of every loop ([`Bounds::max_t_db`]).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub max_t_db: Option<f64>,
-    /// See [`Bounds::allow_unproven`]; here it applies to every loop.
+    /// Let loops that cannot be analysed run, with this reason
+    /// ([`Bounds::allow_unproven`]); here it applies to every loop.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub allow_unproven: Option<String>,
     /// Per-loop bounds, keyed by the name of a block in the loop.

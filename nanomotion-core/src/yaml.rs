@@ -10,22 +10,60 @@ use serde::de::DeserializeOwned;
 /// Non-finite floats (`.nan`, `.inf`) are let through the parser on purpose (typetag
 /// buffers maps and would otherwise report them without a location): every block
 /// validates its own fields and names the one that is not finite.
+///
+/// Booleans are YAML 1.2's, as editors and `nanomotion schema` read them: only
+/// `true`/`false` (any case). YAML 1.1's `yes`/`no`/`on`/`off`/`y`/`n` are text,
+/// so a block named `y` stays a name, and `strict_rates: yes` is an error that
+/// names its line and says to write `true` — never a silent reading that an
+/// editor would not share.
 pub fn from_str<T: DeserializeOwned>(text: &str, origin: &str) -> Result<T, GraphError> {
     let opts = serde_saphyr::options!(
         non_finite_float_policy: serde_saphyr::NonFiniteFloatPolicy::PassThrough,
+        strict_booleans: true,
     );
     serde_saphyr::from_str_with_options(text, opts).map_err(|e| {
         // Inside a map the parser buffers (a block entry, a tagged config), an
         // unknown field or a wrong-type value is reported at the map's first
         // line: name the field at its own line.
-        locate_field(
+        with_boolean_fix(locate_field(
             GraphError::Parse {
                 origin: origin.to_string(),
                 message: plain_message(&e.to_string(), origin),
             },
             text,
-        )
+        ))
     })
+}
+
+/// The words YAML 1.1 read as booleans and YAML 1.2 (graph files) reads as text.
+const YAML11_BOOLEANS: [&str; 6] = ["yes", "no", "on", "off", "y", "n"];
+
+/// A boolean written the YAML 1.1 way: say what to write instead. The parser
+/// reports it as a strict-mode boolean (a graph-level key) or, inside a block's
+/// buffered map, as text where a boolean was expected.
+fn with_boolean_fix(e: GraphError) -> GraphError {
+    let GraphError::Parse { origin, message } = e else {
+        return e;
+    };
+    let strict = message.contains("invalid boolean (strict mode expects true/false)");
+    let buffered = message
+        .split("invalid type: string \"")
+        .nth(1)
+        .and_then(|r| r.split_once("\", expected a boolean"))
+        .is_some_and(|(word, _)| YAML11_BOOLEANS.iter().any(|w| w.eq_ignore_ascii_case(word)));
+    if !(strict || buffered) {
+        return GraphError::Parse { origin, message };
+    }
+    let message = message.replace(
+        "invalid boolean (strict mode expects true/false)",
+        "not a boolean",
+    );
+    GraphError::Parse {
+        origin,
+        message: format!(
+            "{message}\n  = fix: write `true` or `false` (graph files are YAML 1.2, where `yes`, `no`, `on`, `off`, `y` and `n` are text, as editors read them)"
+        ),
+    }
 }
 
 /// The parser's message in the user's terms: the snippet names the file instead

@@ -62,9 +62,11 @@ fn plain(line: &str) -> String {
     out.replace("\\[", "[").replace("\\]", "]")
 }
 
-/// Doc comment lines of an item, trimmed, in plain text.
+/// Doc comment lines of an item, trimmed, in plain text; fenced code blocks
+/// (examples for rustdoc) are left out.
 fn doc_lines(attrs: &[Attribute]) -> Vec<String> {
     let mut lines = Vec::new();
+    let mut in_code = false;
     for a in attrs {
         if a.path().is_ident("doc")
             && let syn::Meta::NameValue(nv) = &a.meta
@@ -73,7 +75,13 @@ fn doc_lines(attrs: &[Attribute]) -> Vec<String> {
                 ..
             }) = &nv.value
         {
-            lines.push(plain(s.value().trim()));
+            let line = s.value();
+            let line = line.trim();
+            if line.starts_with("```") {
+                in_code = !in_code;
+            } else if !in_code {
+                lines.push(plain(line));
+            }
         }
     }
     lines

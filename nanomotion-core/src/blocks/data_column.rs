@@ -53,14 +53,15 @@ fn column_schema() -> serde_json::Value {
     serde_json::json!({ "type": "string" })
 }
 
-/// A column name; the message for a YAML boolean (`y`, `n`, `on`, `off` unquoted)
-/// says to quote it.
+/// A column name; the message for a value YAML reads as a boolean or a number
+/// (`true`, `1` unquoted) says to quote it. (`y`, `n`, `on`, `off` are text in a
+/// graph file: YAML 1.2 booleans, `crate::yaml::from_str`.)
 fn column_name<'de, D: serde::Deserializer<'de>>(d: D) -> Result<String, D::Error> {
     struct V;
     impl serde::de::Visitor<'_> for V {
         type Value = String;
         fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
-            f.write_str("a column name (quote names that YAML reads as booleans or numbers, e.g. column: \"y\")")
+            f.write_str("a column name (quote names that YAML reads as booleans or numbers, e.g. column: \"true\")")
         }
         fn visit_str<E: serde::de::Error>(self, v: &str) -> Result<String, E> {
             Ok(v.to_string())
@@ -167,16 +168,26 @@ mod tests {
         assert_eq!(got, vec![1.0, 2.0, 3.0, 3.0, 3.0]);
     }
 
+    /// A name YAML 1.2 reads as a boolean (`true`) gets the hint to quote it;
+    /// `y` (a boolean to YAML 1.1 only) is the column `y`, as an editor reads it.
     #[test]
     fn unquoted_boolean_names_get_a_hint() {
-        let yaml = "base_rate_hz: 100\nduration_s: 0.01\nblocks:\n  - { name: s, type: data_column, column: y }\n";
+        let yaml = "base_rate_hz: 100\nduration_s: 0.01\nblocks:\n  - { name: s, type: data_column, column: true }\n";
         let e = crate::GraphSpec::from_yaml(yaml, "g.yaml")
             .unwrap_err()
             .to_string();
-        assert!(e.contains("column: \"y\""), "{e}");
-        let spec =
-            crate::GraphSpec::from_yaml(&yaml.replace("column: y", "column: \"y\""), "g.yaml");
+        assert!(e.contains("column: \"true\""), "{e}");
+        let spec = crate::GraphSpec::from_yaml(
+            &yaml.replace("column: true", "column: \"true\""),
+            "g.yaml",
+        );
         assert!(spec.is_ok());
+        for name in ["y", "n", "on", "off"] {
+            let text = yaml.replace("column: true", &format!("column: {name}"));
+            let spec = crate::GraphSpec::from_yaml(&text, "g.yaml").unwrap();
+            let block = serde_json::to_value(&spec.blocks[0].block).unwrap();
+            assert_eq!(block["column"], name, "{block}");
+        }
     }
 
     #[test]

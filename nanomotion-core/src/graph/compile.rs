@@ -22,8 +22,8 @@
 use super::load::nearest;
 use super::spec::{
     BlockSpec, BuildReport, Connection, GraphSpec, LOG_CHUNK_TICKS, MAX_BLOCK_NAME_CHARS,
-    MAX_GRAPH_BYTES, MAX_RATE_HZ, MAX_TICKS, MAX_TITLE_CHARS, MIN_RATE_HZ, ScoreSpec,
-    valid_block_name,
+    MAX_GRAPH_BYTES, MAX_RATE_HZ, MAX_TICKS, MAX_TITLE_CHARS, MAX_UNIT_CHARS, MIN_RATE_HZ,
+    ScoreSpec, valid_block_name,
 };
 use crate::block::{Block, BuildContext, MeasuredData, Port};
 use crate::error::GraphError;
@@ -649,9 +649,9 @@ fn assign_units(
         let Some(o) = p.outputs.iter_mut().find(|o| o.name == port) else {
             return Err(bad(format!("block `{b}` has no output `{port}`")));
         };
-        if unit.is_empty() || unit.len() > 32 || unit.chars().any(char::is_control) {
+        if unit.is_empty() || unit.len() > MAX_UNIT_CHARS || unit.chars().any(char::is_control) {
             return Err(bad(format!(
-                "unit `{}` must be 1 to 32 printable characters (e.g. m, m/s, V)",
+                "unit `{}` must be 1 to {MAX_UNIT_CHARS} printable characters (e.g. m, m/s, V)",
                 unit.escape_debug()
             )));
         }

@@ -247,6 +247,46 @@ mod tests {
         assert!(e.contains("line 6 column 7: field `k`"), "{e}");
     }
 
+    /// YAML 1.1 booleans (issue 26): a graph file is read as YAML 1.2, as
+    /// editors and `nanomotion schema` read it. `yes`/`on`/… where a boolean is
+    /// wanted is an error naming the line, with the fix; elsewhere the words are
+    /// text (blocks named `y` and `n`).
+    #[test]
+    fn yaml11_booleans_are_refused_with_the_fix_and_stay_text_elsewhere() {
+        let fix = "write `true` or `false`";
+        // a graph-level key (the old reading: strict_rates = true, silently)
+        let text = "base_rate_hz: 10\nduration_s: 1\nstrict_rates: yes\nblocks:\n  - { name: c, type: constant, value: 1.0 }\n";
+        let e = super::GraphSpec::from_yaml(text, "g.yaml")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("line 3"), "{e}");
+        assert!(e.contains("3 | strict_rates: yes"), "{e}");
+        assert!(e.contains(fix), "{e}");
+        // a block's parameter (the parser buffers the block's map)
+        let text = "base_rate_hz: 10\nduration_s: 1\nblocks:\n  - name: tf\n    type: transfer_function\n    num: [1.0]\n    den: [1.0, 0.5]\n    discrete: on\n";
+        for word in ["on", "off", "yes", "No", "Y"] {
+            let text = text.replace("discrete: on", &format!("discrete: {word}"));
+            let e = super::GraphSpec::from_yaml(&text, "g.yaml")
+                .unwrap_err()
+                .to_string();
+            assert!(e.contains("line 8 column 5: field `discrete`"), "{e}");
+            assert!(e.contains(fix), "{e}");
+        }
+        // YAML 1.2 booleans, in any of its cases, are booleans
+        for word in ["true", "True", "FALSE"] {
+            let ok = text.replace("discrete: on", &format!("discrete: {word}"));
+            super::GraphSpec::from_yaml(&ok, "g.yaml").unwrap();
+        }
+        // as text the words stay text: blocks named `y` and `n`, run: 3·2 = 6
+        let text = "base_rate_hz: 10\nduration_s: 0.2\nblocks:\n  - { name: y, type: constant, value: 2.0 }\n  - { name: n, type: gain, k: 3.0 }\nconnections:\n  - { from: y.y, to: n.u }\nlog: [n.y]\n";
+        let g = super::GraphSpec::from_yaml(text, "g.yaml").unwrap();
+        assert_eq!(g.blocks[0].name, "y");
+        assert_eq!(g.blocks[1].name, "n");
+        let (mut s, _) = g.build().unwrap();
+        let r = s.run(|_| {});
+        assert_eq!(r.logs[0].data, vec![6.0; 2]);
+    }
+
     use super::*;
 
     #[test]

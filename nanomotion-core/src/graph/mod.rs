@@ -39,14 +39,17 @@
 mod compile;
 pub mod include;
 mod load;
+mod schema;
 mod spec;
 
 pub use crate::files::read_text_capped;
 pub use crate::scheduler::RATE_TRANSITION_PREFIX;
 pub(crate) use load::nearest;
 pub use load::{MAX_SUGGEST_BYTES, edit_distance, is_near};
+pub use schema::graph_schema;
 pub use spec::{
     BlockSpec, BuildReport, CompareSpec, Connection, Graph, GraphSpec, LOG_CHUNK_TICKS,
     MAX_BLOCK_NAME_CHARS, MAX_GRAPH_BYTES, MAX_GRAPH_FILE_BYTES, MAX_RATE_HZ, MAX_TICKS,
-    MAX_TITLE_CHARS, MIN_RATE_HZ, OverrunPolicy, RealtimeSpec, ScoreSpec, valid_block_name,
+    MAX_TITLE_CHARS, MAX_UNIT_CHARS, MIN_RATE_HZ, OverrunPolicy, RealtimeSpec, ScoreSpec,
+    valid_block_name,
 };

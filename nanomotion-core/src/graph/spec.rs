@@ -3,20 +3,27 @@
 //! in `load.rs`, compiling to a [`Scheduler`](crate::scheduler::Scheduler) in
 //! `compile.rs`.
 
+use crate::Params;
 use crate::block::Block;
 use crate::require::Require;
 use crate::scheduler::Scheduler;
 use serde::{Deserialize, Serialize};
+use serde_json::{Value, json};
 
 /// One block of a graph: instance name, optional rate, and the block itself
 /// (its `type:` and parameters, flattened into the same YAML map).
-#[derive(Debug, Serialize, Deserialize)]
+///
+/// Its `name` and `rate_hz` are the keys every entry of a graph's `blocks:` has
+/// besides the block's own (`nanomotion schema` takes them from here).
+#[derive(Debug, Serialize, Deserialize, Params)]
 pub struct BlockSpec {
     /// Unique instance name: ASCII letters, digits, `_`, `-` (no `.`, which separates
     /// block and port, and no `:`, reserved for inserted blocks).
+    #[param(schema = "block_name_schema")]
     pub name: String,
     /// Rate in Hz; must divide the base rate. Default: the base rate.
     #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[param(schema = "rate_schema")]
     pub rate_hz: Option<f64>,
     /// The block: `type:` tag and its parameters.
     #[serde(flatten)]
@@ -24,32 +31,37 @@ pub struct BlockSpec {
 }
 
 /// A connection from an output port to an input port (`block.port`).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
 pub struct Connection {
     /// Source, `block.port` of an output.
+    #[param(schema = "signal_schema")]
     pub from: String,
     /// Destination, `block.port` of an input.
+    #[param(schema = "signal_schema")]
     pub to: String,
 }
 
 /// An error signal to score (rms, max, ... after the run).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
 pub struct ScoreSpec {
     /// The signal, `block.port` of an output.
+    #[param(schema = "signal_schema")]
     pub signal: String,
     /// Ignore samples before this time (s), to skip start-up transients.
     #[serde(default)]
+    #[param(schema = "seconds_schema")]
     pub from_s: f64,
 }
 
 /// A model output paired with a measured column (`nanomotion run --data`,
 /// `nanomotion diagnose`): the residual is `measured − model`.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
 pub struct CompareSpec {
     /// The model signal, `block.port` of an output of width 1.
+    #[param(schema = "signal_schema")]
     pub signal: String,
     /// The measured column of the data file.
     pub column: String,
@@ -116,11 +128,14 @@ impl<'de> Deserialize<'de> for OverrunPolicy {
 ///   overrun: catch-up     # or skip (the default)
 ///   max_overruns: 0       # stop, outputs safe, at the first overrun
 /// ```
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
 pub struct RealtimeSpec {
-    /// What to do when a tick ends after the next deadline.
+    /// What to do when a tick ends after the next deadline: `skip` the missed
+    /// deadlines (stay on the grid) or `catch-up` (run the late ticks back to
+    /// back).
     #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[param(schema = "overrun_schema")]
     pub overrun: Option<OverrunPolicy>,
     /// Stop the loop (outputs to their safe values) after more than this many
     /// overruns; absent: never.
@@ -129,6 +144,7 @@ pub struct RealtimeSpec {
         skip_serializing_if = "Option::is_none",
         deserialize_with = "max_overruns"
     )]
+    #[param(schema = "count_schema")]
     pub max_overruns: Option<u64>,
 }
 
@@ -170,14 +186,18 @@ impl RealtimeSpec {
     }
 }
 
-/// A whole graph as written in YAML.
-#[derive(Debug, Serialize, Deserialize)]
+/// A whole graph as written in YAML. Its fields (names, docs, defaults, which are
+/// required, no others allowed) are the graph-level part of `nanomotion schema`
+/// ([`graph_schema`](crate::graph::graph_schema)).
+#[derive(Debug, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
 pub struct GraphSpec {
     /// Optional title, shown in reports and plots.
     #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[param(schema = "title_schema")]
     pub title: Option<String>,
     /// Base tick rate (Hz): every block's rate must divide it.
+    #[param(schema = "rate_schema")]
     pub base_rate_hz: f64,
     /// Simulated duration (s). May be left out of a graph that reads measured
     /// data ([`GraphSpec::reads_data`]): it is then the data's length. Left out,
@@ -186,6 +206,7 @@ pub struct GraphSpec {
         default = "duration_from_data",
         skip_serializing_if = "duration_absent"
     )]
+    #[param(schema = "seconds_schema")]
     pub duration_s: f64,
     /// Seed of all random blocks (each block derives its own stream from it and its
     /// name).
@@ -196,12 +217,14 @@ pub struct GraphSpec {
     #[serde(default)]
     pub strict_rates: bool,
     /// The blocks.
+    #[param(schema = "block_entries_schema")]
     pub blocks: Vec<BlockSpec>,
     /// The connections.
     #[serde(default)]
     pub connections: Vec<Connection>,
     /// Output ports to record (`block.port`).
     #[serde(default)]
+    #[param(schema = "signals_schema")]
     pub log: Vec<String>,
     /// Error signals to score.
     #[serde(default)]
@@ -224,6 +247,7 @@ pub struct GraphSpec {
     /// Units of signals (`block.port: unit`), setting or overriding what the
     /// blocks declare; shown in CSV headers, `metrics.json` and plots.
     #[serde(default, skip_serializing_if = "std::collections::BTreeMap::is_empty")]
+    #[param(schema = "units_schema")]
     pub units: std::collections::BTreeMap<String, String>,
     /// The folder relative file names in block parameters (`calibration_file`)
     /// are resolved against: the graph file's folder when read with
@@ -278,6 +302,57 @@ pub const MAX_BLOCK_NAME_CHARS: usize = 100;
 
 /// Longest `title`, in characters.
 pub const MAX_TITLE_CHARS: usize = 200;
+
+/// Longest unit of a signal (`units:`), in characters.
+pub const MAX_UNIT_CHARS: usize = 32;
+
+// JSON Schemas of the graph-level fields whose form or bounds are the limits
+// above (`#[param(schema = …)]`); the compiler checks the same constants with
+// messages that name the file's context.
+
+fn count_schema() -> Value {
+    json!({ "type": "integer", "minimum": 0 })
+}
+fn overrun_schema() -> Value {
+    json!({ "enum": [OverrunPolicy::Skip.as_str(), OverrunPolicy::CatchUp.as_str()] })
+}
+fn rate_schema() -> Value {
+    json!({ "type": "number", "minimum": MIN_RATE_HZ, "maximum": MAX_RATE_HZ })
+}
+
+fn seconds_schema() -> Value {
+    json!({ "type": "number", "minimum": 0 })
+}
+
+fn title_schema() -> Value {
+    json!({ "type": "string", "maxLength": MAX_TITLE_CHARS })
+}
+
+fn block_name_schema() -> Value {
+    json!({ "type": "string", "pattern": format!("^[A-Za-z0-9_-]{{1,{MAX_BLOCK_NAME_CHARS}}}$") })
+}
+
+fn signal_schema() -> Value {
+    json!({ "type": "string", "pattern": "^[^.]+\\.[^.]+$", "description": "`block.port`" })
+}
+
+fn signals_schema() -> Value {
+    json!({ "type": "array", "items": signal_schema() })
+}
+
+/// Each entry is a block of any registered type, or `- include: FILE`
+/// (`definitions/block_entry` of [`graph_schema`](crate::graph::graph_schema)).
+fn block_entries_schema() -> Value {
+    json!({ "type": "array", "items": { "$ref": "#/definitions/block_entry" } })
+}
+
+fn units_schema() -> Value {
+    json!({
+        "type": "object",
+        "description": "unit of a signal, `block.port: unit`",
+        "additionalProperties": { "type": "string", "minLength": 1, "maxLength": MAX_UNIT_CHARS },
+    })
+}
 
 impl GraphSpec {
     /// An empty graph at `base_rate_hz` running for `duration_s`, for building graphs

@@ -263,6 +263,7 @@ pub struct HysteresisFeedForwardBlock {
     pub range: FfRange,
     /// Reference steps of at most this size (m per sample) count as standstill.
     #[serde(default = "default_standstill")]
+    #[param(non_negative)]
     pub standstill_m: f64,
     #[serde(skip)]
     ff: Option<HysteresisFeedForward>,
@@ -303,9 +304,9 @@ impl Block for HysteresisFeedForwardBlock {
         vec![Port::new("v", 1), Port::new("state", 2)]
     }
     fn build(&mut self, _ctx: &BuildContext) -> Result<(), ParamError> {
+        self.check_params()?;
         self.model.trace.validate("model.trace.")?;
         self.model.retrace.validate("model.retrace.")?;
-        check::non_negative("standstill_m", self.standstill_m)?;
         let ff = match self.range {
             FfRange::Voltage { v_min_v, v_max_v } => {
                 check::ordered("range.v_min_v", v_min_v, "range.v_max_v", v_max_v)?;
@@ -427,6 +428,30 @@ mod tests {
             },
         )
         .unwrap()
+    }
+
+    /// `standstill_m` ≥ 0 is declared on the field: `build()` refuses a negative
+    /// or non-finite value by name, and the schema carries the bound.
+    #[test]
+    fn a_negative_standstill_is_refused_by_name() {
+        let ctx = BuildContext::new("ff", 1e-4, 0);
+        let range = FfRange::Position {
+            x_min_m: 25e-6,
+            x_max_m: 61e-6,
+        };
+        for bad in [-1e-9, f64::NAN] {
+            let mut b = HysteresisFeedForwardBlock::new(model(), range);
+            b.standstill_m = bad;
+            let e = b.build(&ctx).unwrap_err();
+            assert_eq!(e.field, "standstill_m", "{e}");
+        }
+        HysteresisFeedForwardBlock::new(model(), range)
+            .build(&ctx)
+            .unwrap();
+        let docs = HysteresisFeedForwardBlock::param_docs();
+        let s = docs.iter().find(|p| p.name == "standstill_m").unwrap();
+        assert_eq!(s.schema["minimum"], 0);
+        assert_eq!(s.bounds, ["≥ 0"]);
     }
 
     #[test]

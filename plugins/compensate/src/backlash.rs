@@ -7,18 +7,27 @@
 //! output rises, u = w − w/2 while it falls, and the last u while it holds — a
 //! jump of the full width at every reversal. The pair is the identity (tested).
 
-use nanomotion_core::block::{Linearisation, check};
+use nanomotion_core::block::Linearisation;
 use nanomotion_core::lti::StateSpace;
-use nanomotion_core::{Block, BlockDoc, BuildContext, ParamDoc, ParamError, Port, Role, Tick};
+use nanomotion_core::{Block, BuildContext, ParamError, Params, Port, Role, Tick};
 use serde::{Deserialize, Serialize};
 
-/// `backlash_inverse`: u = P⁻¹(w) for the play operator P of total width
-/// `width`. Input `u` (the wanted output), output `y` (the input to give the
-/// play), the ports of an effect block.
-#[derive(Debug, Clone, Serialize, Deserialize)]
+/// `backlash_inverse`: inverse of the play operator (backlash) of width w: the
+/// wanted output ± w/2 by its direction, held while it holds; before the actuator.
+///
+/// u = P⁻¹(w) for the play operator P of total width `width`. Input `u` (the
+/// wanted output), output `y` (the input to give the play), the ports of an
+/// effect block.
+#[derive(Debug, Clone, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
+#[block(
+    type_name = "backlash_inverse",
+    role = Controller,
+    ports = "u (wanted output) -> y (input to give the play)"
+)]
 pub struct BacklashInverse {
-    /// Total play w (unit of the signal), ≥ 0.
+    /// Total play w (unit of the signal).
+    #[param(non_negative)]
     pub width: f64,
     /// (last wanted output, last input given), after the first sample.
     #[serde(skip)]
@@ -57,8 +66,7 @@ impl Block for BacklashInverse {
         vec![Port::new("y", 1)]
     }
     fn build(&mut self, _ctx: &BuildContext) -> Result<(), ParamError> {
-        check::non_negative("width", self.width)?;
-        check::finite("width", self.width)?;
+        self.check_params()?;
         self.last = None;
         Ok(())
     }
@@ -77,18 +85,6 @@ impl Block for BacklashInverse {
     }
     fn role(&self) -> Role {
         Role::Controller
-    }
-}
-
-nanomotion_core::submit_block_doc! {
-    BlockDoc {
-        type_name: "backlash_inverse",
-        role: Role::Controller,
-        summary: "inverse of the play operator (backlash) of width w: the wanted output ± w/2 by its direction, held while it holds; before the actuator",
-        params: &[
-            ParamDoc { name: "width", doc: "total play w (unit of the signal), ≥ 0", default: None },
-        ],
-        ports: "u (wanted output) -> y (input to give the play)",
     }
 }
 
@@ -120,6 +116,31 @@ mod tests {
             worst = worst.max((y[0] - w).abs());
         }
         assert!(worst < 1e-12, "{worst:e}");
+    }
+
+    /// One declaration: the bound on `width` refuses a negative or non-finite
+    /// play by name when the block is built, and is what `nanomotion blocks` and
+    /// the schema show.
+    #[test]
+    fn a_negative_or_non_finite_width_is_refused_by_name() {
+        let ctx = BuildContext::new("b", 1e-3, 0);
+        for w in [-0.1, f64::NAN, f64::INFINITY] {
+            let e = BacklashInverse::new(w).build(&ctx).unwrap_err();
+            assert_eq!(e.field, "width", "{w}: {e}");
+        }
+        BacklashInverse::new(0.0).build(&ctx).unwrap();
+        let doc = nanomotion_core::block::block_docs()
+            .into_iter()
+            .find(|d| d.type_name == "backlash_inverse")
+            .expect("registered");
+        let params = doc.param_docs();
+        assert_eq!(params.len(), 1);
+        assert_eq!(params[0].name, "width");
+        assert_eq!(params[0].bounds, ["≥ 0"]);
+        assert!(params[0].required);
+        assert_eq!(params[0].schema["minimum"], 0);
+        assert!(doc.closed);
+        assert_eq!(doc.role, Role::Controller);
     }
 
     #[test]

@@ -26,27 +26,40 @@ use afm_stage::hysteresis::Branch;
 use nanomotion_core::block::{Linearisation, check};
 use nanomotion_core::lti::StateSpace;
 use nanomotion_core::models::hysteresis::{ChParams, Direction};
-use nanomotion_core::{Block, BlockDoc, BuildContext, ParamDoc, ParamError, Port, Role, Tick};
+use nanomotion_core::{Block, BuildContext, ParamError, Params, Port, Role, Tick};
 use serde::{Deserialize, Serialize};
 
-/// `hysteresis_inverse`: u = H⁻¹(w) for the Coleman–Hodgdon operator H with
-/// parameters `alpha`, `b`, `c` (and `retrace` for decreasing input), the same
-/// fields as the plf `hysteresis` effect block. Input `u`: the output w the
-/// actuator should produce; output `y`: the input to give it (the ports of an
-/// effect block, so graph surgery places it like one). A wanted output the branch
-/// cannot reach (a non-monotone branch: the state far off the anhysteretic line)
-/// holds the last input and is counted on output `state`.
-#[derive(Debug, Clone, Serialize, Deserialize)]
+/// `hysteresis_inverse`: exact inverse of the Coleman–Hodgdon operator (6.3) by
+/// the Lambert-W branch inverse (6.6), re-anchored at every reversal of the wanted
+/// output; before the actuator.
+///
+/// u = H⁻¹(w) for the Coleman–Hodgdon operator H with parameters `alpha`, `b`,
+/// `c` (and `retrace` for decreasing input), the same fields as the plf
+/// `hysteresis` effect block. Input `u`: the output w the actuator should
+/// produce; output `y`: the input to give it (the ports of an effect block, so
+/// graph surgery places it like one). A wanted output the branch cannot reach (a
+/// non-monotone branch: the state far off the anhysteretic line) holds the last
+/// input and is counted on output `state`.
+#[derive(Debug, Clone, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
+#[block(
+    type_name = "hysteresis_inverse",
+    role = Controller,
+    ports = "u (wanted output w) -> y (input to give the operator), state (unreachable samples so far)"
+)]
 pub struct HysteresisInverse {
-    /// α (1/\[u\]) > 0.
+    /// α (1/\[u\]) of the operator to invert.
+    #[param(positive)]
     pub alpha: f64,
-    /// b (\[y\]/\[u\]) > 0: slope of the anhysteretic line.
+    /// b (\[y\]/\[u\]), anhysteretic slope.
+    #[param(positive)]
     pub b: f64,
-    /// c (\[y\]/\[u\]) > 0: slope right after a reversal.
+    /// c (\[y\]/\[u\]), slope right after a reversal.
+    #[param(positive)]
     pub c: f64,
-    /// Parameters for decreasing input (default: the trace set).
+    /// {alpha, b, c} for decreasing input (asymmetric operator), each > 0.
     #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[param(default_doc = "= trace")]
     pub retrace: Option<ChParams>,
     #[serde(skip)]
     state: Option<State>,
@@ -180,11 +193,13 @@ impl Block for HysteresisInverse {
         vec![Port::new("y", 1), Port::new("state", 1)]
     }
     fn build(&mut self, _ctx: &BuildContext) -> Result<(), ParamError> {
-        for (prefix, p) in [("", Some(self.trace())), ("retrace.", self.retrace)] {
-            let Some(p) = p else { continue };
-            p.validate(prefix)?;
-            check::positive(&format!("{prefix}b"), p.b)?;
-            check::positive(&format!("{prefix}c"), p.c)?;
+        self.check_params()?;
+        // k = (b − c)/α finite; the retrace set's slopes must be positive too.
+        self.trace().validate("")?;
+        if let Some(r) = self.retrace {
+            r.validate("retrace.")?;
+            check::positive("retrace.b", r.b)?;
+            check::positive("retrace.c", r.c)?;
         }
         self.state = Some(State {
             u: f64::NAN,
@@ -222,21 +237,6 @@ impl Block for HysteresisInverse {
     }
     fn role(&self) -> Role {
         Role::Controller
-    }
-}
-
-nanomotion_core::submit_block_doc! {
-    BlockDoc {
-        type_name: "hysteresis_inverse",
-        role: Role::Controller,
-        summary: "exact inverse of the Coleman–Hodgdon operator (6.3) by the Lambert-W branch inverse (6.6), re-anchored at every reversal of the wanted output; before the actuator",
-        params: &[
-            ParamDoc { name: "alpha", doc: "α (1/[u]) > 0 of the operator to invert", default: None },
-            ParamDoc { name: "b", doc: "b ([y]/[u]) > 0, anhysteretic slope", default: None },
-            ParamDoc { name: "c", doc: "c ([y]/[u]) > 0, slope right after a reversal", default: None },
-            ParamDoc { name: "retrace", doc: "{alpha, b, c} for decreasing input (asymmetric operator)", default: Some("= trace") },
-        ],
-        ports: "u (wanted output w) -> y (input to give the operator), state (unreachable samples so far)",
     }
 }
 
@@ -296,5 +296,39 @@ mod tests {
         let mut inv = HysteresisInverse::new(0.03, 1.0, -0.1);
         let e = inv.build(&BuildContext::new("inv", 1e-3, 0)).unwrap_err();
         assert_eq!(e.field, "c");
+        for (alpha, b, c, field) in [(0.0, 1.0, 0.7, "alpha"), (0.03, f64::NAN, 0.7, "b")] {
+            let mut inv = HysteresisInverse::new(alpha, b, c);
+            let e = inv.build(&BuildContext::new("inv", 1e-3, 0)).unwrap_err();
+            assert_eq!(e.field, field, "{e}");
+        }
+        let mut inv =
+            HysteresisInverse::new(0.03, 1.0, 0.7).with_retrace(ChParams::new(0.04, 1.0, 0.0));
+        let e = inv.build(&BuildContext::new("inv", 1e-3, 0)).unwrap_err();
+        assert_eq!(e.field, "retrace.c");
+    }
+
+    /// The derived listing keeps what the hand-written one said: the three
+    /// slopes required and > 0, `retrace` optional and defaulting to the trace set.
+    #[test]
+    fn the_listing_is_derived_from_the_parameter_struct() {
+        let doc = nanomotion_core::block::block_docs()
+            .into_iter()
+            .find(|d| d.type_name == "hysteresis_inverse")
+            .expect("registered");
+        let params = doc.param_docs();
+        let names: Vec<&str> = params.iter().map(|p| p.name).collect();
+        assert_eq!(names, ["alpha", "b", "c", "retrace"]);
+        for p in &params[..3] {
+            assert!(p.required, "{}", p.name);
+            assert_eq!(p.bounds, ["> 0"], "{}", p.name);
+            assert_eq!(p.schema["exclusiveMinimum"], 0, "{}", p.name);
+        }
+        assert!(!params[3].required);
+        assert_eq!(params[3].default.as_deref(), Some("= trace"));
+        assert!(
+            doc.summary
+                .starts_with("exact inverse of the Coleman–Hodgdon operator")
+        );
+        assert!(doc.ports.contains("state"));
     }
 }

@@ -81,9 +81,11 @@ fn alias() -> f64 {
 pub struct RotationEstimator {
     /// Number of estimation lines (2 … 16); the estimate runs when line
     /// `lines − 1` ends.
+    #[param(size(2, MAX_LINES))]
     pub lines: usize,
     /// Longest line recorded (s): the buffers hold `max_line_s`/t_s + 2 samples
     /// per line. The plan's lines last a quarter period.
+    #[param(positive)]
     pub max_line_s: f64,
     /// Largest |α| admitted (rad), default 0.1.
     #[serde(default = "max_angle")]
@@ -282,8 +284,7 @@ impl Block for RotationEstimator {
         false
     }
     fn build(&mut self, ctx: &BuildContext) -> Result<(), ParamError> {
-        check::size("lines", self.lines, 2, MAX_LINES)?;
-        check::positive("max_line_s", self.max_line_s)?;
+        self.check_params()?;
         let cap = check::samples_of("max_line_s", self.max_line_s, ctx.dt, 1 << 24)? + 2;
         check::buffer("max_line_s", cap, 8, self.lines)?;
         let o = self.options();

@@ -35,7 +35,6 @@
 
 use glam::{DMat2, DVec2};
 use nanomotion_core::Params;
-use nanomotion_core::block::check;
 use nanomotion_core::{Block, BuildContext, ParamError, Port, Role, Tick};
 use serde::{Deserialize, Serialize};
 
@@ -73,6 +72,7 @@ pub struct FrameRotation {
     /// [`estimate_rotation`](crate::estimate::estimate_rotation). Default 0; must
     /// stay 0 with `alpha_input`.
     #[serde(default)]
+    #[param(finite)]
     pub alpha_rad: f64,
     /// Take α from an input port `alpha` (e.g. a `rotation_estimator`) instead of
     /// `alpha_rad`. The matrix is recomputed only when the value changes.
@@ -84,6 +84,7 @@ pub struct FrameRotation {
     pub direction: Direction,
     /// Width of `u` and `y`: 2 (x, y) or 3 (x, y, z). Default 2.
     #[serde(default = "two")]
+    #[param(size(2, 3))]
     pub width: usize,
     #[serde(skip)]
     m: Option<DMat2>,
@@ -141,19 +142,12 @@ impl Block for FrameRotation {
         vec![Port::new("y", self.width)]
     }
     fn build(&mut self, _ctx: &BuildContext) -> Result<(), ParamError> {
-        check::finite("alpha_rad", self.alpha_rad)?;
+        self.check_params()?;
         if self.alpha_input && self.alpha_rad != 0.0 {
             return Err(ParamError::new(
                 "alpha_rad",
                 format!("is {} with alpha_input: true", self.alpha_rad),
                 "give either alpha_rad or alpha_input: true (α from the `alpha` port), not both",
-            ));
-        }
-        if !(self.width == 2 || self.width == 3) {
-            return Err(ParamError::new(
-                "width",
-                format!("is {}", self.width),
-                "give 2 (x, y) or 3 (x, y, z; z passes unchanged)",
             ));
         }
         if self.alpha_rad.abs() > std::f64::consts::FRAC_PI_4 {
@@ -274,6 +268,20 @@ mod tests {
             let e = b.build(&BuildContext::new("r", 1e-3, 0)).unwrap_err();
             assert_eq!(e.field, field);
         }
+        // width 3 (x, y, z) builds; 1 is refused like 4
+        let mut f = FrameRotation::new(0.1, Direction::ToSample, 3);
+        f.build(&BuildContext::new("r", 1e-3, 0)).unwrap();
+        let e = FrameRotation::new(0.1, Direction::ToSample, 1)
+            .build(&BuildContext::new("r", 1e-3, 0))
+            .unwrap_err();
+        assert_eq!(e.field, "width");
+        assert!(e.to_string().contains("[2, 3]"), "{e}");
+        // the same declaration bounds the schema (editors refuse width 4)
+        let docs = FrameRotation::param_docs();
+        let width = docs.iter().find(|p| p.name == "width").unwrap();
+        assert_eq!(width.schema["minimum"], 2);
+        assert_eq!(width.schema["maximum"], 3);
+        assert_eq!(width.bounds, ["2 to 3"]);
         assert!(
             nanomotion_core::yaml::from_str::<Box<dyn Block>>(
                 "type: frame_rotation\nalpha_rad: 0.1\ndirection: sideways\n",

@@ -137,6 +137,15 @@ fn bad_parameters_name_the_field() {
         let e = b.build(&BuildContext::new("e", DT, 0)).unwrap_err();
         assert_eq!(e.field, field, "{yaml}: {e:?}");
     }
+    // `lines` and `max_line_s` are bounded by their declaration, which the
+    // schema shows too.
+    use nanomotion_core::doc::Params;
+    let docs = RotationEstimator::param_docs();
+    let lines = docs.iter().find(|p| p.name == "lines").unwrap();
+    assert_eq!(lines.schema["minimum"], 2);
+    assert_eq!(lines.schema["maximum"], 16);
+    let max_line = docs.iter().find(|p| p.name == "max_line_s").unwrap();
+    assert_eq!(max_line.schema["exclusiveMinimum"], 0);
 }
 
 /// In a graph: a flat sample makes the estimate fail; with `on_failure: stop` the

@@ -550,9 +550,10 @@ fixed_delay_rc_adapters!(HighOrderRc, "high_order_rc");
 pub struct Dvrc {
     /// Repetitive period P_α in units of α (default 2π rad).
     #[serde(default = "default_period")]
-    #[param(default_doc = "2π")]
+    #[param(positive, default_doc = "2π")]
     pub period_alpha: f64,
     /// Smallest delay m (samples).
+    #[param(at_least_one)]
     pub n_min: usize,
     /// Largest (worst-case) delay M (samples): sizes the ring buffer.
     pub n_max: usize,
@@ -601,8 +602,7 @@ impl Dvrc {
         self
     }
     fn prepare(&mut self, dt: f64) -> Result<(), ParamError> {
-        check::positive("period_alpha", self.period_alpha)?;
-        check::at_least_one("n_min", self.n_min)?;
+        self.check_params()?;
         let n_init = self.n_init.unwrap_or(self.n_max);
         if n_init < self.n_min || n_init > self.n_max {
             return Err(ParamError::new(
@@ -733,5 +733,30 @@ mod tests {
         assert_eq!(dv.step(1.0, 0.0), (0.0, 12));
         let mut dv = dv.with_n_init(6);
         assert_eq!(dv.step(1.0, 0.0), (0.0, 6));
+    }
+
+    /// `period_alpha` > 0 and `n_min` ≥ 1 are declared on the fields: both
+    /// `build_dt` and the schema use the declaration.
+    #[test]
+    fn dvrc_bounds_are_declared_on_the_fields() {
+        let dvrc = |p: f64, n_min: usize| {
+            Dvrc::new(p, n_min, 12, FilterSpec::Identity, FilterSpec::Identity)
+        };
+        for (p, n_min, field) in [
+            (0.0, 4, "period_alpha"),
+            (-1.0, 4, "period_alpha"),
+            (f64::NAN, 4, "period_alpha"),
+            (1.0, 0, "n_min"),
+        ] {
+            let e = dvrc(p, n_min).build_dt(1e-3).unwrap_err();
+            assert_eq!(e.field, field, "{e}");
+        }
+        dvrc(1.0, 4).build_dt(1e-3).unwrap();
+        let docs = Dvrc::param_docs();
+        assert_eq!(docs[0].name, "period_alpha");
+        assert_eq!(docs[0].schema["exclusiveMinimum"], 0);
+        assert_eq!(docs[0].default.as_deref(), Some("2π"));
+        assert_eq!(docs[1].name, "n_min");
+        assert_eq!(docs[1].schema["minimum"], 1);
     }
 }

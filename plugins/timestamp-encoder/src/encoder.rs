@@ -118,7 +118,7 @@ pub struct TimestampEncoder {
     pub clock_hz: f64,
     /// Register length n (events), default 5 (the thesis's hardware), at most 16.
     #[serde(default = "d_n")]
-    #[param(at_least_one)]
+    #[param(size(1, MAX_REGISTER_LEN))]
     pub register_len: usize,
     /// Skip σ (events skipped between stored ones), (8.5)–(8.7), default 0.
     /// The newest event is always kept.
@@ -127,6 +127,7 @@ pub struct TimestampEncoder {
     /// Derivatives provided on the input: 0 → `[x]`, 1 → `[x, ẋ]` (default),
     /// 2 → `[x, ẋ, ẍ]`; sets the interpolant between ticks (linear, cubic, quintic).
     #[serde(default = "d_deriv")]
+    #[param(size(0, 2))]
     pub derivatives: usize,
     /// Random per-slit spacing error, standard deviation (counts), seeded. Default 0.
     #[serde(default)]
@@ -202,13 +203,6 @@ impl TimestampEncoder {
     /// history. Called by [`Block::build`] with the block's seed.
     pub fn prepare(&mut self, seed: u64) -> Result<(), ParamError> {
         self.check_params()?;
-        if self.register_len > MAX_REGISTER_LEN {
-            return Err(ParamError::new(
-                "register_len",
-                format!("is {}, more than {MAX_REGISTER_LEN}", self.register_len),
-                format!("give at most {MAX_REGISTER_LEN} events"),
-            ));
-        }
         if self.skip < 0 {
             return Err(ParamError::new(
                 "skip",
@@ -221,13 +215,6 @@ impl TimestampEncoder {
                 "skip",
                 format!("is {}, absurdly large", self.skip),
                 "give σ ≤ 1e6",
-            ));
-        }
-        if self.derivatives > 2 {
-            return Err(ParamError::new(
-                "derivatives",
-                format!("is {}, must be 0, 1 or 2", self.derivatives),
-                "give 0 ([x]), 1 ([x, v]) or 2 ([x, v, a])",
             ));
         }
         let n_lines = self.lines;

@@ -48,7 +48,6 @@
 
 use crate::fit::{MAX_M, MAX_N, fit_events};
 use nanomotion_core::Params;
-use nanomotion_core::block::check;
 use nanomotion_core::{Block, BuildContext, Estimator, ParamError, Port, Role, Tick};
 use serde::{Deserialize, Serialize};
 
@@ -129,14 +128,18 @@ pub enum Status {
 pub struct TimestampEstimator {
     /// Polynomial order m (8.1), 0..=4, default 2.
     #[serde(default = "d_m")]
+    #[param(size(0, MAX_M))]
     pub order: usize,
     /// Register length n (events) of the encoder feeding it, default 5; n > m.
     #[serde(default = "d_n")]
+    #[param(size(1, MAX_N))]
     pub register_len: usize,
     /// Resolution Δ: units per count (2π/400 rad for the 100-line encoder).
+    #[param(positive)]
     pub resolution: f64,
     /// Fallback band around the cell centre (counts), default 1 (Sec. 8.3).
     #[serde(default = "d_band")]
+    #[param(positive)]
     pub band_counts: f64,
     /// What happens out of band: `thesis` (default), `zero_standstill` or
     /// `pseudo_event`.
@@ -150,10 +153,12 @@ pub struct TimestampEstimator {
     /// disables. Used by `fallback: zero_standstill` and `pseudo_event` only (see
     /// the module documentation for the full rules).
     #[serde(default = "d_timeout")]
+    #[param(non_negative)]
     pub standstill_timeout_s: f64,
     /// Slit calibration ê (counts) per edge, indexed by level mod its length
     /// (normally 4N); added to each event before the fit. Default none.
     #[serde(default)]
+    #[param(finite)]
     pub edge_offsets_counts: Vec<f64>,
     #[serde(skip)]
     status: Option<Status>,
@@ -179,21 +184,7 @@ impl TimestampEstimator {
 
     /// Check the parameters.
     pub fn validate(&self) -> Result<(), ParamError> {
-        if self.order > MAX_M {
-            return Err(ParamError::new(
-                "order",
-                format!("is {}, above {MAX_M}", self.order),
-                format!("give m ≤ {MAX_M}"),
-            ));
-        }
-        check::at_least_one("register_len", self.register_len)?;
-        if self.register_len > MAX_N {
-            return Err(ParamError::new(
-                "register_len",
-                format!("is {}, above {MAX_N}", self.register_len),
-                format!("give n ≤ {MAX_N}"),
-            ));
-        }
+        self.check_params()?;
         if self.register_len <= self.order {
             return Err(ParamError::new(
                 "register_len",
@@ -204,10 +195,6 @@ impl TimestampEstimator {
                 format!("give register_len ≥ {} or a lower order", self.order + 1),
             ));
         }
-        check::positive("resolution", self.resolution)?;
-        check::positive("band_counts", self.band_counts)?;
-        check::non_negative("standstill_timeout_s", self.standstill_timeout_s)?;
-        check::all_finite("edge_offsets_counts", &self.edge_offsets_counts)?;
         Ok(())
     }
 

@@ -510,6 +510,36 @@ fn blocks_from_yaml_validate_and_run() {
             .is_err()
     );
     assert!(TimestampEstimator::new(2, 2, 1.0).is_err());
+    // Bounds declared on the estimator's fields (one declaration for build() and
+    // the schema).
+    assert_eq!(
+        err("type: timestamp_estimator\nresolution: 1\nregister_len: 17\n"),
+        "register_len"
+    );
+    assert_eq!(
+        err("type: timestamp_estimator\nresolution: 1\nstandstill_timeout_s: -0.1\n"),
+        "standstill_timeout_s"
+    );
+    assert_eq!(
+        err("type: timestamp_estimator\nresolution: 1\nedge_offsets_counts: [0.1, .nan]\n"),
+        "edge_offsets_counts[1]"
+    );
+    assert_eq!(
+        TimestampEstimator::new(5, 8, 1.0).unwrap_err().field,
+        "order"
+    );
+    use nanomotion_core::doc::Params;
+    let docs = TimestampEstimator::param_docs();
+    let schema = |name: &str| docs.iter().find(|p| p.name == name).unwrap().schema.clone();
+    assert_eq!(schema("order")["maximum"], 4);
+    assert_eq!(schema("register_len")["minimum"], 1);
+    assert_eq!(schema("register_len")["maximum"], 16);
+    assert_eq!(schema("resolution")["exclusiveMinimum"], 0);
+    let docs = TimestampEncoder::param_docs();
+    let derivatives = docs.iter().find(|p| p.name == "derivatives").unwrap();
+    assert_eq!(derivatives.schema["maximum"], 2);
+    let register_len = docs.iter().find(|p| p.name == "register_len").unwrap();
+    assert_eq!(register_len.schema["maximum"], 16);
 }
 
 #[test]

@@ -505,29 +505,37 @@ impl Block for SwitchedStageBlock {
 pub struct FittedStageParams {
     /// Low-frequency gain c (m per cycle): G(s) ≈ c/s.
     #[serde(default = "d_lin_c")]
+    #[param(finite)]
     pub gain_m_per_cycle: f64,
     /// First resonance f_p1 (Hz); thesis: 527 Hz.
     #[serde(default = "d_fp1")]
+    #[param(positive)]
     pub f_p1_hz: f64,
     /// Damping coefficient b_p1 (= 2ζ) of the first resonance.
     #[serde(default = "d_bp1")]
+    #[param(positive)]
     pub b_p1: f64,
     /// Anti-resonance f_z1 (Hz); thesis: 624 Hz.
     #[serde(default = "d_fz1")]
+    #[param(positive)]
     pub f_z1_hz: f64,
     /// Damping coefficient b_z1 (= 2ζ) of the anti-resonance.
     #[serde(default = "d_bz1")]
+    #[param(non_negative)]
     pub b_z1: f64,
     /// Second resonance f_p2 (Hz); thesis: 650 Hz.
     #[serde(default = "d_fp2")]
+    #[param(positive)]
     pub f_p2_hz: f64,
     /// Damping coefficient b_p2 (= 2ζ) of the second resonance.
     #[serde(default = "d_bp2")]
+    #[param(positive)]
     pub b_p2: f64,
     /// Pure delay (s), an integer number of block periods; thesis: three samples
     /// at 4 kHz = 0.75 ms.
     /// At most 2^24 periods (a ring buffer; the LTI model carries it as states up to 512).
     #[serde(default = "d_delay")]
+    #[param(non_negative)]
     pub delay_s: f64,
 }
 
@@ -577,7 +585,7 @@ fn quad(f_hz: f64, b: f64) -> (f64, f64) {
 impl FittedStageParams {
     /// Check that every parameter is physical.
     pub fn validate(&self) -> Result<(), ParamError> {
-        check::finite("gain_m_per_cycle", self.gain_m_per_cycle)?;
+        self.check_params()?;
         if self.gain_m_per_cycle == 0.0 {
             return Err(ParamError::new(
                 "gain_m_per_cycle",
@@ -585,13 +593,6 @@ impl FittedStageParams {
                 "give the stage travel per cycle of α (m)",
             ));
         }
-        check::positive("f_p1_hz", self.f_p1_hz)?;
-        check::positive("f_z1_hz", self.f_z1_hz)?;
-        check::positive("f_p2_hz", self.f_p2_hz)?;
-        check::positive("b_p1", self.b_p1)?;
-        check::non_negative("b_z1", self.b_z1)?;
-        check::positive("b_p2", self.b_p2)?;
-        check::non_negative("delay_s", self.delay_s)?;
         Ok(())
     }
 
@@ -1115,6 +1116,27 @@ mod tests {
             ..Default::default()
         };
         assert_eq!(FittedStage::new(p, 1e-3).unwrap_err().field, "f_p2_hz");
+        // every bound declared on FittedStageParams, refused by name
+        let fitted = |f: &dyn Fn(&mut FittedStageParams)| {
+            let mut p = FittedStageParams::default();
+            f(&mut p);
+            FittedStage::new(p, 1e-3).unwrap_err().field
+        };
+        assert_eq!(
+            fitted(&|p| p.gain_m_per_cycle = f64::NAN),
+            "gain_m_per_cycle"
+        );
+        assert_eq!(fitted(&|p| p.gain_m_per_cycle = 0.0), "gain_m_per_cycle");
+        assert_eq!(fitted(&|p| p.b_p1 = 0.0), "b_p1");
+        assert_eq!(fitted(&|p| p.b_z1 = -0.1), "b_z1");
+        assert_eq!(fitted(&|p| p.f_z1_hz = -1.0), "f_z1_hz");
+        assert_eq!(fitted(&|p| p.delay_s = -1e-3), "delay_s");
+        // the same declaration is the schema's bound
+        let docs = FittedStageParams::param_docs();
+        let schema = |n: &str| docs.iter().find(|d| d.name == n).unwrap().schema.clone();
+        assert_eq!(schema("f_p1_hz")["exclusiveMinimum"], 0);
+        assert_eq!(schema("b_z1")["minimum"], 0);
+        assert_eq!(schema("delay_s")["minimum"], 0);
     }
 
     #[test]

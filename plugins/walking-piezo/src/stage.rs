@@ -45,21 +45,26 @@ use thiserror::Error;
 pub struct StageParams {
     /// Stage mass M_s (kg); thesis: 0.428 kg (weighed).
     #[serde(default = "d_mass")]
+    #[param(positive)]
     pub stage_mass_kg: f64,
     /// Leg stiffness k_x1, k_x2 (N/m); thesis: from M_s and the 543 Hz resonance,
     /// k_x = 4π²M_s·543² = 4.98·10⁶ N/m.
     #[serde(default = "d_kx")]
+    #[param(positive)]
     pub leg_stiffness_x_n_m: [f64; 2],
     /// Leg damping d_x1, d_x2 (N·s/m). Table 4.1 value lost; default 100 N·s/m
     /// (ζ ≈ 0.03 at the 543 Hz mode).
     #[serde(default = "d_dx")]
+    #[param(non_negative)]
     pub leg_damping_x_ns_m: [f64; 2],
     /// Leg stiffness k_y1, k_y2 (N/m); thesis: EA/L = 70 GPa·9 mm²/4 mm.
     #[serde(default = "d_ky")]
+    #[param(positive)]
     pub leg_stiffness_y_n_m: [f64; 2],
     /// Leg damping d_y1, d_y2 (N·s/m). Table 4.1 value lost; default 5000 N·s/m
     /// ("the damping in the piezo legs is very high", time constant ≈ 30 µs).
     #[serde(default = "d_dy")]
+    #[param(non_negative)]
     pub leg_damping_y_ns_m: [f64; 2],
     /// Bending coefficients c_x1..c_x4 (m/V) of (4.2); default 64.5 nm/V (Ch. 5).
     #[serde(default = "d_cx")]
@@ -69,6 +74,7 @@ pub struct StageParams {
     pub c_y_m_v: [f64; 4],
     /// Preload F_p (N); thesis: 55 N.
     #[serde(default = "d_fp")]
+    #[param(positive)]
     pub preload_n: f64,
     /// Contact law q1 (m·N^−q2) of (4.4). Thesis value lost; default 1.5·10⁻⁸, a
     /// deformation of ≈ 0.1 µm per pair at half the preload (Fig. 4.3 scale).
@@ -80,21 +86,27 @@ pub struct StageParams {
     /// Nominal friction coefficient μ (−). Table 4.1 value lost; default 0.2
     /// (holding force μF_p ≈ 11 N).
     #[serde(default = "d_mu")]
+    #[param(non_negative)]
     pub mu: f64,
     /// Relative standard deviation of the per-pair μ difference.
     #[serde(default = "d_mu_pair")]
+    #[param(non_negative)]
     pub mu_pair_rel: f64,
     /// Relative standard deviation of μ along the drive strip.
     #[serde(default = "d_mu_spatial")]
+    #[param(non_negative)]
     pub mu_spatial_rel: f64,
     /// Correlation length of μ along the strip (m).
     #[serde(default = "d_mu_corr")]
+    #[param(positive)]
     pub mu_spatial_corr_m: f64,
     /// Relative standard deviation of μ in time.
     #[serde(default = "d_mu_temporal")]
+    #[param(non_negative)]
     pub mu_temporal_rel: f64,
     /// Correlation time of μ in time (s).
     #[serde(default = "d_mu_tau")]
+    #[param(positive)]
     pub mu_temporal_tau_s: f64,
     /// rms height σ_h (m) of the drive strip's surface profile (roughness and
     /// waviness, seeded; [`crate::variation::StripProfile`]). Default 0: a flat
@@ -105,14 +117,17 @@ pub struct StageParams {
     /// leg), which decides when a pair slips on a steep spot. So the step per α
     /// cycle varies from cycle to cycle.
     #[serde(default)]
+    #[param(non_negative)]
     pub strip_height_rms_m: f64,
     /// Correlation length of the strip profile (m); default 2 µm, a fraction of
     /// a step (≈ 7 µm per cycle), so each touch-down lands on a fresh height.
     #[serde(default = "d_strip_corr")]
+    #[param(positive)]
     pub strip_height_corr_m: f64,
     /// Pitch of the four legs A, B, C, D along the strip (m); default 2 mm. The
     /// pair {A, D} sees the mean height under A and D, {B, C} under B and C.
     #[serde(default = "d_strip_pitch")]
+    #[param(non_negative)]
     pub strip_leg_pitch_m: f64,
     /// Internal sub-steps per block period (the thesis's Δt = 25 µs is one step at
     /// 40 kHz, or 10 sub-steps at 4 kHz).
@@ -126,6 +141,7 @@ pub struct StageParams {
     pub prox_r: Option<f64>,
     /// Tolerance ε on |λ^{L+1} − λ^L| (N).
     #[serde(default = "d_tol")]
+    #[param(positive)]
     pub tol_n: f64,
     /// Iteration cap of the fixed-point iteration; hitting it is counted and
     /// reported.
@@ -277,37 +293,9 @@ impl StageParams {
     /// field and the fix.
     pub fn validate(&self, dt: f64) -> Result<(), ParamError> {
         check::positive("dt", dt)?;
-        check::positive("stage_mass_kg", self.stage_mass_kg)?;
-        for i in 0..2 {
-            check::positive(
-                &format!("leg_stiffness_x_n_m[{i}]"),
-                self.leg_stiffness_x_n_m[i],
-            )?;
-            check::non_negative(
-                &format!("leg_damping_x_ns_m[{i}]"),
-                self.leg_damping_x_ns_m[i],
-            )?;
-            check::positive(
-                &format!("leg_stiffness_y_n_m[{i}]"),
-                self.leg_stiffness_y_n_m[i],
-            )?;
-            check::non_negative(
-                &format!("leg_damping_y_ns_m[{i}]"),
-                self.leg_damping_y_ns_m[i],
-            )?;
-        }
+        self.check_params()?;
         self.kinematics().validate()?;
-        check::positive("preload_n", self.preload_n)?;
         self.contact_law().validate()?;
-        check::non_negative("mu", self.mu)?;
-        check::non_negative("mu_pair_rel", self.mu_pair_rel)?;
-        check::non_negative("mu_spatial_rel", self.mu_spatial_rel)?;
-        check::positive("mu_spatial_corr_m", self.mu_spatial_corr_m)?;
-        check::non_negative("mu_temporal_rel", self.mu_temporal_rel)?;
-        check::positive("mu_temporal_tau_s", self.mu_temporal_tau_s)?;
-        check::non_negative("strip_height_rms_m", self.strip_height_rms_m)?;
-        check::positive("strip_height_corr_m", self.strip_height_corr_m)?;
-        check::non_negative("strip_leg_pitch_m", self.strip_leg_pitch_m)?;
         if !(1..=MAX_SUBSTEPS).contains(&self.substeps) {
             return Err(ParamError::new(
                 "substeps",
@@ -317,7 +305,6 @@ impl StageParams {
                 ),
             ));
         }
-        check::positive("tol_n", self.tol_n)?;
         if self.max_iter > MAX_ITER {
             return Err(ParamError::new(
                 "max_iter",

@@ -348,6 +348,28 @@ fn non_physical_parameters_are_typed_errors_naming_the_field() {
         assert_eq!(e.field, field, "{e}");
         assert!(!e.fix.is_empty());
     }
+    // The bounds are declared on the fields: the schema carries the same ones
+    // (each leg's value, through the array's items).
+    use nanomotion_core::doc::Params;
+    let docs = StageParams::param_docs();
+    let schema = |n: &str| docs.iter().find(|d| d.name == n).unwrap().schema.clone();
+    assert_eq!(
+        schema("leg_stiffness_x_n_m")["items"]["exclusiveMinimum"],
+        0
+    );
+    assert_eq!(schema("leg_damping_y_ns_m")["items"]["minimum"], 0);
+    assert_eq!(schema("mu")["minimum"], 0);
+    assert_eq!(schema("tol_n")["exclusiveMinimum"], 0);
+    let e = WalkingPiezoStage::new(
+        StageParams {
+            leg_damping_y_ns_m: [5e3, -1.0],
+            ..Default::default()
+        },
+        DT,
+        0,
+    )
+    .unwrap_err();
+    assert_eq!(e.field, "leg_damping_y_ns_m[1]");
 }
 
 #[test]
