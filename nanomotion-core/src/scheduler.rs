@@ -1022,14 +1022,19 @@ fn gather(list: &[Gather], signals: &[f64], inputs: &mut [f64]) {
 /// block names may not contain, so an inserted name can never be a user's name.
 pub const RATE_TRANSITION_PREFIX: &str = "rt:";
 
-/// Explicit rate transition: copies its input at its own rate. Running at a faster
-/// rate than its source it is a zero-order hold; at a slower rate, a decimator
-/// (plain sampling: filter first if aliasing matters). The loader inserts one for
-/// every connection between different rates and reports it.
-#[derive(Debug, Clone, Serialize, Deserialize)]
+/// Copies its input at its own rate: zero-order hold to a faster rate,
+/// sampling to a slower one (inserted automatically between rates).
+///
+/// Running at a faster rate than its source it is a zero-order hold; at a
+/// slower rate, a decimator (plain sampling: filter first if aliasing matters).
+/// The loader inserts one for every connection between different rates and
+/// reports it.
+#[derive(Debug, Clone, Serialize, Deserialize, crate::doc::Params)]
 #[serde(deny_unknown_fields)]
+#[block(type_name = "rate_transition", role = Math, ports = "u[width] -> y[width]")]
 pub struct RateTransition {
     /// Number of values carried.
+    #[param(width)]
     pub width: usize,
 }
 
@@ -1053,15 +1058,5 @@ impl Block for RateTransition {
     }
     fn role(&self) -> Role {
         Role::Math
-    }
-}
-
-crate::submit_block_doc! {
-    crate::block::BlockDoc {
-        type_name: "rate_transition",
-        role: Role::Math,
-        summary: "copies its input at its own rate: zero-order hold to a faster rate, sampling to a slower one (inserted automatically between rates)",
-        params: &[crate::block::ParamDoc { name: "width", doc: "number of values carried", default: None }],
-        ports: "u[width] -> y[width]",
     }
 }
