@@ -62,6 +62,20 @@ fn multisine(rng: &mut Rng, n: usize) -> Vec<f64> {
         .collect()
 }
 
+/// A record of `truth` driven by a multisine (seeded `seed`), its position
+/// measured with white noise of 0.2 % of its rms: columns `u` and `y`.
+fn measured(truth: &str, n: usize, seed: u64) -> Dataset {
+    let mut rng = Rng::new(seed);
+    let u = multisine(&mut rng, n);
+    let y_true = simulate(truth, &u);
+    let rms = (y_true.iter().map(|v| v * v).sum::<f64>() / n as f64).sqrt();
+    let y: Vec<f64> = y_true
+        .iter()
+        .map(|v| v + 2e-3 * rms * rng.normal())
+        .collect();
+    Dataset::from_columns("truth", RATE, 0.0, vec![("u".into(), u), ("y".into(), y)]).unwrap()
+}
+
 #[test]
 fn a_second_mode_off_by_itself_is_calibrated_not_named() {
     // The truth's second mode is 8 % above the nominal's (70 → 75.6 Hz): a
@@ -69,21 +83,7 @@ fn a_second_mode_off_by_itself_is_calibrated_not_named() {
     // The calibration's frequency scale of the second pair must find it, and
     // nothing be named.
     let n = 8000;
-    let mut rng = Rng::new(5);
-    let u = multisine(&mut rng, n);
-    let y_true = simulate(&two_mode_graph(70.0 * 1.08, n), &u);
-    let rms = (y_true.iter().map(|v| v * v).sum::<f64>() / n as f64).sqrt();
-    let y: Vec<f64> = y_true
-        .iter()
-        .map(|v| v + 2e-3 * rms * rng.normal())
-        .collect();
-    let data = Dataset::from_columns(
-        "two_mode",
-        RATE,
-        0.0,
-        vec![("u".into(), u), ("y".into(), y)],
-    )
-    .unwrap();
+    let data = measured(&two_mode_graph(70.0 * 1.08, n), n, 5);
     let nominal = GraphSpec::from_yaml(&two_mode_graph(70.0, n), "nominal.yaml").unwrap();
     let rep = diagnose(&nominal, &data, &Options::default()).unwrap();
     let cal = rep.calibration.as_ref().expect("a calibration was tried");
@@ -181,21 +181,7 @@ fn a_scale_the_data_do_not_determine_is_held_at_the_nominal() {
     // whatever else is wrong), so it is held at the nominal and reported as
     // held; the gain is calibrated, and nothing is named.
     let n = 8000;
-    let mut rng = Rng::new(11);
-    let u = multisine(&mut rng, n);
-    let y_true = simulate(&lag_stage_graph(50_000.0, 1.05, n), &u);
-    let rms = (y_true.iter().map(|v| v * v).sum::<f64>() / n as f64).sqrt();
-    let y: Vec<f64> = y_true
-        .iter()
-        .map(|v| v + 2e-3 * rms * rng.normal())
-        .collect();
-    let data = Dataset::from_columns(
-        "lag_stage",
-        RATE,
-        0.0,
-        vec![("u".into(), u), ("y".into(), y)],
-    )
-    .unwrap();
+    let data = measured(&lag_stage_graph(50_000.0, 1.05, n), n, 11);
     let nominal = GraphSpec::from_yaml(&lag_stage_graph(50_000.0, 1.0, n), "nominal.yaml").unwrap();
     let rep = diagnose(&nominal, &data, &Options::default()).unwrap();
     let cal = rep.calibration.as_ref().expect("a calibration was tried");
