@@ -204,14 +204,12 @@ mod tests {
             )
         };
         let e = super::GraphSpec::from_yaml(&graph("zohh", "state_space"), "g.yaml")
-            .err()
-            .expect("refused")
+            .expect_err("refused")
             .to_string();
         assert!(e.contains("did you mean `zoh`"), "{e}");
         assert!(!e.contains("block type"), "{e}");
         let e = super::GraphSpec::from_yaml(&graph("zoh", "state_spac"), "g.yaml")
-            .err()
-            .expect("refused")
+            .expect_err("refused")
             .to_string();
         assert!(
             e.contains("unknown block type `state_spac`; did you mean `state_space`"),
