@@ -10,6 +10,22 @@ use std::time::Duration;
 
 const EXAMPLES: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/examples");
 
+/// `nanomotion plant` serving the quickstart's stage under `name` (soft
+/// real-time allowed), with `extra` options; output captured.
+fn serve_quickstart_plant(name: &str, extra: &[&str]) -> std::process::Child {
+    Command::new(env!("CARGO_BIN_EXE_nanomotion"))
+        .args([
+            "plant",
+            &format!("{EXAMPLES}/realtime/quickstart_plant.yaml"),
+        ])
+        .args(["--serve", name, "--allow-soft", "--priority", "70"])
+        .args(extra)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap()
+}
+
 /// rms and mean of the `i`-th score's signal, from its log, after `from_s`.
 fn err_stats(sched: &nanomotion::core::Scheduler, signal: &str, from_s: f64) -> (f64, f64, f64) {
     let r = sched.result();
@@ -31,16 +47,7 @@ fn the_quickstart_split_in_two_processes_tracks_like_the_simulation() {
 
     // Two processes: the stage served by `nanomotion plant`, the PI here.
     let name = format!("test-quickstart-{}", std::process::id());
-    let plant = Command::new(env!("CARGO_BIN_EXE_nanomotion"))
-        .args([
-            "plant",
-            &format!("{EXAMPLES}/realtime/quickstart_plant.yaml"),
-        ])
-        .args(["--serve", &name, "--allow-soft", "--priority", "70"])
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
+    let plant = serve_quickstart_plant(&name, &[]);
     let (sched, _) =
         GraphSpec::from_file(format!("{EXAMPLES}/realtime/quickstart_controller.yaml"))
             .unwrap()
@@ -184,16 +191,7 @@ fn a_recorded_two_process_run_replays_bit_for_bit_and_a_changed_gain_does_not() 
     let dir = std::env::temp_dir().join(format!("nanomotion-rt-record-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     let bin = env!("CARGO_BIN_EXE_nanomotion");
-    let plant = Command::new(bin)
-        .args([
-            "plant",
-            &format!("{EXAMPLES}/realtime/quickstart_plant.yaml"),
-        ])
-        .args(["--serve", &name, "--allow-soft", "--priority", "70"])
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
+    let plant = serve_quickstart_plant(&name, &[]);
     let controller = format!("{EXAMPLES}/realtime/quickstart_controller.yaml");
     let out = Command::new(bin)
         .args(["rt", &controller, "--device", &format!("shm:{name}")])
@@ -540,17 +538,7 @@ fn rt_lets_its_plant_go_before_writing_its_files() {
     let dir = std::env::temp_dir().join(format!("nanomotion-rt-letgo-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     let bin = env!("CARGO_BIN_EXE_nanomotion");
-    let plant = Command::new(bin)
-        .args([
-            "plant",
-            &format!("{EXAMPLES}/realtime/quickstart_plant.yaml"),
-        ])
-        .args(["--serve", &name, "--allow-soft", "--priority", "70"])
-        .args(["--watchdog-ms", "100"])
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
+    let plant = serve_quickstart_plant(&name, &["--watchdog-ms", "100"]);
     let out = Command::new(bin)
         .args([
             "rt",
