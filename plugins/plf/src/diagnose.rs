@@ -516,9 +516,10 @@ pub fn diagnose_records(
         let at_floor = excess.iter().all(|&(ms, floor)| ms <= 1.2 * floor * floor);
         let floor_stop = "the held-out residual is at its noise floor (mean square within 20 % of the white-noise estimate)";
         let mut cands = enumerate(&ctx, &cur, opts)?;
-        // An effect named before on an output is never a new effect there (the
+        // An effect named before on an axis is never a new effect there (the
         // joint refit adjusts the first; a second copy at another place of the
-        // same output would only be padding).
+        // same axis — another output of the same loop, another connection in
+        // series on it — would only be padding).
         // A hysteretic force of the stage's own motion after friction was named
         // there is that same force again.
         cands.retain(|c| {
@@ -526,7 +527,10 @@ pub fn diagnose_records(
             let own_motion = matches!(c.site, Site::Feedback { .. });
             !named.iter().any(|(e, o)| {
                 (*e == c.effect || (own_motion && *e == "friction"))
-                    && o.iter().any(|k| outs.contains(k))
+                    && o.iter().any(|&k| {
+                        outs.iter()
+                            .any(|&j| ctx.channels[k].same_axis(&ctx.channels[j]))
+                    })
             })
         });
         if at_floor {
@@ -666,12 +670,12 @@ pub fn diagnose_records(
             }
             // A hysteresis block whose fitted map has no loop is not hysteresis
             // (see `memory_share`): it stands in for a gain, a saturation or a
-            // smooth misfit; a friction force that is all viscous is a damping.
-            let refusal = match (cands[i].effect, &results[i]) {
-                ("hysteresis", Some(f)) => without_memory(&ctx, f),
-                ("friction", Some(f)) => viscous_only(&ctx, f),
-                _ => None,
-            };
+            // smooth misfit; nor is one that runs backwards after reversals
+            // (see `reversed_travel`); a friction force that is all viscous is
+            // a damping.
+            let refusal = results[i]
+                .as_ref()
+                .and_then(|f| not_physical(&ctx, cands[i].effect, f));
             if let Some(why) = refusal
                 && let Some(f) = &results[i]
             {
@@ -715,6 +719,7 @@ pub fn diagnose_records(
             if let Some(Ok(j)) = joint
                 && weighted_holdout_ms(&ctx, &j.residual) < weighted_holdout_ms(&ctx, &f.residual)
                 && implausible(&ctx, &j.spec, j.free.iter().map(|p| p.block.as_str())).is_none()
+                && not_physical(&ctx, cands[i].effect, &j).is_none()
             {
                 f = j;
             }
@@ -1913,10 +1918,59 @@ fn memory_share(x: &[f64], y: &[f64]) -> Option<f64> {
 /// memory (a loop) to be named hysteresis.
 const MIN_MEMORY_SHARE: f64 = 0.25;
 
+/// Share of the input's travel over which a map's output moves against its
+/// overall direction (the sign of its straight-line slope on the input). A
+/// material's hysteresis is monotone on every branch — Preisach and
+/// Prandtl–Ishlinskii maps with non-negative weights are, and so is a
+/// Coleman–Hodgdon loop while its slope right after a reversal, 2c − b, is
+/// positive (thesis Table 6.2: b ≈ 1, c ≈ 0.7 µm/V, 2c − b ≈ 0.4) — so the
+/// share is 0. A fit that runs backwards after each reversal stands in for
+/// something else (a play with a gain error, the loop's response to noise).
+/// `None` when the input does not move or the map has no direction.
+fn reversed_travel(x: &[f64], y: &[f64]) -> Option<f64> {
+    let n = x.len().min(y.len());
+    if n < 3 {
+        return None;
+    }
+    let (xm, ym) = (stats::mean(&x[..n]), stats::mean(&y[..n]));
+    let sxy: f64 = (0..n).map(|k| (x[k] - xm) * (y[k] - ym)).sum();
+    let direction = sxy.signum();
+    // Moves of the output below this are round-off, not a direction.
+    let tiny = 1e-9 * range(&y[..n]);
+    let (mut against, mut travel) = (0.0, 0.0);
+    for k in 1..n {
+        let (dx, dy) = (x[k] - x[k - 1], y[k] - y[k - 1]);
+        travel += dx.abs();
+        if dy.abs() > tiny && dx * dy * direction < 0.0 {
+            against += dx.abs();
+        }
+    }
+    (sxy != 0.0 && travel > 0.0 && travel.is_finite()).then(|| against / travel)
+}
+
+/// The largest share of the input's travel a fitted hysteresis map may move
+/// against its direction (see [`reversed_travel`]): 0 for every monotone map;
+/// the allowance covers a fit that ends a hair past monotone.
+const MAX_REVERSED_TRAVEL: f64 = 1e-3;
+
+/// Why fitted candidate `f` is not the physical `effect` it was fitted as, or
+/// `None`: a hysteresis fit without a loop or running backwards
+/// ([`not_hysteresis`]), a friction force that is all viscous
+/// ([`viscous_only`]). Judged on each fit and again after a joint refit,
+/// which can take an effect's parameters where its own fit would not go.
+fn not_physical(ctx: &Ctx<'_>, effect: &str, f: &Fitted) -> Option<String> {
+    match effect {
+        "hysteresis" => not_hysteresis(ctx, f),
+        "friction" => viscous_only(ctx, f),
+        _ => None,
+    }
+}
+
 /// Why fitted hysteresis candidate `f` is not hysteresis, or `None`: its
 /// block's output against its input (the drive, or the stage position for a
-/// force inside the loop) is close to a single-valued map.
-fn without_memory(ctx: &Ctx<'_>, f: &Fitted) -> Option<String> {
+/// force inside the loop) runs backwards after reversals (not monotone, see
+/// [`reversed_travel`]) or is close to a single-valued map.
+fn not_hysteresis(ctx: &Ctx<'_>, f: &Fitted) -> Option<String> {
     let output = format!("{}.y", f.block_name);
     let input = f
         .spec
@@ -1936,6 +1990,13 @@ fn without_memory(ctx: &Ctx<'_>, f: &Fitted) -> Option<String> {
         return None;
     }
     let (x, y) = (ev.log_series(&input)?, ev.log_series(&output)?);
+    if let Some(share) = reversed_travel(&x, &y).filter(|&s| s > MAX_REVERSED_TRAVEL) {
+        return Some(format!(
+            "the fitted map from {input} runs backwards over {:.0} % of the input's travel (at most {:.0} %): a material's hysteresis is monotone on every branch",
+            100.0 * share,
+            100.0 * MAX_REVERSED_TRAVEL
+        ));
+    }
     match memory_share(&x, &y) {
         Some(share) if share >= MIN_MEMORY_SHARE => None,
         Some(share) => Some(format!(
@@ -2840,5 +2901,53 @@ fn evidence_plot(ctx: &Ctx<'_>, cur: &Current, c: &Cand, win: &Fitted, step: usi
             ("before".into(), xs.clone(), pick(&cur.residual[i])),
             ("after".into(), xs, pick(&win.residual[i])),
         ],
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nanomotion_core::models::hysteresis::{ChParams, ColemanHodgdon};
+
+    /// A Coleman–Hodgdon loop on a triangle of amplitude `amp`, 2000 samples
+    /// per stroke, from its anhysteretic line: (input, output).
+    fn ch_triangle(p: ChParams, amp: f64, strokes: usize) -> (Vec<f64>, Vec<f64>) {
+        let mut h = ColemanHodgdon::symmetric(p).unwrap();
+        h.reset(-p.b * amp, -amp);
+        let per = 2000;
+        let x: Vec<f64> = (0..strokes * per)
+            .map(|k| {
+                let s = (k % per) as f64 / per as f64;
+                let up = (k / per) % 2 == 0;
+                if up { -amp + 2.0 * amp * s } else { amp - 2.0 * amp * s }
+            })
+            .collect();
+        let y = x.iter().map(|&u| h.step(u)).collect();
+        (x, y)
+    }
+
+    /// Thesis Table 6.2's loop (2c − b > 0) is monotone; with 2c − b < 0 the
+    /// output runs backwards after each reversal over the input travel
+    /// s* = ln(2(b − c)/b)/α (slope b − 2(b − c)e^{−αs} on a saturated branch),
+    /// a share s*/(2A) of a stroke of 2A; the first stroke, from the
+    /// anhysteretic line (slope b − (b − c)e^{−αs}), runs backwards over
+    /// ln((b − c)/b)/α.
+    #[test]
+    fn a_hysteresis_that_runs_backwards_after_reversals_is_measured_by_its_travel() {
+        let strokes = 20;
+        let (x, y) = ch_triangle(ChParams::new(20.0, 1.0, 0.7), 1.0, strokes);
+        assert_eq!(reversed_travel(&x, &y), Some(0.0));
+        let (alpha, b, c, amp) = (20.0, 1.0, -0.2, 1.0);
+        let (x, y) = ch_triangle(ChParams::new(alpha, b, c), amp, strokes);
+        let backwards = ((b - c) / b).ln() + (strokes - 1) as f64 * (2.0 * (b - c) / b).ln();
+        let expected = backwards / alpha / (strokes as f64 * 2.0 * amp);
+        let got = reversed_travel(&x, &y).unwrap();
+        assert!(
+            (got - expected).abs() < 0.01 * expected,
+            "share {got}, closed form {expected}"
+        );
+        assert!(got > MAX_REVERSED_TRAVEL);
+        // A map that does not move has no direction.
+        assert_eq!(reversed_travel(&x, &vec![1.0; x.len()]), None);
     }
 }

@@ -117,10 +117,69 @@ pub struct Channel {
     pub plant_inputs: Vec<(String, String)>,
     /// Rate (Hz) of the compared signal's block, `None` for the base rate.
     pub rate_hz: Option<f64>,
+    /// The axis the output measures: outputs of blocks on one single-input
+    /// single-output feedback loop (a position and its controller's drive)
+    /// measure one axis and share this key; any other output is its own axis.
+    pub axis: String,
+}
+
+impl Channel {
+    /// Whether `self` and `other` measure one axis.
+    pub fn same_axis(&self, other: &Channel) -> bool {
+        self.axis == other.axis
+    }
 }
 
 fn split(reference: &str) -> (&str, &str) {
     reference.split_once('.').unwrap_or((reference, ""))
+}
+
+/// The axis key of an output of `block` (see [`Channel::axis`]): the blocks of
+/// the feedback loop through `block` (those it reaches and that reach it), when
+/// that loop is single-input single-output (every connection between them of
+/// width 1, no `mux`/`demux`); else `signal`, the output alone.
+fn axis_of(
+    spec: &GraphSpec,
+    block: &str,
+    signal: &str,
+    width_in: &dyn Fn(&str) -> usize,
+    types: &[(String, String)],
+) -> String {
+    let type_of = |name: &str| {
+        types
+            .iter()
+            .find(|(n, _)| n == name)
+            .map_or("", |(_, t)| t.as_str())
+    };
+    let reach = |forward: bool| -> Vec<&str> {
+        let mut seen = vec![block];
+        let mut stack = vec![block];
+        while let Some(b) = stack.pop() {
+            for k in &spec.connections {
+                let (s, d) = (split(&k.from).0, split(&k.to).0);
+                let (here, next) = if forward { (s, d) } else { (d, s) };
+                if here == b && !seen.contains(&next) {
+                    seen.push(next);
+                    stack.push(next);
+                }
+            }
+        }
+        seen
+    };
+    let up = reach(false);
+    let mut members: Vec<&str> = reach(true).into_iter().filter(|b| up.contains(b)).collect();
+    let siso = members.len() > 1
+        && members.iter().all(|b| !matches!(type_of(b), "mux" | "demux"))
+        && spec.connections.iter().all(|k| {
+            !(members.contains(&split(&k.from).0) && members.contains(&split(&k.to).0))
+                || width_in(&k.to) == 1
+        });
+    if siso {
+        members.sort_unstable();
+        format!("loop {}", members.join(", "))
+    } else {
+        signal.to_string()
+    }
 }
 
 /// The compared channels of `spec`, with their plants (the spec is built once, a
@@ -214,6 +273,7 @@ pub fn channels(
             plant: block.to_string(),
             plant_inputs,
             rate_hz,
+            axis: axis_of(spec, block, &c.signal, &width_in, &probe_types),
         });
     }
     Ok(out)
@@ -442,6 +502,51 @@ mod tests {
         spec.connections
             .iter()
             .any(|c| c.from == from && c.to == to)
+    }
+
+    fn axes(yaml: &str, columns: &[&str]) -> Vec<String> {
+        let spec = GraphSpec::from_yaml(yaml, "axes.yaml").unwrap();
+        let cols: Vec<(String, Vec<f64>)> = columns
+            .iter()
+            .map(|c| (c.to_string(), vec![0.0; 200]))
+            .collect();
+        let data = Arc::new(Dataset::from_columns("axes", 1000.0, 0.0, cols).unwrap());
+        channels(&spec, &data)
+            .unwrap()
+            .into_iter()
+            .map(|c| c.axis)
+            .collect()
+    }
+
+    /// A position and its controller's drive measure one axis (seed 339 of the
+    /// held-out scenarios named one resonance on each); two loops are two
+    /// axes; two outputs of one plant outside a loop are two.
+    #[test]
+    fn the_outputs_of_one_siso_loop_are_one_axis_and_two_loops_two() {
+        let _ = std::any::type_name::<crate::effects::Effect>();
+        let loop_of = |k: &str| {
+            format!(
+                "  - {{ name: r{k}, type: data_column, column: r{k} }}\n  - {{ name: e{k}, type: sum, signs: \"+-\" }}\n  - {{ name: c{k}, type: gain, k: 2.0 }}\n  - {{ name: p{k}, type: transfer_function, num: [0.1], den: [1.0, -0.9], discrete: true }}\n"
+            )
+        };
+        let wires = |k: &str| {
+            format!(
+                "  - {{ from: r{k}.y, to: e{k}.in0 }}\n  - {{ from: p{k}.y, to: e{k}.in1 }}\n  - {{ from: e{k}.y, to: c{k}.u }}\n  - {{ from: c{k}.y, to: p{k}.u }}\n"
+            )
+        };
+        let two_loops = format!(
+            "base_rate_hz: 1000\nduration_s: 0.2\nblocks:\n{}{}connections:\n{}{}compare:\n  - {{ signal: p1.y, column: y1 }}\n  - {{ signal: c1.y, column: u1 }}\n  - {{ signal: p2.y, column: y2 }}\n",
+            loop_of("1"),
+            loop_of("2"),
+            wires("1"),
+            wires("2")
+        );
+        let a = axes(&two_loops, &["r1", "r2", "y1", "u1", "y2"]);
+        assert_eq!(a[0], a[1], "{a:?}");
+        assert_ne!(a[0], a[2], "{a:?}");
+        let open = "base_rate_hz: 1000\nduration_s: 0.2\nblocks:\n  - { name: drive, type: data_column, column: u }\n  - { name: stage, type: state_space, a: [[0.5]], b: [[1.0]], c: [[1.0], [2.0]], discretisation: zoh }\n  - { name: split, type: demux, widths: [1, 1] }\nconnections:\n  - { from: drive.y, to: stage.u }\n  - { from: stage.y, to: split.u }\ncompare:\n  - { signal: split.y0, column: y0 }\n  - { signal: split.y1, column: y1 }\n";
+        let b = axes(open, &["u", "y0", "y1"]);
+        assert_ne!(b[0], b[1], "{b:?}");
     }
 
     /// Issue 24 §1: after one effect on the plant's drive, the connection
