@@ -290,10 +290,17 @@ impl Block for Product {
 // saturation
 // ---------------------------------------------------------------------------------
 
-/// `saturation`: y = min(max(u, lower), upper), element-wise.
+/// `saturation`: y = min(max(u, lower), upper), element-wise; with `sharpness`
+/// p, the smooth limit of an amplifier y = m + h·x/(1 + |x|^p)^{1/p}.
 ///
+/// Hard (no `sharpness`): the clamp. Smooth: x = (u − m)/h with m, h the middle
+/// and half-width of [lower, upper]; slope 1 at m, monotone for every p > 0,
+/// `lower` and `upper` are approached, never reached (at u = upper the output
+/// is m + h/2^{1/p}); p = 2 is the algebraic sigmoid, close to a tanh at
+/// p ≈ 2.5, and the clamp is the limit p → ∞.
 /// A NaN input passes as NaN (it is never hidden by the clamp).
-/// [`Tunable`](crate::Tunable) parameter vector: `[lower, upper]`.
+/// [`Tunable`](crate::Tunable) parameter vector: `[lower, upper]`, then
+/// `[sharpness]` when it is set.
 #[derive(Debug, Clone, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
 #[block(type_name = "saturation", role = Math, ports = "u[n] -> y[n]")]
@@ -303,6 +310,10 @@ pub struct Saturation {
     pub lower: f64,
     /// Upper limit (unit of u), ≥ `lower`.
     pub upper: f64,
+    /// Sharpness p of a smooth limit (> 0; omitted: the hard clamp).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[param(positive, default_doc = "hard clamp")]
+    pub sharpness: Option<f64>,
     /// Signal width n.
     #[serde(default = "one")]
     #[param(width)]
@@ -315,18 +326,34 @@ impl Saturation {
         Self {
             lower,
             upper,
+            sharpness: None,
             width: 1,
         }
     }
-    /// One value clamped to `[lower, upper]`.
+    /// One value limited to `[lower, upper]`: clamped, or the smooth limit of
+    /// sharpness p.
     pub fn clamp(&self, u: f64) -> f64 {
-        if u < self.lower {
-            self.lower
-        } else if u > self.upper {
-            self.upper
-        } else {
-            u
+        let Some(p) = self.sharpness else {
+            return if u < self.lower {
+                self.lower
+            } else if u > self.upper {
+                self.upper
+            } else {
+                u
+            };
+        };
+        let (m, h) = (0.5 * (self.lower + self.upper), 0.5 * (self.upper - self.lower));
+        if h <= 0.0 {
+            return if u.is_nan() { u } else { m };
         }
+        let x = (u - m) / h;
+        // x/(1 + |x|^p)^{1/p}, written so that no power overflows.
+        let limited = if x.abs() <= 1.0 {
+            x / (1.0 + x.abs().powf(p)).powf(1.0 / p)
+        } else {
+            x.signum() / (1.0 + x.abs().powf(-p)).powf(1.0 / p)
+        };
+        m + h * limited
     }
     /// y = clamp(u) element-wise.
     pub fn apply(&self, u: &[f64], y: &mut [f64]) {
@@ -369,22 +396,36 @@ impl Block for Saturation {
 
 impl crate::Tunable for Saturation {
     fn param_names(&self) -> Vec<String> {
-        vec!["lower".into(), "upper".into()]
+        let mut v: Vec<String> = vec!["lower".into(), "upper".into()];
+        if self.sharpness.is_some() {
+            v.push("sharpness".into());
+        }
+        v
     }
     fn params(&self) -> Vec<f64> {
-        vec![self.lower, self.upper]
+        let mut v = vec![self.lower, self.upper];
+        v.extend(self.sharpness);
+        v
     }
     fn set_params(&mut self, p: &[f64]) -> Result<(), ParamError> {
-        if p.len() != 2 {
+        let want = 2 + usize::from(self.sharpness.is_some());
+        if p.len() != want {
             return Err(ParamError::new(
                 "params",
                 format!("{} values given", p.len()),
-                "give [lower, upper]",
+                if want == 2 {
+                    "give [lower, upper]"
+                } else {
+                    "give [lower, upper, sharpness]"
+                },
             ));
         }
-        check::ordered("lower", p[0], "upper", p[1])?;
-        self.lower = p[0];
-        self.upper = p[1];
+        let mut next = self.clone();
+        next.lower = p[0];
+        next.upper = p[1];
+        next.sharpness = p.get(2).copied();
+        next.check_params()?;
+        *self = next;
         Ok(())
     }
 }
@@ -636,6 +677,46 @@ mod tests {
             run(&mut p, &[1.0, 2.0, 3.0, 4.0, 5.0, -6.0]),
             vec![15.0, -48.0]
         );
+    }
+
+    /// The smooth limit against its closed form: y(m) = m, slope 1 at m,
+    /// y(upper) = m + h/2^{1/p}, odd about m, monotone, within [lower, upper]
+    /// (reached only in round-off) even for inputs whose |x|^p overflows, and
+    /// the clamp as p grows.
+    #[test]
+    fn a_smooth_saturation_follows_its_closed_form() {
+        let (lower, upper, p) = (-1.0, 3.0, 2.5);
+        let (m, h) = (1.0, 2.0);
+        let mut s = Saturation::new(lower, upper);
+        s.sharpness = Some(p);
+        s.build(&ctx()).unwrap();
+        assert_eq!(s.clamp(m), m);
+        let d = 1e-6;
+        assert!(((s.clamp(m + d) - s.clamp(m - d)) / (2.0 * d) - 1.0).abs() < 1e-9);
+        assert!((s.clamp(upper) - (m + h / 2f64.powf(1.0 / p))).abs() < 1e-12);
+        for x in [0.3, 1.7, 40.0] {
+            let (hi, lo) = (s.clamp(m + x * h), s.clamp(m - x * h));
+            assert!((hi - m + (lo - m)).abs() < 1e-12, "odd about m at x = {x}");
+            let closed = m + h * x / (1.0 + x.powf(p)).powf(1.0 / p);
+            assert!((hi - closed).abs() < 1e-12, "x = {x}: {hi} vs {closed}");
+        }
+        let ys: Vec<f64> = (0..400).map(|k| s.clamp(-20.0 + 0.1 * k as f64)).collect();
+        assert!(ys.windows(2).all(|w| w[1] > w[0]), "monotone");
+        for u in [1e300, -1e300] {
+            let y = s.clamp(u);
+            assert!(y.is_finite() && y >= lower && y <= upper, "{u:e} -> {y}");
+        }
+        s.sharpness = Some(200.0);
+        assert!((s.clamp(2.0) - 2.0).abs() < 1e-4 && (s.clamp(5.0) - upper).abs() < 1e-4);
+        assert!(s.clamp(f64::NAN).is_nan());
+        // Tunable: the sharpness is the third parameter, checked like the field.
+        use crate::Tunable;
+        assert_eq!(s.param_names(), ["lower", "upper", "sharpness"]);
+        s.set_params(&[0.0, 2.0, 3.0]).unwrap();
+        assert_eq!(s.params(), vec![0.0, 2.0, 3.0]);
+        assert_eq!(s.set_params(&[0.0, 2.0, -1.0]).unwrap_err().field, "sharpness");
+        assert_eq!(s.set_params(&[0.0, 2.0]).unwrap_err().field, "params");
+        assert_eq!(s.params(), vec![0.0, 2.0, 3.0], "a refused vector changes nothing");
     }
 
     #[test]

@@ -371,20 +371,40 @@ struct Ctx<'a> {
     /// its own noise floor (see [`output_scales`]), so that outputs in different
     /// units (a position in m, a drive in V) count alike.
     weights: Vec<f64>,
-    /// Per compared output, the noise a quantised measurement carries
-    /// whatever the model: q/√12 for a column on a grid of step q
-    /// (`stats::lattice` on the estimation part), else 0. See [`floor_sigma`].
-    grid_floors: Vec<f64>,
+    /// Per compared output and [`Part`], the noise a quantised measurement
+    /// carries whatever the model: q/√12 for a column on a grid of step q
+    /// (`stats::lattice` on that part), else 0. See [`floor_sigma`]. Per part:
+    /// a held-out record may come from another sensor setting (EMPS: the
+    /// validation record's position is not on the estimation record's grid).
+    grid_floors: Vec<[f64; 2]>,
 }
 
-/// The noise floor (σ) of output `i`'s residual `r`: the white part from its
+/// The estimation or the held-out samples of a record (or records).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Part {
+    Estimation = 0,
+    HeldOut = 1,
+}
+
+impl Ctx<'_> {
+    /// The samples of `part` of `x` (a series over all `n` samples).
+    fn part<'x>(&self, x: &'x [f64], part: Part) -> &'x [f64] {
+        match part {
+            Part::Estimation => &x[..self.n_est],
+            Part::HeldOut => &x[self.n_est..],
+        }
+    }
+}
+
+/// The noise floor (σ) of `part` of output `i`'s residual `r` (all samples): the white part from its
 /// sample-to-sample differences ([`stats::noise_floor`]), but never below the
 /// rounding noise of a quantised measurement (q/√12, Widrow's model). On a
 /// column that holds its level most samples (a slow stage on a coarse
 /// encoder), the differences are mostly zero and their spread says nothing
 /// of the rounding error every model must leave.
-fn floor_sigma(ctx: &Ctx<'_>, i: usize, r: &[f64]) -> f64 {
-    stats::noise_floor(r).max(ctx.grid_floors.get(i).copied().unwrap_or(0.0))
+fn floor_sigma(ctx: &Ctx<'_>, i: usize, r: &[f64], part: Part) -> f64 {
+    let grid = ctx.grid_floors.get(i).map_or(0.0, |g| g[part as usize]);
+    stats::noise_floor(ctx.part(r, part)).max(grid)
 }
 
 /// [`diagnose`] on several records with a progress callback: with one record,
@@ -467,8 +487,9 @@ pub fn diagnose_records(
         .iter()
         .map(|ch| {
             let measured = data.column(&ch.column).unwrap_or(&[]);
-            stats::lattice(&measured[..n_est.min(measured.len())])
-                .map_or(0.0, |(q, _)| q / 12f64.sqrt())
+            let cut = n_est.min(measured.len());
+            let floor = |part: &[f64]| stats::lattice(part).map_or(0.0, |(q, _)| q / 12f64.sqrt());
+            [floor(&measured[..cut]), floor(&measured[cut..])]
         })
         .collect();
     let mut ctx = Ctx {
@@ -675,7 +696,7 @@ pub fn diagnose_records(
             // a damping.
             let refusal = results[i]
                 .as_ref()
-                .and_then(|f| not_physical(&ctx, cands[i].effect, f));
+                .and_then(|f| not_physical(&ctx, &cands[i], f));
             if let Some(why) = refusal
                 && let Some(f) = &results[i]
             {
@@ -719,7 +740,7 @@ pub fn diagnose_records(
             if let Some(Ok(j)) = joint
                 && weighted_holdout_ms(&ctx, &j.residual) < weighted_holdout_ms(&ctx, &f.residual)
                 && implausible(&ctx, &j.spec, j.free.iter().map(|p| p.block.as_str())).is_none()
-                && not_physical(&ctx, cands[i].effect, &j).is_none()
+                && not_physical(&ctx, &cands[i], &j).is_none()
             {
                 f = j;
             }
@@ -1386,7 +1407,8 @@ fn weight(ctx: &Ctx<'_>, i: usize) -> f64 {
 }
 
 /// The scale of each compared output's residual: the nominal residual's noise
-/// floor ([`floor_sigma`]), but at least 1/1000 of the
+/// floor ([`floor_sigma`]) on the held-out samples (the ones every decision
+/// is made on), but at least 1/1000 of the
 /// residual's rms (a floor of zero — a quantised signal that mostly repeats its
 /// value — must not give one output all the weight), and the measured column's
 /// deviation when the residual is zero.
@@ -1396,8 +1418,9 @@ fn output_scales(ctx: &Ctx<'_>, residual: &[Vec<f64>]) -> Vec<f64> {
         .zip(&ctx.channels)
         .enumerate()
         .map(|(i, (r, ch))| {
-            let est = &r[..ctx.n_est];
-            let s = floor_sigma(ctx, i, est).max(1e-3 * stats::mean_square(est).sqrt());
+            let held = ctx.part(r, Part::HeldOut);
+            let s = floor_sigma(ctx, i, r, Part::HeldOut)
+                .max(1e-3 * stats::mean_square(held).sqrt());
             if s > 0.0 && s.is_finite() {
                 s
             } else {
@@ -1602,15 +1625,15 @@ fn holdout_weighted_vectors(ctx: &Ctx<'_>, a: &[Vec<f64>], b: &[Vec<f64>]) -> (V
     (va, vb)
 }
 
-/// (held-out mean square, noise floor σ) per output.
+/// (held-out mean square, its noise floor σ) per output.
 fn excess_ms(ctx: &Ctx<'_>, cur: &Current) -> Vec<(f64, f64)> {
     cur.residual
         .iter()
         .enumerate()
         .map(|(i, r)| {
             (
-                stats::mean_square(&r[ctx.n_est..]),
-                floor_sigma(ctx, i, &r[..ctx.n_est]),
+                stats::mean_square(ctx.part(r, Part::HeldOut)),
+                floor_sigma(ctx, i, r, Part::HeldOut),
             )
         })
         .collect()
@@ -1619,7 +1642,7 @@ fn excess_ms(ctx: &Ctx<'_>, cur: &Current) -> Vec<(f64, f64)> {
 fn tests(ctx: &Ctx<'_>, cur: &Current) -> Result<Vec<ResidualTests>, PlfError> {
     let mut out = Vec::new();
     for (i, c) in ctx.channels.iter().enumerate() {
-        let r = &cur.residual[i][..ctx.n_est];
+        let r = ctx.part(&cur.residual[i], Part::Estimation);
         let (input, u) = match c.plant_inputs.first() {
             Some((from, _)) => (from.clone(), signal(ctx, cur, from)?),
             None => (c.signal.clone(), cur.model[i].clone()),
@@ -1634,7 +1657,7 @@ fn tests(ctx: &Ctx<'_>, cur: &Current) -> Result<Vec<ResidualTests>, PlfError> {
             input_lag: lag,
             periodic_line: line,
             line_hz: f * ctx.fs,
-            noise_floor: floor_sigma(ctx, i, r),
+            noise_floor: floor_sigma(ctx, i, &cur.residual[i], Part::Estimation),
             rms: stats::mean_square(r).sqrt(),
         });
     }
@@ -1919,7 +1942,8 @@ fn memory_share(x: &[f64], y: &[f64]) -> Option<f64> {
 const MIN_MEMORY_SHARE: f64 = 0.25;
 
 /// Share of the input's travel over which a map's output moves against its
-/// overall direction (the sign of its straight-line slope on the input). A
+/// overall direction (the sign of Σ Δx·Δy: the way the output mostly moves
+/// with the input; friction's force falls as the position rises). A
 /// material's hysteresis is monotone on every branch — Preisach and
 /// Prandtl–Ishlinskii maps with non-negative weights are, and so is a
 /// Coleman–Hodgdon loop while its slope right after a reversal, 2c − b, is
@@ -1932,8 +1956,7 @@ fn reversed_travel(x: &[f64], y: &[f64]) -> Option<f64> {
     if n < 3 {
         return None;
     }
-    let (xm, ym) = (stats::mean(&x[..n]), stats::mean(&y[..n]));
-    let sxy: f64 = (0..n).map(|k| (x[k] - xm) * (y[k] - ym)).sum();
+    let sxy: f64 = (1..n).map(|k| (x[k] - x[k - 1]) * (y[k] - y[k - 1])).sum();
     let direction = sxy.signum();
     // Moves of the output below this are round-off, not a direction.
     let tiny = 1e-9 * range(&y[..n]);
@@ -1953,14 +1976,14 @@ fn reversed_travel(x: &[f64], y: &[f64]) -> Option<f64> {
 /// the allowance covers a fit that ends a hair past monotone.
 const MAX_REVERSED_TRAVEL: f64 = 1e-3;
 
-/// Why fitted candidate `f` is not the physical `effect` it was fitted as, or
+/// Why fitted candidate `f` is not the physical effect `c` names, or
 /// `None`: a hysteresis fit without a loop or running backwards
 /// ([`not_hysteresis`]), a friction force that is all viscous
 /// ([`viscous_only`]). Judged on each fit and again after a joint refit,
 /// which can take an effect's parameters where its own fit would not go.
-fn not_physical(ctx: &Ctx<'_>, effect: &str, f: &Fitted) -> Option<String> {
-    match effect {
-        "hysteresis" => not_hysteresis(ctx, f),
+fn not_physical(ctx: &Ctx<'_>, c: &Cand, f: &Fitted) -> Option<String> {
+    match c.effect {
+        "hysteresis" => not_hysteresis(ctx, f, matches!(c.site, Site::Input { .. })),
         "friction" => viscous_only(ctx, f),
         _ => None,
     }
@@ -1968,9 +1991,11 @@ fn not_physical(ctx: &Ctx<'_>, effect: &str, f: &Fitted) -> Option<String> {
 
 /// Why fitted hysteresis candidate `f` is not hysteresis, or `None`: its
 /// block's output against its input (the drive, or the stage position for a
-/// force inside the loop) runs backwards after reversals (not monotone, see
-/// [`reversed_travel`]) or is close to a single-valued map.
-fn not_hysteresis(ctx: &Ctx<'_>, f: &Fitted) -> Option<String> {
+/// force inside the loop) is close to a single-valued map, or, for a map on
+/// the drive (`on_drive`: the actuator's material), runs backwards after
+/// reversals (not monotone, see [`reversed_travel`]). A force of the stage's
+/// own motion is named by [`ForceSplit`] instead.
+fn not_hysteresis(ctx: &Ctx<'_>, f: &Fitted, on_drive: bool) -> Option<String> {
     let output = format!("{}.y", f.block_name);
     let input = f
         .spec
@@ -1990,7 +2015,7 @@ fn not_hysteresis(ctx: &Ctx<'_>, f: &Fitted) -> Option<String> {
         return None;
     }
     let (x, y) = (ev.log_series(&input)?, ev.log_series(&output)?);
-    if let Some(share) = reversed_travel(&x, &y).filter(|&s| s > MAX_REVERSED_TRAVEL) {
+    if let Some(share) = reversed_travel(&x, &y).filter(|&s| on_drive && s > MAX_REVERSED_TRAVEL) {
         return Some(format!(
             "the fitted map from {input} runs backwards over {:.0} % of the input's travel (at most {:.0} %): a material's hysteresis is monotone on every branch",
             100.0 * share,
@@ -2083,7 +2108,7 @@ fn enumerate(ctx: &Ctx<'_>, cur: &Current, opts: &Options) -> Result<Vec<Cand>, 
     let spec_now = cur.spec()?;
     for (i, ch) in ctx.channels.iter().enumerate() {
         let first_of_channel = out.len();
-        let r = &cur.residual[i][..ctx.n_est];
+        let r = ctx.part(&cur.residual[i], Part::Estimation);
         let yhat = &cur.model[i];
         let pos = signal(ctx, cur, &ch.position)?;
         let (sr, sy) = (std_of(r).max(1e-300), std_of(&pos).max(1e-300));
@@ -2384,6 +2409,25 @@ fn enumerate(ctx: &Ctx<'_>, cur: &Current, opts: &Options) -> Result<Vec<Cand>, 
                         .map(|f| json!({"type": "saturation", "lower": mid - f * (mid - lo), "upper": mid + f * (hi - mid)}))
                         .collect(),
                     free: vec![(0, Scale::Linear(0.02 * ru)), (1, Scale::Linear(0.02 * ru))],
+                    s: vec![],
+                    rate_hz: None,
+                });
+                // An amplifier that limits gradually (the smooth form of
+                // `saturation`): its asymptotes lie beyond what the drive
+                // reaches, and the whole range is compressed a little.
+                out.push(Cand {
+                    effect: "saturation",
+                    site: inp.clone(),
+                    output: None,
+                    starts: [(1.2, 2.0), (1.6, 3.0), (1.1, 6.0)]
+                        .iter()
+                        .map(|(f, p)| json!({"type": "saturation", "lower": mid - f * (mid - lo), "upper": mid + f * (hi - mid), "sharpness": p}))
+                        .collect(),
+                    free: vec![
+                        (0, Scale::Linear(0.02 * ru)),
+                        (1, Scale::Linear(0.02 * ru)),
+                        (2, Scale::Log),
+                    ],
                     s: vec![],
                     rate_hz: None,
                 });
