@@ -845,3 +845,90 @@ mod random_parameters {
         }
     }
 }
+
+/// Run `b` on a seeded random walk with random reversals and step sizes and
+/// return the smallest and largest Δy/Δu between successive samples, and
+/// whether every ratio lay in the block's declared slope range (up to the
+/// rounding of y over the step).
+fn slope_ratios(b: &mut dyn Block, seed: u64, scale: f64) -> (f64, f64, bool) {
+    use nanomotion_core::rng::Rng;
+    b.build(&ctx(DT)).unwrap();
+    let s = b.sector().expect("a slope range");
+    let mut rng = Rng::new(seed);
+    let (mut lo, mut hi, mut inside) = (f64::INFINITY, f64::NEG_INFINITY, true);
+    let (mut u, mut dir) = (0.0, 1.0);
+    let mut y = [0.0];
+    b.output(Tick::new(0, DT), &[u], &mut y);
+    for k in 1..20_000u64 {
+        if rng.uniform() < 0.02 {
+            dir = -dir;
+        }
+        let du = dir * scale * 10f64.powf(rng.uniform_in(-4.0, 0.5));
+        let y0 = y[0];
+        u += du;
+        b.output(Tick::new(k, DT), &[u], &mut y);
+        let ratio = (y[0] - y0) / du;
+        let rounding = 1e-14 * (y0.abs() + y[0].abs()) / du.abs();
+        lo = lo.min(ratio);
+        hi = hi.max(ratio);
+        inside &= (ratio >= s.lower - rounding && ratio <= s.upper + rounding)
+            || s.contains(ratio, 1e-9);
+    }
+    (lo, hi, inside)
+}
+
+/// Issue 25: the slope ranges the effect blocks declare hold for every sample
+/// of a random input, and are attained (within 3 % of the width) where the
+/// range is tight; blocks without a bound declare none.
+#[test]
+fn effect_slope_ranges_hold_for_every_sample_and_are_attained() {
+    // (block, the range by its closed form, input scale, tight?)
+    let cases: Vec<(Box<dyn Block>, (f64, f64), f64, bool)> = vec![
+        (Box::new(Backlash::new(0.5)), (0.0, 1.0), 1.0, true),
+        (Box::new(Hysteresis::new(0.03, 1.0, 0.7)), (0.4, 1.0), 30.0, true),
+        (Box::new(Hysteresis::new(2.0, 0.8, 1.3)), (0.8, 1.8), 1.0, true),
+        // Bouc–Wen: [0, max(a, 2aβ/(β+γ))], shifted by `linear`.
+        (Box::new(BoucWen::new(2.0, 3.0, 1.0)), (0.0, 3.0), 1.0, true),
+        (Box::new(BoucWen::new(2.0, 1.0, 1.0)), (0.0, 2.0), 1.0, true),
+        (Box::new(BoucWen::new(-2.0, 3.0, -1.0)), (-3.0, 0.0), 1.0, true),
+        (
+            Box::new({
+                let mut b = BoucWen::new(2.0, 3.0, -1.0);
+                b.linear = 0.5;
+                b
+            }),
+            (0.5, 6.5),
+            1.0,
+            false,
+        ),
+    ];
+    for (i, (mut b, (a, c), scale, tight)) in cases.into_iter().enumerate() {
+        b.build(&ctx(DT)).unwrap();
+        let s = b.sector().unwrap();
+        assert!(
+            (s.lower - a).abs() < 1e-12 && (s.upper - c).abs() < 1e-12,
+            "case {i}: {s:?} vs [{a}, {c}]"
+        );
+        let (lo, hi, inside) = slope_ratios(b.as_mut(), 100 + i as u64, scale);
+        assert!(inside, "case {i}: a ratio outside [{a}, {c}]: seen [{lo}, {hi}]");
+        if tight {
+            let tol = 0.03 * (c - a);
+            assert!(
+                (lo - a).abs() < tol && (hi - c).abs() < tol,
+                "case {i}: seen [{lo}, {hi}], declared [{a}, {c}]"
+            );
+        }
+    }
+    // No bound: different b on the retrace, a non-saturating Bouc–Wen loop,
+    // friction (velocity-driven), drift (moves with time).
+    let mut none: Vec<Box<dyn Block>> = vec![
+        Box::new(Hysteresis::new(0.03, 1.0, 0.7).with_retrace(ChParams::new(0.03, 1.2, 0.7))),
+        Box::new(BoucWen::new(2.0, 1.0, -1.5)),
+        Box::new(Friction::new(1.0, 0.5, 1e-3, 1e-4)),
+        Box::new(Drift::new(0.0, 1.0, 0.0)),
+    ];
+    for b in &mut none {
+        b.build(&ctx(DT)).unwrap();
+        assert!(b.sector().is_none(), "{b:?}");
+    }
+}
