@@ -221,9 +221,26 @@ impl fmt::Display for CircleCheck {
     }
 }
 
-/// A number in the shortest form that round-trips (`0.85`, `1e-6`).
+/// A number to 6 significant digits, trailing zeros dropped (`0.4`, `1.5e-7`).
 fn fmt_g(x: f64) -> String {
-    format!("{x}")
+    if x == 0.0 || !x.is_finite() {
+        return format!("{x}");
+    }
+    let trim = |s: &str| -> String {
+        if s.contains('.') {
+            s.trim_end_matches('0').trim_end_matches('.').to_string()
+        } else {
+            s.to_string()
+        }
+    };
+    let mag = x.abs().log10().floor() as i32;
+    if (-3..6).contains(&mag) {
+        trim(&format!("{:.*}", (5 - mag).max(0) as usize, x))
+    } else {
+        let s = format!("{x:.5e}");
+        let (mantissa, exp) = s.split_once('e').unwrap_or((&s, "0"));
+        format!("{}e{exp}", trim(mantissa))
+    }
 }
 
 /// The analysis of one loop.
@@ -345,6 +362,9 @@ impl LoopReport {
         format!(" at the centre slope {}", v.join(", "))
     }
 }
+
+/// How the `linearised` entry of a sector block says what it is judged on.
+const CENTRE_SLOPE: &str = "judged at the centre slope";
 
 /// How an unproven reason from a failed circle criterion starts.
 const CIRCLE_PREFIX: &str = "circle criterion";
@@ -569,7 +589,11 @@ impl fmt::Display for GateReport {
                 writeln!(f, "    broken at {}", p.break_at)?;
             }
             for n in &l.linearised {
-                writeln!(f, "    judged on its linearisation: {n}")?;
+                if n.contains(CENTRE_SLOPE) {
+                    writeln!(f, "    {n}")?;
+                } else {
+                    writeln!(f, "    judged on its linearisation: {n}")?;
+                }
             }
             for u in &l.unproven {
                 writeln!(f, "    unproven: {u}")?;
@@ -662,7 +686,7 @@ fn block_models(block: &dyn Block, w: &BlockWiring) -> Result<BlockModels, Strin
         }
         let k0 = s.centre();
         let note = format!(
-            "`{}`: judged at the centre slope k0 = {} of its slope range [{}, {}] ({}); the circle criterion covers every slope in the range",
+            "`{}`: {CENTRE_SLOPE} k0 = {} of its slope range [{}, {}] ({}); the circle criterion covers every slope in the range",
             w.name,
             fmt_g(k0),
             fmt_g(s.lower),
@@ -1470,4 +1494,70 @@ fn loci_min_distance(l: &StateSpace) -> Option<f64> {
         .flatten()
         .map(|lam| (lam + Complex::new(1.0, 0.0)).norm())
         .reduce(f64::min)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn point(label: &str, stable: bool) -> PointAnalysis {
+        PointAnalysis {
+            label: label.into(),
+            poles: Vec::new(),
+            spectral_radius: if stable { 0.5 } else { 1.2 },
+            stable,
+            break_at: String::new(),
+            width: 1,
+            margins: None,
+            s_hinf: f64::NAN,
+            t_hinf: f64::NAN,
+            nyquist: None,
+            loci_min_distance: None,
+            learning: Vec::new(),
+            notes: Vec::new(),
+            loop_transfer: None,
+            circle: None,
+        }
+    }
+
+    /// Issue 25: a loop can be unproven (the circle criterion fails at one
+    /// schedule point) and have an unstable point; `allow_unproven` lets the
+    /// first run, never the second.
+    #[test]
+    fn an_allowed_unproven_loop_with_an_unstable_point_still_fails() {
+        let mut l = LoopReport {
+            name: "c".into(),
+            blocks: vec!["c".into()],
+            rate_hz: 1000.0,
+            method: String::new(),
+            linearised: Vec::new(),
+            unproven: vec![format!("{CIRCLE_PREFIX}: ‖M R‖∞ = 1.2 ≥ 1")],
+            points: vec![point("K = 1", true), point("K = 9", false)],
+            violations: Vec::new(),
+            allowed: Some("bench".into()),
+            sectors: vec![("h".into(), 0.7, 0.4, 1.0)],
+        };
+        assert!(!l.passes() && !l.stable());
+        let f = l.failures();
+        assert_eq!(f.len(), 1, "{f:?}");
+        assert!(f[0].contains("at K = 9 is unstable") && f[0].contains("k0 = 0.7 of `h`"));
+        l.points[1].stable = true;
+        assert!(l.passes() && !l.stable());
+        l.violations.push("gain margin 1 dB < required 6 dB".into());
+        assert!(!l.passes());
+        l.allowed = None;
+        l.violations.clear();
+        assert!(!l.passes());
+        assert!(l.failures()[0].contains("(fix: state why it may run"));
+    }
+
+    #[test]
+    fn numbers_are_printed_short() {
+        assert_eq!(fmt_g(2.0 * 0.7 - 1.0), "0.4");
+        assert_eq!(fmt_g(1.0), "1");
+        assert_eq!(fmt_g(-0.35), "-0.35");
+        assert_eq!(fmt_g(1.5e-7), "1.5e-7");
+        assert_eq!(fmt_g(123456.0), "123456");
+        assert_eq!(fmt_g(1.5e7), "1.5e7");
+    }
 }
