@@ -932,3 +932,37 @@ fn effect_slope_ranges_hold_for_every_sample_and_are_attained() {
         assert!(b.sector().is_none(), "{b:?}");
     }
 }
+
+/// Issue 25 (class 3): `time_delay` declares its ring buffer (⌈max_delay_s/dt⌉
+/// + 2 samples) before it is built, so a graph of many long ones is refused
+/// naming `max_delay_s` before any buffer is allocated (550 × 10⁶ samples =
+/// 4.4 GB > 4 GiB).
+#[test]
+fn time_delay_declares_its_buffer_and_many_long_ones_are_refused_before_allocating() {
+    let mut small = TimeDelay::new(0.002, 0.0105);
+    assert_eq!(small.planned_bytes(1e-3), ("max_delay_s", (11 + 2) * 8));
+    small.build(&ctx(1e-3)).unwrap();
+    assert_eq!(small.memory_bytes(), small.planned_bytes(1e-3).1);
+    // The longest buffer a block may have: 10⁶ samples.
+    assert_eq!(TimeDelay::new(0.0, 1000.0).planned_bytes(1e-3).1, (1_000_000 + 2) * 8);
+    let mut yaml = String::from(
+        "base_rate_hz: 1000\nduration_s: 0.01\nblocks:\n  - { name: c, type: constant, value: 1.0 }\n",
+    );
+    for i in 0..550 {
+        yaml.push_str(&format!(
+            "  - {{ name: d{i}, type: time_delay, delay_s: 0.0, max_delay_s: 1000.0 }}\n"
+        ));
+    }
+    yaml.push_str("connections:\n");
+    for i in 0..550 {
+        yaml.push_str(&format!("  - {{ from: c.y, to: d{i}.u }}\n"));
+    }
+    let e = GraphSpec::from_yaml(&yaml, "delays.yaml")
+        .unwrap()
+        .build()
+        .err()
+        .expect("refused")
+        .to_string();
+    assert!(e.contains("field `max_delay_s`") && e.contains("block `d536`"), "{e}");
+    assert!(e.contains("checked before anything is allocated"), "{e}");
+}

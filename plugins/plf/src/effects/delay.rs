@@ -60,6 +60,24 @@ impl TimeDelay {
         check::in_range("delay_s", delay_s, 0.0, max_delay_s)
     }
 
+    /// The ring buffer's length for `max_delay_s` at period `dt`:
+    /// ⌈max_delay_s/dt⌉ + 2 samples, or `Err` naming `max_delay_s` when that is
+    /// more than [`MAX_DELAY_SAMPLES`]. [`Block::build`] allocates it and
+    /// [`Block::planned_bytes`] declares it (one formula).
+    fn buffer_len(max_delay_s: f64, dt: f64) -> Result<usize, ParamError> {
+        let samples = (max_delay_s / dt).ceil();
+        if samples.is_nan() || samples > MAX_DELAY_SAMPLES {
+            return Err(ParamError::new(
+                "max_delay_s",
+                format!(
+                    "{max_delay_s} s is {samples:e} samples at dt = {dt} s, more than the {MAX_DELAY_SAMPLES:e} allowed"
+                ),
+                "give a shorter max_delay_s or run the block at a lower rate",
+            ));
+        }
+        Ok(samples.max(0.0) as usize + 2)
+    }
+
     /// τ/dt split into whole samples and a fraction; values within 1e-9 of an
     /// integer count as that integer (so 3·dt is exactly 3 samples).
     fn split(delay_s: f64, dt: f64) -> (usize, f64) {
@@ -85,19 +103,8 @@ impl Block for TimeDelay {
     fn build(&mut self, ctx: &BuildContext) -> Result<(), ParamError> {
         Self::check_delay(self.delay_s, self.max_delay_s)?;
         check::positive("dt", ctx.dt)?;
-        let samples = (self.max_delay_s / ctx.dt).ceil();
-        if samples.is_nan() || samples > MAX_DELAY_SAMPLES {
-            return Err(ParamError::new(
-                "max_delay_s",
-                format!(
-                    "{} s is {samples:e} samples at dt = {} s, more than the {MAX_DELAY_SAMPLES:e} allowed",
-                    self.max_delay_s, ctx.dt
-                ),
-                "give a shorter max_delay_s or run the block at a lower rate",
-            ));
-        }
+        let len = Self::buffer_len(self.max_delay_s, ctx.dt)?;
         let (n, frac) = Self::split(self.delay_s, ctx.dt);
-        let len = samples as usize + 2;
         if n + 1 >= len {
             return Err(ParamError::new(
                 "delay_s",
@@ -112,6 +119,14 @@ impl Block for TimeDelay {
         self.frac = frac;
         self.started = false;
         Ok(())
+    }
+    fn planned_bytes(&self, dt: f64) -> (&'static str, usize) {
+        // Out of range: left to `build`'s message.
+        let len = Self::buffer_len(self.max_delay_s, dt).unwrap_or(0);
+        ("max_delay_s", len * std::mem::size_of::<f64>())
+    }
+    fn memory_bytes(&self) -> usize {
+        self.buf.len() * std::mem::size_of::<f64>()
     }
     fn output(&mut self, _tick: Tick, u: &[f64], y: &mut [f64]) {
         let len = self.buf.len();
