@@ -284,6 +284,42 @@ fn a_sector_block_faster_than_the_loop_stays_unproven_with_the_reason() {
     );
 }
 
+#[test]
+fn a_dead_zone_has_slopes_zero_to_one_and_a_proportional_loop_through_it_is_proven() {
+    use nanomotion_core::blocks::math::Deadzone;
+    let mut dz = Deadzone::new(-0.3, 0.5);
+    dz.build(&BuildContext::new("dz", 1e-3, 0)).unwrap();
+    let s = dz.sector().unwrap();
+    assert_eq!((s.lower, s.upper), (0.0, 1.0));
+    let mut rng = Rng::new(5);
+    let (mut lo, mut hi, mut u0) = (f64::INFINITY, f64::NEG_INFINITY, 0.0);
+    for _ in 0..10_000 {
+        let u1 = rng.uniform_in(-2.0, 2.0);
+        let ratio = (dz.map(u1) - dz.map(u0)) / (u1 - u0);
+        assert!((-1e-12..=1.0 + 1e-12).contains(&ratio), "{ratio}");
+        lo = lo.min(ratio);
+        hi = hi.max(ratio);
+        u0 = u1;
+    }
+    assert!(lo < 1e-9 && hi > 1.0 - 1e-9);
+    // P control k = 0.5 of 0.1/(z − 0.9) through the dead zone: k0 = 0.5,
+    // r = 0.5, M = −kG/(1 + k0 kG).
+    let yaml = piezo_loop(1.0, "type: deadzone, lower: -0.01, upper: 0.01", 1.0, 0.9, 1.0, 0.1, "")
+        .replace("num: [1e0], den: [1.0, -1.0]", "num: [0.5], den: [1.0]");
+    let r = check(&yaml);
+    assert!(r.passes() && r.proven(), "{r}");
+    let n = 200_000;
+    let want = (0..=n)
+        .map(|i| {
+            let z = Complex::from_polar(1.0, PI * i as f64 / n as f64);
+            let kg = 0.5 * 0.1 / (z - 0.9);
+            0.5 * (kg / (kg * 0.5 + 1.0)).norm()
+        })
+        .fold(0.0, f64::max);
+    let c = r.loops[0].points[0].circle.as_ref().unwrap();
+    assert!((c.norm - want).abs() < 1e-6 * want, "{} vs {want}", c.norm);
+}
+
 proptest! {
     #![proptest_config(ProptestConfig { cases: 40, rng_seed: proptest::test_runner::RngSeed::Fixed(25), ..ProptestConfig::default() })]
 
