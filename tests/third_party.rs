@@ -67,7 +67,9 @@ fn third_party_windows_are_declared_and_refused_before_allocating() {
         "base_rate_hz: 100\nduration_s: 0.1\nblocks:\n  - { name: c, type: constant, value: 1.0 }\n",
     );
     for i in 0..40 {
-        yaml.push_str(&format!("  - {{ name: m{i}, type: moving_average, window: 16777216 }}\n"));
+        yaml.push_str(&format!(
+            "  - {{ name: m{i}, type: moving_average, window: 16777216 }}\n"
+        ));
     }
     yaml.push_str("connections:\n");
     for i in 0..40 {
@@ -79,6 +81,9 @@ fn third_party_windows_are_declared_and_refused_before_allocating() {
         .err()
         .expect("refused")
         .to_string();
-    assert!(e.contains("field `window`") && e.contains("block `m32`"), "{e}");
+    assert!(
+        e.contains("field `window`") && e.contains("block `m32`"),
+        "{e}"
+    );
     assert!(e.contains("checked before anything is allocated"), "{e}");
 }

@@ -349,7 +349,7 @@ impl Linearisation {
 ///
 /// **Why increments.** Write s_k for the slope of sample k. If the rest of the
 /// loop is LTI (reference and disturbances constant), the increments
-/// Δx[k] = x[k] − x[k−1] of every signal satisfy the same LTI loop with the block
+/// Δx(k) = x(k) − x(k−1) of every signal satisfy the same LTI loop with the block
 /// replaced by the time-varying gain s_k ∈ [lower, upper]: its memory (a
 /// hysteresis loop, the play of a backlash) is in s_k. If that time-varying loop
 /// is stable for every slope history (the gate proves it with the circle
@@ -388,7 +388,11 @@ impl Sector {
     /// Whether `s` lies in the range, with a relative tolerance `tol` of the
     /// range's scale (for tests of blocks against their declared range).
     pub fn contains(&self, s: f64, tol: f64) -> bool {
-        let scale = self.lower.abs().max(self.upper.abs()).max(f64::MIN_POSITIVE);
+        let scale = self
+            .lower
+            .abs()
+            .max(self.upper.abs())
+            .max(f64::MIN_POSITIVE);
         s >= self.lower - tol * scale && s <= self.upper + tol * scale
     }
 }

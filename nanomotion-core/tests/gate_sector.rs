@@ -191,7 +191,11 @@ fn a_piezo_loop_with_hysteresis_and_integral_control_is_proven_by_the_circle_cri
     let c = p.circle.as_ref().expect("circle criterion evaluated");
     let want = sweep_mr(ki, 1.0, 0.9, K0, R);
     assert!(c.holds() && want < 1.0);
-    assert!((c.norm - want).abs() < 1e-6 * want, "{} vs sweep {want}", c.norm);
+    assert!(
+        (c.norm - want).abs() < 1e-6 * want,
+        "{} vs sweep {want}",
+        c.norm
+    );
     assert!((c.m_norm - want / R).abs() < 1e-6 * want / R);
     let text = r.to_string();
     assert!(
@@ -215,11 +219,20 @@ fn an_unstable_centre_slope_is_refused_and_the_graph_does_not_settle() {
     assert!((r.loops[0].points[0].spectral_radius - rho).abs() < 1e-9 && rho > 1.0);
     let f = r.failures().join("\n");
     assert!(
-        f.contains("unstable") && f.contains("at the centre slope k0 = 0.7 of `hyst` (slope range [0.4, 1])"),
+        f.contains("unstable")
+            && f.contains("at the centre slope k0 = 0.7 of `hyst` (slope range [0.4, 1])"),
         "{f}"
     );
     // Allowing unproven loops does not let a known instability run.
-    let allowed = piezo_loop(ki, CH, 1.0, 0.9, 1.0, 4.0, "require: { allow_unproven: \"bench\" }");
+    let allowed = piezo_loop(
+        ki,
+        CH,
+        1.0,
+        0.9,
+        1.0,
+        4.0,
+        "require: { allow_unproven: \"bench\" }",
+    );
     assert!(!check(&allowed).passes());
     // The real hysteresis in the loop: the error never settles; it grows.
     let (mut sched, _) = GraphSpec::from_yaml(&yaml, "t").unwrap().build().unwrap();
@@ -250,8 +263,12 @@ fn a_loop_whose_circle_criterion_fails_stays_unproven_with_the_figure() {
     assert!((c.norm - want).abs() < 1e-6 * want, "{} vs {want}", c.norm);
     let f = r.failures().join("\n");
     assert!(
-        f.contains(&format!("circle criterion: ‖M R‖∞ = {want:.4} ≥ 1 over slopes [0.4, 1] of `hyst`"))
-            && f.contains(&format!("lower the loop gain until ‖M‖∞ = {:.4} < 1/r = 3.3333, or narrow the slope range", want / R)),
+        f.contains(&format!(
+            "circle criterion: ‖M R‖∞ = {want:.4} ≥ 1 over slopes [0.4, 1] of `hyst`"
+        )) && f.contains(&format!(
+            "lower the loop gain until ‖M‖∞ = {:.4} < 1/r = 3.3333, or narrow the slope range",
+            want / R
+        )),
         "{f}"
     );
     // `allow_unproven` lets it run, as for any unproven loop …
@@ -279,7 +296,8 @@ fn a_sector_block_faster_than_the_loop_stays_unproven_with_the_reason() {
     let r = check(&yaml);
     assert!(!r.passes());
     assert!(
-        r.failures()[0].contains("sector block `hyst` runs faster than the loop's analysis rate 500 Hz"),
+        r.failures()[0]
+            .contains("sector block `hyst` runs faster than the loop's analysis rate 500 Hz"),
         "{r}"
     );
 }
@@ -304,8 +322,16 @@ fn a_dead_zone_has_slopes_zero_to_one_and_a_proportional_loop_through_it_is_prov
     assert!(lo < 1e-9 && hi > 1.0 - 1e-9);
     // P control k = 0.5 of 0.1/(z − 0.9) through the dead zone: k0 = 0.5,
     // r = 0.5, M = −kG/(1 + k0 kG).
-    let yaml = piezo_loop(1.0, "type: deadzone, lower: -0.01, upper: 0.01", 1.0, 0.9, 1.0, 0.1, "")
-        .replace("num: [1e0], den: [1.0, -1.0]", "num: [0.5], den: [1.0]");
+    let yaml = piezo_loop(
+        1.0,
+        "type: deadzone, lower: -0.01, upper: 0.01",
+        1.0,
+        0.9,
+        1.0,
+        0.1,
+        "",
+    )
+    .replace("num: [1e0], den: [1.0, -1.0]", "num: [0.5], den: [1.0]");
     let r = check(&yaml);
     assert!(r.passes() && r.proven(), "{r}");
     let n = 200_000;

@@ -85,7 +85,10 @@ impl Block for MovingAverage {
     /// Declared before `build` so the graph compiler can refuse a graph of
     /// many long windows before any is allocated.
     fn planned_bytes(&self, _dt: f64) -> (&'static str, usize) {
-        ("window", self.window.saturating_mul(std::mem::size_of::<f64>()))
+        (
+            "window",
+            self.window.saturating_mul(std::mem::size_of::<f64>()),
+        )
     }
     fn role(&self) -> Role {
         Role::Math

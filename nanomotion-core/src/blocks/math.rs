@@ -454,7 +454,11 @@ impl Block for Deadzone {
     fn sector(&self) -> Option<crate::Sector> {
         // Continuous, slope 0 inside the zone and 1 outside: every chord's
         // slope lies in [0, 1].
-        Some(crate::Sector::new(0.0, 1.0, "dead zone: 0 inside, 1 outside"))
+        Some(crate::Sector::new(
+            0.0,
+            1.0,
+            "dead zone: 0 inside, 1 outside",
+        ))
     }
 }
 

@@ -9,7 +9,27 @@
 //! output limits inside its limits, a gain-scheduled controller at each schedule
 //! point — the report says so), else its exact [`Block::lti`]; inserted rate
 //! transitions are identities (a hold or a sampler, see below). A block with
-//! neither makes its loop *unproven*, named in the report.
+//! neither but with a slope range ([`Block::sector`]) is judged at its centre
+//! slope (below). A block with none of these makes its loop *unproven*, named
+//! in the report.
+//!
+//! **Slope ranges: the circle criterion.** A sector block promises that each
+//! output channel moves by s·(its input's move) between samples, s ∈ [a, b];
+//! with the rest of the loop LTI, the increments of every signal obey the loop
+//! with the block replaced by a time-varying gain s_k. The loop is closed with
+//! each sector block at k0 = (a + b)/2 (its poles, margins and norms are that
+//! model's). If that is unstable the loop fails as unstable, naming the centre
+//! slope. Else M, the transfer from signals added to the sector blocks' outputs to
+//! their inputs, is read off the closed loop (each sector block's part has an
+//! extra input added to its output and an extra output equal to its input, on the
+//! port index `SECTOR_PORT` that no connection uses, so the interconnection leaves them
+//! open), R = diag((b − a)/2) per channel, and ‖M R‖∞ < 1 ([`hinfnorm`]) proves
+//! the loop for every slope history (small gain; [`CircleCheck`]); ‖M R‖∞ ≥ 1
+//! leaves it unproven with the figure and a fix. Sufficient, not necessary; a
+//! sector block must run at the analysis rate (a faster one: unproven, since the
+//! perturbation channel is not lifted). An unproven loop that has analysed points
+//! still fails on an unstable point or a missed bound, with or without
+//! `allow_unproven`.
 //!
 //! **Rates.** A loop is analysed at its *slowest* rate, normally the controller's:
 //! blocks at faster rates are first interconnected at their own rate, then
@@ -298,17 +318,22 @@ impl LoopReport {
     pub fn failures(&self) -> Vec<String> {
         let mut v = Vec::new();
         if !self.unproven.is_empty() && self.allowed.is_none() {
+            // A failed circle criterion carries its own fix.
             let circle_only = self.unproven.iter().all(|u| u.starts_with(CIRCLE_PREFIX));
-            v.push(format!(
-                "loop `{}` is unproven: {} (fix: {}state why it may run with `require: {{ allow_unproven: \"reason\" }}`)",
-                self.name,
-                self.unproven.join("; "),
-                if circle_only {
-                    ""
-                } else {
-                    "give the block a linear model or a slope range, or "
-                }
-            ));
+            let allow = "state why it may run with `require: { allow_unproven: \"reason\" }`";
+            v.push(if circle_only {
+                format!(
+                    "loop `{}` is unproven: {}; or {allow}",
+                    self.name,
+                    self.unproven.join("; ")
+                )
+            } else {
+                format!(
+                    "loop `{}` is unproven: {} (fix: give the block a linear model or a slope range, or {allow})",
+                    self.name,
+                    self.unproven.join("; ")
+                )
+            });
         }
         for p in &self.points {
             if !p.stable {
@@ -602,7 +627,8 @@ impl fmt::Display for GateReport {
                 writeln!(f, "    allowed to run unproven: {r}")?;
             }
             for p in &l.points {
-                if let Some(c) = &p.circle {
+                // (A failed one is among the `unproven` lines.)
+                if let Some(c) = p.circle.as_ref().filter(|c| c.holds()) {
                     writeln!(f, "    {c}{}", at_label(&p.label))?;
                 }
                 for c in &p.learning {
@@ -1548,7 +1574,7 @@ mod tests {
         l.allowed = None;
         l.violations.clear();
         assert!(!l.passes());
-        assert!(l.failures()[0].contains("(fix: state why it may run"));
+        assert!(l.failures()[0].contains("≥ 1; or state why it may run"));
     }
 
     #[test]

@@ -402,12 +402,21 @@ mod tests {
             let mut h = ColemanHodgdon::symmetric(p).unwrap();
             let s = h.sector().unwrap();
             let (a, b) = ((2.0 * p.c - p.b).min(p.b), (2.0 * p.c - p.b).max(p.b));
-            assert!((s.lower - a).abs() < 1e-12 && (s.upper - b).abs() < 1e-12, "{s:?}");
+            assert!(
+                (s.lower - a).abs() < 1e-12 && (s.upper - b).abs() < 1e-12,
+                "{s:?}"
+            );
             let (lo, hi, inside) = increment_ratios(&mut h, &s, 7 + i as u64);
-            assert!(inside, "{p:?}: a ratio outside [{a}, {b}]: seen [{lo}, {hi}]");
+            assert!(
+                inside,
+                "{p:?}: a ratio outside [{a}, {b}]: seen [{lo}, {hi}]"
+            );
             // Attained within 2 % of the range's width.
             let tol = 0.02 * (b - a);
-            assert!((lo - a).abs() < tol && (hi - b).abs() < tol, "{p:?}: [{lo}, {hi}] vs [{a}, {b}]");
+            assert!(
+                (lo - a).abs() < tol && (hi - b).abs() < tol,
+                "{p:?}: [{lo}, {hi}] vs [{a}, {b}]"
+            );
         }
         // Asymmetric with equal b: the declared range holds.
         let mut h =

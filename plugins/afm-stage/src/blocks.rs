@@ -238,7 +238,10 @@ mod tests {
         );
         ch.build(&BuildContext::new("h", DT, 0)).unwrap();
         let s = ch.sector().unwrap();
-        assert!((s.lower - 0.4).abs() < 1e-12 && (s.upper - 1.0).abs() < 1e-12, "{s:?}");
+        assert!(
+            (s.lower - 0.4).abs() < 1e-12 && (s.upper - 1.0).abs() < 1e-12,
+            "{s:?}"
+        );
         let mut rng = nanomotion_core::rng::Rng::new(3);
         let (mut v, mut dir, mut x) = (20.0, 1.0, [0.0]);
         ch.output(Tick::new(0, DT), &[v], &mut x);
@@ -253,11 +256,17 @@ mod tests {
             ch.output(Tick::new(k, DT), &[v], &mut x);
             let r = (x[0] - x0) / dv;
             let rounding = 1e-14 * (x0.abs() + x[0].abs()) / dv.abs();
-            assert!(r >= 0.4 - rounding - 1e-9 && r <= 1.0 + rounding + 1e-9, "{r}");
+            assert!(
+                r >= 0.4 - rounding - 1e-9 && r <= 1.0 + rounding + 1e-9,
+                "{r}"
+            );
             lo = lo.min(r);
             hi = hi.max(r);
         }
-        assert!((lo - 0.4).abs() < 0.02 && (hi - 1.0).abs() < 0.02, "[{lo}, {hi}]");
+        assert!(
+            (lo - 0.4).abs() < 0.02 && (hi - 1.0).abs() < 0.02,
+            "[{lo}, {hi}]"
+        );
         let mut ext = yaml(
             "type: extended_coleman_hodgdon\nv_min_v: 0\nv_max_v: 100\nmodel:\n  trace: {a_um_per_v: 0, b_um_per_v: 1.0, c_per_v: 0, u_um_per_v: 0.7, alpha_per_v: 0.03, d_um_per_v2: 0, e_um_per_v: 0, f_um: 0}\n  retrace: {a_um_per_v: 0, b_um_per_v: 1.0, c_per_v: 0, u_um_per_v: 0.7, alpha_per_v: 0.03, d_um_per_v2: 0, e_um_per_v: 0, f_um: 0}\n",
         );

@@ -871,8 +871,8 @@ fn slope_ratios(b: &mut dyn Block, seed: u64, scale: f64) -> (f64, f64, bool) {
         let rounding = 1e-14 * (y0.abs() + y[0].abs()) / du.abs();
         lo = lo.min(ratio);
         hi = hi.max(ratio);
-        inside &= (ratio >= s.lower - rounding && ratio <= s.upper + rounding)
-            || s.contains(ratio, 1e-9);
+        inside &=
+            (ratio >= s.lower - rounding && ratio <= s.upper + rounding) || s.contains(ratio, 1e-9);
     }
     (lo, hi, inside)
 }
@@ -885,12 +885,27 @@ fn effect_slope_ranges_hold_for_every_sample_and_are_attained() {
     // (block, the range by its closed form, input scale, tight?)
     let cases: Vec<(Box<dyn Block>, (f64, f64), f64, bool)> = vec![
         (Box::new(Backlash::new(0.5)), (0.0, 1.0), 1.0, true),
-        (Box::new(Hysteresis::new(0.03, 1.0, 0.7)), (0.4, 1.0), 30.0, true),
-        (Box::new(Hysteresis::new(2.0, 0.8, 1.3)), (0.8, 1.8), 1.0, true),
+        (
+            Box::new(Hysteresis::new(0.03, 1.0, 0.7)),
+            (0.4, 1.0),
+            30.0,
+            true,
+        ),
+        (
+            Box::new(Hysteresis::new(2.0, 0.8, 1.3)),
+            (0.8, 1.8),
+            1.0,
+            true,
+        ),
         // Bouc–Wen: [0, max(a, 2aβ/(β+γ))], shifted by `linear`.
         (Box::new(BoucWen::new(2.0, 3.0, 1.0)), (0.0, 3.0), 1.0, true),
         (Box::new(BoucWen::new(2.0, 1.0, 1.0)), (0.0, 2.0), 1.0, true),
-        (Box::new(BoucWen::new(-2.0, 3.0, -1.0)), (-3.0, 0.0), 1.0, true),
+        (
+            Box::new(BoucWen::new(-2.0, 3.0, -1.0)),
+            (-3.0, 0.0),
+            1.0,
+            true,
+        ),
         (
             Box::new({
                 let mut b = BoucWen::new(2.0, 3.0, -1.0);
@@ -910,7 +925,10 @@ fn effect_slope_ranges_hold_for_every_sample_and_are_attained() {
             "case {i}: {s:?} vs [{a}, {c}]"
         );
         let (lo, hi, inside) = slope_ratios(b.as_mut(), 100 + i as u64, scale);
-        assert!(inside, "case {i}: a ratio outside [{a}, {c}]: seen [{lo}, {hi}]");
+        assert!(
+            inside,
+            "case {i}: a ratio outside [{a}, {c}]: seen [{lo}, {hi}]"
+        );
         if tight {
             let tol = 0.03 * (c - a);
             assert!(
@@ -944,7 +962,10 @@ fn time_delay_declares_its_buffer_and_many_long_ones_are_refused_before_allocati
     small.build(&ctx(1e-3)).unwrap();
     assert_eq!(small.memory_bytes(), small.planned_bytes(1e-3).1);
     // The longest buffer a block may have: 10⁶ samples.
-    assert_eq!(TimeDelay::new(0.0, 1000.0).planned_bytes(1e-3).1, (1_000_000 + 2) * 8);
+    assert_eq!(
+        TimeDelay::new(0.0, 1000.0).planned_bytes(1e-3).1,
+        (1_000_000 + 2) * 8
+    );
     let mut yaml = String::from(
         "base_rate_hz: 1000\nduration_s: 0.01\nblocks:\n  - { name: c, type: constant, value: 1.0 }\n",
     );
@@ -963,6 +984,9 @@ fn time_delay_declares_its_buffer_and_many_long_ones_are_refused_before_allocati
         .err()
         .expect("refused")
         .to_string();
-    assert!(e.contains("field `max_delay_s`") && e.contains("block `d536`"), "{e}");
+    assert!(
+        e.contains("field `max_delay_s`") && e.contains("block `d536`"),
+        "{e}"
+    );
     assert!(e.contains("checked before anything is allocated"), "{e}");
 }

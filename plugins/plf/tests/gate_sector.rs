@@ -58,7 +58,8 @@ fn effect_blocks_in_a_loop_are_proven_refused_or_unproven_by_their_slope_range()
     let r = check(&graph(2.0, HYST));
     assert!(!r.passes());
     assert!(
-        r.failures()[0].contains("unstable") && r.failures()[0].contains("centre slope k0 = 0.7 of `act`"),
+        r.failures()[0].contains("unstable")
+            && r.failures()[0].contains("centre slope k0 = 0.7 of `act`"),
         "{r}"
     );
     // Backlash [0, 1] under integral control: unproven, with the figure ≥ 1.
@@ -66,12 +67,18 @@ fn effect_blocks_in_a_loop_are_proven_refused_or_unproven_by_their_slope_range()
     assert!(!r.passes() && !r.proven());
     let c = r.loops[0].points[0].circle.as_ref().unwrap();
     assert!(c.norm >= 1.0 - 1e-9, "{}", c.norm);
-    assert!(r.failures()[0].contains("circle criterion: ‖M R‖∞ = "), "{r}");
+    assert!(
+        r.failures()[0].contains("circle criterion: ‖M R‖∞ = "),
+        "{r}"
+    );
     // Friction has no slope range: unproven as before.
     let r = check(&graph(
         0.2,
         "type: friction, coulomb: 0.1, v_stribeck: 0.01, v_eps: 0.001",
     ));
     assert!(!r.passes());
-    assert!(r.failures()[0].contains("has no linear model and no slope range"), "{r}");
+    assert!(
+        r.failures()[0].contains("has no linear model and no slope range"),
+        "{r}"
+    );
 }

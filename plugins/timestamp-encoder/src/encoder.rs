@@ -486,7 +486,10 @@ impl Block for TimestampEncoder {
     fn planned_bytes(&self, _dt: f64) -> (&'static str, usize) {
         // The per-slit (lines) and per-edge (4·lines) error tables `prepare`
         // fills.
-        ("lines", self.lines.saturating_mul(5 * std::mem::size_of::<f64>()))
+        (
+            "lines",
+            self.lines.saturating_mul(5 * std::mem::size_of::<f64>()),
+        )
     }
     fn build(&mut self, ctx: &BuildContext) -> Result<(), ParamError> {
         self.prepare(ctx.seed)

@@ -647,6 +647,9 @@ fn encoder_tables_are_declared_and_many_large_encoders_are_refused_before_alloca
         .err()
         .expect("refused")
         .to_string();
-    assert!(e.contains("field `lines`") && e.contains("block `e102`"), "{e}");
+    assert!(
+        e.contains("field `lines`") && e.contains("block `e102`"),
+        "{e}"
+    );
     assert!(e.contains("checked before anything is allocated"), "{e}");
 }

@@ -78,7 +78,11 @@ impl Block for Backlash {
     }
     fn sector(&self) -> Option<Sector> {
         // y moves only by the part of u's move beyond the play, in u's direction.
-        Some(Sector::new(0.0, 1.0, "backlash: 0 inside the play, 1 when pushed"))
+        Some(Sector::new(
+            0.0,
+            1.0,
+            "backlash: 0 inside the play, 1 when pushed",
+        ))
     }
     fn role(&self) -> Role {
         Role::Plant

@@ -179,13 +179,8 @@ impl Block for BoucWen {
     fn sector(&self) -> Option<Sector> {
         let (lo, hi) = Self::z_slopes(self.a, self.beta, self.gamma, self.z)?;
         let (lower, upper) = (self.linear + lo, self.linear + hi);
-        (lower.is_finite() && upper.is_finite()).then(|| {
-            Sector::new(
-                lower,
-                upper,
-                "Bouc–Wen: linear + dz/du, |z| ≤ a/(β + γ)",
-            )
-        })
+        (lower.is_finite() && upper.is_finite())
+            .then(|| Sector::new(lower, upper, "Bouc–Wen: linear + dz/du, |z| ≤ a/(β + γ)"))
     }
     fn role(&self) -> Role {
         Role::Actuator
