@@ -78,8 +78,7 @@ fn third_party_windows_are_declared_and_refused_before_allocating() {
     let e = GraphSpec::from_yaml(&yaml, "ma.yaml")
         .unwrap()
         .build()
-        .err()
-        .expect("refused")
+        .expect_err("refused")
         .to_string();
     assert!(
         e.contains("field `window`") && e.contains("block `m32`"),

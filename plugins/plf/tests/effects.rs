@@ -883,7 +883,8 @@ fn slope_ratios(b: &mut dyn Block, seed: u64, scale: f64) -> (f64, f64, bool) {
 #[test]
 fn effect_slope_ranges_hold_for_every_sample_and_are_attained() {
     // (block, the range by its closed form, input scale, tight?)
-    let cases: Vec<(Box<dyn Block>, (f64, f64), f64, bool)> = vec![
+    type Case = (Box<dyn Block>, (f64, f64), f64, bool);
+    let cases: Vec<Case> = vec![
         (Box::new(Backlash::new(0.5)), (0.0, 1.0), 1.0, true),
         (
             Box::new(Hysteresis::new(0.03, 1.0, 0.7)),
@@ -951,10 +952,10 @@ fn effect_slope_ranges_hold_for_every_sample_and_are_attained() {
     }
 }
 
-/// Issue 25 (class 3): `time_delay` declares its ring buffer (⌈max_delay_s/dt⌉
-/// + 2 samples) before it is built, so a graph of many long ones is refused
-/// naming `max_delay_s` before any buffer is allocated (550 × 10⁶ samples =
-/// 4.4 GB > 4 GiB).
+/// Issue 25 (class 3): `time_delay` declares its ring buffer (two samples more
+/// than ⌈max_delay_s/dt⌉) before it is built, so a graph of many long ones is
+/// refused naming `max_delay_s` before any buffer is allocated (550 × 10⁶
+/// samples = 4.4 GB > 4 GiB).
 #[test]
 fn time_delay_declares_its_buffer_and_many_long_ones_are_refused_before_allocating() {
     let mut small = TimeDelay::new(0.002, 0.0105);
@@ -981,8 +982,7 @@ fn time_delay_declares_its_buffer_and_many_long_ones_are_refused_before_allocati
     let e = GraphSpec::from_yaml(&yaml, "delays.yaml")
         .unwrap()
         .build()
-        .err()
-        .expect("refused")
+        .expect_err("refused")
         .to_string();
     assert!(
         e.contains("field `max_delay_s`") && e.contains("block `d536`"),

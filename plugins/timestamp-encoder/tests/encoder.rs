@@ -644,8 +644,7 @@ fn encoder_tables_are_declared_and_many_large_encoders_are_refused_before_alloca
     let e = nanomotion_core::graph::GraphSpec::from_yaml(&yaml, "encoders.yaml")
         .unwrap()
         .build()
-        .err()
-        .expect("refused")
+        .expect_err("refused")
         .to_string();
     assert!(
         e.contains("field `lines`") && e.contains("block `e102`"),
