@@ -990,3 +990,41 @@ fn time_delay_declares_its_buffer_and_many_long_ones_are_refused_before_allocati
     );
     assert!(e.contains("checked before anything is allocated"), "{e}");
 }
+
+/// Issue 25: `creep` is linear and says so (`Block::lti`), so loops through it
+/// can be analysed: its model, stepped from rest, reproduces the block's
+/// output on a random input sample by sample.
+#[test]
+fn creep_lti_model_reproduces_the_block() {
+    use nanomotion_core::rng::Rng;
+    let mut b = Creep::new(vec![
+        CreepTerm {
+            gain: 0.05,
+            tau_s: 0.01,
+        },
+        CreepTerm {
+            gain: 0.1,
+            tau_s: 0.3,
+        },
+    ]);
+    b.build(&ctx(DT)).unwrap();
+    let m = b.lti().expect("creep is LTI");
+    assert_eq!((m.nstates(), m.dt), (2, Some(DT)));
+    let mut rng = Rng::new(9);
+    let mut x = [0.0; 2];
+    let mut y = [0.0];
+    for k in 0..2000u64 {
+        let u = if k == 0 {
+            0.0
+        } else {
+            rng.uniform_in(-1.0, 1.0)
+        };
+        b.output(Tick::new(k, DT), &[u], &mut y);
+        let want = m.c[(0, 0)] * x[0] + m.c[(0, 1)] * x[1] + m.d[(0, 0)] * u;
+        assert!((y[0] - want).abs() < 1e-12, "k = {k}: {} vs {want}", y[0]);
+        x = [
+            m.a[(0, 0)] * x[0] + m.b[(0, 0)] * u,
+            m.a[(1, 1)] * x[1] + m.b[(1, 0)] * u,
+        ];
+    }
+}

@@ -71,6 +71,18 @@ fn effect_blocks_in_a_loop_are_proven_refused_or_unproven_by_their_slope_range()
         r.failures()[0].contains("circle criterion: ‖M R‖∞ = "),
         "{r}"
     );
+    // Hysteresis then creep (linear, `Block::lti`) in the loop: still proven.
+    let yaml = graph(0.2, HYST).replace(
+        "  - { from: act.y, to: plant.u }\n",
+        "  - { from: act.y, to: creep.u }\n  - { from: creep.y, to: plant.u }\n",
+    );
+    let yaml = yaml.replace(
+        "  - { name: plant,",
+        "  - { name: creep, type: creep, terms: [{ gain: 0.05, tau_s: 0.05 }, { gain: 0.05, tau_s: 0.5 }] }\n  - { name: plant,",
+    );
+    let r = check(&yaml);
+    assert!(r.passes() && r.proven(), "{r}");
+    assert_eq!(r.loops[0].blocks.len(), 5);
     // Friction has no slope range: unproven as before.
     let r = check(&graph(
         0.2,
