@@ -1028,3 +1028,37 @@ fn creep_lti_model_reproduces_the_block() {
         ];
     }
 }
+
+/// Issue 25: `time_delay` gives its exact LTI model (integer and fractional
+/// delays): stepped from rest it reproduces the block; above 512 samples none.
+#[test]
+fn time_delay_lti_model_reproduces_the_block() {
+    use nanomotion_core::lti::SsStepper;
+    use nanomotion_core::rng::Rng;
+    for (tau, states) in [(0.0, 0), (0.3e-3, 1), (3e-3, 3), (2.4e-3, 3)] {
+        let mut b = TimeDelay::new(tau, 0.01);
+        b.build(&ctx(DT)).unwrap();
+        let m = b.lti().expect("a short delay is LTI");
+        assert_eq!(m.nstates(), states, "τ = {tau}");
+        let mut sim = SsStepper::new(&m).unwrap();
+        let mut rng = Rng::new(4);
+        let mut y = [0.0];
+        for k in 0..500u64 {
+            let u = if k == 0 {
+                0.0
+            } else {
+                rng.uniform_in(-1.0, 1.0)
+            };
+            b.output(Tick::new(k, DT), &[u], &mut y);
+            let want = sim.step_siso(u);
+            assert!(
+                (y[0] - want).abs() < 1e-12,
+                "τ = {tau}, k = {k}: {} vs {want}",
+                y[0]
+            );
+        }
+    }
+    let mut long = TimeDelay::new(0.6, 1.0);
+    long.build(&ctx(DT)).unwrap();
+    assert!(long.lti().is_none());
+}

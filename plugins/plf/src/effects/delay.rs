@@ -3,6 +3,9 @@
 use super::check_len;
 use nanomotion_core::Params;
 use nanomotion_core::block::check;
+use nanomotion_core::blocks::linear::MAX_DENSE_DELAY_STATES;
+use nanomotion_core::lti::StateSpace;
+use nanomotion_core::nalgebra::DMatrix;
 use nanomotion_core::{Block, BuildContext, ParamError, Port, Role, Tick, Tunable};
 use serde::{Deserialize, Serialize};
 
@@ -39,6 +42,9 @@ pub struct TimeDelay {
     frac: f64,
     #[serde(skip)]
     started: bool,
+    /// The period it was built for (s); 0 before `build`.
+    #[serde(skip)]
+    dt: f64,
 }
 
 impl TimeDelay {
@@ -52,6 +58,7 @@ impl TimeDelay {
             n: 0,
             frac: 0.0,
             started: false,
+            dt: 0.0,
         }
     }
 
@@ -118,7 +125,29 @@ impl Block for TimeDelay {
         self.n = n;
         self.frac = frac;
         self.started = false;
+        self.dt = ctx.dt;
         Ok(())
+    }
+    /// The exact model of [`Block::output`]: y_k = (1 − f)·u_{k−n} + f·u_{k−n−1}
+    /// (τ = (n + f)·dt), a shift register of the last n (+1 if f > 0) inputs,
+    /// up to [`MAX_DENSE_DELAY_STATES`] states like the core's `delay` (a
+    /// longer delay has none: its loop stays unproven).
+    fn lti(&self) -> Option<StateSpace> {
+        let states = self.n + usize::from(self.frac > 0.0);
+        if self.dt <= 0.0 || states > MAX_DENSE_DELAY_STATES {
+            return None;
+        }
+        // x_j = u_{k−j}, j = 1..=states; coefficient of u_{k−j} in y: taps[j].
+        let mut taps = vec![0.0; states + 1];
+        taps[self.n] += 1.0 - self.frac;
+        if self.frac > 0.0 {
+            taps[self.n + 1] += self.frac;
+        }
+        let a = DMatrix::from_fn(states, states, |i, j| if i == j + 1 { 1.0 } else { 0.0 });
+        let b = DMatrix::from_fn(states, 1, |i, _| if i == 0 { 1.0 } else { 0.0 });
+        let c = DMatrix::from_fn(1, states, |_, j| taps[j + 1]);
+        let d = DMatrix::from_element(1, 1, taps[0]);
+        StateSpace::new(a, b, c, d, Some(self.dt)).ok()
     }
     fn planned_bytes(&self, dt: f64) -> (&'static str, usize) {
         // Out of range: left to `build`'s message.

@@ -41,9 +41,8 @@
 //! variable `input`, a polynomial gain whose slope u·g'(u) + g(u) grows with |u|
 //! (unless the gain is constant).
 //! `creep`, `time_delay` and `unmodeled_resonance` are linear (dynamic), not
-//! static slopes: `creep`, `axis_coupling` and `unmodeled_resonance` give their
-//! LTI models (`Block::lti`); `time_delay` (a fractional delay of up to 10⁶
-//! samples) gives none yet, so a loop through it stays unproven.
+//! static slopes: they give their LTI models (`Block::lti`; `time_delay` up to
+//! 512 samples, like the core's `delay`), as does `axis_coupling`.
 
 use nanomotion_core::ParamError;
 
