@@ -346,6 +346,60 @@ fn a_dead_zone_has_slopes_zero_to_one_and_a_proportional_loop_through_it_is_prov
     assert!((c.norm - want).abs() < 1e-6 * want, "{} vs {want}", c.norm);
 }
 
+/// Two sector blocks in series (hysteresis [0.4, 1] then a dead zone [0, 1])
+/// under P control k of 0.1/(z − 0.9): M is 2 × 2,
+/// M = [[−k2 CG, −CG], [1, −k1 CG]]/(1 + k1 k2 CG) from (w1, w2) to (u1, u2),
+/// and ‖M R‖∞ is the largest singular value of M·diag(r1, r2) over a sweep.
+#[test]
+fn two_sector_blocks_are_judged_together_by_the_largest_singular_value() {
+    let kp = 0.5;
+    let yaml = piezo_loop(1.0, CH, 1.0, 0.9, 1.0, 0.1, "")
+        .replace(
+            "num: [1e0], den: [1.0, -1.0]",
+            &format!("num: [{kp}], den: [1.0]"),
+        )
+        .replace(
+            "  - { from: hyst.y, to: plant.u }\n",
+            "  - { from: hyst.y, to: dz.u }\n  - { from: dz.y, to: plant.u }\n",
+        )
+        .replace(
+            "  - { name: plant,",
+            "  - { name: dz, type: deadzone, lower: -0.01, upper: 0.01 }\n  - { name: plant,",
+        );
+    let r = check(&yaml);
+    let l = &r.loops[0];
+    assert_eq!(l.sectors.len(), 2, "{r}");
+    let c = l.points[0].circle.as_ref().expect("evaluated");
+    let (k1, r1, k2, r2) = (K0, R, 0.5, 0.5);
+    let n = 100_000;
+    let want = (0..=n)
+        .map(|i| {
+            let z = Complex::from_polar(1.0, PI * i as f64 / n as f64);
+            let cg = kp * 0.1 / (z - 0.9);
+            let d = cg * (k1 * k2) + 1.0;
+            // M·R, entries m[row][col].
+            let m = [
+                [-cg * k2 / d * r1, -cg / d * r2],
+                [Complex::new(1.0, 0.0) / d * r1, -cg * k1 / d * r2],
+            ];
+            // Largest eigenvalue of Mᴴ M (2 × 2 Hermitian).
+            let h = |i: usize, j: usize| m[0][i].conj() * m[0][j] + m[1][i].conj() * m[1][j];
+            let (a, b, dd) = (h(0, 0).re, h(0, 1), h(1, 1).re);
+            let tr = a + dd;
+            let det = a * dd - b.norm_sqr();
+            ((tr + (tr * tr - 4.0 * det).max(0.0).sqrt()) / 2.0).sqrt()
+        })
+        .fold(0.0, f64::max);
+    assert!(
+        (c.norm - want).abs() < 1e-6 * want,
+        "{} vs sweep {want}",
+        c.norm
+    );
+    assert_eq!(c.holds(), r.passes(), "{r}");
+    let names: Vec<&str> = c.blocks.iter().map(|b| b.0.as_str()).collect();
+    assert_eq!(names, vec!["hyst", "dz"]);
+}
+
 proptest! {
     #![proptest_config(ProptestConfig { cases: 40, rng_seed: proptest::test_runner::RngSeed::Fixed(25), ..ProptestConfig::default() })]
 
