@@ -54,3 +54,35 @@ fn third_party_parameters_are_validated() {
         .to_string();
     assert!(err.contains("`window`"), "{err}");
 }
+
+/// Issue 25 (class 3): the third-party example declares its window before it
+/// is built, so many of the longest windows (2^24 samples, 128 MiB each) are
+/// refused naming `window` before any is allocated.
+#[test]
+fn third_party_windows_are_declared_and_refused_before_allocating() {
+    use nanomotion::core::Block;
+    let ma = third_party_block::MovingAverage::new(1000);
+    assert_eq!(ma.planned_bytes(1e-3), ("window", 8000));
+    let mut yaml = String::from(
+        "base_rate_hz: 100\nduration_s: 0.1\nblocks:\n  - { name: c, type: constant, value: 1.0 }\n",
+    );
+    for i in 0..40 {
+        yaml.push_str(&format!(
+            "  - {{ name: m{i}, type: moving_average, window: 16777216 }}\n"
+        ));
+    }
+    yaml.push_str("connections:\n");
+    for i in 0..40 {
+        yaml.push_str(&format!("  - {{ from: c.y, to: m{i}.u }}\n"));
+    }
+    let e = GraphSpec::from_yaml(&yaml, "ma.yaml")
+        .unwrap()
+        .build()
+        .expect_err("refused")
+        .to_string();
+    assert!(
+        e.contains("field `window`") && e.contains("block `m32`"),
+        "{e}"
+    );
+    assert!(e.contains("checked before anything is allocated"), "{e}");
+}

@@ -256,6 +256,16 @@ pub trait Block: Send + Debug {
     fn linearisation(&self) -> Option<Linearisation> {
         None
     }
+    /// The block's *incremental sector* (slope range), if its input–output map
+    /// has one: see [`Sector`]. The stability gate ([`crate::gate`]) uses it for
+    /// a block with neither [`Block::linearisation`] nor [`Block::lti`]: the loop
+    /// is judged at the centre slope and proven for every slope history in the
+    /// range by the circle criterion. Valid after [`Block::build`] (the range may
+    /// depend on the built state). `None` (the default): no such bound is known,
+    /// and the block's loops stay "unproven".
+    fn sector(&self) -> Option<Sector> {
+        None
+    }
     /// For learning blocks (repetitive control and its variants): the filters and
     /// delay range the stability gate ([`crate::gate`]) needs to evaluate the
     /// convergence criteria (5.5)/(5.9) with the T of the loop the block is in.
@@ -317,6 +327,73 @@ impl Linearisation {
             points: vec![(String::new(), model)],
             note: note.into(),
         }
+    }
+}
+
+/// What [`Block::sector`] returns: an **incremental sector** (slope range)
+/// `[lower, upper]` of a square block (total input width = total output width,
+/// ports concatenated, channel i of the output paired with channel i of the
+/// input).
+///
+/// **The promise.** For any two successive samples k−1, k of the block's rate and
+/// every channel i, with finite inputs,
+///
+/// ```text
+/// y_i[k] − y_i[k−1] = s · (u_i[k] − u_i[k−1])   for some s ∈ [lower, upper]
+/// ```
+///
+/// (s may depend on the channel, the sample and the block's state; when the input
+/// does not move the output does not move). It must hold from the block's built
+/// state on, for every finite input sequence — a bound that holds only for
+/// bounded inputs or from some states is not a sector.
+///
+/// **Why increments.** Write s_k for the slope of sample k. If the rest of the
+/// loop is LTI (reference and disturbances constant), the increments
+/// Δx(k) = x(k) − x(k−1) of every signal satisfy the same LTI loop with the block
+/// replaced by the time-varying gain s_k ∈ [lower, upper]: its memory (a
+/// hysteresis loop, the play of a backlash) is in s_k. If that time-varying loop
+/// is stable for every slope history (the gate proves it with the circle
+/// criterion, see [`crate::gate`]), the increments decay exponentially and the
+/// loop settles, whatever the block's memory; equilibria need no separate proof.
+/// A sector on values (y/u ∈ [a, b]) would not do: hysteresis and backlash
+/// have none (y ≠ 0 at u = 0).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Sector {
+    /// Smallest slope (finite).
+    pub lower: f64,
+    /// Largest slope (finite, ≥ `lower`).
+    pub upper: f64,
+    /// Where the range comes from, e.g. `"Coleman–Hodgdon: slopes between 2c − b and
+    /// b"` (shown in the gate's report).
+    pub note: String,
+}
+
+impl Sector {
+    /// The range `[lower, upper]` with a note.
+    pub fn new(lower: f64, upper: f64, note: impl Into<String>) -> Self {
+        Self {
+            lower,
+            upper,
+            note: note.into(),
+        }
+    }
+    /// The centre slope k0 = (lower + upper)/2: the gain the loop is judged at.
+    pub fn centre(&self) -> f64 {
+        0.5 * (self.lower + self.upper)
+    }
+    /// The radius r = (upper − lower)/2: how far a slope may be from the centre.
+    pub fn radius(&self) -> f64 {
+        0.5 * (self.upper - self.lower)
+    }
+    /// Whether `s` lies in the range, with a relative tolerance `tol` of the
+    /// range's scale (for tests of blocks against their declared range).
+    pub fn contains(&self, s: f64, tol: f64) -> bool {
+        let scale = self
+            .lower
+            .abs()
+            .max(self.upper.abs())
+            .max(f64::MIN_POSITIVE);
+        s >= self.lower - tol * scale && s <= self.upper + tol * scale
     }
 }
 

@@ -65,7 +65,7 @@ pub use block::MeasuredData;
 // The derive (`nanomotion-derive`) names `::nanomotion_core` paths, in this crate too.
 extern crate self as nanomotion_core;
 
-pub use block::{Block, BuildContext, Linearisation, Port, Tick, Tunable};
+pub use block::{Block, BuildContext, Linearisation, Port, Sector, Tick, Tunable};
 pub use doc::Params;
 pub use doc::{BlockDoc, ParamDoc, Role};
 pub use error::{GraphError, ParamError};

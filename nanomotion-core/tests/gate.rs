@@ -221,8 +221,11 @@ fn a_saturation_is_judged_on_its_linearisation_and_says_so() {
     assert!(r.to_string().contains("judged on its linearisation"));
 }
 
+/// A dead zone (slopes [0, 1]) under integral action: at slope 0 the loop is
+/// open around the plant's integrator, so the circle criterion cannot prove it
+/// (‖M R‖∞ ≥ r/k0 = 1 at DC): unproven, unless allowed.
 #[test]
-fn a_block_without_a_model_makes_the_loop_unproven_unless_allowed() {
+fn a_loop_the_gate_cannot_prove_is_unproven_unless_allowed() {
     let yaml = integrator_loop(0.4, 0, "+-", "").replace(
         "  - { from: k.y, to: plant.u }\n",
         "  - { from: k.y, to: dz.u }\n  - { from: dz.y, to: plant.u }\n",
@@ -234,6 +237,7 @@ fn a_block_without_a_model_makes_the_loop_unproven_unless_allowed() {
     let (_, r) = build(&yaml);
     assert!(!r.passes());
     assert!(r.failures()[0].contains("unproven") && r.failures()[0].contains("`dz`"));
+    assert!(r.failures()[0].contains("circle criterion"), "{r}");
     let allowed = yaml.replace(
         "duration_s: 0.5",
         "duration_s: 0.5\nrequire: { allow_unproven: \"dead zone tested on the bench\" }",

@@ -82,6 +82,14 @@ impl Block for MovingAverage {
     fn memory_bytes(&self) -> usize {
         self.ring.len() * std::mem::size_of::<f64>()
     }
+    /// Declared before `build` so the graph compiler can refuse a graph of
+    /// many long windows before any is allocated.
+    fn planned_bytes(&self, _dt: f64) -> (&'static str, usize) {
+        (
+            "window",
+            self.window.saturating_mul(std::mem::size_of::<f64>()),
+        )
+    }
     fn role(&self) -> Role {
         Role::Math
     }

@@ -436,6 +436,8 @@ impl crate::Tunable for Saturation {
 
 /// `deadzone`: y = 0 inside `[lower, upper]`, y = u − upper above it and
 /// y = u − lower below it (continuous, slope 1 outside the zone), element-wise.
+/// Slope range ([`Block::sector`]) [0, 1]: between two samples y moves by a part
+/// of u's move, in its direction.
 #[derive(Debug, Clone, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
 #[block(type_name = "deadzone", role = Math, ports = "u[n] -> y[n]")]
@@ -489,6 +491,15 @@ impl Block for Deadzone {
         for (yi, &ui) in y.iter_mut().zip(u) {
             *yi = self.map(ui);
         }
+    }
+    fn sector(&self) -> Option<crate::Sector> {
+        // Continuous, slope 0 inside the zone and 1 outside: every chord's
+        // slope lies in [0, 1].
+        Some(crate::Sector::new(
+            0.0,
+            1.0,
+            "dead zone: 0 inside, 1 outside",
+        ))
     }
 }
 

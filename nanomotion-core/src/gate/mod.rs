@@ -9,7 +9,27 @@
 //! output limits inside its limits, a gain-scheduled controller at each schedule
 //! point — the report says so), else its exact [`Block::lti`]; inserted rate
 //! transitions are identities (a hold or a sampler, see below). A block with
-//! neither makes its loop *unproven*, named in the report.
+//! neither but with a slope range ([`Block::sector`]) is judged at its centre
+//! slope (below). A block with none of these makes its loop *unproven*, named
+//! in the report.
+//!
+//! **Slope ranges: the circle criterion.** A sector block promises that each
+//! output channel moves by s·(its input's move) between samples, s ∈ [a, b];
+//! with the rest of the loop LTI, the increments of every signal obey the loop
+//! with the block replaced by a time-varying gain s_k. The loop is closed with
+//! each sector block at k0 = (a + b)/2 (its poles, margins and norms are that
+//! model's). If that is unstable the loop fails as unstable, naming the centre
+//! slope. Else M, the transfer from signals added to the sector blocks' outputs to
+//! their inputs, is read off the closed loop (each sector block's part has an
+//! extra input added to its output and an extra output equal to its input, on the
+//! port index `SECTOR_PORT` that no connection uses, so the interconnection leaves them
+//! open), R = diag((b − a)/2) per channel, and ‖M R‖∞ < 1 ([`hinfnorm`]) proves
+//! the loop for every slope history (small gain; [`CircleCheck`]); ‖M R‖∞ ≥ 1
+//! leaves it unproven with the figure and a fix. Sufficient, not necessary; a
+//! sector block must run at the analysis rate (a faster one: unproven, since the
+//! perturbation channel is not lifted). An unproven loop that has analysed points
+//! still fails on an unstable point or a missed bound, with or without
+//! `allow_unproven`.
 //!
 //! **Rates.** A loop is analysed at its *slowest* rate, normally the controller's:
 //! blocks at faster rates are first interconnected at their own rate, then
@@ -74,7 +94,7 @@ pub use crate::learning;
 pub use crate::learning::{LearningCheck, LearningModel};
 pub use crate::require::{Bounds, Require};
 
-use crate::block::{Block, Role};
+use crate::block::{Block, Role, Sector};
 use crate::lti::{Complex, FrequencyEvaluator, StateSpace, hinfnorm, stability_margins};
 use crate::scheduler::{BlockWiring, Scheduler};
 use assemble::{Edge, Part, compose, lift};
@@ -160,6 +180,87 @@ pub struct PointAnalysis {
     /// The loop transfer L at the break (negative feedback: the loop is
     /// (I + L)⁻¹), when it was formed.
     pub loop_transfer: Option<StateSpace>,
+    /// The circle criterion over the slope ranges of the loop's sector blocks
+    /// (when it has any and the loop at the centre slopes is stable).
+    pub circle: Option<CircleCheck>,
+}
+
+/// The circle criterion (small-gain form) of a loop with sector blocks
+/// ([`Block::sector`]) at one schedule point: M is the transfer of the loop
+/// closed at the centre slopes from signals added to the sector blocks' outputs
+/// to their inputs, R = diag(r_i) their slope radii. ‖M R‖∞ < 1 proves the loop
+/// stable for every slope history in the ranges.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CircleCheck {
+    /// The sector blocks: name and slope range [lower, upper].
+    pub blocks: Vec<(String, f64, f64)>,
+    /// ‖M R‖∞.
+    pub norm: f64,
+    /// ‖M‖∞ (for the fix: ‖M‖∞ < 1/max r_i suffices).
+    pub m_norm: f64,
+}
+
+impl CircleCheck {
+    /// ‖M R‖∞ < 1: the loop is stable for every slope history.
+    pub fn holds(&self) -> bool {
+        self.norm < 1.0
+    }
+    /// The largest slope radius r = (upper − lower)/2.
+    pub fn max_radius(&self) -> f64 {
+        self.blocks
+            .iter()
+            .map(|(_, a, b)| 0.5 * (b - a))
+            .fold(0.0, f64::max)
+    }
+    /// What to change when the criterion fails.
+    pub fn fix(&self) -> String {
+        format!(
+            "lower the loop gain until ‖M‖∞ = {:.4} < 1/r = {:.4}, or narrow the slope range",
+            self.m_norm,
+            1.0 / self.max_radius()
+        )
+    }
+    fn ranges(&self) -> String {
+        self.blocks
+            .iter()
+            .map(|(n, a, b)| format!("[{}, {}] of `{n}`", fmt_g(*a), fmt_g(*b)))
+            .collect::<Vec<_>>()
+            .join(", ")
+    }
+}
+
+impl fmt::Display for CircleCheck {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(
+            f,
+            "circle criterion: ‖M R‖∞ = {:.4} {} 1 over slopes {}",
+            self.norm,
+            if self.holds() { "<" } else { "≥" },
+            self.ranges()
+        )
+    }
+}
+
+/// A number to 6 significant digits, trailing zeros dropped (`0.4`, `1.5e-7`).
+fn fmt_g(x: f64) -> String {
+    if x == 0.0 || !x.is_finite() {
+        return format!("{x}");
+    }
+    let trim = |s: &str| -> String {
+        if s.contains('.') {
+            s.trim_end_matches('0').trim_end_matches('.').to_string()
+        } else {
+            s.to_string()
+        }
+    };
+    let mag = x.abs().log10().floor() as i32;
+    if (-3..6).contains(&mag) {
+        trim(&format!("{:.*}", (5 - mag).max(0) as usize, x))
+    } else {
+        let s = format!("{x:.5e}");
+        let (mantissa, exp) = s.split_once('e').unwrap_or((&s, "0"));
+        format!("{}e{exp}", trim(mantissa))
+    }
 }
 
 /// The analysis of one loop.
@@ -185,46 +286,63 @@ pub struct LoopReport {
     pub violations: Vec<String>,
     /// The reason an unproven loop may run (`allow_unproven`).
     pub allowed: Option<String>,
+    /// The sector blocks of the loop ([`Block::sector`]), judged at their
+    /// centre slopes: name, centre slope k0 and slope range [lower, upper].
+    pub sectors: Vec<(String, f64, f64, f64)>,
 }
 
 impl LoopReport {
-    /// The loop was analysed and every schedule point is stable.
+    /// The loop was analysed (proven: not unproven) and every schedule point is
+    /// stable.
     pub fn stable(&self) -> bool {
-        self.unproven.is_empty()
-            && !self.points.is_empty()
-            && self
-                .points
-                .iter()
-                .all(|p| p.stable && p.learning.iter().all(LearningCheck::holds))
+        self.unproven.is_empty() && !self.points.is_empty() && self.points_hold()
     }
-    /// Stable and within every bound, or unproven with a reason to run.
+    /// Every analysed schedule point is stable and its learning criteria hold
+    /// (true when no point was analysed).
+    fn points_hold(&self) -> bool {
+        self.points
+            .iter()
+            .all(|p| p.stable && p.learning.iter().all(LearningCheck::holds))
+    }
+    /// Stable and within every bound; or unproven with a reason to run, and then
+    /// still no analysed point unstable and no bound missed (an unproven loop is
+    /// allowed to run without a proof, not with a known instability).
     pub fn passes(&self) -> bool {
         if self.unproven.is_empty() {
             self.stable() && self.violations.is_empty()
         } else {
-            self.allowed.is_some()
+            self.allowed.is_some() && self.points_hold() && self.violations.is_empty()
         }
     }
     /// One line per reason the loop fails the gate.
     pub fn failures(&self) -> Vec<String> {
         let mut v = Vec::new();
-        if !self.unproven.is_empty() {
-            if self.allowed.is_none() {
-                v.push(format!(
-                    "loop `{}` is unproven: {} (fix: give the block a linear model, or state why it may run with `require: {{ allow_unproven: \"reason\" }}`)",
+        if !self.unproven.is_empty() && self.allowed.is_none() {
+            // A failed circle criterion carries its own fix.
+            let circle_only = self.unproven.iter().all(|u| u.starts_with(CIRCLE_PREFIX));
+            let allow = "state why it may run with `require: { allow_unproven: \"reason\" }`";
+            v.push(if circle_only {
+                format!(
+                    "loop `{}` is unproven: {}; or {allow}",
                     self.name,
                     self.unproven.join("; ")
-                ));
-            }
-            return v;
+                )
+            } else {
+                format!(
+                    "loop `{}` is unproven: {} (fix: give the block a linear model or a slope range, or {allow})",
+                    self.name,
+                    self.unproven.join("; ")
+                )
+            });
         }
         for p in &self.points {
             if !p.stable {
                 v.push(format!(
-                    "loop `{}`{} is unstable: closed-loop pole of modulus {:.6} ≥ 1",
+                    "loop `{}`{} is unstable: closed-loop pole of modulus {:.6} ≥ 1{}",
                     self.name,
                     at_label(&p.label),
-                    p.spectral_radius
+                    p.spectral_radius,
+                    self.at_centre_slopes()
                 ));
             }
             for c in p.learning.iter().filter(|c| !c.holds()) {
@@ -246,6 +364,35 @@ impl LoopReport {
         v
     }
 }
+
+impl LoopReport {
+    /// `" at the centre slope k0 = … of `b` (slope range [a, b])"`, or `""`
+    /// without sector blocks.
+    fn at_centre_slopes(&self) -> String {
+        if self.sectors.is_empty() {
+            return String::new();
+        }
+        let v: Vec<String> = self
+            .sectors
+            .iter()
+            .map(|(n, k0, a, b)| {
+                format!(
+                    "k0 = {} of `{n}` (slope range [{}, {}])",
+                    fmt_g(*k0),
+                    fmt_g(*a),
+                    fmt_g(*b)
+                )
+            })
+            .collect();
+        format!(" at the centre slope {}", v.join(", "))
+    }
+}
+
+/// How the `linearised` entry of a sector block says what it is judged on.
+const CENTRE_SLOPE: &str = "judged at the centre slope";
+
+/// How an unproven reason from a failed circle criterion starts.
+const CIRCLE_PREFIX: &str = "circle criterion";
 
 fn at_label(label: &str) -> String {
     if label.is_empty() {
@@ -388,7 +535,7 @@ impl fmt::Display for GateReport {
             )?;
         }
         for l in &self.loops {
-            if !l.unproven.is_empty() {
+            if !l.unproven.is_empty() && l.points.is_empty() {
                 writeln!(
                     f,
                     "  {:<14} {:>9} {:>8} {:>8} {:>8} {:>8} {:>8} {:>9}  {}",
@@ -427,6 +574,14 @@ impl fmt::Display for GateReport {
                     "LEARNING FAILS"
                 } else if !l.violations.is_empty() {
                     "VIOLATES"
+                } else if !l.unproven.is_empty() {
+                    if l.allowed.is_some() {
+                        "UNPROVEN, allowed"
+                    } else {
+                        "UNPROVEN"
+                    }
+                } else if p.circle.is_some() {
+                    "ok (circle)"
                 } else if l.linearised.is_empty() {
                     "ok"
                 } else {
@@ -459,7 +614,11 @@ impl fmt::Display for GateReport {
                 writeln!(f, "    broken at {}", p.break_at)?;
             }
             for n in &l.linearised {
-                writeln!(f, "    judged on its linearisation: {n}")?;
+                if n.contains(CENTRE_SLOPE) {
+                    writeln!(f, "    {n}")?;
+                } else {
+                    writeln!(f, "    judged on its linearisation: {n}")?;
+                }
             }
             for u in &l.unproven {
                 writeln!(f, "    unproven: {u}")?;
@@ -468,6 +627,10 @@ impl fmt::Display for GateReport {
                 writeln!(f, "    allowed to run unproven: {r}")?;
             }
             for p in &l.points {
+                // (A failed one is among the `unproven` lines.)
+                if let Some(c) = p.circle.as_ref().filter(|c| c.holds()) {
+                    writeln!(f, "    {c}{}", at_label(&p.label))?;
+                }
                 for c in &p.learning {
                     writeln!(f, "    {c}")?;
                 }
@@ -493,8 +656,15 @@ impl fmt::Display for GateReport {
     }
 }
 
-/// The model(s) of one block: points, and the linearisation note if any.
-type BlockModels = (Vec<(String, StateSpace)>, Option<String>);
+/// The model(s) of one block: points, the linearisation note if any, and the
+/// block's slope range if it is judged at its centre slope.
+type BlockModels = (Vec<(String, StateSpace)>, Option<String>, Option<Sector>);
+
+/// The port index of the two extra ports of a sector block's part (an input
+/// added to its output, an output equal to its input): no connection uses it,
+/// so [`compose`] leaves them open and the transfer M of the circle criterion
+/// can be read off the closed loop.
+const SECTOR_PORT: usize = usize::MAX;
 
 fn block_models(block: &dyn Block, w: &BlockWiring) -> Result<BlockModels, String> {
     let in_w: usize = w.inputs.iter().map(|p| p.width).sum();
@@ -527,9 +697,33 @@ fn block_models(block: &dyn Block, w: &BlockWiring) -> Result<BlockModels, Strin
         (lin.points, Some(format!("`{}`: {}", w.name, lin.note)))
     } else if let Some(m) = block.lti() {
         (vec![(String::new(), m)], None)
+    } else if let Some(s) = block.sector() {
+        if !(s.lower.is_finite() && s.upper.is_finite() && s.lower <= s.upper) {
+            return Err(format!(
+                "`{}` ({}) declares the slope range [{}, {}], not a finite range with lower ≤ upper",
+                w.name, w.type_name, s.lower, s.upper
+            ));
+        }
+        if in_w != out_w {
+            return Err(format!(
+                "`{}` ({}) declares a slope range but has {in_w} inputs and {out_w} outputs; a slope range pairs each output channel with its own input channel, so the block must be square",
+                w.name, w.type_name
+            ));
+        }
+        let k0 = s.centre();
+        let note = format!(
+            "`{}`: {CENTRE_SLOPE} k0 = {} of its slope range [{}, {}] ({}); the circle criterion covers every slope in the range",
+            w.name,
+            fmt_g(k0),
+            fmt_g(s.lower),
+            fmt_g(s.upper),
+            s.note
+        );
+        let model = StateSpace::gain(DMatrix::identity(out_w, in_w) * k0, None);
+        return Ok((vec![(String::new(), model)], Some(note), Some(s)));
     } else {
         return Err(format!(
-            "`{}` ({}) has no linear model",
+            "`{}` ({}) has no linear model and no slope range",
             w.name, w.type_name
         ));
     };
@@ -557,11 +751,13 @@ fn block_models(block: &dyn Block, w: &BlockWiring) -> Result<BlockModels, Strin
             }
         }
     }
-    Ok((points, note))
+    Ok((points, note, None))
 }
 
-fn part_of(i: usize, w: &BlockWiring, m: &StateSpace) -> Part {
-    Part {
+/// The part of block `i` with model `m`; a sector block (`sector`) gets the two
+/// extra ports [`SECTOR_PORT`]: y = k0·u + w_extra, z_extra = u.
+fn part_of(i: usize, w: &BlockWiring, m: &StateSpace, sector: bool) -> Part {
+    let mut part = Part {
         a: m.a.clone(),
         b: m.b.clone(),
         c: m.c.clone(),
@@ -578,7 +774,21 @@ fn part_of(i: usize, w: &BlockWiring, m: &StateSpace) -> Part {
             .enumerate()
             .map(|(k, p)| ((i, k), p.width))
             .collect(),
+    };
+    if sector {
+        // A static gain k0·I (n × n): D = [k0·I, I; I, 0].
+        let n = m.ninputs();
+        let mut d = DMatrix::zeros(2 * n, 2 * n);
+        d.view_mut((0, 0), (n, n)).copy_from(&m.d);
+        d.view_mut((0, n), (n, n)).fill_with_identity();
+        d.view_mut((n, 0), (n, n)).fill_with_identity();
+        part.b = DMatrix::zeros(0, 2 * n);
+        part.c = DMatrix::zeros(2 * n, 0);
+        part.d = d;
+        part.inputs.push(((i, SECTOR_PORT), n));
+        part.outputs.push(((i, SECTOR_PORT), n));
     }
+    part
 }
 
 /// Analyse every feedback loop of `sched` against `require`.
@@ -633,9 +843,9 @@ pub fn analyse(sched: &Scheduler, require: &Require) -> GateReport {
         let mut lr = analyse_loop(sched, &wiring, &roles, members, name, blocks);
         if !lr.unproven.is_empty() {
             lr.allowed = bounds.allow_unproven.clone();
-        } else {
-            lr.violations = check_bounds(&lr, &bounds);
         }
+        // Bounds hold for every analysed point, proven or not.
+        lr.violations = check_bounds(&lr, &bounds);
         report.loops.push(lr);
     }
     for k in require.loops.keys() {
@@ -746,18 +956,26 @@ fn analyse_loop(
         points: Vec::new(),
         violations: Vec::new(),
         allowed: None,
+        sectors: Vec::new(),
     };
     // Models.
     let mut models: Vec<Vec<(String, StateSpace)>> = Vec::with_capacity(members.len());
+    // Sector blocks: (execution index, slope range).
+    let mut sectors: Vec<(usize, Sector)> = Vec::new();
     for &i in members {
         let Some(block) = sched.block_at(i) else {
             lr.unproven.push(format!("block {i} missing"));
             continue;
         };
         match block_models(block, &wiring[i]) {
-            Ok((points, note)) => {
+            Ok((points, note, sector)) => {
                 if let Some(n) = note {
                     lr.linearised.push(n);
+                }
+                if let Some(s) = sector {
+                    lr.sectors
+                        .push((wiring[i].name.clone(), s.centre(), s.lower, s.upper));
+                    sectors.push((i, s));
                 }
                 models.push(points);
             }
@@ -827,6 +1045,14 @@ fn analyse_loop(
             learners.push((i, lm));
         }
     }
+    for (i, _) in &sectors {
+        if wiring[*i].period != slow {
+            lr.unproven.push(format!(
+                "sector block `{}` runs faster than the loop's analysis rate {} Hz; the circle criterion is computed at the analysis rate, where the slope could change between the samples it sees (run the block at the loop's slowest rate)",
+                wiring[*i].name, lr.rate_hz
+            ));
+        }
+    }
     if !lr.unproven.is_empty() {
         return lr;
     }
@@ -863,8 +1089,20 @@ fn analyse_loop(
             .collect();
         let mut point = analyse_point(
             wiring, roles, members, &models, &choice, &edges, &periods, slow_dt, &learners,
+            &sectors,
         );
         point.label = label.join(", ");
+        if point.stable && !sectors.is_empty() {
+            let at = at_label(&point.label);
+            match &point.circle {
+                Some(c) if c.holds() => {}
+                Some(c) => lr.unproven.push(format!("{c}{at} (fix: {})", c.fix())),
+                None => lr.unproven.push(format!(
+                    "{CIRCLE_PREFIX} not evaluated{at}: {}",
+                    point.notes.join("; ")
+                )),
+            }
+        }
         if combo == 0 && total > count {
             point.notes.push(format!(
                 "only the first {count} of {total} combinations of schedule points analysed"
@@ -894,6 +1132,7 @@ fn analyse_point(
     periods: &[u64],
     slow_dt: f64,
     learners: &[(usize, LearningModel)],
+    sectors: &[(usize, Sector)],
 ) -> PointAnalysis {
     let mut out = PointAnalysis {
         label: String::new(),
@@ -910,6 +1149,7 @@ fn analyse_point(
         learning: Vec::new(),
         notes: Vec::new(),
         loop_transfer: None,
+        circle: None,
     };
     // Level by level, fastest first: compose, then lift to the next rate. A
     // connection is closed at the level of its slower end (once: the lifted part
@@ -929,7 +1169,10 @@ fn analyse_point(
             .iter()
             .enumerate()
             .filter(|&(_, &i)| wiring[i].period == p)
-            .map(|(j, &i)| part_of(i, &wiring[i], &models[j][choice[j]].1))
+            .map(|(j, &i)| {
+                let sector = sectors.iter().any(|(b, _)| *b == i);
+                part_of(i, &wiring[i], &models[j][choice[j]].1, sector)
+            })
             .collect();
         if let Some(c) = carried.take() {
             parts.push(c);
@@ -958,6 +1201,24 @@ fn analyse_point(
     out.poles = crate::lti::linalg::eigvals(&closed.a);
     out.spectral_radius = out.poles.iter().map(|p| p.norm()).fold(0.0, f64::max);
     out.stable = out.spectral_radius < 1.0 - STABILITY_TOLERANCE;
+    if out.stable && !sectors.is_empty() {
+        let n = closed.a.nrows();
+        if n > MAX_MARGIN_STATES {
+            out.notes.push(format!(
+                "the loop has {n} states; the circle criterion is computed up to {MAX_MARGIN_STATES}"
+            ));
+        } else {
+            match circle_check(&closed, wiring, sectors, slow_dt) {
+                Ok(c) => out.circle = Some(c),
+                Err(e) => out.notes.push(format!("{CIRCLE_PREFIX}: {e}")),
+            }
+            if !learners.is_empty() {
+                out.notes.push(
+                    "the learning criteria are evaluated at the centre slopes of the sector blocks only".into(),
+                );
+            }
+        }
+    }
     // Break: a top-level connection, preferably a controller's output.
     let score = |e: &Edge| -> i32 {
         let ((s, _), (d, _)) = *e;
@@ -1033,6 +1294,58 @@ fn analyse_point(
     loop_measures(&l, &mut out);
     out.loop_transfer = Some(l);
     out
+}
+
+/// The circle criterion of the loop `closed` at the centre slopes (stable):
+/// M from the extra inputs [`SECTOR_PORT`] (added to the sector blocks'
+/// outputs) to the extra outputs (their inputs), R = diag(r_i); returns
+/// ‖M R‖∞ and ‖M‖∞.
+fn circle_check(
+    closed: &Part,
+    wiring: &[BlockWiring],
+    sectors: &[(usize, Sector)],
+    dt: f64,
+) -> Result<CircleCheck, String> {
+    let mut cols: Vec<(usize, f64)> = Vec::new();
+    let mut rows: Vec<usize> = Vec::new();
+    let mut blocks = Vec::new();
+    for (i, s) in sectors {
+        let (i, r) = (*i, s.radius());
+        let (uo, w) = closed
+            .input_offset((i, SECTOR_PORT))
+            .ok_or("a sector block is not at the analysis rate")?;
+        let (yo, _) = closed
+            .output_offset((i, SECTOR_PORT))
+            .ok_or("a sector block is not at the analysis rate")?;
+        cols.extend((uo..uo + w).map(|c| (c, r)));
+        rows.extend(yo..yo + w);
+        blocks.push((wiring[i].name.clone(), s.lower, s.upper));
+    }
+    let n = closed.a.nrows();
+    let (m, p) = (cols.len(), rows.len());
+    let b = DMatrix::from_fn(n, m, |x, j| closed.b[(x, cols[j].0)]);
+    let c = DMatrix::from_fn(p, n, |k, x| closed.c[(rows[k], x)]);
+    let d = DMatrix::from_fn(p, m, |k, j| closed.d[(rows[k], cols[j].0)]);
+    let scale = DMatrix::from_diagonal(&nalgebra::DVector::from_iterator(
+        m,
+        cols.iter().map(|&(_, r)| r),
+    ));
+    let mm = StateSpace::new(closed.a.clone(), b, c, d, Some(dt)).map_err(|e| e.to_string())?;
+    let mr = StateSpace::new(
+        mm.a.clone(),
+        &mm.b * &scale,
+        mm.c.clone(),
+        &mm.d * &scale,
+        Some(dt),
+    )
+    .map_err(|e| e.to_string())?;
+    let m_norm = hinfnorm(&mm).map_err(|e| e.to_string())?.norm;
+    let norm = hinfnorm(&mr).map_err(|e| e.to_string())?.norm;
+    Ok(CircleCheck {
+        blocks,
+        norm,
+        m_norm,
+    })
 }
 
 /// T = −(transfer from the learning output w to the learning block's error
@@ -1207,4 +1520,70 @@ fn loci_min_distance(l: &StateSpace) -> Option<f64> {
         .flatten()
         .map(|lam| (lam + Complex::new(1.0, 0.0)).norm())
         .reduce(f64::min)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn point(label: &str, stable: bool) -> PointAnalysis {
+        PointAnalysis {
+            label: label.into(),
+            poles: Vec::new(),
+            spectral_radius: if stable { 0.5 } else { 1.2 },
+            stable,
+            break_at: String::new(),
+            width: 1,
+            margins: None,
+            s_hinf: f64::NAN,
+            t_hinf: f64::NAN,
+            nyquist: None,
+            loci_min_distance: None,
+            learning: Vec::new(),
+            notes: Vec::new(),
+            loop_transfer: None,
+            circle: None,
+        }
+    }
+
+    /// Issue 25: a loop can be unproven (the circle criterion fails at one
+    /// schedule point) and have an unstable point; `allow_unproven` lets the
+    /// first run, never the second.
+    #[test]
+    fn an_allowed_unproven_loop_with_an_unstable_point_still_fails() {
+        let mut l = LoopReport {
+            name: "c".into(),
+            blocks: vec!["c".into()],
+            rate_hz: 1000.0,
+            method: String::new(),
+            linearised: Vec::new(),
+            unproven: vec![format!("{CIRCLE_PREFIX}: ‖M R‖∞ = 1.2 ≥ 1")],
+            points: vec![point("K = 1", true), point("K = 9", false)],
+            violations: Vec::new(),
+            allowed: Some("bench".into()),
+            sectors: vec![("h".into(), 0.7, 0.4, 1.0)],
+        };
+        assert!(!l.passes() && !l.stable());
+        let f = l.failures();
+        assert_eq!(f.len(), 1, "{f:?}");
+        assert!(f[0].contains("at K = 9 is unstable") && f[0].contains("k0 = 0.7 of `h`"));
+        l.points[1].stable = true;
+        assert!(l.passes() && !l.stable());
+        l.violations.push("gain margin 1 dB < required 6 dB".into());
+        assert!(!l.passes());
+        l.allowed = None;
+        l.violations.clear();
+        assert!(!l.passes());
+        assert!(l.failures()[0].contains("≥ 1; or state why it may run"));
+    }
+
+    #[test]
+    fn numbers_are_printed_short() {
+        assert_eq!(fmt_g(2.0 * 0.7 - 1.0), "0.4");
+        assert_eq!(fmt_g(1.0), "1");
+        assert_eq!(fmt_g(-0.35), "-0.35");
+        assert_eq!(fmt_g(1.5e-7), "1.5e-7");
+        assert_eq!(fmt_g(123456.0), "123456");
+        assert_eq!(fmt_g(1.5e7), "1.5e7");
+    }
 }

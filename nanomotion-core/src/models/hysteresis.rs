@@ -25,11 +25,26 @@
 //! ([`ch_closed_loop`]); [`ColemanHodgdon::steady_loop`] gives the periodic orbit of
 //! the asymmetric model in closed form.
 //!
+//! **Slope range** ([`ColemanHodgdon::sector`]). With e = y − b·u (the distance
+//! from the anhysteretic line) and k = (b − c)/α, the ODE reads
+//! de/du = −α(e + k) for increasing u and de/du = α(e − k) for decreasing u:
+//! along increasing u, e moves monotonically towards −k, along decreasing u
+//! towards +k, so e never leaves the band between its start and ±k
+//! (|e| ≤ |b − c|/α from y₀ = b·u₀). The slope is dy/du = c − α e (increasing u) or c + α e
+//! (decreasing), so every slope lies in [c − |b − c|, c + |b − c|] =
+//! [min(2c − b, b), max(2c − b, b)]: 2c − b right after a reversal from the far
+//! side of the band, b far along a branch. Each sample's step is exact, so the
+//! ratio Δy/Δu of a sample is the mean slope over the input's move: in the range
+//! too. With separate trace/retrace sets of equal b the same argument gives the
+//! band between e₀, −k_t and +k_r; with different b the output follows two lines
+//! b_t·u and b_r·u that drift apart as |u| grows, e is unbounded over unbounded
+//! inputs and so is the slope: no range.
+//!
 //! Units: α in 1/\[u\], b and c in \[y\]/\[u\]. The AFM-stage plugin uses V and µm
 //! (Table 6.2); its YAML names `alpha_per_v`, `b_um_per_v`, `u_um_per_v` are
 //! accepted as aliases of `alpha`, `b`, `c`.
 
-use crate::block::check;
+use crate::block::{Sector, check};
 use crate::error::ParamError;
 use serde::{Deserialize, Serialize};
 
@@ -221,6 +236,32 @@ impl ColemanHodgdon {
         self.x
     }
 
+    /// The incremental slope range of the model from its present state on (see
+    /// the [module documentation](self)): for every later sample,
+    /// Δy/Δu ∈ [lower, upper]. With e = y − b·u now and k_t, k_r the trace and
+    /// retrace k, e stays in [lo, hi] = the hull of {e, −k_t, +k_r}; the slope is
+    /// c_t − α_t e increasing and c_r + α_r e decreasing, so the range is the
+    /// union of those over [lo, hi]. `None` when trace and retrace b differ (the
+    /// slope is unbounded over unbounded inputs: no range exists).
+    pub fn sector(&self) -> Option<Sector> {
+        let (t, r) = (&self.trace, &self.retrace);
+        if t.b != r.b {
+            return None;
+        }
+        let e = self.x - t.b * self.v;
+        let lo = e.min(-t.k()).min(r.k());
+        let hi = e.max(-t.k()).max(r.k());
+        let lower = (t.c - t.alpha * hi).min(r.c + r.alpha * lo);
+        let upper = (t.c - t.alpha * lo).max(r.c + r.alpha * hi);
+        (lower.is_finite() && upper.is_finite()).then(|| {
+            Sector::new(
+                lower,
+                upper,
+                "Coleman–Hodgdon: slope c ∓ α(y − b·u) with y − b·u between its start and ±(b − c)/α",
+            )
+        })
+    }
+
     /// The periodic orbit under an input oscillating between `v_m` and `v_max`, in
     /// closed form: trace y = b_t u − k_t + C e^{−α_t(u−u_m)}, retrace
     /// y = b_r u + k_r + D e^{α_r(u−u_M)}, with C, D from continuity at both turning
@@ -315,6 +356,79 @@ mod tests {
         assert!(ChParams::new(1e-300, 1e10, -1e10).validate("").is_err());
         let h = ColemanHodgdon::symmetric(ChParams::new(0.03, 1.0, 0.7)).unwrap();
         assert!(h.steady_loop(1.0, 1.0).is_err());
+    }
+
+    /// Step `h` along a random walk with random reversals and step sizes
+    /// (seeded), returning the smallest and largest Δy/Δu seen and whether
+    /// every one lay in `s` (up to the rounding of y over the step).
+    fn increment_ratios(h: &mut ColemanHodgdon, s: &Sector, seed: u64) -> (f64, f64, bool) {
+        let mut rng = crate::rng::Rng::new(seed);
+        let (mut lo, mut hi, mut inside) = (f64::INFINITY, f64::NEG_INFINITY, true);
+        let mut u = h.voltage();
+        let mut dir = 1.0;
+        for _ in 0..20_000 {
+            if rng.uniform() < 0.02 {
+                dir = -dir;
+            }
+            // Steps from 1e-4 to 30 (a long run to the branch's far end, a short
+            // one right after a reversal).
+            let du = dir * 10f64.powf(rng.uniform_in(-4.0, 1.5));
+            let y0 = h.position();
+            u += du;
+            let y1 = h.step(u);
+            let ratio = (y1 - y0) / du;
+            lo = lo.min(ratio);
+            hi = hi.max(ratio);
+            // Rounding of y (≈ 1e-16·|y|) divided by a small step.
+            let rounding = 1e-14 * (y0.abs() + y1.abs()) / du.abs();
+            inside &= ratio >= s.lower - rounding && ratio <= s.upper + rounding
+                || s.contains(ratio, 1e-9);
+        }
+        (lo, hi, inside)
+    }
+
+    #[test]
+    fn the_slope_range_holds_for_every_sample_and_is_attained() {
+        // Symmetric: [min(2c − b, b), max(2c − b, b)] by the closed form, for
+        // c < b, c > b and a negative c.
+        for (i, p) in [
+            ChParams::new(0.03, 1.0, 0.7),
+            ChParams::new(0.5, 1.0, 1.6),
+            ChParams::new(2.0, 0.8, -0.2),
+        ]
+        .into_iter()
+        .enumerate()
+        {
+            let mut h = ColemanHodgdon::symmetric(p).unwrap();
+            let s = h.sector().unwrap();
+            let (a, b) = ((2.0 * p.c - p.b).min(p.b), (2.0 * p.c - p.b).max(p.b));
+            assert!(
+                (s.lower - a).abs() < 1e-12 && (s.upper - b).abs() < 1e-12,
+                "{s:?}"
+            );
+            let (lo, hi, inside) = increment_ratios(&mut h, &s, 7 + i as u64);
+            assert!(
+                inside,
+                "{p:?}: a ratio outside [{a}, {b}]: seen [{lo}, {hi}]"
+            );
+            // Attained within 2 % of the range's width.
+            let tol = 0.02 * (b - a);
+            assert!(
+                (lo - a).abs() < tol && (hi - b).abs() < tol,
+                "{p:?}: [{lo}, {hi}] vs [{a}, {b}]"
+            );
+        }
+        // Asymmetric with equal b: the declared range holds.
+        let mut h =
+            ColemanHodgdon::new(ChParams::new(0.05, 1.0, 0.6), ChParams::new(0.02, 1.0, 0.9))
+                .unwrap();
+        let s = h.sector().unwrap();
+        let (_, _, inside) = increment_ratios(&mut h, &s, 11);
+        assert!(inside, "{s:?}");
+        // Different b: no range (the slope grows without bound with |u|).
+        let h = ColemanHodgdon::new(ChParams::new(0.05, 1.0, 0.6), ChParams::new(0.05, 1.2, 0.6))
+            .unwrap();
+        assert!(h.sector().is_none());
     }
 
     #[test]

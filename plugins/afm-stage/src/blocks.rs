@@ -5,7 +5,7 @@
 
 use crate::hysteresis::{CH_NAMES_UM_V, ChParams, ColemanHodgdon, Direction, ExtendedCh};
 use nanomotion_core::Params;
-use nanomotion_core::{Actuator, Block, BuildContext, ParamError, Port, Role, Tick};
+use nanomotion_core::{Actuator, Block, BuildContext, ParamError, Port, Role, Sector, Tick};
 use serde::{Deserialize, Serialize};
 
 /// `coleman_hodgdon`: Coleman–Hodgdon piezo hysteresis dx/dt = α|V̇|(bV − x) + uV̇
@@ -13,7 +13,9 @@ use serde::{Deserialize, Serialize};
 ///
 /// Piezo hysteresis x = H(V) by the Coleman–Hodgdon ODE
 /// dx/dt = α|V̇|(bV − x) + uV̇, integrated exactly per sample, with optional
-/// separate retrace parameters. Input `v` (V), output `x` (µm).
+/// separate retrace parameters. Input `v` (V), output `x` (µm). Slope range
+/// ([`Block::sector`]): the model's ([`ColemanHodgdon::sector`]), [min(2u − b,
+/// b), max(2u − b, b)] µm/V when symmetric; none when the retrace b differs.
 #[derive(Debug, Clone, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
 #[block(type_name = "coleman_hodgdon", role = Actuator, ports = "v (V) -> x (µm)")]
@@ -77,6 +79,11 @@ impl Block for ColemanHodgdonBlock {
     fn output(&mut self, _tick: Tick, u: &[f64], y: &mut [f64]) {
         self.drive(u, y);
     }
+    fn sector(&self) -> Option<Sector> {
+        // From the built state: x = 0 at 0 V moved to `initial_v` along the
+        // virgin curve, inside the model's band.
+        self.h.as_ref()?.sector()
+    }
     fn role(&self) -> Role {
         Role::Actuator
     }
@@ -87,7 +94,9 @@ impl Block for ColemanHodgdonBlock {
 ///
 /// The extended asymmetric model (6.4) on the fixed
 /// range [v_min_v, v_max_v]; the branch follows the sign of ΔV and is kept at
-/// standstill. Input `v` (V), output `x` (µm).
+/// standstill. Input `v` (V), output `x` (µm). No slope range: a reversal inside
+/// the range switches from one fixed branch to the other, a jump of x for an
+/// arbitrarily small ΔV (the branches meet only at V_m and V_M).
 #[derive(Debug, Clone, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
 #[block(type_name = "extended_coleman_hodgdon", role = Actuator, ports = "v (V) -> x (µm)")]
@@ -147,6 +156,11 @@ impl Block for ExtendedChBlock {
             .model
             .eval(v, self.v_min_v, self.v_max_v, *dir)
             .unwrap_or(0.0);
+    }
+    fn sector(&self) -> Option<Sector> {
+        // None: the switch between the two fixed branches at a reversal is a
+        // jump of x for an arbitrarily small ΔV (see the type's docs).
+        None
     }
     fn role(&self) -> Role {
         Role::Actuator
@@ -211,6 +225,58 @@ mod tests {
             bad.build(&BuildContext::new("e", DT, 0)).unwrap_err().field,
             "v_max_v"
         );
+    }
+
+    /// Issue 25: the `coleman_hodgdon` block declares the model's slope range
+    /// [2u − b, b] (u < b), every sample of a random input keeps Δx/ΔV in it and
+    /// reaches both ends; `extended_coleman_hodgdon` declares none, and indeed
+    /// a reversal inside its range jumps (|Δx/ΔV| beyond any bound).
+    #[test]
+    fn coleman_hodgdon_block_keeps_its_slope_range_and_the_extended_model_has_none() {
+        let mut ch = yaml(
+            "type: coleman_hodgdon\ntrace: {alpha_per_v: 0.03, b_um_per_v: 1.0, u_um_per_v: 0.7}\ninitial_v: 20\n",
+        );
+        ch.build(&BuildContext::new("h", DT, 0)).unwrap();
+        let s = ch.sector().unwrap();
+        assert!(
+            (s.lower - 0.4).abs() < 1e-12 && (s.upper - 1.0).abs() < 1e-12,
+            "{s:?}"
+        );
+        let mut rng = nanomotion_core::rng::Rng::new(3);
+        let (mut v, mut dir, mut x) = (20.0, 1.0, [0.0]);
+        ch.output(Tick::new(0, DT), &[v], &mut x);
+        let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+        for k in 1..20_000u64 {
+            if rng.uniform() < 0.02 {
+                dir = -dir;
+            }
+            let dv = dir * 10f64.powf(rng.uniform_in(-3.0, 1.5));
+            let x0 = x[0];
+            v += dv;
+            ch.output(Tick::new(k, DT), &[v], &mut x);
+            let r = (x[0] - x0) / dv;
+            let rounding = 1e-14 * (x0.abs() + x[0].abs()) / dv.abs();
+            assert!(
+                r >= 0.4 - rounding - 1e-9 && r <= 1.0 + rounding + 1e-9,
+                "{r}"
+            );
+            lo = lo.min(r);
+            hi = hi.max(r);
+        }
+        assert!(
+            (lo - 0.4).abs() < 0.02 && (hi - 1.0).abs() < 0.02,
+            "[{lo}, {hi}]"
+        );
+        let mut ext = yaml(
+            "type: extended_coleman_hodgdon\nv_min_v: 0\nv_max_v: 100\nmodel:\n  trace: {a_um_per_v: 0, b_um_per_v: 1.0, c_per_v: 0, u_um_per_v: 0.7, alpha_per_v: 0.03, d_um_per_v2: 0, e_um_per_v: 0, f_um: 0}\n  retrace: {a_um_per_v: 0, b_um_per_v: 1.0, c_per_v: 0, u_um_per_v: 0.7, alpha_per_v: 0.03, d_um_per_v2: 0, e_um_per_v: 0, f_um: 0}\n",
+        );
+        ext.build(&BuildContext::new("e", DT, 0)).unwrap();
+        assert!(ext.sector().is_none());
+        let mut y = [0.0];
+        ext.output(Tick::new(0, DT), &[50.0], &mut y);
+        let up = y[0];
+        ext.output(Tick::new(1, DT), &[50.0 - 1e-6], &mut y);
+        assert!(((y[0] - up) / 1e-6).abs() > 1e3, "{up} -> {}", y[0]);
     }
 
     #[test]

@@ -1395,7 +1395,7 @@ fn allow_fitted_loops(
     }
     let blocks: Vec<&str> = steps.iter().map(|s| s.block.name.as_str()).collect();
     require.allow_unproven = Some(format!(
-        "a fitted model of the measured stage (nanomotion diagnose inserted {}), not a design: its effect blocks have no linear model",
+        "a fitted model of the measured stage (nanomotion diagnose inserted {}), not a design: the gate cannot prove a loop through its effect blocks (no linear model, or a slope range too wide for the circle criterion)",
         blocks.join(", ")
     ));
     spec.require = Some(require);

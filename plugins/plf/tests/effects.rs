@@ -845,3 +845,220 @@ mod random_parameters {
         }
     }
 }
+
+/// Run `b` on a seeded random walk with random reversals and step sizes and
+/// return the smallest and largest Δy/Δu between successive samples, and
+/// whether every ratio lay in the block's declared slope range (up to the
+/// rounding of y over the step).
+fn slope_ratios(b: &mut dyn Block, seed: u64, scale: f64) -> (f64, f64, bool) {
+    use nanomotion_core::rng::Rng;
+    b.build(&ctx(DT)).unwrap();
+    let s = b.sector().expect("a slope range");
+    let mut rng = Rng::new(seed);
+    let (mut lo, mut hi, mut inside) = (f64::INFINITY, f64::NEG_INFINITY, true);
+    let (mut u, mut dir) = (0.0, 1.0);
+    let mut y = [0.0];
+    b.output(Tick::new(0, DT), &[u], &mut y);
+    for k in 1..20_000u64 {
+        if rng.uniform() < 0.02 {
+            dir = -dir;
+        }
+        let du = dir * scale * 10f64.powf(rng.uniform_in(-4.0, 0.5));
+        let y0 = y[0];
+        u += du;
+        b.output(Tick::new(k, DT), &[u], &mut y);
+        let ratio = (y[0] - y0) / du;
+        let rounding = 1e-14 * (y0.abs() + y[0].abs()) / du.abs();
+        lo = lo.min(ratio);
+        hi = hi.max(ratio);
+        inside &=
+            (ratio >= s.lower - rounding && ratio <= s.upper + rounding) || s.contains(ratio, 1e-9);
+    }
+    (lo, hi, inside)
+}
+
+/// Issue 25: the slope ranges the effect blocks declare hold for every sample
+/// of a random input, and are attained (within 3 % of the width) where the
+/// range is tight; blocks without a bound declare none.
+#[test]
+fn effect_slope_ranges_hold_for_every_sample_and_are_attained() {
+    // (block, the range by its closed form, input scale, tight?)
+    type Case = (Box<dyn Block>, (f64, f64), f64, bool);
+    let cases: Vec<Case> = vec![
+        (Box::new(Backlash::new(0.5)), (0.0, 1.0), 1.0, true),
+        (
+            Box::new(Hysteresis::new(0.03, 1.0, 0.7)),
+            (0.4, 1.0),
+            30.0,
+            true,
+        ),
+        (
+            Box::new(Hysteresis::new(2.0, 0.8, 1.3)),
+            (0.8, 1.8),
+            1.0,
+            true,
+        ),
+        // Bouc–Wen: [0, max(a, 2aβ/(β+γ))], shifted by `linear`.
+        (Box::new(BoucWen::new(2.0, 3.0, 1.0)), (0.0, 3.0), 1.0, true),
+        (Box::new(BoucWen::new(2.0, 1.0, 1.0)), (0.0, 2.0), 1.0, true),
+        (
+            Box::new(BoucWen::new(-2.0, 3.0, -1.0)),
+            (-3.0, 0.0),
+            1.0,
+            true,
+        ),
+        (
+            Box::new({
+                let mut b = BoucWen::new(2.0, 3.0, -1.0);
+                b.linear = 0.5;
+                b
+            }),
+            (0.5, 6.5),
+            1.0,
+            false,
+        ),
+    ];
+    for (i, (mut b, (a, c), scale, tight)) in cases.into_iter().enumerate() {
+        b.build(&ctx(DT)).unwrap();
+        let s = b.sector().unwrap();
+        assert!(
+            (s.lower - a).abs() < 1e-12 && (s.upper - c).abs() < 1e-12,
+            "case {i}: {s:?} vs [{a}, {c}]"
+        );
+        let (lo, hi, inside) = slope_ratios(b.as_mut(), 100 + i as u64, scale);
+        assert!(
+            inside,
+            "case {i}: a ratio outside [{a}, {c}]: seen [{lo}, {hi}]"
+        );
+        if tight {
+            let tol = 0.03 * (c - a);
+            assert!(
+                (lo - a).abs() < tol && (hi - c).abs() < tol,
+                "case {i}: seen [{lo}, {hi}], declared [{a}, {c}]"
+            );
+        }
+    }
+    // No bound: different b on the retrace, a non-saturating Bouc–Wen loop,
+    // friction (velocity-driven), drift (moves with time).
+    let mut none: Vec<Box<dyn Block>> = vec![
+        Box::new(Hysteresis::new(0.03, 1.0, 0.7).with_retrace(ChParams::new(0.03, 1.2, 0.7))),
+        Box::new(BoucWen::new(2.0, 1.0, -1.5)),
+        Box::new(Friction::new(1.0, 0.5, 1e-3, 1e-4)),
+        Box::new(Drift::new(0.0, 1.0, 0.0)),
+    ];
+    for b in &mut none {
+        b.build(&ctx(DT)).unwrap();
+        assert!(b.sector().is_none(), "{b:?}");
+    }
+}
+
+/// Issue 25 (class 3): `time_delay` declares its ring buffer (two samples more
+/// than ⌈max_delay_s/dt⌉) before it is built, so a graph of many long ones is
+/// refused naming `max_delay_s` before any buffer is allocated (550 × 10⁶
+/// samples = 4.4 GB > 4 GiB).
+#[test]
+fn time_delay_declares_its_buffer_and_many_long_ones_are_refused_before_allocating() {
+    let mut small = TimeDelay::new(0.002, 0.0105);
+    assert_eq!(small.planned_bytes(1e-3), ("max_delay_s", (11 + 2) * 8));
+    small.build(&ctx(1e-3)).unwrap();
+    assert_eq!(small.memory_bytes(), small.planned_bytes(1e-3).1);
+    // The longest buffer a block may have: 10⁶ samples.
+    assert_eq!(
+        TimeDelay::new(0.0, 1000.0).planned_bytes(1e-3).1,
+        (1_000_000 + 2) * 8
+    );
+    let mut yaml = String::from(
+        "base_rate_hz: 1000\nduration_s: 0.01\nblocks:\n  - { name: c, type: constant, value: 1.0 }\n",
+    );
+    for i in 0..550 {
+        yaml.push_str(&format!(
+            "  - {{ name: d{i}, type: time_delay, delay_s: 0.0, max_delay_s: 1000.0 }}\n"
+        ));
+    }
+    yaml.push_str("connections:\n");
+    for i in 0..550 {
+        yaml.push_str(&format!("  - {{ from: c.y, to: d{i}.u }}\n"));
+    }
+    let e = GraphSpec::from_yaml(&yaml, "delays.yaml")
+        .unwrap()
+        .build()
+        .expect_err("refused")
+        .to_string();
+    assert!(
+        e.contains("field `max_delay_s`") && e.contains("block `d536`"),
+        "{e}"
+    );
+    assert!(e.contains("checked before anything is allocated"), "{e}");
+}
+
+/// Issue 25: `creep` is linear and says so (`Block::lti`), so loops through it
+/// can be analysed: its model, stepped from rest, reproduces the block's
+/// output on a random input sample by sample.
+#[test]
+fn creep_lti_model_reproduces_the_block() {
+    use nanomotion_core::rng::Rng;
+    let mut b = Creep::new(vec![
+        CreepTerm {
+            gain: 0.05,
+            tau_s: 0.01,
+        },
+        CreepTerm {
+            gain: 0.1,
+            tau_s: 0.3,
+        },
+    ]);
+    b.build(&ctx(DT)).unwrap();
+    let m = b.lti().expect("creep is LTI");
+    assert_eq!((m.nstates(), m.dt), (2, Some(DT)));
+    let mut rng = Rng::new(9);
+    let mut x = [0.0; 2];
+    let mut y = [0.0];
+    for k in 0..2000u64 {
+        let u = if k == 0 {
+            0.0
+        } else {
+            rng.uniform_in(-1.0, 1.0)
+        };
+        b.output(Tick::new(k, DT), &[u], &mut y);
+        let want = m.c[(0, 0)] * x[0] + m.c[(0, 1)] * x[1] + m.d[(0, 0)] * u;
+        assert!((y[0] - want).abs() < 1e-12, "k = {k}: {} vs {want}", y[0]);
+        x = [
+            m.a[(0, 0)] * x[0] + m.b[(0, 0)] * u,
+            m.a[(1, 1)] * x[1] + m.b[(1, 0)] * u,
+        ];
+    }
+}
+
+/// Issue 25: `time_delay` gives its exact LTI model (integer and fractional
+/// delays): stepped from rest it reproduces the block; above 512 samples none.
+#[test]
+fn time_delay_lti_model_reproduces_the_block() {
+    use nanomotion_core::lti::SsStepper;
+    use nanomotion_core::rng::Rng;
+    for (tau, states) in [(0.0, 0), (0.3e-3, 1), (3e-3, 3), (2.4e-3, 3)] {
+        let mut b = TimeDelay::new(tau, 0.01);
+        b.build(&ctx(DT)).unwrap();
+        let m = b.lti().expect("a short delay is LTI");
+        assert_eq!(m.nstates(), states, "τ = {tau}");
+        let mut sim = SsStepper::new(&m).unwrap();
+        let mut rng = Rng::new(4);
+        let mut y = [0.0];
+        for k in 0..500u64 {
+            let u = if k == 0 {
+                0.0
+            } else {
+                rng.uniform_in(-1.0, 1.0)
+            };
+            b.output(Tick::new(k, DT), &[u], &mut y);
+            let want = sim.step_siso(u);
+            assert!(
+                (y[0] - want).abs() < 1e-12,
+                "τ = {tau}, k = {k}: {} vs {want}",
+                y[0]
+            );
+        }
+    }
+    let mut long = TimeDelay::new(0.6, 1.0);
+    long.build(&ctx(DT)).unwrap();
+    assert!(long.lti().is_none());
+}

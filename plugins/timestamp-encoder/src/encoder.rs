@@ -481,8 +481,15 @@ impl Block for TimestampEncoder {
         ]
     }
     fn memory_bytes(&self) -> usize {
-        // Per-slit and per-edge error tables.
-        self.lines.saturating_mul(5 * std::mem::size_of::<f64>())
+        self.planned_bytes(0.0).1
+    }
+    fn planned_bytes(&self, _dt: f64) -> (&'static str, usize) {
+        // The per-slit (lines) and per-edge (4·lines) error tables `prepare`
+        // fills.
+        (
+            "lines",
+            self.lines.saturating_mul(5 * std::mem::size_of::<f64>()),
+        )
     }
     fn build(&mut self, ctx: &BuildContext) -> Result<(), ParamError> {
         self.prepare(ctx.seed)

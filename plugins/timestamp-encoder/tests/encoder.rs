@@ -622,3 +622,33 @@ proptest::proptest! {
         }
     }
 }
+
+/// Issue 25 (class 3): the encoder declares its error tables (5 values per
+/// line) before it is built, so a graph of many encoders with the most lines
+/// is refused naming `lines` before any table is allocated (110 × 40 MiB >
+/// 4 GiB).
+#[test]
+fn encoder_tables_are_declared_and_many_large_encoders_are_refused_before_allocating() {
+    let text = |lines: usize| format!("type: timestamp_encoder\nlines: {lines}\n");
+    let mut b: Box<dyn Block> = nanomotion_core::yaml::from_str(&text(100), "t").unwrap();
+    assert_eq!(b.planned_bytes(1e-3), ("lines", 100 * 5 * 8));
+    b.build(&BuildContext::new("enc", 1e-3, 1)).unwrap();
+    assert_eq!(b.memory_bytes(), b.planned_bytes(1e-3).1);
+    let mut yaml = String::from("base_rate_hz: 1000\nduration_s: 0.01\nblocks:\n");
+    for i in 0..110 {
+        yaml.push_str(&format!(
+            "  - {{ name: e{i}, type: timestamp_encoder, lines: {} }}\n",
+            timestamp_encoder::encoder::MAX_LINES
+        ));
+    }
+    let e = nanomotion_core::graph::GraphSpec::from_yaml(&yaml, "encoders.yaml")
+        .unwrap()
+        .build()
+        .expect_err("refused")
+        .to_string();
+    assert!(
+        e.contains("field `lines`") && e.contains("block `e102`"),
+        "{e}"
+    );
+    assert!(e.contains("checked before anything is allocated"), "{e}");
+}

@@ -3,7 +3,7 @@
 use super::{MAX_MAGNITUDE, check_bounded, check_len};
 use nanomotion_core::Params;
 use nanomotion_core::block::check;
-use nanomotion_core::{Block, BuildContext, ParamError, Port, Role, Tick, Tunable};
+use nanomotion_core::{Block, BuildContext, ParamError, Port, Role, Sector, Tick, Tunable};
 use serde::{Deserialize, Serialize};
 
 /// `backlash`: PLF effect: play operator of width w: y moves only once u is w/2 past
@@ -20,6 +20,9 @@ use serde::{Deserialize, Serialize};
 ///
 /// starting at y = u₀ (the first input). A non-finite input passes through without
 /// changing the state.
+///
+/// Slope range ([`Block::sector`]) [0, 1]: between two samples y moves in the
+/// direction of u by at most as much as u (0 inside the play, 1 when pushed).
 ///
 /// [`Tunable`] vector: `[width]`.
 #[derive(Debug, Clone, Serialize, Deserialize, Params)]
@@ -72,6 +75,14 @@ impl Block for Backlash {
         }
         self.y = Some(out);
         y[0] = out;
+    }
+    fn sector(&self) -> Option<Sector> {
+        // y moves only by the part of u's move beyond the play, in u's direction.
+        Some(Sector::new(
+            0.0,
+            1.0,
+            "backlash: 0 inside the play, 1 when pushed",
+        ))
     }
     fn role(&self) -> Role {
         Role::Plant

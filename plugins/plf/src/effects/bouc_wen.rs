@@ -7,7 +7,7 @@
 use super::check_len;
 use nanomotion_core::Params;
 use nanomotion_core::block::check;
-use nanomotion_core::{Block, BuildContext, ParamError, Port, Role, Tick, Tunable};
+use nanomotion_core::{Block, BuildContext, ParamError, Port, Role, Sector, Tick, Tunable};
 use serde::{Deserialize, Serialize};
 
 /// `bouc_wen`: PLF effect (hysteresis): Bouc–Wen y = linear·u + z, ż = a·u̇ − β|u̇|z −
@@ -19,6 +19,12 @@ use serde::{Deserialize, Serialize};
 /// side of z = 0 (s = sign u̇) is linear and is integrated **exactly**, including
 /// the crossing of z = 0 inside a sample. [`Tunable`] vector: `[a, beta, gamma,
 /// linear]`.
+///
+/// Slope range ([`Block::sector`], see [`BoucWen::z_slopes`]): for a > 0 and
+/// β + γ > 0, |z| stays below z_m = a/(β + γ) and dz/du lies between 0 and
+/// max(a, 2aβ/(β + γ)); y's slope is `linear` plus that. a < 0 mirrors it
+/// (z → −z, γ → −γ); a = 0 keeps z = 0. Otherwise (β + γ ≤ 0 for a > 0) the
+/// loop does not saturate, z and its slope grow without bound: no range.
 #[derive(Debug, Clone, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
 #[block(type_name = "bouc_wen", role = Actuator, ports = "u -> y")]
@@ -71,6 +77,32 @@ impl BoucWen {
             }
         }
         Ok(())
+    }
+
+    /// The range of dz/du from state z on, if bounded: for a > 0 and β + γ > 0,
+    /// along increasing u dz/du = a − (β + γ)z for z ≥ 0 (towards z_m = a/(β+γ))
+    /// and a + (β − γ)|z| for z < 0 (towards 0), mirrored for decreasing u, so
+    /// [−z_m, z_m] is never left from inside it and the slope at its ends and
+    /// at 0 is 0, 2aβ/(β + γ) and a (linear in z between): the range is their
+    /// hull. a < 0 is the mirror image w = −z with (−a, β, −γ).
+    pub fn z_slopes(a: f64, beta: f64, gamma: f64, z: f64) -> Option<(f64, f64)> {
+        if a == 0.0 {
+            // z stays where it is (0 from the built state): dz/du = −(β s ± γ) z.
+            return (z == 0.0).then_some((0.0, 0.0));
+        }
+        if a < 0.0 {
+            return Self::z_slopes(-a, beta, -gamma, -z).map(|(lo, hi)| (-hi, -lo));
+        }
+        let g = beta + gamma;
+        if g <= 0.0 {
+            return None;
+        }
+        let zm = a / g;
+        if z.abs() > zm {
+            return None;
+        }
+        let far = 2.0 * a * beta / g;
+        Some((0f64.min(far), a.max(far)))
     }
 
     /// z after the input moves by `du` from state `z` (exact, see the type docs).
@@ -143,6 +175,12 @@ impl Block for BoucWen {
         }
         self.u_prev = Some(u);
         y[0] = self.linear * u + self.z;
+    }
+    fn sector(&self) -> Option<Sector> {
+        let (lo, hi) = Self::z_slopes(self.a, self.beta, self.gamma, self.z)?;
+        let (lower, upper) = (self.linear + lo, self.linear + hi);
+        (lower.is_finite() && upper.is_finite())
+            .then(|| Sector::new(lower, upper, "Bouc–Wen: linear + dz/du, |z| ≤ a/(β + γ)"))
     }
     fn role(&self) -> Role {
         Role::Actuator

@@ -3,6 +3,8 @@
 use super::{MAX_MAGNITUDE, check_bounded, check_count, check_len};
 use nanomotion_core::Params;
 use nanomotion_core::block::check;
+use nanomotion_core::lti::StateSpace;
+use nanomotion_core::nalgebra::DMatrix;
 use nanomotion_core::{Block, BuildContext, ParamError, Port, Role, Tick, Tunable};
 use serde::{Deserialize, Serialize};
 
@@ -49,6 +51,9 @@ pub struct Creep {
     x: [f64; MAX_TERMS],
     #[serde(skip)]
     started: bool,
+    /// The period it was built for (s); 0 before `build`.
+    #[serde(skip)]
+    dt: f64,
 }
 
 impl Creep {
@@ -58,6 +63,7 @@ impl Creep {
             terms,
             a: [0.0; MAX_TERMS],
             x: [0.0; MAX_TERMS],
+            dt: 0.0,
             started: false,
         }
     }
@@ -133,6 +139,7 @@ impl Block for Creep {
         }
         self.x = [0.0; MAX_TERMS];
         self.started = false;
+        self.dt = ctx.dt;
         Ok(())
     }
     fn output(&mut self, _tick: Tick, u: &[f64], y: &mut [f64]) {
@@ -149,6 +156,19 @@ impl Block for Creep {
             self.x[i] = a * self.x[i] + (1.0 - a) * x;
         }
         y[0] = out;
+    }
+    /// The exact discrete model of [`Block::output`] (what the stability gate
+    /// analyses): x⁺ = diag(a_i)x + (1 − a_i)u, y = Σ k_i x_i + u. (The lags
+    /// start at the first input, an initial state of this model.)
+    fn lti(&self) -> Option<StateSpace> {
+        if self.dt <= 0.0 {
+            return None;
+        }
+        let n = self.terms.len().min(MAX_TERMS);
+        let a = DMatrix::from_fn(n, n, |i, j| if i == j { self.a[i] } else { 0.0 });
+        let b = DMatrix::from_fn(n, 1, |i, _| 1.0 - self.a[i]);
+        let c = DMatrix::from_fn(1, n, |_, j| self.terms[j].gain);
+        StateSpace::new(a, b, c, DMatrix::from_element(1, 1, 1.0), Some(self.dt)).ok()
     }
     fn role(&self) -> Role {
         Role::Actuator

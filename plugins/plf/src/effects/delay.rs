@@ -3,6 +3,9 @@
 use super::check_len;
 use nanomotion_core::Params;
 use nanomotion_core::block::check;
+use nanomotion_core::blocks::linear::MAX_DENSE_DELAY_STATES;
+use nanomotion_core::lti::StateSpace;
+use nanomotion_core::nalgebra::DMatrix;
 use nanomotion_core::{Block, BuildContext, ParamError, Port, Role, Tick, Tunable};
 use serde::{Deserialize, Serialize};
 
@@ -39,6 +42,9 @@ pub struct TimeDelay {
     frac: f64,
     #[serde(skip)]
     started: bool,
+    /// The period it was built for (s); 0 before `build`.
+    #[serde(skip)]
+    dt: f64,
 }
 
 impl TimeDelay {
@@ -52,12 +58,31 @@ impl TimeDelay {
             n: 0,
             frac: 0.0,
             started: false,
+            dt: 0.0,
         }
     }
 
     fn check_delay(delay_s: f64, max_delay_s: f64) -> Result<(), ParamError> {
         check::non_negative("max_delay_s", max_delay_s)?;
         check::in_range("delay_s", delay_s, 0.0, max_delay_s)
+    }
+
+    /// The ring buffer's length for `max_delay_s` at period `dt`:
+    /// ⌈max_delay_s/dt⌉ + 2 samples, or `Err` naming `max_delay_s` when that is
+    /// more than [`MAX_DELAY_SAMPLES`]. [`Block::build`] allocates it and
+    /// [`Block::planned_bytes`] declares it (one formula).
+    fn buffer_len(max_delay_s: f64, dt: f64) -> Result<usize, ParamError> {
+        let samples = (max_delay_s / dt).ceil();
+        if samples.is_nan() || samples > MAX_DELAY_SAMPLES {
+            return Err(ParamError::new(
+                "max_delay_s",
+                format!(
+                    "{max_delay_s} s is {samples:e} samples at dt = {dt} s, more than the {MAX_DELAY_SAMPLES:e} allowed"
+                ),
+                "give a shorter max_delay_s or run the block at a lower rate",
+            ));
+        }
+        Ok(samples.max(0.0) as usize + 2)
     }
 
     /// τ/dt split into whole samples and a fraction; values within 1e-9 of an
@@ -85,19 +110,8 @@ impl Block for TimeDelay {
     fn build(&mut self, ctx: &BuildContext) -> Result<(), ParamError> {
         Self::check_delay(self.delay_s, self.max_delay_s)?;
         check::positive("dt", ctx.dt)?;
-        let samples = (self.max_delay_s / ctx.dt).ceil();
-        if samples.is_nan() || samples > MAX_DELAY_SAMPLES {
-            return Err(ParamError::new(
-                "max_delay_s",
-                format!(
-                    "{} s is {samples:e} samples at dt = {} s, more than the {MAX_DELAY_SAMPLES:e} allowed",
-                    self.max_delay_s, ctx.dt
-                ),
-                "give a shorter max_delay_s or run the block at a lower rate",
-            ));
-        }
+        let len = Self::buffer_len(self.max_delay_s, ctx.dt)?;
         let (n, frac) = Self::split(self.delay_s, ctx.dt);
-        let len = samples as usize + 2;
         if n + 1 >= len {
             return Err(ParamError::new(
                 "delay_s",
@@ -111,7 +125,37 @@ impl Block for TimeDelay {
         self.n = n;
         self.frac = frac;
         self.started = false;
+        self.dt = ctx.dt;
         Ok(())
+    }
+    /// The exact model of [`Block::output`]: y_k = (1 − f)·u_{k−n} + f·u_{k−n−1}
+    /// (τ = (n + f)·dt), a shift register of the last n (+1 if f > 0) inputs,
+    /// up to [`MAX_DENSE_DELAY_STATES`] states like the core's `delay` (a
+    /// longer delay has none: its loop stays unproven).
+    fn lti(&self) -> Option<StateSpace> {
+        let states = self.n + usize::from(self.frac > 0.0);
+        if self.dt <= 0.0 || states > MAX_DENSE_DELAY_STATES {
+            return None;
+        }
+        // x_j = u_{k−j}, j = 1..=states; coefficient of u_{k−j} in y: taps[j].
+        let mut taps = vec![0.0; states + 1];
+        taps[self.n] += 1.0 - self.frac;
+        if self.frac > 0.0 {
+            taps[self.n + 1] += self.frac;
+        }
+        let a = DMatrix::from_fn(states, states, |i, j| if i == j + 1 { 1.0 } else { 0.0 });
+        let b = DMatrix::from_fn(states, 1, |i, _| if i == 0 { 1.0 } else { 0.0 });
+        let c = DMatrix::from_fn(1, states, |_, j| taps[j + 1]);
+        let d = DMatrix::from_element(1, 1, taps[0]);
+        StateSpace::new(a, b, c, d, Some(self.dt)).ok()
+    }
+    fn planned_bytes(&self, dt: f64) -> (&'static str, usize) {
+        // Out of range: left to `build`'s message.
+        let len = Self::buffer_len(self.max_delay_s, dt).unwrap_or(0);
+        ("max_delay_s", len * std::mem::size_of::<f64>())
+    }
+    fn memory_bytes(&self) -> usize {
+        self.buf.len() * std::mem::size_of::<f64>()
     }
     fn output(&mut self, _tick: Tick, u: &[f64], y: &mut [f64]) {
         let len = self.buf.len();

@@ -4,7 +4,7 @@
 use super::check_len;
 use nanomotion_core::Params;
 use nanomotion_core::models::hysteresis::{ChParams, ColemanHodgdon};
-use nanomotion_core::{Block, BuildContext, ParamError, Port, Role, Tick, Tunable};
+use nanomotion_core::{Block, BuildContext, ParamError, Port, Role, Sector, Tick, Tunable};
 use serde::{Deserialize, Serialize};
 
 /// `hysteresis`: PLF effect: Coleman–Hodgdon hysteresis dy/dt = α|u̇|(b·u − y) + c·u̇
@@ -15,6 +15,10 @@ use serde::{Deserialize, Serialize};
 /// for decreasing u (asymmetric model). The state starts on the anhysteretic line at
 /// the first input, y₀ = b·u₀ (b of the trace set). A non-finite input holds the
 /// output.
+///
+/// Slope range ([`Block::sector`]): [min(2c − b, b), max(2c − b, b)] for the
+/// symmetric model; with `retrace` see [`ColemanHodgdon::sector`] (none when the
+/// two b differ).
 ///
 /// [`Tunable`] vector: `[alpha, b, c]`, followed by
 /// `[retrace.alpha, retrace.b, retrace.c]` when `retrace` is set.
@@ -103,6 +107,11 @@ impl Block for Hysteresis {
             self.started = true;
         }
         y[0] = h.step(u);
+    }
+    fn sector(&self) -> Option<Sector> {
+        // The model's range from its built state (y = 0 at u = 0, then y₀ = b·u₀:
+        // both on the anhysteretic line).
+        self.h.as_ref()?.sector()
     }
     fn role(&self) -> Role {
         Role::Actuator

@@ -25,6 +25,25 @@
 //! | `saturation` | `saturation` (core) | [`nanomotion_core::blocks::math::Saturation`] |
 //! | `backlash` | `backlash` | [`backlash`] |
 
+//!
+//! **Slope ranges for the stability gate** ([`Block::sector`](nanomotion_core::Block::sector):
+//! between two samples Δy = s·Δu with s in a declared range, which lets the gate
+//! prove or refuse a loop through the block by the circle criterion). Given
+//! where a bound genuinely holds for every finite input sequence:
+//! `hysteresis` (Coleman–Hodgdon: [min(2c − b, b), max(2c − b, b)]; none for a
+//! `retrace` set with a different b), `bouc_wen` (`linear` + [0, max(a, 2aβ/(β+γ))]
+//! for a > 0, β + γ > 0; none for a non-saturating loop), `backlash` ([0, 1]).
+//! None for the others, because none exists: `friction` reads the velocity Δu/dt,
+//! so y changes when u stops (Δu = 0, Δy ≠ 0); `drift` and
+//! `repetitive_disturbance` add a signal of time that moves when u does not;
+//! `encoder_slit_error` jumps by a slit's error at a slit edge however small Δu
+//! is; `position_dependent_gain` has two inputs (variable `signal`) or, with
+//! variable `input`, a polynomial gain whose slope u·g'(u) + g(u) grows with |u|
+//! (unless the gain is constant).
+//! `creep`, `time_delay` and `unmodeled_resonance` are linear (dynamic), not
+//! static slopes: they give their LTI models (`Block::lti`; `time_delay` up to
+//! 512 samples, like the core's `delay`), as does `axis_coupling`.
+
 use nanomotion_core::ParamError;
 
 pub mod backlash;
