@@ -342,7 +342,10 @@ impl Saturation {
                 u
             };
         };
-        let (m, h) = (0.5 * (self.lower + self.upper), 0.5 * (self.upper - self.lower));
+        let (m, h) = (
+            0.5 * (self.lower + self.upper),
+            0.5 * (self.upper - self.lower),
+        );
         if h <= 0.0 {
             return if u.is_nan() { u } else { m };
         }
@@ -725,9 +728,16 @@ mod tests {
         assert_eq!(s.param_names(), ["lower", "upper", "sharpness"]);
         s.set_params(&[0.0, 2.0, 3.0]).unwrap();
         assert_eq!(s.params(), vec![0.0, 2.0, 3.0]);
-        assert_eq!(s.set_params(&[0.0, 2.0, -1.0]).unwrap_err().field, "sharpness");
+        assert_eq!(
+            s.set_params(&[0.0, 2.0, -1.0]).unwrap_err().field,
+            "sharpness"
+        );
         assert_eq!(s.set_params(&[0.0, 2.0]).unwrap_err().field, "params");
-        assert_eq!(s.params(), vec![0.0, 2.0, 3.0], "a refused vector changes nothing");
+        assert_eq!(
+            s.params(),
+            vec![0.0, 2.0, 3.0],
+            "a refused vector changes nothing"
+        );
     }
 
     #[test]

@@ -1419,8 +1419,8 @@ fn output_scales(ctx: &Ctx<'_>, residual: &[Vec<f64>]) -> Vec<f64> {
         .enumerate()
         .map(|(i, (r, ch))| {
             let held = ctx.part(r, Part::HeldOut);
-            let s = floor_sigma(ctx, i, r, Part::HeldOut)
-                .max(1e-3 * stats::mean_square(held).sqrt());
+            let s =
+                floor_sigma(ctx, i, r, Part::HeldOut).max(1e-3 * stats::mean_square(held).sqrt());
             if s > 0.0 && s.is_finite() {
                 s
             } else {
@@ -2963,7 +2963,11 @@ mod tests {
             .map(|k| {
                 let s = (k % per) as f64 / per as f64;
                 let up = (k / per) % 2 == 0;
-                if up { -amp + 2.0 * amp * s } else { amp - 2.0 * amp * s }
+                if up {
+                    -amp + 2.0 * amp * s
+                } else {
+                    amp - 2.0 * amp * s
+                }
             })
             .collect();
         let y = x.iter().map(|&u| h.step(u)).collect();

@@ -169,7 +169,9 @@ fn axis_of(
     let up = reach(false);
     let mut members: Vec<&str> = reach(true).into_iter().filter(|b| up.contains(b)).collect();
     let siso = members.len() > 1
-        && members.iter().all(|b| !matches!(type_of(b), "mux" | "demux"))
+        && members
+            .iter()
+            .all(|b| !matches!(type_of(b), "mux" | "demux"))
         && spec.connections.iter().all(|k| {
             !(members.contains(&split(&k.from).0) && members.contains(&split(&k.to).0))
                 || width_in(&k.to) == 1
