@@ -316,8 +316,14 @@ fn the_watchdog_stops_the_loop_when_the_plant_falls_silent() {
     // Stopped about 20 ms after the last heartbeat (≈ 40 ms in), long before
     // the 2 s run would have ended.
     assert!(rep.ticks > 20 && rep.ticks < 200, "{} ticks", rep.ticks);
-    // While running, the plant saw cmd = 2·pos + 1.5 ≥ 1.5; after: the safe 0.
-    assert!(seen.iter().skip(5).all(|&c| c >= 1.5), "{seen:?}");
+    // While running, the plant saw cmd = 2·pos + 1.5 ≥ 1.5 from the
+    // controller's first command on (when that comes depends on the machine's
+    // load: CI saw it 6 ms in); after: the safe 0.
+    let first = seen
+        .iter()
+        .position(|&c| c != 0.0)
+        .unwrap_or_else(|| panic!("the controller never wrote a command: {seen:?}"));
+    assert!(seen[first..].iter().all(|&c| c >= 1.5), "{seen:?}");
     assert_eq!(after, 0.0);
     assert!(rep.safe_state_ok);
 }

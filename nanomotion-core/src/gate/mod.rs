@@ -185,6 +185,30 @@ pub struct PointAnalysis {
     pub circle: Option<CircleCheck>,
 }
 
+impl PointAnalysis {
+    /// A point nothing has been computed for yet: no poles, NaN measures,
+    /// not stable (what an analysis that stops early reports).
+    fn unanalysed() -> Self {
+        Self {
+            label: String::new(),
+            poles: Vec::new(),
+            spectral_radius: f64::NAN,
+            stable: false,
+            break_at: String::new(),
+            width: 0,
+            margins: None,
+            s_hinf: f64::NAN,
+            t_hinf: f64::NAN,
+            nyquist: None,
+            loci_min_distance: None,
+            learning: Vec::new(),
+            notes: Vec::new(),
+            loop_transfer: None,
+            circle: None,
+        }
+    }
+}
+
 /// The circle criterion (small-gain form) of a loop with sector blocks
 /// ([`Block::sector`]) at one schedule point: M is the transfer of the loop
 /// closed at the centre slopes from signals added to the sector blocks' outputs
@@ -1134,23 +1158,7 @@ fn analyse_point(
     learners: &[(usize, LearningModel)],
     sectors: &[(usize, Sector)],
 ) -> PointAnalysis {
-    let mut out = PointAnalysis {
-        label: String::new(),
-        poles: Vec::new(),
-        spectral_radius: f64::NAN,
-        stable: false,
-        break_at: String::new(),
-        width: 0,
-        margins: None,
-        s_hinf: f64::NAN,
-        t_hinf: f64::NAN,
-        nyquist: None,
-        loci_min_distance: None,
-        learning: Vec::new(),
-        notes: Vec::new(),
-        loop_transfer: None,
-        circle: None,
-    };
+    let mut out = PointAnalysis::unanalysed();
     // Level by level, fastest first: compose, then lift to the next rate. A
     // connection is closed at the level of its slower end (once: the lifted part
     // keeps the ports of the connections already closed inside it).
@@ -1529,20 +1537,10 @@ mod tests {
     fn point(label: &str, stable: bool) -> PointAnalysis {
         PointAnalysis {
             label: label.into(),
-            poles: Vec::new(),
             spectral_radius: if stable { 0.5 } else { 1.2 },
             stable,
-            break_at: String::new(),
             width: 1,
-            margins: None,
-            s_hinf: f64::NAN,
-            t_hinf: f64::NAN,
-            nyquist: None,
-            loci_min_distance: None,
-            learning: Vec::new(),
-            notes: Vec::new(),
-            loop_transfer: None,
-            circle: None,
+            ..PointAnalysis::unanalysed()
         }
     }
 
