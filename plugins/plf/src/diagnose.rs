@@ -1996,25 +1996,7 @@ fn not_physical(ctx: &Ctx<'_>, c: &Cand, f: &Fitted) -> Option<String> {
 /// reversals (not monotone, see [`reversed_travel`]). A force of the stage's
 /// own motion is named by [`ForceSplit`] instead.
 fn not_hysteresis(ctx: &Ctx<'_>, f: &Fitted, on_drive: bool) -> Option<String> {
-    let output = format!("{}.y", f.block_name);
-    let input = f
-        .spec
-        .connections
-        .iter()
-        .find(|c| c.to == format!("{}.u", f.block_name))?
-        .from
-        .clone();
-    let mut spec = surgery::clone_spec(&f.spec).ok()?;
-    for name in [&input, &output] {
-        if !spec.log.contains(name) {
-            spec.log.push(name.clone());
-        }
-    }
-    let mut ev = Evaluator::over(spec, ctx.records, &[], 0).ok()?;
-    if !ev.run(&[], ctx.n) {
-        return None;
-    }
-    let (x, y) = (ev.log_series(&input)?, ev.log_series(&output)?);
+    let (input, x, y) = fitted_map(ctx, f)?;
     if let Some(share) = reversed_travel(&x, &y).filter(|&s| on_drive && s > MAX_REVERSED_TRAVEL) {
         return Some(format!(
             "the fitted map from {input} runs backwards over {:.0} % of the input's travel (at most {:.0} %): a material's hysteresis is monotone on every branch",
@@ -2035,6 +2017,31 @@ fn not_hysteresis(ctx: &Ctx<'_>, f: &Fitted, on_drive: bool) -> Option<String> {
     }
 }
 
+/// The fitted block's input (its source's name) and the block's input and
+/// output over the records, from one run of the fitted graph.
+fn fitted_map(ctx: &Ctx<'_>, f: &Fitted) -> Option<(String, Vec<f64>, Vec<f64>)> {
+    let output = format!("{}.y", f.block_name);
+    let input = f
+        .spec
+        .connections
+        .iter()
+        .find(|c| c.to == format!("{}.u", f.block_name))?
+        .from
+        .clone();
+    let mut spec = surgery::clone_spec(&f.spec).ok()?;
+    for name in [&input, &output] {
+        if !spec.log.contains(name) {
+            spec.log.push(name.clone());
+        }
+    }
+    let mut ev = Evaluator::over(spec, ctx.records, &[], 0).ok()?;
+    if !ev.run(&[], ctx.n) {
+        return None;
+    }
+    let (x, y) = (ev.log_series(&input)?, ev.log_series(&output)?);
+    Some((input, x, y))
+}
+
 /// The least share of a fitted friction force's variance that must come from
 /// its Coulomb (direction-set) part for it to be named friction.
 const MIN_COULOMB_SHARE: f64 = 0.25;
@@ -2048,22 +2055,7 @@ fn viscous_only(ctx: &Ctx<'_>, f: &Fitted) -> Option<String> {
     let block = f.spec.blocks.iter().find(|b| b.name == f.block_name)?;
     let p = block.block.tunable()?.params();
     let (coulomb, viscous) = (p.first()?.abs(), p.get(3)?.abs());
-    let input = f
-        .spec
-        .connections
-        .iter()
-        .find(|c| c.to == format!("{}.u", f.block_name))?
-        .from
-        .clone();
-    let mut spec = surgery::clone_spec(&f.spec).ok()?;
-    if !spec.log.contains(&input) {
-        spec.log.push(input.clone());
-    }
-    let mut ev = Evaluator::over(spec, ctx.records, &[], 0).ok()?;
-    if !ev.run(&[], ctx.n) {
-        return None;
-    }
-    let x = ev.log_series(&input)?;
+    let (_, x, _) = fitted_map(ctx, f)?;
     let v: Vec<f64> = x.windows(2).map(|w| (w[1] - w[0]) * ctx.fs).collect();
     let fv = viscous * stats::mean_square(&v).sqrt();
     let share = coulomb * coulomb / (coulomb * coulomb + fv * fv).max(f64::MIN_POSITIVE);
