@@ -407,17 +407,9 @@ fn floor_sigma(ctx: &Ctx<'_>, i: usize, r: &[f64], part: Part) -> f64 {
     stats::noise_floor(ctx.part(r, part)).max(grid)
 }
 
-/// [`diagnose`] on several records with a progress callback: with one record,
-/// its last `opts.holdout` is held out; with more, `records[0]` estimates every
-/// parameter and the others (same columns and rate, other excitations) are
-/// held out whole and decide what is named — an effect must help on records
-/// it was not fitted on. Each record is simulated from rest.
-pub fn diagnose_records(
-    spec: &GraphSpec,
-    records: &[Dataset],
-    opts: &Options,
-    progress: Progress<'_>,
-) -> Result<Report, PlfError> {
+/// Phase 0: the options must be in range (`holdout`, `max-effects`, every
+/// `effects` name in the vocabulary).
+fn check_options(opts: &Options) -> Result<(), PlfError> {
     if !(0.05..=0.8).contains(&opts.holdout) {
         return Err(PlfError::Option {
             option: "holdout",
@@ -444,6 +436,21 @@ pub fn diagnose_records(
             });
         }
     }
+    Ok(())
+}
+
+/// [`diagnose`] on several records with a progress callback: with one record,
+/// its last `opts.holdout` is held out; with more, `records[0]` estimates every
+/// parameter and the others (same columns and rate, other excitations) are
+/// held out whole and decide what is named — an effect must help on records
+/// it was not fitted on. Each record is simulated from rest.
+pub fn diagnose_records(
+    spec: &GraphSpec,
+    records: &[Dataset],
+    opts: &Options,
+    progress: Progress<'_>,
+) -> Result<Report, PlfError> {
+    check_options(opts)?;
     if spec.compare.is_empty() {
         return Err(PlfError::Model(
             "the graph has no `compare:` entries; add e.g. `compare: [{ signal: stage.y, column: y }]`".into(),
@@ -571,69 +578,9 @@ pub fn diagnose_records(
             .iter()
             .map(|c| time_period(c).and_then(|p| phase_locked(&ctx, &spec_now, p)))
             .collect();
-        let mut results: Vec<Option<Fitted>> = Vec::with_capacity(total);
-        // Why each failed candidate failed (shown in the candidate table).
-        let mut failures: Vec<Option<String>> = Vec::with_capacity(total);
-        let threads = opts.threads.max(1);
-        // A work queue: each worker takes the next candidate, longest first;
-        // results land in their candidate's slot, so the outcome does not depend
-        // on timing.
-        let queue = crate::pool::longest_first(&cands, fit_cost);
-        let next = std::sync::atomic::AtomicUsize::new(0);
-        let slots: Vec<std::sync::Mutex<Option<Result<Fitted, String>>>> =
-            (0..total).map(|_| std::sync::Mutex::new(None)).collect();
-        let (tx, rx) = std::sync::mpsc::channel::<()>();
-        std::thread::scope(|sc| {
-            for _ in 0..threads.min(total.max(1)) {
-                let tx = tx.clone();
-                let (next, slots, cands, ctx, cur, locked, queue) =
-                    (&next, &slots, &cands, &ctx, &cur, &locked, &queue);
-                sc.spawn(move || {
-                    loop {
-                        let k = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-                        let Some(&i) = queue.get(k) else {
-                            break;
-                        };
-                        let r = match &locked[i] {
-                            Some(why) => Err(format!("not tried: {why}")),
-                            None => std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-                                fit_candidate(ctx, cur, &cands[i])
-                            }))
-                            .unwrap_or_else(|_| Err("the fit panicked".into())),
-                        };
-                        if let Ok(mut slot) = slots[i].lock() {
-                            *slot = Some(r);
-                        }
-                        let _ = tx.send(());
-                    }
-                });
-            }
-            drop(tx);
-            let mut done = 0;
-            while rx.recv().is_ok() {
-                done += 1;
-                progress(
-                    &format!("step {}: fitting candidates", step_no + 1),
-                    done as f64 / total as f64,
-                );
-            }
-        });
-        for (c, slot) in cands.iter().zip(slots) {
-            match slot.into_inner().ok().flatten() {
-                Some(Ok(f)) => {
-                    runs += f.runs;
-                    results.push(Some(f));
-                }
-                Some(Err(e)) => {
-                    tracing::debug!(effect = c.effect, site = %c.site.describe(), "candidate failed: {e}");
-                    results.push(None);
-                    failures.push(Some(e));
-                    continue;
-                }
-                None => results.push(None),
-            }
-            failures.push(None);
-        }
+        let (mut results, failures, fit_runs) =
+            fit_candidates(&ctx, &cur, &cands, &locked, opts.threads, step_no, progress);
+        runs += fit_runs;
         progress(&format!("step {}: deciding", step_no + 1), 1.0);
         let before_ms = weighted_holdout_ms(&ctx, &cur.residual);
         let mut table: Vec<Candidate> = cands
@@ -993,6 +940,87 @@ pub fn diagnose_records(
         residuals,
         rate_hz: fs,
     })
+}
+
+/// Phase 2 of a step: fit every candidate (refused ones, `locked`, are not
+/// tried), on `threads` workers, longest first; results land in their
+/// candidate's slot, so the outcome does not depend on timing. Returns the
+/// fits, why each failed one failed, and the graph runs spent.
+#[allow(clippy::type_complexity)]
+fn fit_candidates(
+    ctx: &Ctx<'_>,
+    cur: &Current,
+    cands: &[Cand],
+    locked: &[Option<String>],
+    threads: usize,
+    step_no: usize,
+    progress: Progress<'_>,
+) -> (Vec<Option<Fitted>>, Vec<Option<String>>, usize) {
+    let total = cands.len();
+    let mut runs = 0;
+    let mut results: Vec<Option<Fitted>> = Vec::with_capacity(total);
+    // Why each failed candidate failed (shown in the candidate table).
+    let mut failures: Vec<Option<String>> = Vec::with_capacity(total);
+    let threads = threads.max(1);
+    // A work queue: each worker takes the next candidate, longest first;
+    // results land in their candidate's slot, so the outcome does not depend
+    // on timing.
+    let queue = crate::pool::longest_first(cands, fit_cost);
+    let next = std::sync::atomic::AtomicUsize::new(0);
+    let slots: Vec<std::sync::Mutex<Option<Result<Fitted, String>>>> =
+        (0..total).map(|_| std::sync::Mutex::new(None)).collect();
+    let (tx, rx) = std::sync::mpsc::channel::<()>();
+    std::thread::scope(|sc| {
+        for _ in 0..threads.min(total.max(1)) {
+            let tx = tx.clone();
+            let (next, slots, queue) = (&next, &slots, &queue);
+            sc.spawn(move || {
+                loop {
+                    let k = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                    let Some(&i) = queue.get(k) else {
+                        break;
+                    };
+                    let r = match &locked[i] {
+                        Some(why) => Err(format!("not tried: {why}")),
+                        None => std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+                            fit_candidate(ctx, cur, &cands[i])
+                        }))
+                        .unwrap_or_else(|_| Err("the fit panicked".into())),
+                    };
+                    if let Ok(mut slot) = slots[i].lock() {
+                        *slot = Some(r);
+                    }
+                    let _ = tx.send(());
+                }
+            });
+        }
+        drop(tx);
+        let mut done = 0;
+        while rx.recv().is_ok() {
+            done += 1;
+            progress(
+                &format!("step {}: fitting candidates", step_no + 1),
+                done as f64 / total as f64,
+            );
+        }
+    });
+    for (c, slot) in cands.iter().zip(slots) {
+        match slot.into_inner().ok().flatten() {
+            Some(Ok(f)) => {
+                runs += f.runs;
+                results.push(Some(f));
+            }
+            Some(Err(e)) => {
+                tracing::debug!(effect = c.effect, site = %c.site.describe(), "candidate failed: {e}");
+                results.push(None);
+                failures.push(Some(e));
+                continue;
+            }
+            None => results.push(None),
+        }
+        failures.push(None);
+    }
+    (results, failures, runs)
 }
 
 /// The p-value above which the held-out data are said not to tell the named
