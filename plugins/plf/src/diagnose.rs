@@ -407,7 +407,7 @@ fn floor_sigma(ctx: &Ctx<'_>, i: usize, r: &[f64], part: Part) -> f64 {
     stats::noise_floor(ctx.part(r, part)).max(grid)
 }
 
-/// Phase 0: the options must be in range (`holdout`, `max-effects`, every
+/// The options must be in range (`holdout`, `max-effects`, every
 /// `effects` name in the vocabulary).
 fn check_options(opts: &Options) -> Result<(), PlfError> {
     if !(0.05..=0.8).contains(&opts.holdout) {
@@ -942,9 +942,9 @@ pub fn diagnose_records(
     })
 }
 
-/// Phase 2 of a step: fit every candidate (refused ones, `locked`, are not
-/// tried), on `threads` workers, longest first; results land in their
-/// candidate's slot, so the outcome does not depend on timing. Returns the
+/// A step's fits: every candidate (refused ones, `locked`, are not tried),
+/// from a work queue on `threads` workers, longest first; results land in
+/// their candidate's slot, so the outcome does not depend on timing. Returns the
 /// fits, why each failed one failed, and the graph runs spent.
 #[allow(clippy::type_complexity)]
 fn fit_candidates(
@@ -962,9 +962,6 @@ fn fit_candidates(
     // Why each failed candidate failed (shown in the candidate table).
     let mut failures: Vec<Option<String>> = Vec::with_capacity(total);
     let threads = threads.max(1);
-    // A work queue: each worker takes the next candidate, longest first;
-    // results land in their candidate's slot, so the outcome does not depend
-    // on timing.
     let queue = crate::pool::longest_first(cands, fit_cost);
     let next = std::sync::atomic::AtomicUsize::new(0);
     let slots: Vec<std::sync::Mutex<Option<Result<Fitted, String>>>> =
