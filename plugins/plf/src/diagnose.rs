@@ -632,32 +632,49 @@ pub fn diagnose_records(
         // The finalists: the best one (three once effects are named, for the
         // joint refit), passing over fits that are not physical as named.
         let mut finalists: Vec<usize> = Vec::new();
+        // The best fit that does not cut the held-out residual as a name must
+        // (`held_out_gain`): passed over (ranked first by its penalised score,
+        // it would stop the search before a candidate that does is tested; the
+        // level is over all candidates, so testing each one is allowed for),
+        // but the finalist when no candidate passes, so the report says why
+        // the search stopped.
+        let mut not_cutting: Option<usize> = None;
+        // The level an effect must be significant at (α over the candidates).
+        let level = opts.alpha / total.max(1) as f64;
         for &i in &order {
             if finalists.len() == if cur.free.is_empty() { 1 } else { 3 } {
                 break;
             }
+            let Some(f) = &results[i] else { continue };
             // A hysteresis block whose fitted map has no loop is not hysteresis
             // (see `memory_share`): it stands in for a gain, a saturation or a
             // smooth misfit; nor is one that runs backwards after reversals
             // (see `reversed_travel`); a friction force that is all viscous is
             // a damping.
-            let refusal = results[i]
-                .as_ref()
-                .and_then(|f| not_physical(&ctx, &cands[i], f));
-            if let Some(why) = refusal
-                && let Some(f) = &results[i]
+            let note = if let Some(why) = not_physical(&ctx, &cands[i], f) {
+                format!("refused as not physical: {why}")
+            } else if let (test, cut) =
+                held_out_gain(&ctx, (&excess, at_floor), &cur.residual, &f.residual)
+                && (test.p_value >= level || cut < opts.min_excess_cut)
             {
-                if let Some(row) = table.iter_mut().find(|r| {
-                    r.effect == cands[i].effect
-                        && r.site == cands[i].site.describe()
-                        && r.score == f.score
-                }) {
-                    row.note = Some(format!("refused as not physical: {why}"));
+                if not_cutting.is_none() {
+                    not_cutting = Some(i);
+                    continue;
                 }
-                results[i] = None;
+                NOT_CUTTING.into()
+            } else {
+                finalists.push(i);
                 continue;
-            }
-            finalists.push(i);
+            };
+            annotate(&mut table, &cands[i], f.score, note);
+            results[i] = None;
+        }
+        if finalists.is_empty() {
+            finalists.extend(not_cutting);
+        } else if let Some(i) = not_cutting
+            && let Some(f) = results[i].take()
+        {
+            annotate(&mut table, &cands[i], f.score, NOT_CUTTING.into());
         }
         let top: Vec<Fitted> = finalists
             .iter()
@@ -743,11 +760,8 @@ pub fn diagnose_records(
                 continue;
             }
         }
-        let after_ms = weighted_holdout_ms(&ctx, &win.residual);
-        let (worse, better) = holdout_weighted_vectors(&ctx, &cur.residual, &win.residual);
-        let (test, _rel) = stats::improvement_test(&worse, &better, 200);
-        let level = opts.alpha / total.max(1) as f64;
-        let excess_cut = excess_cut(&ctx, &excess, at_floor, before_ms, after_ms);
+        let (test, excess_cut) =
+            held_out_gain(&ctx, (&excess, at_floor), &cur.residual, &win.residual);
         let hb = holdout_rms(&ctx, &cur.residual);
         let ha = holdout_rms(&ctx, &win.residual);
         if test.p_value >= level || excess_cut < opts.min_excess_cut {
@@ -866,7 +880,8 @@ pub fn diagnose_records(
             evidence,
             holdout_rms_before: hb,
             holdout_rms_after: sc.holdout_rms,
-            cut_percent: 100.0 * (1.0 - (after_ms / before_ms).sqrt()),
+            cut_percent: 100.0
+                * (1.0 - (weighted_holdout_ms(&ctx, &win.residual) / before_ms).sqrt()),
             p_value: test.p_value,
             per_output: sc.per_output,
             candidates: table,
@@ -1039,7 +1054,6 @@ fn alternatives(
     [named, fitted_as]: [&str; 2],
     (level, excess, at_floor, min_cut): (f64, &[(f64, f64)], bool, f64),
 ) -> Vec<Alternative> {
-    let before_ms = weighted_holdout_ms(ctx, &cur.residual);
     let mut seen: Vec<&str> = vec![named, fitted_as];
     let mut out = Vec::new();
     for &i in order {
@@ -1050,15 +1064,7 @@ fn alternatives(
             continue;
         }
         seen.push(c.effect);
-        let (worse, better) = holdout_weighted_vectors(ctx, &cur.residual, &f.residual);
-        let (own, _) = stats::improvement_test(&worse, &better, 200);
-        let cut = excess_cut(
-            ctx,
-            excess,
-            at_floor,
-            before_ms,
-            weighted_holdout_ms(ctx, &f.residual),
-        );
+        let (own, cut) = held_out_gain(ctx, (excess, at_floor), &cur.residual, &f.residual);
         if own.p_value >= level || cut < min_cut {
             continue;
         }
@@ -1632,6 +1638,29 @@ fn weighted_holdout_ms(ctx: &Ctx<'_>, residual: &[Vec<f64>]) -> f64 {
         .enumerate()
         .map(|(i, r)| stats::mean_square(&r[ctx.n_est..]) * weight(ctx, i).powi(2))
         .sum()
+}
+
+/// How much `after` improves on `before` on the held-out data: the
+/// improvement test (see [`stats::improvement_test`]) and the share of the
+/// excess over the noise floor it cuts (see [`excess_cut`]). An effect is named
+/// only when the test's p is below the step's level and the cut reaches
+/// `min_excess_cut`.
+fn held_out_gain(
+    ctx: &Ctx<'_>,
+    (excess, at_floor): (&[(f64, f64)], bool),
+    before: &[Vec<f64>],
+    after: &[Vec<f64>],
+) -> (stats::Test, f64) {
+    let (worse, better) = holdout_weighted_vectors(ctx, before, after);
+    let (test, _) = stats::improvement_test(&worse, &better, 200);
+    let cut = excess_cut(
+        ctx,
+        excess,
+        at_floor,
+        weighted_holdout_ms(ctx, before),
+        weighted_holdout_ms(ctx, after),
+    );
+    (test, cut)
 }
 
 /// Held-out residuals of all outputs, weighted, as one vector per model (outputs
@@ -2637,6 +2666,18 @@ fn slit_count(r: &[f64], y: &[f64], pitch: f64, slits: usize) -> Option<usize> {
         }
     }
     best.map(|(nn, _)| nn)
+}
+
+const NOT_CUTTING: &str = "passed over: it does not cut the held-out residual significantly (p and share of the excess as for a name)";
+
+/// Writes `note` on the row of candidate `c` (fitted to `score`) in the step's table.
+fn annotate(table: &mut [Candidate], c: &Cand, score: f64, note: String) {
+    if let Some(row) = table
+        .iter_mut()
+        .find(|r| r.effect == c.effect && r.site == c.site.describe() && r.score == score)
+    {
+        row.note = Some(note);
+    }
 }
 
 /// A rough cost of fitting candidate `c`, for the work queue's order only (it

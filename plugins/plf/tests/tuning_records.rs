@@ -1,0 +1,55 @@
+//! Decisions of `diagnose` pinned on records of the scenario distribution's
+//! **tuning** split (`nanomotion_plf::scenario`; docs/plf.md "Judged on
+//! records it was not built against"): each test is a record a change was
+//! made looking at, and asserts the decision that change is about.
+
+use nanomotion_core::graph::GraphSpec;
+use nanomotion_plf::diagnose::{Options, diagnose};
+use nanomotion_plf::scenario::{self, Split};
+
+fn diagnose_scenario(seed: u64) -> nanomotion_plf::Report {
+    // typetag registers the effect blocks through the linker.
+    let _ = std::any::type_name::<nanomotion_plf::effects::Effect>();
+    let s = scenario::draw(seed).unwrap();
+    assert_eq!(
+        s.family.split(),
+        Split::Tune,
+        "seed {seed} is a tuning record"
+    );
+    let spec = GraphSpec::from_yaml(&s.record.nominal_yaml, "scenario.yaml").unwrap();
+    diagnose(&spec, &s.record.data, &Options::default()).unwrap()
+}
+
+/// Scenario 431 hides slit errors of a 64-slit encoder (the nominal has the
+/// encoder's rounding). Ranked by the penalised score, fits that do not cut
+/// the held-out residual at all (a drift, a delay: 2–3 parameters) come before
+/// the 64-entry slit table, which cuts it by a fifth; the first of them used to
+/// stop the search ("no candidate cut the held-out residual").
+#[test]
+fn a_fit_that_does_not_cut_the_held_out_residual_does_not_stop_the_search() {
+    let r = diagnose_scenario(431);
+    assert_eq!(r.found, ["encoder_slit_error"], "{}", r.stopped_because);
+    let step = &r.steps[0];
+    let named = step
+        .candidates
+        .iter()
+        .position(|c| c.effect == "encoder_slit_error" && c.note.is_none())
+        .unwrap();
+    let passed_over = step.candidates[..named]
+        .iter()
+        .filter(|c| {
+            c.note
+                .as_deref()
+                .is_some_and(|n| n.starts_with("passed over"))
+        })
+        .count();
+    assert!(passed_over > 0, "{:#?}", &step.candidates[..named]);
+    // Each passed-over fit indeed cuts the held-out rms by less than the named one.
+    for c in &step.candidates[..named] {
+        assert!(
+            c.holdout_rms.is_nan() || c.holdout_rms > step.holdout_rms_after,
+            "{c:?}"
+        );
+    }
+    assert!(step.holdout_rms_after < 0.9 * step.holdout_rms_before);
+}
