@@ -114,10 +114,11 @@ fn main() {
                 {
                     for st in &r.steps {
                         steps_text += &format!(
-                            " {}@{} −{:.0}%{}",
+                            " {}@{} {}{:.0}%{}",
                             st.effect,
                             st.site.split_whitespace().next().unwrap_or(""),
-                            st.cut_percent,
+                            if st.cut_percent < 0.0 { "+" } else { "−" },
+                            st.cut_percent.abs(),
                             if st.ambiguous_with.is_empty() {
                                 String::new()
                             } else {

@@ -373,7 +373,8 @@ struct Ctx<'a> {
     weights: Vec<f64>,
     /// Per compared output and [`Part`], the noise a quantised measurement
     /// carries whatever the model: q/√12 for a column on a grid of step q
-    /// (`stats::lattice` on that part), else 0. See [`floor_sigma`]. Per part:
+    /// (`stats::lattice` on that part, or `stats::value_grid` where the model
+    /// has no quantizer of its own), else 0. See [`floor_sigma`]. Per part:
     /// a held-out record may come from another sensor setting (EMPS: the
     /// validation record's position is not on the estimation record's grid).
     grid_floors: Vec<[f64; 2]>,
@@ -495,7 +496,22 @@ pub fn diagnose_records(
         .map(|ch| {
             let measured = data.column(&ch.column).unwrap_or(&[]);
             let cut = n_est.min(measured.len());
-            let floor = |part: &[f64]| stats::lattice(part).map_or(0.0, |(q, _)| q / 12f64.sqrt());
+            // A grid under noise comparable to its step shows only to the
+            // Rayleigh test of the values in motion (`stats::value_grid`);
+            // where the model rounds the output itself, the rounding is
+            // predicted, not noise.
+            let modelled = quantizer_lsb(&nominal, &ch.signal).is_some();
+            let level = opts.alpha / channels.len() as f64;
+            let floor = |part: &[f64]| {
+                stats::lattice(part)
+                    .map(|(q, _)| q)
+                    .or_else(|| {
+                        stats::value_grid(part)
+                            .filter(|g| !modelled && g.test.p_value < level)
+                            .map(|g| g.pitch)
+                    })
+                    .map_or(0.0, |q| q / 12f64.sqrt())
+            };
             [floor(&measured[..cut]), floor(&measured[cut..])]
         })
         .collect();
@@ -887,6 +903,16 @@ pub fn diagnose_records(
             candidates: table,
             ambiguous_with,
         });
+        cur = new;
+    }
+    // Rounding read off the record: simulation cannot show it where the model
+    // is off by more than a step, but the measured values sit on its grid.
+    while steps.len() < opts.max_effects
+        && let Some((i, step, new)) = quantization_from_grid(&ctx, &cur, opts, &named, &mut runs)?
+    {
+        named.push(("quantization", vec![i]));
+        own_forces.push(None);
+        steps.push(step);
         cur = new;
     }
     let final_scores = scores(&ctx, &cur);
@@ -2666,6 +2692,110 @@ fn slit_count(r: &[f64], y: &[f64], pitch: f64, slits: usize) -> Option<usize> {
         }
     }
     best.map(|(nn, _)| nn)
+}
+
+/// Quantization named from the record's own values (see [`stats::value_grid`])
+/// on the first compared output whose measured column sits on a grid (p below
+/// α over the outputs) that the model has no quantizer for and no
+/// quantization named on its axis, where the rounding error's mean square
+/// (q²/12) reaches `min_excess_cut` of the output's held-out mean square (a
+/// finer rounding is not what the model misses). A quantizer with the grid's
+/// step and offset goes on the output; its held-out change is reported as it
+/// is — a rounding's pattern is not predicted by a simulation off by more
+/// than a step, so the grid is the evidence, not the cut.
+fn quantization_from_grid(
+    ctx: &Ctx<'_>,
+    cur: &Current,
+    opts: &Options,
+    named: &[(&'static str, Vec<usize>)],
+    runs: &mut usize,
+) -> Result<Option<(usize, Step, Current)>, PlfError> {
+    let spec = cur.spec()?;
+    let level = opts.alpha / ctx.channels.len() as f64;
+    for (i, ch) in ctx.channels.iter().enumerate() {
+        let on_axis = named
+            .iter()
+            .any(|(e, o)| *e == "quantization" && o.iter().any(|&k| ctx.channels[k].same_axis(ch)));
+        if on_axis || quantizer_lsb(&spec, &ch.signal).is_some() {
+            continue;
+        }
+        let measured: Vec<f64> = cur.residual[i]
+            .iter()
+            .zip(&cur.model[i])
+            .map(|(r, m)| r + m)
+            .collect();
+        let Some(grid) = stats::value_grid(&measured) else {
+            continue;
+        };
+        let held_out_ms = stats::mean_square(&cur.residual[i][ctx.n_est..]);
+        if grid.test.p_value >= level
+            || grid.pitch * grid.pitch / 12.0 < opts.min_excess_cut * held_out_ms
+        {
+            continue;
+        }
+        let site = Site::Output {
+            compare: i,
+            signal: ch.signal.clone(),
+        };
+        let block = surgery::block_from_json(
+            json!({"type": "quantizer", "lsb": grid.pitch, "offset": grid.offset}),
+        )
+        .map_err(|e| PlfError::Model(e.to_string()))?;
+        let mut new_spec = surgery::clone_spec(&spec)?;
+        let name = surgery::insert(
+            &mut new_spec,
+            "plf_quantization",
+            block,
+            &site,
+            &[],
+            Some(ctx.fs),
+        )
+        .map_err(|e| PlfError::Model(e.to_string()))?;
+        let new = evaluate_current(ctx, new_spec, cur.free.clone(), runs)?;
+        let sc = scores(ctx, &new);
+        let (hb, ha) = (holdout_rms(ctx, &cur.residual), sc.holdout_rms);
+        let step = Step {
+            effect: "quantization".into(),
+            block: BlockRef {
+                name,
+                type_name: "quantizer".into(),
+            },
+            site: site.describe(),
+            params: BTreeMap::from([
+                ("lsb".to_string(), grid.pitch),
+                ("offset".to_string(), grid.offset),
+            ]),
+            final_params: BTreeMap::new(),
+            derived: BTreeMap::new(),
+            uncertainty: BTreeMap::new(),
+            evidence: format!(
+                "the measured {} sits on a grid of step {:.4e} while it moves (Rayleigh z = {:.1} over {} samples in motion, {:.1} per occupied bin; p = {:.1e} over the steps searched); its rounding error ({:.4e} rms) is {:.0} % of the held-out residual's mean square. Named from the record: a simulation off by more than a step does not predict the rounding's pattern, so the held-out change ({:.4e} -> {:.4e}) is not the evidence",
+                ch.column,
+                grid.pitch,
+                grid.test.statistic,
+                grid.samples,
+                grid.repeats,
+                grid.test.p_value,
+                grid.pitch / 12f64.sqrt(),
+                100.0 * grid.pitch * grid.pitch / 12.0 / held_out_ms,
+                hb,
+                ha
+            ),
+            holdout_rms_before: hb,
+            holdout_rms_after: ha,
+            cut_percent: 100.0
+                * (1.0
+                    - (weighted_holdout_ms(ctx, &new.residual)
+                        / weighted_holdout_ms(ctx, &cur.residual))
+                    .sqrt()),
+            p_value: grid.test.p_value,
+            per_output: sc.per_output,
+            candidates: Vec::new(),
+            ambiguous_with: Vec::new(),
+        };
+        return Ok(Some((i, step, new)));
+    }
+    Ok(None)
 }
 
 const NOT_CUTTING: &str = "passed over: it does not cut the held-out residual significantly (p and share of the excess as for a name)";

@@ -679,6 +679,149 @@ pub fn least_squares(
     Some((theta, cov))
 }
 
+/// The values of a moving signal sitting on a grid o + m·q: what a rounding
+/// (an encoder's count, an ADC's code) leaves in a measured record, read off
+/// the record alone — no model needed, so it holds where a simulation cannot
+/// reproduce the rounding's pattern (a model off by more than a step, a loop
+/// closed over the rounded signal).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ValueGrid {
+    /// The grid's step q (unit of the signal).
+    pub pitch: f64,
+    /// Its offset o ∈ [0, q).
+    pub offset: f64,
+    /// Rayleigh's z = |Σ e^{i2πy/q}|/√n over the n samples in motion, and the
+    /// chance of so large a z without a grid over the pitches searched.
+    pub test: Test,
+    /// The samples in motion the test used.
+    pub samples: usize,
+    /// The mean number of them per occupied bin (≥ 1), which z² is divided by.
+    pub repeats: f64,
+}
+
+/// The grid of `y`'s values ([`ValueGrid`]), with 30 to 4096 steps over the
+/// range travelled (coarser grids are told from a few levels the signal rests
+/// at by nothing; finer ones by too few samples per step). Only samples **in
+/// motion** count — the signal moved at least three steps between the tenth
+/// samples around it: a signal resting at a few levels has a "grid" of any
+/// step dividing their distances; a moving one spreads over many levels, and
+/// only a true grid keeps its values on the levels while it moves. The
+/// pitches are searched an octave at a time (the motion threshold set by the
+/// octave's largest step): the values in motion are binned (eight bins per
+/// smallest step) and transformed (FFT), |Σ e^{i2πy/q}|² read at every
+/// pitch, and the best refined off the grid (golden section over ± one bin on
+/// the samples themselves). Without a grid the phases e^{i2πy/q} of values
+/// spread smoothly over many steps are uniform, and z² = |Σ|²/n is
+/// exponential with mean 1 — for independent values. A signal that passes
+/// the same positions again (a periodic motion, a slow crossing) repeats its
+/// values, and r repeats of each multiply z² by r: z² is divided by the mean
+/// number of samples per occupied bin (r ≥ 1; a grid's own levels are
+/// occupied as densely, so what that costs a grid is its noise's share of a
+/// step). p = m·e^{−z²} over the m pitches searched (Bonferroni). `None` when
+/// no octave has 200 samples in motion. O(N + B log B).
+pub fn value_grid(y: &[f64]) -> Option<ValueGrid> {
+    use rustfft::{FftPlanner, num_complex::Complex};
+    const MIN_STEPS: f64 = 30.0;
+    const MAX_STEPS: f64 = 4096.0;
+    const HALF_WINDOW: usize = 5;
+    const MIN_SAMPLES: usize = 200;
+    let n = y.len();
+    if n < 2 * HALF_WINDOW + MIN_SAMPLES || y.iter().any(|v| !v.is_finite()) {
+        return None;
+    }
+    let lo = y.iter().copied().fold(f64::INFINITY, f64::min);
+    let span = y.iter().copied().fold(f64::NEG_INFINITY, f64::max) - lo;
+    if span <= 0.0 {
+        return None;
+    }
+    // How far the signal moves around each sample.
+    let motion: Vec<f64> = (0..n)
+        .map(|k| {
+            if k < HALF_WINDOW || k + HALF_WINDOW >= n {
+                0.0
+            } else {
+                (y[k + HALF_WINDOW] - y[k - HALF_WINDOW]).abs()
+            }
+        })
+        .collect();
+    let mut planner = FftPlanner::new();
+    let mut searched = 0usize;
+    // (z², frequency index, motion threshold, repeats)
+    let mut best: Option<(f64, usize, f64, f64)> = None;
+    let mut steps_lo = MIN_STEPS;
+    while steps_lo < MAX_STEPS {
+        let steps_hi = (2.0 * steps_lo).min(MAX_STEPS);
+        let threshold = 3.0 * span / steps_lo;
+        let moving = in_motion(y, &motion, threshold);
+        let (j_lo, j_hi) = (steps_lo.ceil() as usize, steps_hi.floor() as usize);
+        steps_lo = steps_hi;
+        if moving.len() < MIN_SAMPLES {
+            continue;
+        }
+        let bins = (8 * j_hi).next_power_of_two();
+        let mut buf = vec![Complex::new(0.0, 0.0); bins];
+        for v in &moving {
+            let b = (((v - lo) / span) * bins as f64) as usize;
+            buf[b.min(bins - 1)].re += 1.0;
+        }
+        let m = moving.len() as f64;
+        let repeats = (m / buf.iter().filter(|c| c.re > 0.0).count() as f64).max(1.0);
+        planner.plan_fft_forward(bins).process(&mut buf);
+        for (j, c) in buf.iter().enumerate().take(j_hi + 1).skip(j_lo) {
+            searched += 1;
+            let z2 = c.norm_sqr() / (m * repeats);
+            if best.is_none_or(|(b, ..)| z2 > b) {
+                best = Some((z2, j, threshold, repeats));
+            }
+        }
+    }
+    let (_, j, threshold, repeats) = best?;
+    let moving = in_motion(y, &motion, threshold);
+    let sum_at = |f: f64| {
+        let (mut re, mut im) = (0.0, 0.0);
+        for v in &moving {
+            let (s, c) = (2.0 * PI * f * (v - lo)).sin_cos();
+            re += c;
+            im += s;
+        }
+        (re, im)
+    };
+    let j = j as f64;
+    let (a, b, _, _) = nanomotion_core::lti::linalg::golden_section_max(
+        |f| {
+            let (re, im) = sum_at(f);
+            re * re + im * im
+        },
+        (j - 1.0) / span,
+        (j + 1.0) / span,
+        40,
+    );
+    let f = 0.5 * (a + b);
+    let (re, im) = sum_at(f);
+    let z2 = (re * re + im * im) / (moving.len() as f64 * repeats);
+    let pitch = 1.0 / f;
+    Some(ValueGrid {
+        pitch,
+        offset: (lo + pitch * im.atan2(re) / (2.0 * PI)).rem_euclid(pitch),
+        test: Test {
+            statistic: z2.sqrt(),
+            p_value: (searched as f64 * (-z2).exp()).min(1.0),
+        },
+        samples: moving.len(),
+        repeats,
+    })
+}
+
+/// The samples of `y` around which the signal moves at least `threshold`
+/// over ten samples (see [`value_grid`]).
+fn in_motion(y: &[f64], motion: &[f64], threshold: f64) -> Vec<f64> {
+    y.iter()
+        .zip(motion)
+        .filter(|(_, m)| **m >= threshold)
+        .map(|(v, _)| *v)
+        .collect()
+}
+
 /// The grid of a quantised record: if the values of `y` sit on levels
 /// o + m·q (plus noise small next to q), returns (q, o) with o ∈ [0, q).
 ///
@@ -850,6 +993,70 @@ fn grid_at(v: &[f64], threshold: f64) -> Option<(f64, f64)> {
 mod tests {
     use super::*;
     use nanomotion_core::rng::Rng;
+
+    /// A stage swept over ±1 by a sine and a chirp-like second sine, 12 000 samples.
+    fn sweep(k: usize) -> f64 {
+        let t = k as f64 / 2000.0;
+        0.8 * (2.0 * PI * 0.7 * t).sin() + 0.2 * (2.0 * PI * 3.1 * t + 0.4).sin()
+    }
+
+    #[test]
+    fn a_rounded_moving_signal_shows_its_grid_and_a_smooth_one_none() {
+        let mut rng = Rng::new(11);
+        let (q, o) = (2.0 / 437.0, 0.3 / 437.0);
+        // Rounded to o + m·q, noise q/8 after the rounding.
+        let rounded: Vec<f64> = (0..12_000)
+            .map(|k| o + q * ((sweep(k) - o) / q).round() + q / 8.0 * rng.normal())
+            .collect();
+        let g = value_grid(&rounded).unwrap();
+        assert!((g.pitch / q - 1.0).abs() < 1e-3, "{g:?}");
+        let d = (g.offset - o).rem_euclid(q);
+        assert!(d.min(q - d) < 0.02 * q, "{g:?}");
+        // z²·r/n = |E e^{i2πy/q}|² = e^{−(2πσ/q)²} for noise σ: here e^{−π²/16}.
+        let r2 = g.test.statistic.powi(2) * g.repeats / g.samples as f64;
+        assert!(
+            (r2 / (-(PI / 4.0).powi(2)).exp() - 1.0).abs() < 0.1,
+            "{g:?}: {r2}"
+        );
+        assert!(g.test.p_value < 1e-100);
+        // The same motion and noise without the rounding: no grid.
+        let smooth: Vec<f64> = (0..12_000)
+            .map(|k| sweep(k) + q / 8.0 * rng.normal())
+            .collect();
+        let g = value_grid(&smooth).unwrap();
+        assert!(g.test.p_value > 1e-3, "{g:?}");
+    }
+
+    #[test]
+    fn a_periodic_motion_that_repeats_its_values_has_no_grid() {
+        // 500 samples per period, 24 periods, noise far below any step searched:
+        // each value comes 24 times, which alone would make z² 24 times too large.
+        let mut rng = Rng::new(3);
+        let y: Vec<f64> = (0..12_000)
+            .map(|k| (2.0 * PI * k as f64 / 500.0).sin() + 1e-7 * rng.normal())
+            .collect();
+        let g = value_grid(&y).unwrap();
+        assert!(g.test.p_value > 1e-3, "{g:?}");
+    }
+
+    #[test]
+    fn a_signal_resting_at_a_few_levels_has_no_grid() {
+        // Steps between seven levels, settling in 40 samples, resting 600: the
+        // resting values alone sit on "grids" of many steps; in motion they do not.
+        let mut rng = Rng::new(5);
+        let levels = [-0.9, -0.41, 0.13, 0.52, 0.05, 0.77, -0.2];
+        let mut x = 0.0;
+        let y: Vec<f64> = (0..12_000)
+            .map(|k| {
+                let target = levels[(k / 640) % levels.len()];
+                x += (target - x) * 0.1;
+                x + 1e-3 * rng.normal()
+            })
+            .collect();
+        if let Some(g) = value_grid(&y) {
+            assert!(g.test.p_value > 1e-3, "{g:?}");
+        }
+    }
 
     #[test]
     fn a_rounding_error_is_a_line_in_the_position_with_the_lsb_and_offset() {

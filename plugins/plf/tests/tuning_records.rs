@@ -53,3 +53,39 @@ fn a_fit_that_does_not_cut_the_held_out_residual_does_not_stop_the_search() {
     }
     assert!(step.holdout_rms_after < 0.9 * step.holdout_rms_before);
 }
+
+/// Scenario 514 hides an encoder's rounding (no quantizer in the nominal,
+/// which is a few per cent off): a quantizer fitted on the simulated output
+/// cannot cut the held-out residual — the model is off by more than a step,
+/// so its rounding pattern is not the record's — but the measured values sit
+/// on the grid while the stage moves, and quantization is named from that.
+#[test]
+fn quantization_is_named_from_the_grid_the_measured_values_sit_on() {
+    let r = diagnose_scenario(514);
+    assert_eq!(r.found, ["quantization"], "{}", r.stopped_because);
+    let step = &r.steps[0];
+    assert!(
+        step.evidence.contains("sits on a grid"),
+        "{}",
+        step.evidence
+    );
+    assert!(step.p_value < 1e-6, "{}", step.p_value);
+    // The named grid is the record's: the measured values lie much closer to
+    // its levels than values spread over the steps would (rms q/√12 ≈ 0.29 q).
+    let (q, o) = (step.params["lsb"], step.params["offset"]);
+    let s = scenario::draw(514).unwrap();
+    let y = s.record.data.column("y").unwrap();
+    let rms = (y
+        .iter()
+        .map(|v| {
+            let d = (v - o).rem_euclid(q);
+            d.min(q - d).powi(2)
+        })
+        .sum::<f64>()
+        / y.len() as f64)
+        .sqrt();
+    assert!(
+        rms < 0.2 * q,
+        "rms distance to the grid {rms:.3e} for a step {q:.3e}"
+    );
+}
