@@ -373,8 +373,7 @@ struct Ctx<'a> {
     weights: Vec<f64>,
     /// Per compared output and [`Part`], the noise a quantised measurement
     /// carries whatever the model: q/√12 for a column on a grid of step q
-    /// (`stats::lattice` on that part, or `stats::value_grid` where the model
-    /// has no quantizer of its own), else 0. See [`floor_sigma`]. Per part:
+    /// (`stats::lattice` on that part), else 0. See [`floor_sigma`]. Per part:
     /// a held-out record may come from another sensor setting (EMPS: the
     /// validation record's position is not on the estimation record's grid).
     grid_floors: Vec<[f64; 2]>,
@@ -496,22 +495,7 @@ pub fn diagnose_records(
         .map(|ch| {
             let measured = data.column(&ch.column).unwrap_or(&[]);
             let cut = n_est.min(measured.len());
-            // A grid under noise comparable to its step shows only to the
-            // Rayleigh test of the values in motion (`stats::value_grid`);
-            // where the model rounds the output itself, the rounding is
-            // predicted, not noise.
-            let modelled = quantizer_lsb(&nominal, &ch.signal).is_some();
-            let level = opts.alpha / channels.len() as f64;
-            let floor = |part: &[f64]| {
-                stats::lattice(part)
-                    .map(|(q, _)| q)
-                    .or_else(|| {
-                        stats::value_grid(part)
-                            .filter(|g| !modelled && g.test.p_value < level)
-                            .map(|g| g.pitch)
-                    })
-                    .map_or(0.0, |q| q / 12f64.sqrt())
-            };
+            let floor = |part: &[f64]| stats::lattice(part).map_or(0.0, |(q, _)| q / 12f64.sqrt());
             [floor(&measured[..cut]), floor(&measured[cut..])]
         })
         .collect();
@@ -653,7 +637,9 @@ pub fn diagnose_records(
         // it would stop the search before a candidate that does is tested; the
         // level is over all candidates, so testing each one is allowed for),
         // but the finalist when no candidate passes, so the report says why
-        // the search stopped.
+        // the search stopped. Once effects are named, a finalist is refitted
+        // jointly with them and only then decided (the refit can make it
+        // pass), so only a fit that cuts nothing at all is passed over.
         let mut not_cutting: Option<usize> = None;
         // The level an effect must be significant at (α over the candidates).
         let level = opts.alpha / total.max(1) as f64;
@@ -671,7 +657,11 @@ pub fn diagnose_records(
                 format!("refused as not physical: {why}")
             } else if let (test, cut) =
                 held_out_gain(&ctx, (&excess, at_floor), &cur.residual, &f.residual)
-                && (test.p_value >= level || cut < opts.min_excess_cut)
+                && if cur.free.is_empty() {
+                    test.p_value >= level || cut < opts.min_excess_cut
+                } else {
+                    cut <= 0.0
+                }
             {
                 if not_cutting.is_none() {
                     not_cutting = Some(i);
