@@ -530,6 +530,22 @@ pub fn spatial_line(
         }
         (re, im)
     };
+    let (f, (re, im)) = off_the_grid(sum_at, j, span);
+    Some(SpatialLine {
+        period: 1.0 / f,
+        phase: im.atan2(re),
+        origin: lo,
+        test: Test {
+            statistic: ratio,
+            p_value,
+        },
+    })
+}
+
+/// A line found at FFT bin `j` over a `span`, refined off the grid: the
+/// frequency within ± one bin where |`sum_at`(f)|² (the sum over the samples
+/// themselves, as (re, im)) is largest (golden section), with that sum.
+fn off_the_grid(sum_at: impl Fn(f64) -> (f64, f64), j: usize, span: f64) -> (f64, (f64, f64)) {
     let j = j as f64;
     let (a, b, _, _) = nanomotion_core::lti::linalg::golden_section_max(
         |f| {
@@ -541,16 +557,7 @@ pub fn spatial_line(
         40,
     );
     let f = 0.5 * (a + b);
-    let (re, im) = sum_at(f);
-    Some(SpatialLine {
-        period: 1.0 / f,
-        phase: im.atan2(re),
-        origin: lo,
-        test: Test {
-            statistic: ratio,
-            p_value,
-        },
-    })
+    (f, sum_at(f))
 }
 
 /// Test whether residual `better` is smaller than `worse` on held-out data: the
@@ -786,18 +793,7 @@ pub fn value_grid(y: &[f64]) -> Option<ValueGrid> {
         }
         (re, im)
     };
-    let j = j as f64;
-    let (a, b, _, _) = nanomotion_core::lti::linalg::golden_section_max(
-        |f| {
-            let (re, im) = sum_at(f);
-            re * re + im * im
-        },
-        (j - 1.0) / span,
-        (j + 1.0) / span,
-        40,
-    );
-    let f = 0.5 * (a + b);
-    let (re, im) = sum_at(f);
+    let (f, (re, im)) = off_the_grid(sum_at, j, span);
     let z2 = (re * re + im * im) / (moving.len() as f64 * repeats);
     let pitch = 1.0 / f;
     Some(ValueGrid {
@@ -1001,7 +997,7 @@ mod tests {
     }
 
     #[test]
-    fn a_rounded_moving_signal_shows_its_grid_and_a_smooth_one_none() {
+    fn a_rounded_moving_signal_shows_its_grid() {
         let mut rng = Rng::new(11);
         let (q, o) = (2.0 / 437.0, 0.3 / 437.0);
         // Rounded to o + m·q, noise q/8 after the rounding.
@@ -1019,42 +1015,38 @@ mod tests {
             "{g:?}: {r2}"
         );
         assert!(g.test.p_value < 1e-100);
-        // The same motion and noise without the rounding: no grid.
-        let smooth: Vec<f64> = (0..12_000)
-            .map(|k| sweep(k) + q / 8.0 * rng.normal())
-            .collect();
-        let g = value_grid(&smooth).unwrap();
-        assert!(g.test.p_value > 1e-3, "{g:?}");
     }
 
     #[test]
-    fn a_periodic_motion_that_repeats_its_values_has_no_grid() {
+    fn signals_whose_values_sit_on_no_grid_show_none() {
+        let mut rng = Rng::new(3);
+        // The sweep of the test above, same noise, without the rounding.
+        let smooth: Vec<f64> = (0..12_000)
+            .map(|k| sweep(k) + 2.0 / 437.0 / 8.0 * rng.normal())
+            .collect();
         // 500 samples per period, 24 periods, noise far below any step searched:
         // each value comes 24 times, which alone would make z² 24 times too large.
-        let mut rng = Rng::new(3);
-        let y: Vec<f64> = (0..12_000)
+        let periodic: Vec<f64> = (0..12_000)
             .map(|k| (2.0 * PI * k as f64 / 500.0).sin() + 1e-7 * rng.normal())
             .collect();
-        let g = value_grid(&y).unwrap();
-        assert!(g.test.p_value > 1e-3, "{g:?}");
-    }
-
-    #[test]
-    fn a_signal_resting_at_a_few_levels_has_no_grid() {
         // Steps between seven levels, settling in 40 samples, resting 600: the
         // resting values alone sit on "grids" of many steps; in motion they do not.
-        let mut rng = Rng::new(5);
         let levels = [-0.9, -0.41, 0.13, 0.52, 0.05, 0.77, -0.2];
         let mut x = 0.0;
-        let y: Vec<f64> = (0..12_000)
+        let resting: Vec<f64> = (0..12_000)
             .map(|k| {
-                let target = levels[(k / 640) % levels.len()];
-                x += (target - x) * 0.1;
+                x += (levels[(k / 640) % levels.len()] - x) * 0.1;
                 x + 1e-3 * rng.normal()
             })
             .collect();
-        if let Some(g) = value_grid(&y) {
-            assert!(g.test.p_value > 1e-3, "{g:?}");
+        for (name, y) in [
+            ("smooth", smooth),
+            ("periodic", periodic),
+            ("resting", resting),
+        ] {
+            if let Some(g) = value_grid(&y) {
+                assert!(g.test.p_value > 1e-3, "{name}: {g:?}");
+            }
         }
     }
 
