@@ -208,7 +208,11 @@ fn print_report(r: &Report) {
         );
     }
     for (k, s) in r.steps.iter().enumerate() {
-        say!("\nstep {}: candidates tried (best first):", k + 1);
+        if s.candidates.is_empty() {
+            say!("\nstep {}: read off the record itself (no fit):", k + 1);
+        } else {
+            say!("\nstep {}: candidates tried (best first):", k + 1);
+        }
         for c in s.candidates.iter().take(8) {
             match &c.note {
                 None => say!(
@@ -278,11 +282,16 @@ fn print_report(r: &Report) {
             say!("     derived from the final fit: {}", d.join(", "));
         }
         say!(
-            "     held-out rms {:.4e} -> {:.4e} ({:.1} % cut, p = {:.1e})",
+            "     held-out rms {:.4e} -> {:.4e} ({:.1} % cut, p = {:.1e}{})",
             s.holdout_rms_before,
             s.holdout_rms_after,
             s.cut_percent,
-            s.p_value
+            s.p_value,
+            if s.candidates.is_empty() {
+                " of the test in the evidence"
+            } else {
+                ""
+            }
         );
     }
     say!(

@@ -196,7 +196,8 @@ pub struct Step {
     /// Cut of the held-out residual (%), each output in units of its noise
     /// floor (the cut of the held-out rms for one output).
     pub cut_percent: f64,
-    /// p-value of the held-out improvement test.
+    /// p-value of the held-out improvement test (an effect read off the
+    /// record itself, with no candidates: of the test its evidence names).
     pub p_value: f64,
     /// Scores per output after the step.
     pub per_output: Vec<OutputScore>,
