@@ -4,10 +4,12 @@
 //! quotes its output:
 //!
 //! ```text
-//! cargo run --release -p nanomotion-plf --example scenarios -- [COUNT] [--tune] [--hidden EFFECT] [--csv FILE] [--visibility-only | --labels-only]
+//! cargo run --release -p nanomotion-plf --example scenarios -- [COUNT] [--from SEED] [--tune] [--hidden EFFECT] [--csv FILE] [--visibility-only | --labels-only]
 //! ```
 //!
-//! COUNT held-out records (default 300) from seed 0 on; `--tune` takes the
+//! COUNT held-out records (default 300) from seed 0 on (`--from SEED`: from
+//! that seed on — records no change has been looked at yet, once the first
+//! ones have been scored and studied); `--tune` takes the
 //! tuning split instead (the only records the workflow may be tuned on).
 //! `--csv` writes one row per record. `--visibility-only` runs no diagnosis:
 //! it prints `seed,visibility` of the same records ([`scenario::visibility`]:
@@ -50,10 +52,16 @@ fn main() {
         .iter()
         .position(|a| a == "--csv")
         .and_then(|i| args.get(i + 1).cloned());
+    let first_seed: u64 = args
+        .iter()
+        .position(|a| a == "--from")
+        .and_then(|i| args.get(i + 1))
+        .and_then(|a| a.parse().ok())
+        .unwrap_or(0);
     let count: usize = args
         .iter()
         .enumerate()
-        .find(|(i, _)| *i == 0 || !matches!(args[i - 1].as_str(), "--csv" | "--hidden"))
+        .find(|(i, _)| *i == 0 || !matches!(args[i - 1].as_str(), "--csv" | "--hidden" | "--from"))
         .and_then(|(_, a)| a.parse().ok())
         .unwrap_or(300);
     let mut csv = String::from(
@@ -67,7 +75,7 @@ fn main() {
     let mut seconds = Vec::new();
     let (mut correct_cut, mut calibrations) = (0usize, 0usize);
     let start = Instant::now();
-    let mut seed = 0u64;
+    let mut seed = first_seed;
     while records < count {
         let (hidden, family) = scenario::labels(seed);
         seed += 1;
@@ -222,9 +230,10 @@ fn main() {
     };
     seconds.sort_by(f64::total_cmp);
     println!(
-        "{} records of the {} families (seeds 0–{}), {:.0} s in all",
+        "{} records of the {} families (seeds {}–{}), {:.0} s in all",
         records,
         if tune { "tuning" } else { "held-out" },
+        first_seed,
         seed - 1,
         start.elapsed().as_secs_f64()
     );

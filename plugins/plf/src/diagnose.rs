@@ -2687,7 +2687,8 @@ fn slit_count(r: &[f64], y: &[f64], pitch: f64, slits: usize) -> Option<usize> {
 
 /// Quantization named from the record's own values (see [`stats::value_grid`])
 /// on the first compared output whose measured column sits on a grid (p below
-/// α over the outputs) that the model has no quantizer for and no
+/// α over the outputs) that the model has no quantizer for, whose simulated
+/// output sits on none (a sampled constant-speed sweep does), and no
 /// quantization named on its axis, where the rounding error's mean square
 /// (q²/12) reaches `min_excess_cut` of the output's held-out mean square (a
 /// finer rounding is not what the model misses). A quantizer with the grid's
@@ -2718,6 +2719,12 @@ fn quantization_from_grid(
         let Some(grid) = stats::value_grid(&measured) else {
             continue;
         };
+        // A constant-speed sweep sampled at a fixed rate sits on a grid of its
+        // own (step v·dt, each pass at the same places), and so does the
+        // model's simulation of it; a rounding is in the record only.
+        if stats::value_grid(&cur.model[i]).is_some_and(|g| g.test.p_value < level) {
+            continue;
+        }
         let held_out_ms = stats::mean_square(&cur.residual[i][ctx.n_est..]);
         if grid.test.p_value >= level
             || grid.pitch * grid.pitch / 12.0 < opts.min_excess_cut * held_out_ms

@@ -1018,6 +1018,27 @@ mod tests {
     }
 
     #[test]
+    fn a_constant_speed_sweep_sampled_at_a_fixed_rate_sits_on_a_grid_of_its_own() {
+        // Why `diagnose` asks the model's output too before naming a rounding:
+        // a triangle at 2.37 steps of 10⁻³ per sample, 1000 samples per ramp,
+        // passes the same places on every ramp — a grid of step v·dt (or a
+        // divisor of it) in the values of a signal nothing rounds.
+        let y: Vec<f64> = (0..12_000)
+            .map(|k| {
+                let p = (k % 2000) as f64 * 2.37e-3;
+                if p <= 2.37 { p } else { 4.74 - p }
+            })
+            .collect();
+        let g = value_grid(&y).unwrap();
+        assert!(g.test.p_value < 1e-6, "{g:?}");
+        let per_step = 2.37e-3 / g.pitch;
+        assert!(
+            (per_step - per_step.round()).abs() < 0.01,
+            "{g:?}: v·dt = {per_step} steps"
+        );
+    }
+
+    #[test]
     fn signals_whose_values_sit_on_no_grid_show_none() {
         let mut rng = Rng::new(3);
         // The sweep of the test above, same noise, without the rounding.
