@@ -2685,10 +2685,35 @@ fn slit_count(r: &[f64], y: &[f64], pitch: f64, slits: usize) -> Option<usize> {
     best.map(|(nn, _)| nn)
 }
 
+/// Whether a grid of step `q` in a record can be the sampling of a
+/// constant-speed sweep rather than a rounding: a sweep at speed v sampled
+/// every dt puts its values on a grid of step v·dt — and of v·dt/m, so q
+/// divides the step per sample — each pass at the same places. It is when
+/// most samples of the model's (noise-free) output `model` that move at least
+/// half a step per sample move the same whole number m ≥ 1 of steps q
+/// (within 5 %); a rounding of a motion whose speed varies, or of one slower
+/// than a step per sample, is not mistaken for it.
+fn sampled_sweep(model: &[f64], q: f64) -> bool {
+    let mut ratios: Vec<f64> = model
+        .windows(2)
+        .map(|w| (w[1] - w[0]).abs() / q)
+        .filter(|r| *r >= 0.5)
+        .collect();
+    if ratios.len() < 200 {
+        return false;
+    }
+    let m = stats::median(&mut ratios).round().max(1.0);
+    let on_m = ratios
+        .iter()
+        .filter(|r| (*r / m - 1.0).abs() <= 0.05)
+        .count();
+    2 * on_m >= ratios.len()
+}
+
 /// Quantization named from the record's own values (see [`stats::value_grid`])
 /// on the first compared output whose measured column sits on a grid (p below
-/// α over the outputs) that the model has no quantizer for, whose simulated
-/// output sits on none (a sampled constant-speed sweep does), and no
+/// α over the outputs) that the model has no quantizer for and that is not
+/// the sampling of a constant-speed sweep ([`sampled_sweep`]), with no
 /// quantization named on its axis, where the rounding error's mean square
 /// (q²/12) reaches `min_excess_cut` of the output's held-out mean square (a
 /// finer rounding is not what the model misses). A quantizer with the grid's
@@ -2719,10 +2744,7 @@ fn quantization_from_grid(
         let Some(grid) = stats::value_grid(&measured) else {
             continue;
         };
-        // A constant-speed sweep sampled at a fixed rate sits on a grid of its
-        // own (step v·dt, each pass at the same places), and so does the
-        // model's simulation of it; a rounding is in the record only.
-        if stats::value_grid(&cur.model[i]).is_some_and(|g| g.test.p_value < level) {
+        if sampled_sweep(&cur.model[i], grid.pitch) {
             continue;
         }
         let held_out_ms = stats::mean_square(&cur.residual[i][ctx.n_est..]);
@@ -3166,6 +3188,26 @@ mod tests {
     /// a share s*/(2A) of a stroke of 2A; the first stroke, from the
     /// anhysteretic line (slope b − (b − c)e^{−αs}), runs backwards over
     /// ln((b − c)/b)/α.
+    #[test]
+    fn a_grid_at_the_step_per_sample_of_a_constant_speed_sweep_is_not_called_a_rounding() {
+        // A triangle at 2.37e-3 per sample: its values sit on grids of steps
+        // 2.37e-3/m; a rounding of 1e-3 on it, or any grid on a sine, is no
+        // sampling of a constant speed.
+        let tri: Vec<f64> = (0..12_000)
+            .map(|k| {
+                let p = (k % 2000) as f64 * 2.37e-3;
+                if p <= 2.37 { p } else { 4.74 - p }
+            })
+            .collect();
+        assert!(sampled_sweep(&tri, 2.37e-3));
+        assert!(sampled_sweep(&tri, 2.37e-3 / 2.0));
+        assert!(!sampled_sweep(&tri, 1e-3));
+        let sine: Vec<f64> = (0..12_000)
+            .map(|k| (2.0 * std::f64::consts::PI * k as f64 / 3000.0).sin())
+            .collect();
+        assert!(!sampled_sweep(&sine, 1e-3));
+    }
+
     #[test]
     fn a_hysteresis_that_runs_backwards_after_reversals_is_measured_by_its_travel() {
         let strokes = 20;
