@@ -105,13 +105,13 @@ use std::fmt;
 pub const MAX_POINTS: usize = 64;
 
 /// Largest number of states of a loop whose margins, norms and Nyquist count
-/// are computed (poles are always computed): 256, the most one `state_space`
-/// block holds. Each frequency point costs O(n²) (one Hessenberg reduction
-/// per loop transfer), but each H∞ norm solves the dense 2n × 2n Hamiltonian
+/// are computed (poles are always computed): 512, two full `state_space`
+/// blocks. Each frequency point costs O(n²) (one Hessenberg reduction per
+/// loop transfer), but each H∞ norm solves the dense 2n × 2n Hamiltonian
 /// eigenvalue problem, O(n³), and the gate runs before every run of a sweep
-/// (docs/performance.md: 199 states in 1.5 s, 399 in 16 s on the loaded
-/// 2-core machine).
-pub const MAX_MARGIN_STATES: usize = 256;
+/// (docs/performance.md, issue 29: 199 states in 0.6 s, 399 in about 4 s on
+/// the loaded 2-core machine).
+pub const MAX_MARGIN_STATES: usize = 512;
 
 /// Closed-loop poles with modulus above 1 − this are not counted as stable.
 pub const STABILITY_TOLERANCE: f64 = 1e-9;

@@ -108,7 +108,10 @@ fn hinf_continuous(sys: &StateSpace, eig: Eigensolver) -> HinfNorm {
         norm: sigma_max(&ev, None, f64::INFINITY),
         peak_rad_s: f64::INFINITY,
     };
-    let consider = |w: f64, best: &mut HinfNorm| raise(&ev, sys, best, w);
+    // Grid frequencies with σ̄ by the Hessenberg evaluation, confirmed
+    // together below.
+    let mut grid: Vec<(f64, f64)> = Vec::new();
+    let mut consider = |w: f64| grid.push((w, sigma_max(&ev, None, w)));
     // The Hamiltonian's frequencies are few: evaluated by the dense LU alone.
     let consider_exact = |w: f64, best: &mut HinfNorm| {
         let s = sigma_max(&ev, Some(sys), w);
@@ -126,7 +129,7 @@ fn hinf_continuous(sys: &StateSpace, eig: Eigensolver) -> HinfNorm {
         Eigensolver::Fast => ev.poles().to_vec(),
         Eigensolver::Schur => sys.poles(),
     };
-    consider(0.0, &mut best);
+    consider(0.0);
     let mags: Vec<f64> = poles
         .iter()
         .map(|p| p.norm())
@@ -134,17 +137,18 @@ fn hinf_continuous(sys: &StateSpace, eig: Eigensolver) -> HinfNorm {
         .collect();
     for p in &poles {
         if p.im.abs() > 0.0 {
-            consider(p.im.abs(), &mut best);
+            consider(p.im.abs());
         }
-        consider(p.norm(), &mut best);
+        consider(p.norm());
     }
     let lo = mags.iter().copied().fold(f64::INFINITY, f64::min).min(1.0) / 10.0;
     let hi = mags.iter().copied().fold(0.0, f64::max).max(1.0) * 10.0;
     let decades = (hi / lo).log10().max(1.0);
     let npts = ((decades * 20.0) as usize).clamp(20, 400);
     for i in 0..npts {
-        consider(lo * (hi / lo).powf(i as f64 / (npts - 1) as f64), &mut best);
+        consider(lo * (hi / lo).powf(i as f64 / (npts - 1) as f64));
     }
+    confirm(&ev, sys, &mut best, grid, eig == Eigensolver::Fast);
     if best.norm == 0.0 {
         return best;
     }
@@ -201,6 +205,43 @@ fn hinf_continuous(sys: &StateSpace, eig: Eigensolver) -> HinfNorm {
     // (only ever raises the bound).
     refine_peak(&ev, sys, &mut best, ratio);
     best
+}
+
+/// `best` raised to the dense-LU value σ̄(G(jw)) of the grid points `(w,
+/// σ̄ by the Hessenberg evaluation)` whose Hessenberg value exceeds it, as
+/// [`raise`] point by point. With `by_value`, in descending order of the
+/// Hessenberg value, stopping at the first that does not exceed `best`: one
+/// or two dense LUs instead of one per record of the scan order (the
+/// previous implementation, `by_value` false); the same maximum unless
+/// round-off reorders two values within it. A NaN Hessenberg value (an
+/// exactly singular pivot) is always confirmed, as [`raise`] does.
+fn confirm(
+    ev: &FrequencyEvaluator,
+    sys: &StateSpace,
+    best: &mut HinfNorm,
+    mut grid: Vec<(f64, f64)>,
+    by_value: bool,
+) {
+    if by_value {
+        // Stable: equal values keep the scan order (the first one wins).
+        grid.sort_by(|a, b| b.1.total_cmp(&a.1));
+        grid.sort_by_key(|g| !g.1.is_nan());
+    }
+    for (w, s) in grid {
+        if s <= best.norm {
+            if by_value {
+                break;
+            }
+            continue;
+        }
+        let d = sigma_max(ev, Some(sys), w);
+        if d > best.norm {
+            *best = HinfNorm {
+                norm: d,
+                peak_rad_s: w,
+            };
+        }
+    }
 }
 
 /// A golden-section search of σ̄ on log ω between `best.peak_rad_s / ratio`
