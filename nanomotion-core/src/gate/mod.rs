@@ -109,8 +109,8 @@ pub const MAX_POINTS: usize = 64;
 /// blocks. Each frequency point costs O(n²) (one Hessenberg reduction per
 /// loop transfer), but each H∞ norm solves the dense 2n × 2n Hamiltonian
 /// eigenvalue problem, O(n³), and the gate runs before every run of a sweep
-/// (docs/performance.md, issue 29: 199 states in 0.6 s, 399 in about 4 s on
-/// the loaded 2-core machine).
+/// (docs/performance.md, issue 29: 199 states in 0.6 s, 399 in 3.6 s on the
+/// loaded 2-core machine).
 pub const MAX_MARGIN_STATES: usize = 512;
 
 /// Closed-loop poles with modulus above 1 − this are not counted as stable.
