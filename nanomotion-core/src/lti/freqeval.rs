@@ -14,9 +14,12 @@
 //! stability gate evaluate loops at thousands of points each; with this they
 //! scale as n² per point instead of n³.
 
-use super::linalg::balance;
+use super::linalg::{balance, hessenberg_eigvals};
 use super::{Complex, LtiError, StateSpace};
 use nalgebra::DMatrix;
+
+/// An eigenvalue solver of a real square matrix ([`linalg::eigvals`](super::linalg::eigvals)).
+pub(crate) type EigvalsFn = fn(&DMatrix<f64>) -> Vec<Complex<f64>>;
 
 /// A state-space model prepared for evaluation at many points (see the
 /// module documentation): [`StateSpace::frequency_evaluator`].
@@ -54,14 +57,19 @@ impl StateSpace {
 impl FrequencyEvaluator {
     /// The reduction of `sys`, which must be valid ([`StateSpace::validate`]).
     pub(crate) fn new(sys: &StateSpace) -> Self {
-        Self::with_eigensolver(sys, super::linalg::eigvals_fast)
+        Self::reduce(sys, None)
     }
 
-    /// The reduction of `sys` with the poles computed by `eig`.
-    pub(crate) fn with_eigensolver(
-        sys: &StateSpace,
-        eig: fn(&DMatrix<f64>) -> Vec<Complex<f64>>,
-    ) -> Self {
+    /// The reduction of `sys` with the poles computed from A by `eig` (the
+    /// previous implementation of [`hinfnorm`](super::hinfnorm), for its
+    /// comparison).
+    pub(crate) fn with_eigensolver(sys: &StateSpace, eig: EigvalsFn) -> Self {
+        Self::reduce(sys, Some(eig))
+    }
+
+    /// The reduction; the poles by `eig`, or by default from the Hessenberg
+    /// form itself ([`hessenberg_eigvals`]: no second reduction).
+    fn reduce(sys: &StateSpace, eig: Option<EigvalsFn>) -> Self {
         let n = sys.nstates();
         let (m, p) = (sys.ninputs(), sys.noutputs());
         let (a, scale) = balance(&sys.a);
@@ -93,7 +101,11 @@ impl FrequencyEvaluator {
             }
         }
         debug_assert_eq!(cq.shape(), (p, n));
-        let poles = eig(&sys.a);
+        let poles = match eig {
+            Some(eig) => eig(&sys.a),
+            None => hessenberg_eigvals(&mut hr.clone(), n)
+                .unwrap_or_else(|| super::linalg::eigvals_fast(&sys.a)),
+        };
         Self {
             n,
             h: hr,
@@ -109,7 +121,8 @@ impl FrequencyEvaluator {
     }
 
     /// The eigenvalues of A (poles of the model), in no particular order, by
-    /// [`linalg::eigvals_fast`](super::linalg::eigvals_fast).
+    /// the eigenvalue-only QR iteration of the Hessenberg form
+    /// ([`hessenberg_eigvals`]).
     pub fn poles(&self) -> &[Complex<f64>] {
         &self.poles
     }
@@ -491,6 +504,35 @@ mod tests {
                     "n={n} ω={w:e}: dense {old} vs closed form {want}"
                 );
             }
+        }
+    }
+
+    /// The poles from the Hessenberg form against nalgebra's Schur form of A
+    /// (each pole near one of the other set and the reverse; sums equal the
+    /// trace).
+    #[test]
+    fn poles_from_the_hessenberg_form_match_the_schur_form() {
+        let mut rng = Rng::new(2930);
+        for &n in &[1usize, 2, 3, 8, 31, 77] {
+            let sys = random_system(&mut rng, n, 1, 2, None);
+            let ev = sys.frequency_evaluator().unwrap();
+            let (got, want) = (ev.poles(), crate::lti::linalg::eigvals(&sys.a));
+            assert_eq!(got.len(), n);
+            let tol = 1e-9 * norm_1(&sys.a);
+            let near = |x: &Complex<f64>, set: &[Complex<f64>]| {
+                set.iter()
+                    .map(|y| (x - y).norm())
+                    .fold(f64::INFINITY, f64::min)
+            };
+            for p in got {
+                assert!(near(p, &want) <= tol, "n={n}: {p} not a pole");
+            }
+            for p in &want {
+                assert!(near(p, got) <= tol, "n={n}: pole {p} missed");
+            }
+            let trace: f64 = sys.a.trace();
+            let sum: Complex<f64> = got.iter().sum();
+            assert!((sum.re - trace).abs() <= tol * n as f64 && sum.im.abs() <= tol * n as f64);
         }
     }
 

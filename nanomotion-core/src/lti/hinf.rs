@@ -63,7 +63,8 @@ pub fn hinfnorm_schur_eigensolver(sys: &StateSpace) -> Result<HinfNorm, LtiError
 /// The eigenvalue solver of [`hinfnorm`]'s poles and Hamiltonian tests.
 #[derive(Debug, Clone, Copy, PartialEq)]
 enum Eigensolver {
-    /// [`linalg::eigvals_fast`](super::linalg::eigvals_fast), poles once.
+    /// [`linalg::eigvals_fast`](super::linalg::eigvals_fast), poles once
+    /// (from the frequency evaluator's Hessenberg form).
     Fast,
     /// [`linalg::eigvals`](super::linalg::eigvals), poles twice (the previous
     /// implementation).
@@ -98,11 +99,14 @@ fn hinfnorm_by(sys: &StateSpace, eig: Eigensolver) -> Result<HinfNorm, LtiError>
 fn hinf_continuous(sys: &StateSpace, eig: Eigensolver) -> HinfNorm {
     const TOL: f64 = 1e-10;
     let n = sys.nstates();
-    let eigvals: fn(&DMatrix<f64>) -> Vec<Complex<f64>> = match eig {
+    let eigvals: super::freqeval::EigvalsFn = match eig {
         Eigensolver::Fast => super::linalg::eigvals_fast,
         Eigensolver::Schur => super::linalg::eigvals,
     };
-    let ev = FrequencyEvaluator::with_eigensolver(sys, eigvals);
+    let ev = match eig {
+        Eigensolver::Fast => FrequencyEvaluator::new(sys),
+        Eigensolver::Schur => FrequencyEvaluator::with_eigensolver(sys, eigvals),
+    };
     // Lower bound: D (ω = ∞), DC, pole frequencies and a coarse log grid.
     let mut best = HinfNorm {
         norm: sigma_max(&ev, None, f64::INFINITY),
