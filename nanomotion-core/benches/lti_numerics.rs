@@ -1,10 +1,17 @@
 //! Time per call of the dense LTI numerics at n = 10, 20, 40 (issue 14):
 //! `cargo bench -p nanomotion-core --bench lti_numerics`.
+//!
+//! Issue 29: `hinf_ratio` times `hinfnorm` and its previous implementation
+//! (`hinfnorm_schur_eigensolver`) side by side at n = 10 … 80, and `eig`
+//! the eigenvalue-only QR iteration (`eigvals_fast`) against nalgebra's Schur
+//! form (`eigvals`) at n = 100 … 400, so their ratios come from one run:
+//! `cargo bench -p nanomotion-core --bench lti_numerics -- 'hinf_ratio|eig/'`.
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use nalgebra::DMatrix;
+use nanomotion_core::lti::hinf::hinfnorm_schur_eigensolver;
 use nanomotion_core::lti::hinfsyn::{HinfSynOptions, augw, hinfsyn};
-use nanomotion_core::lti::linalg::eigvals;
+use nanomotion_core::lti::linalg::{eigvals, eigvals_fast};
 use nanomotion_core::lti::{StateSpace, care, dare, hinfnorm, lyap};
 use nanomotion_core::rng::Rng;
 use std::hint::black_box;
@@ -94,5 +101,58 @@ fn bench(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, bench);
+/// `hinfnorm` before and after issue 29 at n = 10 … 80 (2 × 2, continuous
+/// and discrete), and the eigenvalue solvers at n = 100 … 400.
+fn issue_29(c: &mut Criterion) {
+    let mut group = c.benchmark_group("hinf_ratio");
+    group
+        .sample_size(10)
+        .warm_up_time(Duration::from_millis(300))
+        .measurement_time(Duration::from_secs(1));
+    for n in [10usize, 20, 40, 80] {
+        let mut rng = Rng::new(29 + n as u64);
+        let ah = hurwitz(&mut rng, n);
+        let rho = eigvals(&ah).iter().map(|p| p.norm()).fold(0.0, f64::max);
+        for (kind, a, dt) in [
+            ("c", ah.clone(), None),
+            ("d", &ah * (0.95 / rho), Some(0.01)),
+        ] {
+            let sys = StateSpace::new(
+                a,
+                random(&mut rng, n, 2),
+                random(&mut rng, 2, n),
+                DMatrix::zeros(2, 2),
+                dt,
+            )
+            .unwrap();
+            if !sys.is_stable() {
+                continue;
+            }
+            group.bench_function(format!("after/{kind}{n}"), |bch| {
+                bch.iter(|| hinfnorm(black_box(&sys)).unwrap())
+            });
+            group.bench_function(format!("before/{kind}{n}"), |bch| {
+                bch.iter(|| hinfnorm_schur_eigensolver(black_box(&sys)).unwrap())
+            });
+        }
+    }
+    group.finish();
+    let mut group = c.benchmark_group("eig");
+    group
+        .sample_size(10)
+        .warm_up_time(Duration::from_millis(300))
+        .measurement_time(Duration::from_secs(1));
+    for n in [100usize, 200, 400] {
+        let a = random(&mut Rng::new(n as u64), n, n);
+        group.bench_function(format!("eigvals_fast/{n}"), |bch| {
+            bch.iter(|| eigvals_fast(black_box(&a)))
+        });
+        group.bench_function(format!("eigvals/{n}"), |bch| {
+            bch.iter(|| eigvals(black_box(&a)))
+        });
+    }
+    group.finish();
+}
+
+criterion_group!(benches, bench, issue_29);
 criterion_main!(benches);

@@ -51,13 +51,14 @@
 //! output), so that the closed loop is (I + L)⁻¹ whatever signs the `sum` blocks
 //! carry. Reported per loop: closed-loop poles (eigenvalues of the closed
 //! interconnection, not of L), gain, phase and modulus margins
-//! ([`stability_margins`]), delay margin PM/ω_c, ‖S‖∞ and ‖T‖∞ ([`hinfnorm`]) of
-//! S = (I + L)⁻¹ and T = L(I + L)⁻¹, and the generalised Nyquist count: the
-//! winding number N of det(I + L(z)) along |z| = 1 (passing outside poles on the
-//! circle) with the open-loop poles P outside it gives P − N closed-loop poles
-//! outside, a second computation of stability. A MIMO break (a port wider than
-//! one) reports the characteristic loci (eigenvalues of L(e^{jωT})) by their
-//! closest approach to −1, and ‖S‖∞, ‖T‖∞; gain/phase/delay margins are SISO.
+//! ([`stability_margins`](crate::lti::stability_margins)), delay margin
+//! PM/ω_c, ‖S‖∞ and ‖T‖∞ ([`hinfnorm`]) of S = (I + L)⁻¹ and T = L(I + L)⁻¹,
+//! and the generalised Nyquist count: the winding number N of det(I + L(z))
+//! along |z| = 1 (passing outside poles on the circle) with the open-loop
+//! poles P outside it gives P − N closed-loop poles outside, a second
+//! computation of stability. A MIMO break (a port wider than one) reports
+//! the characteristic loci (eigenvalues of L(e^{jωT})) by their closest
+//! approach to −1, and ‖S‖∞, ‖T‖∞; gain/phase/delay margins are SISO.
 //!
 //! ```
 //! use nanomotion_core::{GraphSpec, gate};
@@ -95,7 +96,7 @@ pub use crate::learning::{LearningCheck, LearningModel};
 pub use crate::require::{Bounds, Require};
 
 use crate::block::{Block, Role, Sector};
-use crate::lti::{Complex, FrequencyEvaluator, StateSpace, hinfnorm, stability_margins};
+use crate::lti::{Complex, FrequencyEvaluator, StateSpace, hinfnorm};
 use crate::scheduler::{BlockWiring, Scheduler};
 use assemble::{Edge, Part, compose, lift};
 use nalgebra::DMatrix;
@@ -105,13 +106,13 @@ use std::fmt;
 pub const MAX_POINTS: usize = 64;
 
 /// Largest number of states of a loop whose margins, norms and Nyquist count
-/// are computed (poles are always computed): 256, the most one `state_space`
-/// block holds. Each frequency point costs O(n²) (one Hessenberg reduction
-/// per loop transfer), but each H∞ norm solves the dense 2n × 2n Hamiltonian
+/// are computed (poles are always computed): 512, two full `state_space`
+/// blocks. Each frequency point costs O(n²) (one Hessenberg reduction per
+/// loop transfer), but each H∞ norm solves the dense 2n × 2n Hamiltonian
 /// eigenvalue problem, O(n³), and the gate runs before every run of a sweep
-/// (docs/performance.md: 199 states in 1.5 s, 399 in 16 s on the loaded
-/// 2-core machine).
-pub const MAX_MARGIN_STATES: usize = 256;
+/// (docs/performance.md, issue 29: 199 states in 0.6 s, 399 in 3.6 s on the
+/// loaded 2-core machine).
+pub const MAX_MARGIN_STATES: usize = 512;
 
 /// Closed-loop poles with modulus above 1 − this are not counted as stable.
 pub const STABILITY_TOLERANCE: f64 = 1e-9;
@@ -1416,8 +1417,11 @@ fn loop_measures(l: &StateSpace, out: &mut PointAnalysis) {
         out.s_hinf = f64::INFINITY;
         out.t_hinf = f64::INFINITY;
     }
+    // `l` was built by `StateSpace::new`, so it is valid: one reduction for
+    // the margins, the loci and the Nyquist count.
+    let ev = FrequencyEvaluator::new(l);
     if w == 1 {
-        match stability_margins(l) {
+        match crate::lti::margins::margins_with(l, &ev) {
             Ok(m) => {
                 let hz = |w: f64| w / (2.0 * std::f64::consts::PI);
                 let dm = if m.gain_crossover_rad_s.is_finite() && m.phase_margin_deg.is_finite() {
@@ -1437,9 +1441,9 @@ fn loop_measures(l: &StateSpace, out: &mut PointAnalysis) {
             Err(e) => out.notes.push(format!("margins: {e}")),
         }
     } else {
-        out.loci_min_distance = loci_min_distance(l);
+        out.loci_min_distance = loci_min_distance(l, &ev);
     }
-    let ny = nyquist_count(l);
+    let ny = nyquist_count(l, &ev);
     let cl_out = out
         .poles
         .iter()
@@ -1466,15 +1470,14 @@ fn det_i_plus_l(l: &FrequencyEvaluator, z: Complex<f64>) -> Complex<f64> {
     if n == 1 { m[(0, 0)] } else { m.determinant() }
 }
 
-fn nyquist_count(l: &StateSpace) -> Nyquist {
+/// The Nyquist count of the loop transfer `l` (reduced to `ev`).
+fn nyquist_count(l: &StateSpace, ev: &FrequencyEvaluator) -> Nyquist {
     let p_out = l
         .poles()
         .iter()
         .filter(|p| p.norm() > NYQUIST_RADIUS)
         .count();
-    // `l` was built by `StateSpace::new`, so it is valid.
-    let ev = FrequencyEvaluator::new(l);
-    let f = |theta: f64| det_i_plus_l(&ev, Complex::from_polar(NYQUIST_RADIUS, theta));
+    let f = |theta: f64| det_i_plus_l(ev, Complex::from_polar(NYQUIST_RADIUS, theta));
     // Arg increments, subdividing where the phase moves more than 0.5 rad.
     let n0 = 1024;
     let mut total = 0.0;
@@ -1513,15 +1516,14 @@ fn arg_increment(
     arg_increment(f, t0, v0, tm, vm, depth + 1) + arg_increment(f, tm, vm, t1, v1, depth + 1)
 }
 
-/// Closest approach to −1 of the characteristic loci of `l` on a grid of 512
-/// frequencies up to Nyquist.
-fn loci_min_distance(l: &StateSpace) -> Option<f64> {
+/// Closest approach to −1 of the characteristic loci of `l` (reduced to `ev`)
+/// on a grid of 512 frequencies up to Nyquist.
+fn loci_min_distance(l: &StateSpace, ev: &FrequencyEvaluator) -> Option<f64> {
     let dt = l.dt?;
     let wn = std::f64::consts::PI / dt;
     let grid: Vec<f64> = (0..512)
         .map(|i| wn * 10f64.powf(-5.0 + 5.0 * i as f64 / 511.0))
         .collect();
-    let ev = l.frequency_evaluator().ok()?;
     let resp: Vec<_> = grid.iter().map(|&w| ev.at(w)).collect();
     let loci = crate::analysis::mimo::characteristic_loci(&resp).ok()?;
     loci.iter()

@@ -14,9 +14,12 @@
 //! stability gate evaluate loops at thousands of points each; with this they
 //! scale as n² per point instead of n³.
 
-use super::linalg::balance;
+use super::linalg::{balance, hessenberg_eigvals};
 use super::{Complex, LtiError, StateSpace};
 use nalgebra::DMatrix;
+
+/// An eigenvalue solver of a real square matrix ([`linalg::eigvals`](super::linalg::eigvals)).
+pub(crate) type EigvalsFn = fn(&DMatrix<f64>) -> Vec<Complex<f64>>;
 
 /// A state-space model prepared for evaluation at many points (see the
 /// module documentation): [`StateSpace::frequency_evaluator`].
@@ -35,6 +38,8 @@ pub struct FrequencyEvaluator {
     model: StateSpace,
     /// Eigenvalues of A.
     poles: Vec<Complex<f64>>,
+    /// Their moduli.
+    pole_norms: Vec<f64>,
     /// ‖A‖₁.
     a_norm: f64,
 }
@@ -52,6 +57,19 @@ impl StateSpace {
 impl FrequencyEvaluator {
     /// The reduction of `sys`, which must be valid ([`StateSpace::validate`]).
     pub(crate) fn new(sys: &StateSpace) -> Self {
+        Self::reduce(sys, None)
+    }
+
+    /// The reduction of `sys` with the poles computed from A by `eig` (the
+    /// previous implementation of [`hinfnorm`](super::hinfnorm), for its
+    /// comparison).
+    pub(crate) fn with_eigensolver(sys: &StateSpace, eig: EigvalsFn) -> Self {
+        Self::reduce(sys, Some(eig))
+    }
+
+    /// The reduction; the poles by `eig`, or by default from the Hessenberg
+    /// form itself ([`hessenberg_eigvals`]: no second reduction).
+    fn reduce(sys: &StateSpace, eig: Option<EigvalsFn>) -> Self {
         let n = sys.nstates();
         let (m, p) = (sys.ninputs(), sys.noutputs());
         let (a, scale) = balance(&sys.a);
@@ -83,6 +101,11 @@ impl FrequencyEvaluator {
             }
         }
         debug_assert_eq!(cq.shape(), (p, n));
+        let poles = match eig {
+            Some(eig) => eig(&sys.a),
+            None => hessenberg_eigvals(&mut hr.clone(), n)
+                .unwrap_or_else(|| super::linalg::eigvals_fast(&sys.a)),
+        };
         Self {
             n,
             h: hr,
@@ -91,9 +114,17 @@ impl FrequencyEvaluator {
             d: sys.d.clone(),
             dt: sys.dt,
             model: sys.clone(),
-            poles: super::linalg::eigvals(&sys.a),
+            pole_norms: poles.iter().map(|p| p.norm()).collect(),
+            poles,
             a_norm: super::linalg::norm_1(&sys.a),
         }
+    }
+
+    /// The eigenvalues of A (poles of the model), in no particular order, by
+    /// the eigenvalue-only QR iteration of the Hessenberg form
+    /// ([`hessenberg_eigvals`]).
+    pub fn poles(&self) -> &[Complex<f64>] {
+        &self.poles
     }
 
     /// The feedthrough D (the value at infinite frequency of a continuous model).
@@ -129,7 +160,7 @@ impl FrequencyEvaluator {
             for i in 0..p {
                 let mut acc = Complex::new(0.0, 0.0);
                 for k in 0..n {
-                    acc += Complex::new(xr[k * m + j], xi[k * m + j]) * self.cq[(i, k)];
+                    acc += Complex::new(xr[j * n + k], xi[j * n + k]) * self.cq[(i, k)];
                 }
                 g[(i, j)] += acc;
             }
@@ -146,9 +177,11 @@ impl FrequencyEvaluator {
     /// poles on the unit circle at a distance of 10⁻⁹.
     fn near_a_pole(&self, x: Complex<f64>) -> bool {
         let abs = 1e-6 * self.a_norm;
-        self.poles
-            .iter()
-            .any(|p| (x - p).norm() <= 1e-4 * x.norm().max(p.norm()) + abs)
+        let x_norm = x.norm();
+        self.poles.iter().zip(&self.pole_norms).any(|(p, &p_norm)| {
+            let tol = 1e-4 * x_norm.max(p_norm) + abs;
+            (x - p).norm_sqr() <= tol * tol
+        })
     }
 
     /// G at angular frequency `w_rad_s` (rad/s): s = jω, or z = e^{jωT} for a
@@ -171,75 +204,101 @@ impl FrequencyEvaluator {
         super::ss::frequency_point(self.dt, w_rad_s)
     }
 
-    /// X = (xI − H)⁻¹ Qᵀ B (row-major n × m, real and imaginary parts
-    /// apart so that the row operations vectorise) by the LU of the
-    /// Hessenberg matrix xI − H with partial pivoting; `None` when a pivot is
-    /// exactly zero (x an eigenvalue, as the dense LU's refusal).
+    /// X = (xI − H)⁻¹ Qᵀ B (column-major n × m: column j at j·n, real and
+    /// imaginary parts apart so that the row operations vectorise) by the LU
+    /// of the Hessenberg matrix xI − H with partial pivoting; `None` when a
+    /// pivot is exactly zero (x an eigenvalue, as the dense LU's refusal).
+    ///
+    /// Only two rows are live during the elimination: the row carried down
+    /// from the previous steps and the next row of xI − H, read from H. The
+    /// pivot row of each step is appended to the packed upper triangle U (row
+    /// k holds columns k..n), the other one, eliminated, is carried on.
     fn solve(&self, x: Complex<f64>) -> Option<(Vec<f64>, Vec<f64>)> {
         let (n, m) = (self.n, self.ninputs());
-        let mut ur: Vec<f64> = self.h.iter().map(|&v| -v).collect();
-        let mut ui = vec![0.0; n * n];
-        for i in 0..n {
-            ur[i * n + i] += x.re;
-            ui[i * n + i] += x.im;
-        }
-        let mut rr = self.qb.clone();
+        let packed = n * (n + 1) / 2;
+        let (mut ur, mut ui) = (Vec::with_capacity(packed), Vec::with_capacity(packed));
+        let mut rr = vec![0.0; n * m];
         let mut ri = vec![0.0; n * m];
-        // Elimination: only row k + 1 has an entry below the diagonal in column k.
-        for k in 0..n.saturating_sub(1) {
-            let len = n - k;
-            let (a, b) = (k * n + k, (k + 1) * n + k);
-            let (top_r, bot_r) = ur.split_at_mut(b);
-            let (top_i, bot_i) = ui.split_at_mut(b);
-            let (pr, pi) = (&mut top_r[a..a + len], &mut top_i[a..a + len]);
-            let (qr, qi) = (&mut bot_r[..len], &mut bot_i[..len]);
-            let (rtop_r, rbot_r) = rr.split_at_mut((k + 1) * m);
-            let (rtop_i, rbot_i) = ri.split_at_mut((k + 1) * m);
-            let (sr, si) = (&mut rtop_r[k * m..], &mut rtop_i[k * m..]);
-            let (tr, ti) = (&mut rbot_r[..m], &mut rbot_i[..m]);
-            if qr[0] * qr[0] + qi[0] * qi[0] > pr[0] * pr[0] + pi[0] * pi[0] {
-                pr.swap_with_slice(qr);
-                pi.swap_with_slice(qi);
-                sr.swap_with_slice(tr);
-                si.swap_with_slice(ti);
+        for j in 0..m {
+            for k in 0..n {
+                rr[j * n + k] = self.qb[k * m + j];
             }
-            let pivot = Complex::new(pr[0], pi[0]);
-            if pivot == Complex::new(0.0, 0.0) {
-                // Both candidates zero: column k is already eliminated.
-                continue;
-            }
-            let l = Complex::new(qr[0], qi[0]) / pivot;
-            qr[0] = 0.0;
-            qi[0] = 0.0;
-            axpy_complex(l, &pr[1..], &pi[1..], &mut qr[1..], &mut qi[1..]);
-            axpy_complex(l, sr, si, tr, ti);
         }
-        // Back substitution with the upper triangle, row by row.
-        let mut acc_r = vec![0.0; m];
-        let mut acc_i = vec![0.0; m];
+        // Row k of xI − H, columns k..n, into (vr, vi) at the same positions.
+        let row_of = |k: usize, vr: &mut [f64], vi: &mut [f64]| {
+            for (v, &h) in vr[k..].iter_mut().zip(&self.h[k * n + k..k * n + n]) {
+                *v = -h;
+            }
+            vi[k..].fill(0.0);
+            vr[k] += x.re;
+            vi[k] += x.im;
+        };
+        // The carried row (columns k..n) and its right-hand sides.
+        let (mut cr, mut ci) = (vec![0.0; n], vec![0.0; n]);
+        let (mut nr, mut ni) = (vec![0.0; n], vec![0.0; n]);
+        row_of(0, &mut cr, &mut ci);
+        for k in 0..n.saturating_sub(1) {
+            // The next row: row k + 1 of xI − H, whose column k is its
+            // subdiagonal entry.
+            nr[k] = -self.h[(k + 1) * n + k];
+            ni[k] = 0.0;
+            row_of(k + 1, &mut nr, &mut ni);
+            // Pivot: the larger of the two candidates in column k.
+            if nr[k] * nr[k] + ni[k] * ni[k] > cr[k] * cr[k] + ci[k] * ci[k] {
+                std::mem::swap(&mut cr, &mut nr);
+                std::mem::swap(&mut ci, &mut ni);
+                for j in 0..m {
+                    rr.swap(j * n + k, j * n + k + 1);
+                    ri.swap(j * n + k, j * n + k + 1);
+                }
+            }
+            // (cr, ci) is the pivot row, (nr, ni) the row to eliminate.
+            let pivot = Complex::new(cr[k], ci[k]);
+            if pivot != Complex::new(0.0, 0.0) {
+                let l = Complex::new(nr[k], ni[k]) / pivot;
+                axpy_complex(
+                    l,
+                    &cr[k + 1..],
+                    &ci[k + 1..],
+                    &mut nr[k + 1..],
+                    &mut ni[k + 1..],
+                );
+                for j in 0..m {
+                    let (s, t) = (j * n + k, j * n + k + 1);
+                    let v = Complex::new(rr[t], ri[t]) - l * Complex::new(rr[s], ri[s]);
+                    rr[t] = v.re;
+                    ri[t] = v.im;
+                }
+            }
+            // Both candidates zero: column k is already eliminated.
+            ur.extend_from_slice(&cr[k..]);
+            ui.extend_from_slice(&ci[k..]);
+            std::mem::swap(&mut cr, &mut nr);
+            std::mem::swap(&mut ci, &mut ni);
+        }
+        ur.push(cr[n - 1]);
+        ui.push(ci[n - 1]);
+        // Back substitution with the upper triangle, row by row (row i
+        // starts at i·n − i(i − 1)/2).
         for i in (0..n).rev() {
-            let piv = Complex::new(ur[i * n + i], ui[i * n + i]);
+            let start = i * n - i * i.saturating_sub(1) / 2;
+            let piv = Complex::new(ur[start], ui[start]);
             if piv == Complex::new(0.0, 0.0) {
                 return None;
             }
-            let (row_r, row_i) = (&ur[i * n + i + 1..i * n + n], &ui[i * n + i + 1..i * n + n]);
+            let end = start + n - i;
+            let (row_r, row_i) = (&ur[start + 1..end], &ui[start + 1..end]);
             for j in 0..m {
-                let (d_r, d_i) = if m == 1 {
-                    dot_complex(row_r, row_i, &rr[i + 1..], &ri[i + 1..])
-                } else {
-                    let xr: Vec<f64> = (i + 1..n).map(|jj| rr[jj * m + j]).collect();
-                    let xi: Vec<f64> = (i + 1..n).map(|jj| ri[jj * m + j]).collect();
-                    dot_complex(row_r, row_i, &xr, &xi)
-                };
-                acc_r[j] = d_r;
-                acc_i[j] = d_i;
-            }
-            for j in 0..m {
-                let v = (Complex::new(rr[i * m + j], ri[i * m + j])
-                    - Complex::new(acc_r[j], acc_i[j]))
-                    / piv;
-                rr[i * m + j] = v.re;
-                ri[i * m + j] = v.im;
+                let col = j * n;
+                let (d_r, d_i) = dot_complex(
+                    row_r,
+                    row_i,
+                    &rr[col + i + 1..col + n],
+                    &ri[col + i + 1..col + n],
+                );
+                let v = (Complex::new(rr[col + i], ri[col + i]) - Complex::new(d_r, d_i)) / piv;
+                rr[col + i] = v.re;
+                ri[col + i] = v.im;
             }
         }
         Some((rr, ri))
@@ -445,6 +504,35 @@ mod tests {
                     "n={n} ω={w:e}: dense {old} vs closed form {want}"
                 );
             }
+        }
+    }
+
+    /// The poles from the Hessenberg form against nalgebra's Schur form of A
+    /// (each pole near one of the other set and the reverse; sums equal the
+    /// trace).
+    #[test]
+    fn poles_from_the_hessenberg_form_match_the_schur_form() {
+        let mut rng = Rng::new(2930);
+        for &n in &[1usize, 2, 3, 8, 31, 77] {
+            let sys = random_system(&mut rng, n, 1, 2, None);
+            let ev = sys.frequency_evaluator().unwrap();
+            let (got, want) = (ev.poles(), crate::lti::linalg::eigvals(&sys.a));
+            assert_eq!(got.len(), n);
+            let tol = 1e-9 * norm_1(&sys.a);
+            let near = |x: &Complex<f64>, set: &[Complex<f64>]| {
+                set.iter()
+                    .map(|y| (x - y).norm())
+                    .fold(f64::INFINITY, f64::min)
+            };
+            for p in got {
+                assert!(near(p, &want) <= tol, "n={n}: {p} not a pole");
+            }
+            for p in &want {
+                assert!(near(p, got) <= tol, "n={n}: pole {p} missed");
+            }
+            let trace: f64 = sys.a.trace();
+            let sum: Complex<f64> = got.iter().sum();
+            assert!((sum.re - trace).abs() <= tol * n as f64 && sum.im.abs() <= tol * n as f64);
         }
     }
 

@@ -8,7 +8,7 @@
 //! loop the grid ends at the Nyquist frequency π/T, which is itself checked as a
 //! phase crossover (a real, negative L at Nyquist is common after ZOH).
 
-use super::{Complex, LtiError, StateSpace};
+use super::{Complex, FrequencyEvaluator, LtiError, StateSpace};
 
 /// Stability margins of a loop gain L.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -86,13 +86,18 @@ pub fn stability_margins(l: &StateSpace) -> Result<Margins, LtiError> {
             l.ninputs()
         )));
     }
+    margins_with(l, &l.frequency_evaluator()?)
+}
+
+/// [`stability_margins`] of a valid SISO `l` whose frequency evaluator `ev`
+/// is at hand (the stability gate shares one with the Nyquist count).
+pub(crate) fn margins_with(l: &StateSpace, ev: &FrequencyEvaluator) -> Result<Margins, LtiError> {
     let (w_lo, w_hi) = grid_range(l);
     let n = 4000usize;
     let ratio = (w_hi / w_lo).ln();
     let grid: Vec<f64> = (0..n)
         .map(|i| w_lo * (ratio * i as f64 / (n - 1) as f64).exp())
         .collect();
-    let ev = l.frequency_evaluator()?;
     let eval = |w: f64| ev.siso_at(w);
     let resp: Vec<Complex<f64>> = grid.iter().map(|&w| eval(w)).collect();
     if resp.iter().any(|c| !c.re.is_finite() || !c.im.is_finite()) {
