@@ -2710,13 +2710,23 @@ fn sampled_sweep(model: &[f64], q: f64) -> bool {
     2 * on_m >= ratios.len()
 }
 
+/// The largest share of an output's held-out mean square a rounding read off
+/// the record may claim: a model without the quantizer leaves the rounding
+/// error (q²/12, Widrow) in its residual beside its own error, so a residual
+/// well below q²/12 says the values are not rounded to that step (EMPS: a
+/// weak "grid" of a trapezoidal reference's sampling with q²/12 at 70× the
+/// position's held-out mean square). 1.5 leaves room for a model error that
+/// partly follows the rounding.
+const MAX_ROUNDING_SHARE: f64 = 1.5;
+
 /// Quantization named from the record's own values (see [`stats::value_grid`])
 /// on the first compared output whose measured column sits on a grid (p below
 /// α over the outputs) that the model has no quantizer for and that is not
 /// the sampling of a constant-speed sweep ([`sampled_sweep`]), with no
 /// quantization named on its axis, where the rounding error's mean square
 /// (q²/12) reaches `min_excess_cut` of the output's held-out mean square (a
-/// finer rounding is not what the model misses). A quantizer with the grid's
+/// finer rounding is not what the model misses) and at most
+/// [`MAX_ROUNDING_SHARE`] of it. A quantizer with the grid's
 /// step and offset goes on the output; its held-out change is reported as it
 /// is — a rounding's pattern is not predicted by a simulation off by more
 /// than a step, so the grid is the evidence, not the cut.
@@ -2748,8 +2758,10 @@ fn quantization_from_grid(
             continue;
         }
         let held_out_ms = stats::mean_square(&cur.residual[i][ctx.n_est..]);
+        let rounding_ms = grid.pitch * grid.pitch / 12.0;
         if grid.test.p_value >= level
-            || grid.pitch * grid.pitch / 12.0 < opts.min_excess_cut * held_out_ms
+            || rounding_ms < opts.min_excess_cut * held_out_ms
+            || rounding_ms > MAX_ROUNDING_SHARE * held_out_ms
         {
             continue;
         }

@@ -86,10 +86,12 @@ fn emps_closed_loop_axis_names_friction_at_the_datasets_coulomb_level() {
         (coulomb - EMPS_COULOMB_N).abs() <= 0.25 * EMPS_COULOMB_N,
         "Coulomb level {coulomb} N, the dataset's identification {EMPS_COULOMB_N} N"
     );
+    // Nor a rounding: the position's values are on a 5·10⁻⁸ m grid, far
+    // finer than a step whose rounding error would exceed the whole residual.
     assert!(
         !r.found
             .iter()
-            .any(|e| e == "hysteresis" || e == "unmodeled_resonance"),
+            .any(|e| e == "hysteresis" || e == "unmodeled_resonance" || e == "quantization"),
         "padding after friction: {:?}",
         r.found
     );
