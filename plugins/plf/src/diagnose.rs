@@ -3194,23 +3194,12 @@ mod tests {
         (x, y)
     }
 
-    /// Thesis Table 6.2's loop (2c − b > 0) is monotone; with 2c − b < 0 the
-    /// output runs backwards after each reversal over the input travel
-    /// s* = ln(2(b − c)/b)/α (slope b − 2(b − c)e^{−αs} on a saturated branch),
-    /// a share s*/(2A) of a stroke of 2A; the first stroke, from the
-    /// anhysteretic line (slope b − (b − c)e^{−αs}), runs backwards over
-    /// ln((b − c)/b)/α.
     #[test]
     fn a_grid_at_the_step_per_sample_of_a_constant_speed_sweep_is_not_called_a_rounding() {
         // A triangle at 2.37e-3 per sample: its values sit on grids of steps
         // 2.37e-3/m; a rounding of 1e-3 on it, or any grid on a sine, is no
         // sampling of a constant speed.
-        let tri: Vec<f64> = (0..12_000)
-            .map(|k| {
-                let p = (k % 2000) as f64 * 2.37e-3;
-                if p <= 2.37 { p } else { 4.74 - p }
-            })
-            .collect();
+        let tri = stats::sampled_triangle(2.37e-3, 1000, 12_000);
         assert!(sampled_sweep(&tri, 2.37e-3));
         assert!(sampled_sweep(&tri, 2.37e-3 / 2.0));
         assert!(!sampled_sweep(&tri, 1e-3));
@@ -3219,6 +3208,13 @@ mod tests {
             .collect();
         assert!(!sampled_sweep(&sine, 1e-3));
     }
+
+    /// Thesis Table 6.2's loop (2c − b > 0) is monotone; with 2c − b < 0 the
+    /// output runs backwards after each reversal over the input travel
+    /// s* = ln(2(b − c)/b)/α (slope b − 2(b − c)e^{−αs} on a saturated branch),
+    /// a share s*/(2A) of a stroke of 2A; the first stroke, from the
+    /// anhysteretic line (slope b − (b − c)e^{−αs}), runs backwards over
+    /// ln((b − c)/b)/α.
 
     #[test]
     fn a_hysteresis_that_runs_backwards_after_reversals_is_measured_by_its_travel() {

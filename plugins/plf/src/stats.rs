@@ -808,6 +808,18 @@ pub fn value_grid(y: &[f64]) -> Option<ValueGrid> {
     })
 }
 
+/// `n` samples of a triangle that moves `step` per sample, `ramp` samples up
+/// then `ramp` down, from 0 (tests of [`value_grid`] and `diagnose`).
+#[cfg(test)]
+pub(crate) fn sampled_triangle(step: f64, ramp: usize, n: usize) -> Vec<f64> {
+    (0..n)
+        .map(|k| {
+            let i = k % (2 * ramp);
+            step * i.min(2 * ramp - i) as f64
+        })
+        .collect()
+}
+
 /// The samples of `y` around which the signal moves at least `threshold`
 /// over ten samples (see [`value_grid`]).
 fn in_motion(y: &[f64], motion: &[f64], threshold: f64) -> Vec<f64> {
@@ -1019,16 +1031,12 @@ mod tests {
 
     #[test]
     fn a_constant_speed_sweep_sampled_at_a_fixed_rate_sits_on_a_grid_of_its_own() {
-        // Why `diagnose` asks the model's output too before naming a rounding:
-        // a triangle at 2.37 steps of 10⁻³ per sample, 1000 samples per ramp,
-        // passes the same places on every ramp — a grid of step v·dt (or a
-        // divisor of it) in the values of a signal nothing rounds.
-        let y: Vec<f64> = (0..12_000)
-            .map(|k| {
-                let p = (k % 2000) as f64 * 2.37e-3;
-                if p <= 2.37 { p } else { 4.74 - p }
-            })
-            .collect();
+        // Why `diagnose` asks whether a grid is a sweep's sampling before
+        // naming a rounding (`sampled_sweep`): a triangle at 2.37·10⁻³ per
+        // sample, 1000 samples per ramp, passes the same places on every ramp —
+        // a grid of step v·dt (or a divisor of it) in the values of a signal
+        // nothing rounds.
+        let y = sampled_triangle(2.37e-3, 1000, 12_000);
         let g = value_grid(&y).unwrap();
         assert!(g.test.p_value < 1e-6, "{g:?}");
         let per_step = 2.37e-3 / g.pitch;
