@@ -7,7 +7,8 @@
 //! form (`eigvals`) at n = 100 … 400, so their ratios come from one run:
 //! `cargo bench -p nanomotion-core --bench lti_numerics -- 'hinf_ratio|eig/'`.
 
-use criterion::{Criterion, criterion_group, criterion_main};
+use criterion::measurement::WallTime;
+use criterion::{BenchmarkGroup, Criterion, criterion_group, criterion_main};
 use nalgebra::DMatrix;
 use nanomotion_core::lti::hinf::hinfnorm_schur_eigensolver;
 use nanomotion_core::lti::hinfsyn::{HinfSynOptions, augw, hinfsyn};
@@ -30,12 +31,19 @@ fn hurwitz(rng: &mut Rng, n: usize) -> DMatrix<f64> {
     a - DMatrix::identity(n, n) * (worst + 0.5)
 }
 
-fn bench(c: &mut Criterion) {
-    let mut group = c.benchmark_group("lti");
+/// A group of 10 samples, 0.3 s warm-up and 1 s of measurement: every
+/// group of this bench is timed alike.
+fn quick_group<'a>(c: &'a mut Criterion, name: &str) -> BenchmarkGroup<'a, WallTime> {
+    let mut group = c.benchmark_group(name);
     group
         .sample_size(10)
         .warm_up_time(Duration::from_millis(300))
         .measurement_time(Duration::from_secs(1));
+    group
+}
+
+fn bench(c: &mut Criterion) {
+    let mut group = quick_group(c, "lti");
     for n in [10usize, 20, 40] {
         let mut rng = Rng::new(n as u64);
         let a = random(&mut rng, n, n);
@@ -104,11 +112,7 @@ fn bench(c: &mut Criterion) {
 /// `hinfnorm` before and after issue 29 at n = 10 … 80 (2 × 2, continuous
 /// and discrete), and the eigenvalue solvers at n = 100 … 400.
 fn issue_29(c: &mut Criterion) {
-    let mut group = c.benchmark_group("hinf_ratio");
-    group
-        .sample_size(10)
-        .warm_up_time(Duration::from_millis(300))
-        .measurement_time(Duration::from_secs(1));
+    let mut group = quick_group(c, "hinf_ratio");
     for n in [10usize, 20, 40, 80] {
         let mut rng = Rng::new(29 + n as u64);
         let ah = hurwitz(&mut rng, n);
@@ -137,11 +141,7 @@ fn issue_29(c: &mut Criterion) {
         }
     }
     group.finish();
-    let mut group = c.benchmark_group("eig");
-    group
-        .sample_size(10)
-        .warm_up_time(Duration::from_millis(300))
-        .measurement_time(Duration::from_secs(1));
+    let mut group = quick_group(c, "eig");
     for n in [100usize, 200, 400] {
         let a = random(&mut Rng::new(n as u64), n, n);
         group.bench_function(format!("eigvals_fast/{n}"), |bch| {
