@@ -887,8 +887,7 @@ pub fn diagnose_records(
             evidence,
             holdout_rms_before: hb,
             holdout_rms_after: sc.holdout_rms,
-            cut_percent: 100.0
-                * (1.0 - (weighted_holdout_ms(&ctx, &win.residual) / before_ms).sqrt()),
+            cut_percent: cut_percent(before_ms, weighted_holdout_ms(&ctx, &win.residual)),
             p_value: test.p_value,
             per_output: sc.per_output,
             candidates: table,
@@ -907,11 +906,10 @@ pub fn diagnose_records(
         cur = new;
     }
     let final_scores = scores(&ctx, &cur);
-    let holdout_cut_percent = 100.0
-        * (1.0
-            - (weighted_holdout_ms(&ctx, &cur.residual)
-                / weighted_holdout_ms(&ctx, &first_residuals))
-            .sqrt());
+    let holdout_cut_percent = cut_percent(
+        weighted_holdout_ms(&ctx, &first_residuals),
+        weighted_holdout_ms(&ctx, &cur.residual),
+    );
     let final_tests = tests(&ctx, &cur)?;
     let mut augmented = cur.spec()?;
     if let Some(cal) = calibration.as_mut().filter(|c| c.accepted) {
@@ -1249,7 +1247,7 @@ fn calibrate(
         uncertainty,
         holdout_rms_before: hb,
         holdout_rms_after: ha,
-        cut_percent: 100.0 * (1.0 - (after_ms / before_ms).sqrt()),
+        cut_percent: cut_percent(before_ms, after_ms),
         p_value: test.p_value,
         excess_cut_percent: f64::NAN,
         held,
@@ -2815,11 +2813,10 @@ fn quantization_from_grid(
             ),
             holdout_rms_before: hb,
             holdout_rms_after: ha,
-            cut_percent: 100.0
-                * (1.0
-                    - (weighted_holdout_ms(ctx, &new.residual)
-                        / weighted_holdout_ms(ctx, &cur.residual))
-                    .sqrt()),
+            cut_percent: cut_percent(
+                weighted_holdout_ms(ctx, &cur.residual),
+                weighted_holdout_ms(ctx, &new.residual),
+            ),
             p_value: grid.test.p_value,
             per_output: sc.per_output,
             candidates: Vec::new(),
@@ -2828,6 +2825,12 @@ fn quantization_from_grid(
         return Ok(Some((i, step, new)));
     }
     Ok(None)
+}
+
+/// The cut (%) of a held-out rms whose mean square went from `before_ms` to
+/// `after_ms` (negative when it grew).
+fn cut_percent(before_ms: f64, after_ms: f64) -> f64 {
+    100.0 * (1.0 - (after_ms / before_ms).sqrt())
 }
 
 const NOT_CUTTING: &str = "passed over: it does not cut the held-out residual significantly (p and share of the excess as for a name)";
