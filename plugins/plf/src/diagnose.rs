@@ -544,44 +544,57 @@ pub fn diagnose_records(
         let excess = excess_ms(&ctx, &cur);
         let at_floor = excess.iter().all(|&(ms, floor)| ms <= 1.2 * floor * floor);
         let floor_stop = "the held-out residual is at its noise floor (mean square within 20 % of the white-noise estimate)";
-        let mut cands = enumerate(&ctx, &cur, opts)?;
         // An effect named before on an axis is never a new effect there (the
         // joint refit adjusts the first; a second copy at another place of the
         // same axis — another output of the same loop, another connection in
         // series on it — would only be padding).
         // A hysteretic force of the stage's own motion after friction was named
         // there is that same force again.
-        cands.retain(|c| {
-            let outs = outputs_of(&ctx, &c.site);
-            let own_motion = matches!(c.site, Site::Feedback { .. });
-            !named.iter().any(|(e, o)| {
-                (*e == c.effect || (own_motion && *e == "friction"))
-                    && o.iter().any(|&k| {
-                        outs.iter()
-                            .any(|&j| ctx.channels[k].same_axis(&ctx.channels[j]))
-                    })
-            })
-        });
+        // Those copies (`again`) are fitted all the same: they are what a new
+        // name must beat (see `same_form` below).
+        let (mut cands, mut again): (Vec<Cand>, Vec<Cand>) =
+            enumerate(&ctx, &cur, opts)?.into_iter().partition(|c| {
+                let outs = outputs_of(&ctx, &c.site);
+                let own_motion = matches!(c.site, Site::Feedback { .. });
+                !named.iter().any(|(e, o)| {
+                    (*e == c.effect || (own_motion && *e == "friction"))
+                        && o.iter().any(|&k| {
+                            outs.iter()
+                                .any(|&j| ctx.channels[k].same_axis(&ctx.channels[j]))
+                        })
+                })
+            });
         if at_floor {
             cands.retain(|c| {
                 matches!(c.effect, "quantization" | "encoder_slit_error")
                     && matches!(c.site, Site::Output { .. } | Site::Sensor { .. })
             });
+            again.clear();
             if cands.is_empty() {
                 stopped = floor_stop.into();
                 break;
             }
         }
         let total = cands.len();
+        cands.append(&mut again);
         // Names refused before any fit, by physics (see `phase_locked`).
         let spec_now = cur.spec()?;
         let locked: Vec<Option<String>> = cands
             .iter()
             .map(|c| time_period(c).and_then(|p| phase_locked(&ctx, &spec_now, p)))
             .collect();
-        let (mut results, failures, fit_runs) =
+        let (mut results, mut failures, fit_runs) =
             fit_candidates(&ctx, &cur, &cands, &locked, opts.threads, step_no, progress);
         runs += fit_runs;
+        let again = cands.split_off(total);
+        let again_results = results.split_off(total);
+        failures.truncate(total);
+        // The best copy of a named effect, by its own penalised score.
+        let same_form = again_results
+            .into_iter()
+            .zip(&again)
+            .filter_map(|(f, c)| f.map(|f| (f, c)))
+            .min_by(|a, b| a.0.score.total_cmp(&b.0.score));
         progress(&format!("step {}: deciding", step_no + 1), 1.0);
         let before_ms = weighted_holdout_ms(&ctx, &cur.residual);
         let mut table: Vec<Candidate> = cands
@@ -683,10 +696,15 @@ pub fn diagnose_records(
         {
             annotate(&mut table, &cands[i], f.score, NOT_CUTTING.into());
         }
-        let top: Vec<Fitted> = finalists
+        let mut top: Vec<Fitted> = finalists
             .iter()
             .map(|&i| results[i].take().expect("fitted"))
             .collect();
+        // The copy of a named effect is refitted jointly too, last.
+        let same_form = same_form.map(|(f, c)| {
+            top.push(f);
+            c
+        });
         // The joint refits are independent: one per core.
         type Joint = Option<(Result<Fitted, PlfError>, usize)>;
         let top: Vec<(Fitted, Joint)> = if cur.free.is_empty() {
@@ -703,14 +721,41 @@ pub fn diagnose_records(
                 },
             )
         };
-        for (&i, (mut f, joint)) in finalists.iter().zip(top) {
-            let joint = joint.map(|(j, n_runs)| {
-                runs += n_runs;
-                j
-            });
-            if let Some(Ok(j)) = joint
-                && weighted_holdout_ms(&ctx, &j.residual) < weighted_holdout_ms(&ctx, &f.residual)
-                && implausible(&ctx, &j.spec, j.free.iter().map(|p| p.block.as_str())).is_none()
+        let top: Vec<(Fitted, Option<Fitted>)> = top
+            .into_iter()
+            .map(|(f, joint)| {
+                let joint = joint.map(|(j, n_runs)| {
+                    runs += n_runs;
+                    j
+                });
+                match joint {
+                    Some(Ok(j))
+                        if weighted_holdout_ms(&ctx, &j.residual)
+                            < weighted_holdout_ms(&ctx, &f.residual)
+                            && implausible(
+                                &ctx,
+                                &j.spec,
+                                j.free.iter().map(|p| p.block.as_str()),
+                            )
+                            .is_none() =>
+                    {
+                        (f, Some(j))
+                    }
+                    _ => (f, None),
+                }
+            })
+            .collect();
+        let mut top = top.into_iter();
+        let finalist_fits: Vec<(Fitted, Option<Fitted>)> =
+            top.by_ref().take(finalists.len()).collect();
+        // The named effects' own form: the best copy of one, jointly refitted.
+        let same_form = same_form.zip(top.next()).map(|(c, (f, j))| {
+            let f = j.unwrap_or(f);
+            let sc = penalised(&f, weighted_holdout_ms(&ctx, &f.residual));
+            (c, f, sc)
+        });
+        for (&i, (mut f, joint)) in finalists.iter().zip(finalist_fits) {
+            if let Some(j) = joint
                 && not_physical(&ctx, &cands[i], &j).is_none()
             {
                 f = j;
@@ -744,12 +789,12 @@ pub fn diagnose_records(
         // explanation, and the effect is still tried next step.
         if opts.calibrate
             && !calibration.as_ref().is_some_and(|c| c.accepted)
-            && let Some((mut cal, calibrated, cal_ms)) = calibrate(&ctx, &cur, &mut runs)?
+            && let Some((mut cal, calibrated, (before_ms, cal_ms))) =
+                calibrate(&ctx, &cur, &mut runs)?
         {
             let k = cal.params.len() as f64;
             let (ne, nh) = (ctx.n_est as f64, (ctx.n - ctx.n_est) as f64);
             let cal_score = cal_ms * (1.0 + k * ne.ln() / ne) * (1.0 + k / nh.sqrt());
-            let before_ms = weighted_holdout_ms(&ctx, &cur.residual);
             let cut = excess_cut(&ctx, &excess, at_floor, before_ms, cal_ms);
             let level = opts.alpha / (total + 1) as f64;
             let (cal_residual, win_residual) =
@@ -796,6 +841,36 @@ pub fn diagnose_records(
                 100.0 * opts.min_excess_cut
             );
             break;
+        }
+        // The named effects' own form: the record's effect is rarely in the
+        // exact shape of our block (another hysteresis law, a smoother limit,
+        // creep with other time constants), and what our block leaves is
+        // structured, so a flexible new block cuts it significantly. A new
+        // name must therefore predict the held-out data better than another
+        // copy of an effect already named (refitted jointly like the winner):
+        // on the penalised score and significantly, at the level it must beat
+        // the model at — as against the nominal calibration, when the data
+        // cannot tell a new effect from the form of one named, one effect is
+        // the likelier and simpler explanation.
+        if let Some((c, f, sc)) = &same_form {
+            let (copy_residual, win_residual) =
+                holdout_weighted_vectors(&ctx, &f.residual, &win.residual);
+            let (vs_copy, _) = stats::improvement_test(&copy_residual, &win_residual, 200);
+            if *sc <= best_score || vs_copy.p_value >= level {
+                rejected_candidates = table.clone();
+                stopped = format!(
+                    "the rest is the form of the effects named, not a new effect: the best new effect, {} ({}), held-out rms {:.4e}, does not predict the held-out data significantly better than another {} ({}), {:.4e} (p = {:.2e}, needed < {:.1e})",
+                    cand.effect,
+                    cand.site.describe(),
+                    ha,
+                    c.effect,
+                    c.site.describe(),
+                    holdout_rms(&ctx, &f.residual),
+                    vs_copy.p_value,
+                    level
+                );
+                break;
+            }
         }
         // Accept.
         let evidence = format!(
@@ -1155,14 +1230,16 @@ fn excess_cut(
 /// damping, lag and per-mode scales of every continuous `state_space` block
 /// of the current model, from λ = 1 and from λ = 1 ∓ 8 % (a lightly damped
 /// mode a few per cent off is a local minimum away), each per-mode scale
-/// started on a grid ([`scan_mode_scales`]). Returns the report (not yet judged), the calibrated model
-/// and its weighted held-out mean square; `None` when the model has nothing
+/// started on a grid ([`scan_mode_scales`]), with the named effects' parameters
+/// refitted too. Returns the report (not yet judged), the calibrated model,
+/// and the weighted held-out mean squares it is judged by (the named effects
+/// refitted alone, the calibrated model); `None` when the model has nothing
 /// to calibrate or no fit runs.
 fn calibrate(
     ctx: &Ctx<'_>,
     cur: &Current,
     runs: &mut usize,
-) -> Result<Option<(Calibration, Current, f64)>, PlfError> {
+) -> Result<Option<(Calibration, Current, (f64, f64))>, PlfError> {
     let spec = cur.spec()?;
     let mut free = Vec::new();
     for b in &spec.blocks {
@@ -1192,10 +1269,14 @@ fn calibrate(
     // band) is not calibrated: left free, it wanders to absurd values and
     // absorbs an effect. It is held at the nominal, reported with the value
     // it went to, and the rest refitted.
+    // The effects named so far are refitted with the scales, as every new
+    // effect is refitted with them (see `joint_refit`): the calibration
+    // competes on the same terms, and an effect fitted against the
+    // uncalibrated nominal keeps nothing of the nominal's error.
     let mut best = None;
     let mut held = BTreeMap::new();
     while !free.is_empty() {
-        let Some(fit) = fit_calibration(ctx, &spec, &free, runs)? else {
+        let Some(fit) = fit_calibration(ctx, &spec, &free, &cur.free, runs)? else {
             return Ok(None);
         };
         let undetermined: Vec<usize> = (0..free.len())
@@ -1223,9 +1304,21 @@ fn calibrate(
     let Some((_, fitted, std, residual)) = best else {
         return Ok(None);
     };
-    let before_ms = weighted_holdout_ms(ctx, &cur.residual);
+    // Judged against the named effects refitted alone: that the joint fit
+    // converges further than the fit of the step that named them is no
+    // evidence of a nominal error.
+    let before = match cur.free.is_empty() {
+        true => None,
+        false => refit(ctx, &spec, &cur.free).ok().map(|(_, _, r, n)| {
+            *runs += n;
+            r
+        }),
+    }
+    .filter(|r| weighted_holdout_ms(ctx, r) < weighted_holdout_ms(ctx, &cur.residual))
+    .unwrap_or_else(|| cur.residual.clone());
+    let before_ms = weighted_holdout_ms(ctx, &before);
     let after_ms = weighted_holdout_ms(ctx, &residual);
-    let (worse, better) = holdout_weighted_vectors(ctx, &cur.residual, &residual);
+    let (worse, better) = holdout_weighted_vectors(ctx, &before, &residual);
     let (test, _) = stats::improvement_test(&worse, &better, 200);
     let mut params = BTreeMap::new();
     let mut uncertainty = BTreeMap::new();
@@ -1238,7 +1331,7 @@ fn calibrate(
             }
         }
     }
-    let hb = holdout_rms(ctx, &cur.residual);
+    let hb = holdout_rms(ctx, &before);
     let ha = holdout_rms(ctx, &residual);
     let cal = Calibration {
         accepted: false,
@@ -1252,8 +1345,8 @@ fn calibrate(
         excess_cut_percent: f64::NAN,
         held,
     };
-    let calibrated = evaluate_current(ctx, fitted, free, runs)?;
-    Ok(Some((cal, calibrated, after_ms)))
+    let calibrated = evaluate_current(ctx, fitted, [cur.free.clone(), free].concat(), runs)?;
+    Ok(Some((cal, calibrated, (before_ms, after_ms))))
 }
 
 /// The value of the tunable parameter `f` in `spec`.
@@ -1280,15 +1373,18 @@ fn param_key(spec: &GraphSpec, f: &FreeParam) -> String {
 /// (estimation cost, calibrated graph, σ of the parameters, residuals)
 type CalibrationFit = (f64, GraphSpec, Vec<f64>, Vec<Vec<f64>>);
 
-/// The best of the calibration fits of `free` from the three starts (see
-/// [`calibrate`]); `None` when no fit runs.
+/// The best of the calibration fits of the nominal's scales `free` (with the
+/// named effects' parameters `named`, listed after them in the fit's σ) from
+/// the three starts (see [`calibrate`]); `None` when no fit runs.
 fn fit_calibration(
     ctx: &Ctx<'_>,
     spec: &GraphSpec,
     free: &[FreeParam],
+    named: &[FreeParam],
     runs: &mut usize,
 ) -> Result<Option<CalibrationFit>, PlfError> {
     let mut best: Option<CalibrationFit> = None;
+    let all = [free, named].concat();
     for start in [1.0, 0.92, 1.08] {
         let mut start_spec = surgery::clone_spec(spec)?;
         for b in start_spec.blocks.iter_mut() {
@@ -1302,9 +1398,9 @@ fn fit_calibration(
                     .map_err(|e| PlfError::Model(format!("block `{}`: {e}", b.name)))?;
             }
         }
-        let mut ev = Evaluator::over(surgery::clone_spec(&start_spec)?, ctx.records, free, 0)?;
+        let mut ev = Evaluator::over(surgery::clone_spec(&start_spec)?, ctx.records, &all, 0)?;
         ev.set_weights(&ctx.weights);
-        let mut z0 = vec![0.0; free.len()];
+        let mut z0 = vec![0.0; all.len()];
         scan_mode_scales(&mut ev, spec, free, &mut z0, ctx.n_est);
         let Some(fit) = levenberg_marquardt(&mut ev, &z0, ctx.n_est, 25) else {
             continue;
@@ -2986,16 +3082,22 @@ fn fit_candidate(ctx: &Ctx<'_>, cur: &Current, c: &Cand) -> Result<Fitted, Strin
     })
 }
 
-/// Refit all effects' free parameters together on the full graph.
-fn joint_refit(ctx: &Ctx<'_>, win: &Fitted, runs: &mut usize) -> Result<Fitted, PlfError> {
-    let mut spec = surgery::clone_spec(&win.spec)?;
-    let mut ev = Evaluator::over(surgery::clone_spec(&spec)?, ctx.records, &win.free, 0)?;
+/// Refit the free parameters `free` of `spec` together on the full graph,
+/// from their values in it: the fitted graph, each parameter's σ, the
+/// residuals, and the graph runs spent.
+#[allow(clippy::type_complexity)]
+fn refit(
+    ctx: &Ctx<'_>,
+    spec: &GraphSpec,
+    free: &[FreeParam],
+) -> Result<(GraphSpec, Vec<f64>, Vec<Vec<f64>>, usize), PlfError> {
+    let mut fitted = surgery::clone_spec(spec)?;
+    let mut ev = Evaluator::over(surgery::clone_spec(spec)?, ctx.records, free, 0)?;
     ev.set_weights(&ctx.weights);
-    let z0 = vec![0.0; win.free.len()];
+    let z0 = vec![0.0; free.len()];
     let fit = levenberg_marquardt(&mut ev, &z0, ctx.n_est, 15)
         .ok_or_else(|| PlfError::Model("joint refit could not run".into()))?;
-    *runs += fit.runs + 1;
-    ev.export(&fit.z, &mut spec)?;
+    ev.export(&fit.z, &mut fitted)?;
     if !ev.run(&fit.z, ctx.n) {
         return Err(PlfError::Model(
             "joint refit diverges on the held-out part".into(),
@@ -3004,16 +3106,23 @@ fn joint_refit(ctx: &Ctx<'_>, win: &Fitted, runs: &mut usize) -> Result<Fitted, 
     let residual = (0..ev.outputs())
         .map(|i| ev.residual(i, 0..ctx.n))
         .collect();
+    Ok((fitted, fit.std, residual, fit.runs + 1))
+}
+
+/// Refit all effects' free parameters together on the full graph.
+fn joint_refit(ctx: &Ctx<'_>, win: &Fitted, runs: &mut usize) -> Result<Fitted, PlfError> {
+    let (spec, std, residual, n_runs) = refit(ctx, &win.spec, &win.free)?;
+    *runs += n_runs;
     let k0 = win.free.len() - win.free_indices.len();
     Ok(Fitted {
         spec,
         block_name: win.block_name.clone(),
         free: win.free.clone(),
         free_indices: win.free_indices.clone(),
-        std: fit.std[k0..].to_vec(),
+        std: std[k0..].to_vec(),
         residual,
         score: win.score,
-        runs: fit.runs,
+        runs: n_runs - 1,
     })
 }
 
