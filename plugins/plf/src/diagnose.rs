@@ -1235,6 +1235,7 @@ fn excess_cut(
 /// and the weighted held-out mean squares it is judged by (the named effects
 /// refitted alone, the calibrated model); `None` when the model has nothing
 /// to calibrate or no fit runs.
+#[allow(clippy::type_complexity)]
 fn calibrate(
     ctx: &Ctx<'_>,
     cur: &Current,
