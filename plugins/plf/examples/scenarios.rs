@@ -32,6 +32,15 @@ use std::collections::BTreeMap;
 use std::io::Write as _;
 use std::time::Instant;
 
+/// The usage line of the module doc, printed for `--help` and an unknown option.
+const USAGE: &str = "usage: scenarios [COUNT] [--from SEED] [--tune] [--hidden EFFECT] [--csv FILE] [--visibility-only | --labels-only]
+  COUNT         records to diagnose (default 300), held-out families unless --tune
+  --from SEED   start at this seed (records no change has been looked at yet)
+  --tune        the tuning split instead (the only records the workflow may be tuned on)
+  --hidden E    only records hiding effect E (`none`: the effect-free ones)
+  --csv FILE    one row per record
+  --visibility-only, --labels-only   diagnose nothing: print seed,visibility or seed,hidden,family";
+
 #[derive(Default)]
 struct Tally {
     records: usize,
@@ -41,6 +50,25 @@ struct Tally {
 fn main() {
     let _ = std::any::type_name::<nanomotion_plf::effects::Effect>();
     let args: Vec<String> = std::env::args().skip(1).collect();
+    if args.iter().any(|a| a == "--help" || a == "-h") {
+        println!("{USAGE}");
+        return;
+    }
+    let known = [
+        "--tune",
+        "--visibility-only",
+        "--labels-only",
+        "--hidden",
+        "--csv",
+        "--from",
+    ];
+    if let Some(a) = args
+        .iter()
+        .find(|a| a.starts_with('-') && !known.contains(&a.as_str()))
+    {
+        eprintln!("unknown option `{a}`\n{USAGE}");
+        std::process::exit(2);
+    }
     let tune = args.iter().any(|a| a == "--tune");
     let visibility_only = args.iter().any(|a| a == "--visibility-only");
     let labels_only = args.iter().any(|a| a == "--labels-only");
