@@ -597,30 +597,7 @@ pub fn diagnose_records(
             .min_by(|a, b| a.0.score.total_cmp(&b.0.score));
         progress(&format!("step {}: deciding", step_no + 1), 1.0);
         let before_ms = weighted_holdout_ms(&ctx, &cur.residual);
-        let mut table: Vec<Candidate> = cands
-            .iter()
-            .zip(&results)
-            .zip(&failures)
-            .map(|((c, r), why)| match r {
-                Some(f) => Candidate {
-                    effect: c.effect.to_string(),
-                    site: c.site.describe(),
-                    n_params: c.free.len(),
-                    holdout_rms: holdout_rms(&ctx, &f.residual),
-                    score: f.score,
-                    note: None,
-                },
-                None => Candidate {
-                    effect: c.effect.to_string(),
-                    site: c.site.describe(),
-                    n_params: c.free.len(),
-                    holdout_rms: f64::NAN,
-                    score: f64::INFINITY,
-                    note: Some(why.clone().unwrap_or_else(|| "fit failed".into())),
-                },
-            })
-            .collect();
-        table.sort_by(|a, b| a.score.total_cmp(&b.score));
+        let mut table = candidate_table(&ctx, &cands, &results, &failures);
         // The best three by score; with effects named before, each is refitted
         // jointly with them (an effect fitted first must not keep what belongs to
         // the new one) and the best after the joint refit wins.
@@ -636,12 +613,7 @@ pub fn diagnose_records(
             stopped = "no candidate could be fitted".into();
             break;
         }
-        let k_of = |f: &Fitted| f.free_indices.len() as f64;
-        let penalised = |f: &Fitted, ms: f64| {
-            let ne = ctx.n_est as f64;
-            let nh = (ctx.n - ctx.n_est) as f64;
-            ms * (1.0 + k_of(f) * ne.ln() / ne) * (1.0 + k_of(f) / nh.sqrt())
-        };
+        let score_of = |f: &Fitted, ms: f64| penalised(&ctx, f.free_indices.len(), ms);
         let mut best: Option<(usize, Fitted, f64)> = None;
         // The finalists: the best one (three once effects are named, for the
         // joint refit), passing over fits that are not physical as named.
@@ -751,7 +723,7 @@ pub fn diagnose_records(
         // The named effects' own form: the best copy of one, jointly refitted.
         let same_form = same_form.zip(top.next()).map(|(c, (f, j))| {
             let f = j.unwrap_or(f);
-            let sc = penalised(&f, weighted_holdout_ms(&ctx, &f.residual));
+            let sc = score_of(&f, weighted_holdout_ms(&ctx, &f.residual));
             (c, f, sc)
         });
         for (&i, (mut f, joint)) in finalists.iter().zip(finalist_fits) {
@@ -760,7 +732,7 @@ pub fn diagnose_records(
             {
                 f = j;
             }
-            let sc = penalised(&f, weighted_holdout_ms(&ctx, &f.residual));
+            let sc = score_of(&f, weighted_holdout_ms(&ctx, &f.residual));
             if best.as_ref().is_none_or(|b| sc < b.2) {
                 if let Some((j, beaten, _)) = best.take() {
                     results[j] = Some(beaten);
@@ -792,9 +764,7 @@ pub fn diagnose_records(
             && let Some((mut cal, calibrated, (before_ms, cal_ms))) =
                 calibrate(&ctx, &cur, &mut runs)?
         {
-            let k = cal.params.len() as f64;
-            let (ne, nh) = (ctx.n_est as f64, (ctx.n - ctx.n_est) as f64);
-            let cal_score = cal_ms * (1.0 + k * ne.ln() / ne) * (1.0 + k / nh.sqrt());
+            let cal_score = penalised(&ctx, cal.params.len(), cal_ms);
             let cut = excess_cut(&ctx, &excess, at_floor, before_ms, cal_ms);
             let level = opts.alpha / (total + 1) as f64;
             let (cal_residual, win_residual) =
@@ -926,25 +896,7 @@ pub fn diagnose_records(
             (level, &excess, at_floor, opts.min_excess_cut),
         );
         let new_spec = new.spec()?;
-        let block = new_spec
-            .blocks
-            .iter()
-            .find(|b| b.name == win.block_name)
-            .ok_or_else(|| PlfError::Model("inserted block vanished".into()))?;
-        let tun = block.block.tunable();
-        let names = tun.map(|t| t.param_names()).unwrap_or_default();
-        let values = tun.map(|t| t.params()).unwrap_or_default();
-        let mut params = BTreeMap::new();
-        let mut unc = BTreeMap::new();
-        for (k, (nm, v)) in names.iter().zip(&values).enumerate() {
-            params.insert(nm.clone(), *v);
-            if let Some(pos) = win.free_indices.iter().position(|&i| i == k)
-                && let Some(s) = win.std.get(pos)
-                && s.is_finite()
-            {
-                unc.insert(nm.clone(), *s);
-            }
-        }
+        let (type_name, params, unc) = fitted_params(&new_spec, &win)?;
         let sc = scores(&ctx, &new);
         named.push((effect_name, outputs_of(&ctx, &cand.site)));
         own_forces.push(own_force);
@@ -952,7 +904,7 @@ pub fn diagnose_records(
             effect: effect_name.to_string(),
             block: BlockRef {
                 name: win.block_name.clone(),
-                type_name: block.block.typetag_name().to_string(),
+                type_name,
             },
             site: cand.site.describe(),
             params,
@@ -1123,6 +1075,70 @@ fn fit_candidates(
         failures.push(None);
     }
     (results, failures, runs)
+}
+
+/// The inserted block of the fit `win` in `spec`: its type, every parameter's
+/// value, and the σ of the fitted ones (where finite).
+#[allow(clippy::type_complexity)]
+fn fitted_params(
+    spec: &GraphSpec,
+    win: &Fitted,
+) -> Result<(String, BTreeMap<String, f64>, BTreeMap<String, f64>), PlfError> {
+    let block = spec
+        .blocks
+        .iter()
+        .find(|b| b.name == win.block_name)
+        .ok_or_else(|| PlfError::Model("inserted block vanished".into()))?;
+    let tun = block.block.tunable();
+    let names = tun.map(|t| t.param_names()).unwrap_or_default();
+    let values = tun.map(|t| t.params()).unwrap_or_default();
+    let mut params = BTreeMap::new();
+    let mut unc = BTreeMap::new();
+    for (k, (nm, v)) in names.iter().zip(&values).enumerate() {
+        params.insert(nm.clone(), *v);
+        if let Some(pos) = win.free_indices.iter().position(|&i| i == k)
+            && let Some(s) = win.std.get(pos)
+            && s.is_finite()
+        {
+            unc.insert(nm.clone(), *s);
+        }
+    }
+    Ok((block.block.typetag_name().to_string(), params, unc))
+}
+
+/// The step's candidate table, best score first: each fit's held-out rms
+/// and score, or why it failed.
+fn candidate_table(
+    ctx: &Ctx<'_>,
+    cands: &[Cand],
+    results: &[Option<Fitted>],
+    failures: &[Option<String>],
+) -> Vec<Candidate> {
+    let mut table: Vec<Candidate> = cands
+        .iter()
+        .zip(results)
+        .zip(failures)
+        .map(|((c, r), why)| {
+            let (holdout_rms, score, note) = match r {
+                Some(f) => (holdout_rms(ctx, &f.residual), f.score, None),
+                None => (
+                    f64::NAN,
+                    f64::INFINITY,
+                    Some(why.clone().unwrap_or_else(|| "fit failed".into())),
+                ),
+            };
+            Candidate {
+                effect: c.effect.to_string(),
+                site: c.site.describe(),
+                n_params: c.free.len(),
+                holdout_rms,
+                score,
+                note,
+            }
+        })
+        .collect();
+    table.sort_by(|a, b| a.score.total_cmp(&b.score));
+    table
 }
 
 /// The p-value above which the held-out data are said not to tell the named
@@ -2945,6 +2961,16 @@ fn annotate(table: &mut [Candidate], c: &Cand, score: f64, note: String) {
 /// A rough cost of fitting candidate `c`, for the work queue's order only (it
 /// changes no result): runs ≈ starts × (parameters + 2) per iteration, a run of
 /// the whole graph costing several times a run of an output-side block alone.
+/// The penalised held-out score of a fit with `k` free parameters and
+/// weighted held-out mean square `ms` (method step 3): a BIC-like factor
+/// (1 + k ln N/N) times a flexibility charge (1 + k/√N_hold).
+fn penalised(ctx: &Ctx<'_>, k: usize, ms: f64) -> f64 {
+    let k = k as f64;
+    let ne = ctx.n_est as f64;
+    let nh = (ctx.n - ctx.n_est) as f64;
+    ms * (1.0 + k * ne.ln() / ne) * (1.0 + k / nh.sqrt())
+}
+
 fn fit_cost(c: &Cand) -> f64 {
     let per_run = if c.output.is_some() { 1.0 } else { 8.0 };
     c.starts.len() as f64 * (c.free.len() + 2) as f64 * per_run
@@ -3064,11 +3090,7 @@ fn fit_candidate(ctx: &Ctx<'_>, cur: &Current, c: &Cand) -> Result<Fitted, Strin
         Some(why) => format!("refused as not physical: {why}"),
         None => "fit failed (refused parameters or diverging runs at every start)".to_string(),
     })?;
-    let k = c.free.len() as f64;
-    let ne = ctx.n_est as f64;
-    let nh = (ctx.n - ctx.n_est) as f64;
-    let score =
-        weighted_holdout_ms(ctx, &residual) * (1.0 + k * ne.ln() / ne) * (1.0 + k / nh.sqrt());
+    let score = penalised(ctx, c.free.len(), weighted_holdout_ms(ctx, &residual));
     let mut free = cur.free.clone();
     free.extend(new_free);
     Ok(Fitted {
