@@ -532,6 +532,10 @@ pub fn diagnose_records(
     let mut named: Vec<(&'static str, Vec<usize>)> = Vec::new();
     // Per step: (force signal, position) of an effect fed by the stage's own motion.
     let mut own_forces: Vec<Option<(String, String)>> = Vec::new();
+    // A step being tried again with the candidates refused as locked to the
+    // excitation (see below): why the step had stopped, its table, and the
+    // number of candidates its level was set by.
+    let mut locked_retry: Option<(String, Vec<Candidate>, usize)> = None;
     while steps.len() < opts.max_effects {
         let step_no = steps.len();
         // At the noise floor already? The floor is estimated from the residual's
@@ -575,14 +579,30 @@ pub fn diagnose_records(
                 break;
             }
         }
-        let total = cands.len();
+        let mut total = cands.len();
         cands.append(&mut again);
         // Names refused before any fit, by physics (see `phase_locked`).
         let spec_now = cur.spec()?;
-        let locked: Vec<Option<String>> = cands
+        let mut locked: Vec<Option<String>> = cands
             .iter()
             .map(|c| time_period(c).and_then(|p| phase_locked(&ctx, &spec_now, p)))
             .collect();
+        let any_locked = locked[..total].iter().any(Option::is_some);
+        // The level is set by every candidate of the step, tried again or not.
+        let n_tested = locked_retry.as_ref().map_or(total, |r| r.2);
+        // Locked to the excitation means a map of the input *could* leave the
+        // line; when none of those tried explains it and nothing is named yet,
+        // the disturbance is the explanation left: the refused candidates are
+        // fitted after all.
+        if locked_retry.is_some() {
+            let keep: Vec<bool> = (0..cands.len())
+                .map(|i| i >= total || locked[i].is_some())
+                .collect();
+            total = (0..total).filter(|&i| keep[i]).count();
+            let mut k = keep.into_iter();
+            cands.retain(|_| k.next().unwrap_or(false));
+            locked = vec![None; cands.len()];
+        }
         let (mut results, mut failures, fit_runs) =
             fit_candidates(&ctx, &cur, &cands, &locked, opts.threads, step_no, progress);
         runs += fit_runs;
@@ -611,6 +631,9 @@ pub fn diagnose_records(
         });
         if order.is_empty() {
             stopped = "no candidate could be fitted".into();
+            if let Some((why, table, _)) = locked_retry.take() {
+                (stopped, rejected_candidates) = (why, table);
+            }
             break;
         }
         let score_of = |f: &Fitted, ms: f64| penalised(&ctx, f.free_indices.len(), ms);
@@ -628,7 +651,7 @@ pub fn diagnose_records(
         // pass), so only a fit that cuts nothing at all is passed over.
         let mut not_cutting: Option<usize> = None;
         // The level an effect must be significant at (α over the candidates).
-        let level = opts.alpha / total.max(1) as f64;
+        let level = opts.alpha / n_tested.max(1) as f64;
         for &i in &order {
             if finalists.len() == if cur.free.is_empty() { 1 } else { 3 } {
                 break;
@@ -746,6 +769,9 @@ pub fn diagnose_records(
         let Some((bi, win, best_score)) = best else {
             stopped = "no candidate could be fitted as a physical effect".into();
             rejected_candidates = table.clone();
+            if let Some((why, table, _)) = locked_retry.take() {
+                (stopped, rejected_candidates) = (why, table);
+            }
             break;
         };
         let cand = &cands[bi];
@@ -766,7 +792,7 @@ pub fn diagnose_records(
         {
             let cal_score = penalised(&ctx, cal.params.len(), cal_ms);
             let cut = excess_cut(&ctx, &excess, at_floor, before_ms, cal_ms);
-            let level = opts.alpha / (total + 1) as f64;
+            let level = opts.alpha / (n_tested + 1) as f64;
             let (cal_residual, win_residual) =
                 holdout_weighted_vectors(&ctx, &calibrated.residual, &win.residual);
             let (effect_vs_cal, _) = stats::improvement_test(&cal_residual, &win_residual, 200);
@@ -779,6 +805,7 @@ pub fn diagnose_records(
             calibration = Some(cal);
             if accepted {
                 cur = calibrated;
+                locked_retry = None;
                 continue;
             }
         }
@@ -787,6 +814,10 @@ pub fn diagnose_records(
         let hb = holdout_rms(&ctx, &cur.residual);
         let ha = holdout_rms(&ctx, &win.residual);
         if test.p_value >= level || excess_cut < opts.min_excess_cut {
+            if let Some((why, table, _)) = locked_retry.take() {
+                (stopped, rejected_candidates) = (why, table);
+                break;
+            }
             rejected_candidates = table.clone();
             if at_floor {
                 stopped = format!(
@@ -810,6 +841,12 @@ pub fn diagnose_records(
                 100.0 * excess_cut,
                 100.0 * opts.min_excess_cut
             );
+            // Only before anything is named: once a map of the input is,
+            // a line locked to the excitation is likelier what its form leaves.
+            if any_locked && named.is_empty() {
+                locked_retry = Some((stopped.clone(), table.clone(), total));
+                continue;
+            }
             break;
         }
         // The named effects' own form: the record's effect is rarely in the
@@ -844,7 +881,12 @@ pub fn diagnose_records(
         }
         // Accept.
         let evidence = format!(
-            "{}; fitted {} {}: held-out rms {:.4e} -> {:.4e} (p = {:.1e})",
+            "{}{}; fitted {} {}: held-out rms {:.4e} -> {:.4e} (p = {:.1e})",
+            match locked_retry.take() {
+                Some(_) =>
+                    "named although its line is locked to the excitation (a map of the input could leave such a line): none of the maps of the input tried explains it; an excitation at a frequency that is not a multiple of the line's would tell them apart; ",
+                None => "",
+            },
             evidence(&ctx, &cur, cand),
             cand.effect,
             cand.site.describe(),

@@ -133,3 +133,26 @@ fn a_new_name_must_beat_another_copy_of_an_effect_named() {
         r.stopped_because
     );
 }
+
+/// Scenario 55 hides a force periodic in time at 7.53 Hz in a PD loop driven
+/// by a sine at a quarter of that frequency: the residual's line repeats with
+/// the excitation, so the disturbance candidates were refused before any fit
+/// ("a map of the input leaves such a line") — and no map of the input cut
+/// anything, so nothing was named. Locked means a map of the input *could*
+/// leave the line; when none tried does, the refused candidates are fitted
+/// after all, and the one that passes is named with the ambiguity stated.
+#[test]
+fn a_line_locked_to_the_excitation_is_named_when_no_map_of_the_input_explains_it() {
+    let r = diagnose_scenario(55);
+    assert_eq!(r.found, ["repetitive_disturbance"], "{}", r.stopped_because);
+    let step = &r.steps[0];
+    assert!(
+        step.evidence.contains("locked to the excitation"),
+        "{}",
+        step.evidence
+    );
+    // The disturbance takes most of the held-out residual (each output in
+    // units of its noise floor; the line holds three quarters of the
+    // residual's periodogram).
+    assert!(step.cut_percent > 50.0, "{step:?}");
+}
