@@ -716,7 +716,7 @@ pub fn diagnose_records(
                 },
             )
         };
-        let top: Vec<(Fitted, Option<Fitted>)> = top
+        let mut top: Vec<(Fitted, Option<Fitted>)> = top
             .into_iter()
             .map(|(f, joint)| {
                 let joint = joint.map(|(j, n_runs)| {
@@ -740,16 +740,15 @@ pub fn diagnose_records(
                 }
             })
             .collect();
-        let mut top = top.into_iter();
-        let finalist_fits: Vec<(Fitted, Option<Fitted>)> =
-            top.by_ref().take(finalists.len()).collect();
-        // The named effects' own form: the best copy of one, jointly refitted.
-        let same_form = same_form.zip(top.next()).map(|(c, (f, j))| {
+        // The named effects' own form: the best copy of one (pushed last),
+        // jointly refitted.
+        let same_form = same_form.and_then(|c| {
+            let (f, j) = top.pop()?;
             let f = j.unwrap_or(f);
             let sc = score_of(&f, weighted_holdout_ms(&ctx, &f.residual));
-            (c, f, sc)
+            Some((c, f, sc))
         });
-        for (&i, (mut f, joint)) in finalists.iter().zip(finalist_fits) {
+        for (&i, (mut f, joint)) in finalists.iter().zip(top) {
             if let Some(j) = joint
                 && not_physical(&ctx, &cands[i], &j).is_none()
             {
@@ -793,9 +792,7 @@ pub fn diagnose_records(
             let cal_score = penalised(&ctx, cal.params.len(), cal_ms);
             let cut = excess_cut(&ctx, &excess, at_floor, before_ms, cal_ms);
             let level = opts.alpha / (n_tested + 1) as f64;
-            let (cal_residual, win_residual) =
-                holdout_weighted_vectors(&ctx, &calibrated.residual, &win.residual);
-            let (effect_vs_cal, _) = stats::improvement_test(&cal_residual, &win_residual, 200);
+            let effect_vs_cal = held_out_test(&ctx, &calibrated.residual, &win.residual);
             cal.accepted = (cal_score < best_score || effect_vs_cal.p_value >= level)
                 && !at_floor
                 && cal.p_value < level
@@ -860,9 +857,7 @@ pub fn diagnose_records(
         // cannot tell a new effect from the form of one named, one effect is
         // the likelier and simpler explanation.
         if let Some((c, f, sc)) = &same_form {
-            let (copy_residual, win_residual) =
-                holdout_weighted_vectors(&ctx, &f.residual, &win.residual);
-            let (vs_copy, _) = stats::improvement_test(&copy_residual, &win_residual, 200);
+            let vs_copy = held_out_test(&ctx, &f.residual, &win.residual);
             if *sc <= best_score || vs_copy.p_value >= level {
                 rejected_candidates = table.clone();
                 stopped = format!(
@@ -1216,8 +1211,7 @@ fn alternatives(
         if own.p_value >= level || cut < min_cut {
             continue;
         }
-        let (alt, w) = holdout_weighted_vectors(ctx, &f.residual, &win.residual);
-        let (vs, _) = stats::improvement_test(&alt, &w, 200);
+        let vs = held_out_test(ctx, &f.residual, &win.residual);
         if vs.p_value >= AMBIGUOUS_P {
             out.push(Alternative {
                 effect: c.effect.to_string(),
@@ -1377,8 +1371,7 @@ fn calibrate(
     .unwrap_or_else(|| cur.residual.clone());
     let before_ms = weighted_holdout_ms(ctx, &before);
     let after_ms = weighted_holdout_ms(ctx, &residual);
-    let (worse, better) = holdout_weighted_vectors(ctx, &before, &residual);
-    let (test, _) = stats::improvement_test(&worse, &better, 200);
+    let test = held_out_test(ctx, &before, &residual);
     let mut params = BTreeMap::new();
     let mut uncertainty = BTreeMap::new();
     for (k, f) in free.iter().enumerate() {
@@ -1821,8 +1814,7 @@ fn held_out_gain(
     before: &[Vec<f64>],
     after: &[Vec<f64>],
 ) -> (stats::Test, f64) {
-    let (worse, better) = holdout_weighted_vectors(ctx, before, after);
-    let (test, _) = stats::improvement_test(&worse, &better, 200);
+    let test = held_out_test(ctx, before, after);
     let cut = excess_cut(
         ctx,
         excess,
@@ -1831,6 +1823,14 @@ fn held_out_gain(
         weighted_holdout_ms(ctx, after),
     );
     (test, cut)
+}
+
+/// Whether the model with residuals `better` predicts the held-out data
+/// better than the one with `worse` ([`stats::improvement_test`] over the
+/// weighted held-out residuals of all outputs, 200 lags).
+fn held_out_test(ctx: &Ctx<'_>, worse: &[Vec<f64>], better: &[Vec<f64>]) -> stats::Test {
+    let (worse, better) = holdout_weighted_vectors(ctx, worse, better);
+    stats::improvement_test(&worse, &better, 200).0
 }
 
 /// Held-out residuals of all outputs, weighted, as one vector per model (outputs

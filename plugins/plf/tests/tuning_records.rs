@@ -20,6 +20,16 @@ fn diagnose_scenario(seed: u64) -> nanomotion_plf::Report {
     diagnose(&spec, &s.record.data, &Options::default()).unwrap()
 }
 
+/// The one step of scenario `seed` when it names `effect` alone, with
+/// `evidence` in the step's evidence.
+fn named_alone(seed: u64, effect: &str, evidence: &str) -> nanomotion_plf::diagnose::Step {
+    let r = diagnose_scenario(seed);
+    assert_eq!(r.found, [effect], "{}", r.stopped_because);
+    let step = r.steps.into_iter().next().expect("one step");
+    assert!(step.evidence.contains(evidence), "{}", step.evidence);
+    step
+}
+
 /// Scenario 431 hides slit errors of a 64-slit encoder (the nominal has the
 /// encoder's rounding). Ranked by the penalised score, fits that do not cut
 /// the held-out residual at all (a drift, a delay: 2–3 parameters) come before
@@ -61,14 +71,7 @@ fn a_fit_that_does_not_cut_the_held_out_residual_does_not_stop_the_search() {
 /// on the grid while the stage moves, and quantization is named from that.
 #[test]
 fn quantization_is_named_from_the_grid_the_measured_values_sit_on() {
-    let r = diagnose_scenario(514);
-    assert_eq!(r.found, ["quantization"], "{}", r.stopped_because);
-    let step = &r.steps[0];
-    assert!(
-        step.evidence.contains("sits on a grid"),
-        "{}",
-        step.evidence
-    );
+    let step = named_alone(514, "quantization", "sits on a grid");
     assert!(step.p_value < 1e-6, "{}", step.p_value);
     // The named grid is the record's: the measured values lie much closer to
     // its levels than values spread over the steps would (rms q/√12 ≈ 0.29 q).
@@ -143,14 +146,7 @@ fn a_new_name_must_beat_another_copy_of_an_effect_named() {
 /// after all, and the one that passes is named with the ambiguity stated.
 #[test]
 fn a_line_locked_to_the_excitation_is_named_when_no_map_of_the_input_explains_it() {
-    let r = diagnose_scenario(55);
-    assert_eq!(r.found, ["repetitive_disturbance"], "{}", r.stopped_because);
-    let step = &r.steps[0];
-    assert!(
-        step.evidence.contains("locked to the excitation"),
-        "{}",
-        step.evidence
-    );
+    let step = named_alone(55, "repetitive_disturbance", "locked to the excitation");
     // The disturbance takes most of the held-out residual (each output in
     // units of its noise floor; the line holds three quarters of the
     // residual's periodogram).
