@@ -2877,8 +2877,10 @@ const MAX_ROUNDING_SHARE: f64 = 1.5;
 /// α over the outputs) that the model has no quantizer for and that is not
 /// the sampling of a constant-speed sweep ([`sampled_sweep`]), with no
 /// quantization named on its axis, where the rounding error's mean square
-/// (q²/12) reaches `min_excess_cut` of the output's held-out mean square (a
-/// finer rounding is not what the model misses) and at most
+/// (q²/12) reaches `min_excess_cut` of the output's held-out mean square or
+/// of its noise floor's, the smaller (a finer rounding is not what the model
+/// misses; a misfit of another effect's form, left large beside it, does not
+/// make the sensor's resolution less of a fact) and at most
 /// [`MAX_ROUNDING_SHARE`] of it. A quantizer with the grid's
 /// step and offset goes on the output; its held-out change is reported as it
 /// is — a rounding's pattern is not predicted by a simulation off by more
@@ -2912,8 +2914,9 @@ fn quantization_from_grid(
         }
         let held_out_ms = stats::mean_square(&cur.residual[i][ctx.n_est..]);
         let rounding_ms = grid.pitch * grid.pitch / 12.0;
+        let floor = floor_sigma(ctx, i, &cur.residual[i], Part::HeldOut);
         if grid.test.p_value >= level
-            || rounding_ms < opts.min_excess_cut * held_out_ms
+            || rounding_ms < opts.min_excess_cut * held_out_ms.min(floor * floor)
             || rounding_ms > MAX_ROUNDING_SHARE * held_out_ms
         {
             continue;

@@ -113,7 +113,11 @@ pub struct Channel {
     pub position: String,
     /// The plant block.
     pub plant: String,
-    /// Width-1 connections into the plant: `(from, to)`.
+    /// Width-1 connections into the plant: `(from, to)`; none when the
+    /// compared signal is itself the drive of another compared output's plant
+    /// (a controller's output: what enters it is computed inside the digital
+    /// controller, where no actuator, friction or creep acts — the drive's own
+    /// effects sit on the connection into that other plant).
     pub plant_inputs: Vec<(String, String)>,
     /// Rate (Hz) of the compared signal's block, `None` for the base rate.
     pub rate_hz: Option<f64>,
@@ -277,6 +281,15 @@ pub fn channels(
             rate_hz,
             axis: axis_of(spec, block, &c.signal, &width_in, &probe_types),
         });
+    }
+    let drives: Vec<String> = out
+        .iter()
+        .flat_map(|ch| ch.plant_inputs.iter().map(|(from, _)| from.clone()))
+        .collect();
+    for ch in &mut out {
+        if drives.contains(&ch.signal) {
+            ch.plant_inputs.clear();
+        }
     }
     Ok(out)
 }

@@ -124,3 +124,42 @@ fn a_delay_in_the_sensor_path_is_placed_inside_the_loop() {
     let d = step.params["delay_s"] * RATE;
     assert!((d - 1.0).abs() < 0.05, "fitted delay {d} samples");
 }
+
+/// With the controller's output compared too (the drive of the position's
+/// plant), the controller is not a plant: what enters it is computed inside
+/// the digital controller, where no actuator, friction or creep acts. Input-
+/// side effects are offered on the drive into the stage only, once.
+#[test]
+fn the_compared_drive_of_a_plant_is_not_itself_a_plant() {
+    let _ = std::any::type_name::<nanomotion_plf::effects::Effect>();
+    let yaml = graph(false).replace(
+        "compare:\n  - { signal: stage.y, column: \"y\" }\n",
+        "compare:\n  - { signal: stage.y, column: \"y\" }\n  - { signal: ctrl.u, column: \"u\" }\n",
+    );
+    let spec = GraphSpec::from_yaml(&yaml, "loop.yaml").unwrap();
+    let zeros = vec![0.0; N];
+    let data = Dataset::from_columns(
+        "loop",
+        RATE,
+        0.0,
+        vec![
+            ("r".into(), zeros.clone()),
+            ("y".into(), zeros.clone()),
+            ("u".into(), zeros),
+        ],
+    )
+    .unwrap();
+    let channels = nanomotion_plf::surgery::channels(&spec, &Arc::new(data)).unwrap();
+    assert_eq!(channels.len(), 2);
+    assert_eq!(
+        channels[0].plant_inputs,
+        vec![("ctrl.u".to_string(), "stage.u".to_string())]
+    );
+    assert!(
+        channels[1].plant_inputs.is_empty(),
+        "{:?}",
+        channels[1].plant_inputs
+    );
+    // Both outputs measure one axis (one SISO loop).
+    assert!(channels[0].same_axis(&channels[1]));
+}

@@ -12,9 +12,16 @@ use std::f64::consts::TAU;
 /// roots and no longer a resonance).
 pub const MAX_DAMPING: f64 = 100.0;
 
-/// The least damping ratio of a structural resonance's pole pair (Q = 5000;
-/// flexure stages and piezo stacks in air have ζ ≈ 10⁻³ and more).
+/// The least damping ratio of a structural resonance's pole pair, and of its
+/// zero pair (Q = 5000; flexure stages and piezo stacks in air have ζ ≈ 10⁻³
+/// and more, at their anti-resonances too).
 pub const MIN_POLE_DAMPING: f64 = 1e-4;
+
+/// The largest damping ratio of a resonance's pole pair: a resonance has a
+/// half-power bandwidth (its Q), which needs the pair's peak to stand at least
+/// 3 dB above its static gain — 1/(2ζ√(1−ζ²)) ≥ √2, i.e. ζ ≤ sin(π/8) ≈ 0.383.
+/// A pair damped more is a lag or lead the nominal lacks, not a resonance.
+pub const MAX_RESONANT_DAMPING: f64 = 0.382_683_432_365_089_8; // sin(π/8)
 
 /// Smallest departure of |R(jω)| from 1 (dB) that a diagnosed resonance must
 /// show in the data's band ([`UnmodeledResonance::implausible`]).
@@ -97,7 +104,8 @@ impl UnmodeledResonance {
     /// absorb any leftover of an imperfect fit; as a *diagnosis* it must be a
     /// lightly damped mode inside the band that changes the response visibly:
     /// - ζ ≤ 1 for both pairs (above 1 a pair is two real roots: a lag or lead,
-    ///   not a resonance; the block itself accepts up to [`MAX_DAMPING`]);
+    ///   not a resonance; the block itself accepts up to [`MAX_DAMPING`]), and
+    ///   the pole pair's below [`MAX_RESONANT_DAMPING`] (a peak 3 dB high);
     /// - both frequencies inside the band (a pair at 0.02 Hz in a 6 s record is a
     ///   drift in disguise, one above the band is invisible);
     /// - not a near-cancelling pair: |R(jω)| departs from 1 by at least
@@ -111,10 +119,22 @@ impl UnmodeledResonance {
                 ));
             }
         }
+        if self.zeta_pole >= MAX_RESONANT_DAMPING {
+            return Some(format!(
+                "the pole pair's damping ζ = {:.3} is above sin(π/8) ≈ 0.383: its peak stands less than 3 dB above its static gain, so it has no half-power bandwidth — a lag or lead the nominal lacks, not a resonance",
+                self.zeta_pole
+            ));
+        }
         if self.zeta_pole < MIN_POLE_DAMPING {
             return Some(format!(
                 "the pole pair's damping ζ = {:.3e} is below {MIN_POLE_DAMPING:.0e} (Q > 5000): an undamped oscillator rings on at {:.4e} Hz without the drive — what a periodic disturbance does, not a structure's resonance",
                 self.zeta_pole, self.f_pole_hz
+            ));
+        }
+        if self.zeta_zero < MIN_POLE_DAMPING {
+            return Some(format!(
+                "the zero pair's damping ζ = {:.3e} is below {MIN_POLE_DAMPING:.0e}: a perfect notch at {:.4e} Hz — a structure's anti-resonance is damped like its modes",
+                self.zeta_zero, self.f_zero_hz
             ));
         }
         for (what, f) in [("pole", self.f_pole_hz), ("zero", self.f_zero_hz)] {
@@ -298,5 +318,32 @@ impl Tunable for UnmodeledResonance {
         self.f_zero_hz = p[2];
         self.zeta_zero = p[3];
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The peak of a pole pair alone over its static gain, 1/(2ζ√(1−ζ²)),
+    /// reaches √2 (3 dB, the half-power bandwidth exists) exactly at ζ = sin(π/8).
+    #[test]
+    fn a_pole_pair_without_a_half_power_bandwidth_is_a_lag_not_a_resonance() {
+        let band = (0.1, 1000.0);
+        let peak = |z: f64| 1.0 / (2.0 * z * (1.0 - z * z).sqrt());
+        assert!((peak(MAX_RESONANT_DAMPING) - 2f64.sqrt()).abs() < 1e-12);
+        assert!((MAX_RESONANT_DAMPING - (std::f64::consts::PI / 8.0).sin()).abs() < 1e-15);
+        // Zero pair at 400 Hz: the pair's departure from 1 is large either way.
+        let light = UnmodeledResonance::new(20.0, 0.05, 400.0, 0.05);
+        assert_eq!(light.implausible(band), None);
+        let just_below = UnmodeledResonance::new(20.0, 0.38, 400.0, 0.05);
+        assert_eq!(just_below.implausible(band), None);
+        let heavy = UnmodeledResonance::new(20.0, 0.39, 400.0, 0.05);
+        let why = heavy.implausible(band).expect("refused");
+        assert!(why.contains("half-power"), "{why}");
+        // A perfect notch (the zero pair undamped) is not a structure's either.
+        let notch = UnmodeledResonance::new(20.0, 0.05, 30.0, 1e-42);
+        let why = notch.implausible(band).expect("refused");
+        assert!(why.contains("perfect notch"), "{why}");
     }
 }
