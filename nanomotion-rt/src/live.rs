@@ -203,6 +203,16 @@ struct Gate {
     passing: Vec<bool>,
 }
 
+impl Gate {
+    /// Set live parameter `slot` of `block` back to its accepted value `old`
+    /// on the copy.
+    fn restore(&mut self, block: usize, slot: usize, old: Option<f64>) {
+        if let (Some(b), Some(old)) = (self.shadow.block_at_mut(block), old) {
+            b.set_live_param(slot, old);
+        }
+    }
+}
+
 /// Sends live parameter updates into a [`RealtimeRunner`](crate::RealtimeRunner)'s
 /// loop ([`RealtimeRunner::param_sender`](crate::RealtimeRunner::param_sender)).
 /// Everything that can refuse happens here, on the caller's thread; it can be
@@ -418,10 +428,15 @@ impl ParamSender {
             });
         }
         let (block, slot, field) = (row.block, row.slot, row.name);
-        let judge = self.judges[block]
-            .as_ref()
-            .expect("a block with live parameters has a judge");
+        let Some(judge) = self.judges.get(block).and_then(Option::as_ref) else {
+            return Err(LiveError::Path {
+                path,
+                problem: "its block cannot be copied to judge the value".into(),
+                fix: "set it before the run with `--set`".into(),
+            });
+        };
         // The block's own validation, on a copy with everything accepted so far.
+        let old = judge.params[field].as_f64();
         let mut params = judge.params.clone();
         params[field] = serde_json::Value::from(value);
         let refused = |source: ParamError| LiveError::Refused {
@@ -439,7 +454,9 @@ impl ParamSender {
             ))
         })?;
         copy.build(&judge.ctx).map_err(refused)?;
-        // The gate, on its copy of the graph.
+        // The gate, on its copy of the graph: the value is set there, and set
+        // back unless the update is sent.
+        let mut passing = None;
         if let Some(g) = &mut self.gate {
             if let Some(b) = g.shadow.block_at_mut(block) {
                 b.set_live_param(slot, value);
@@ -453,29 +470,31 @@ impl ParamSender {
                 .flat_map(|(l, _)| l.failures())
                 .collect();
             if !reasons.is_empty() {
-                // Back to the accepted value on the copy.
-                let old = judge.params[field].as_f64().unwrap_or(value);
-                if let Some(b) = g.shadow.block_at_mut(block) {
-                    b.set_live_param(slot, old);
-                }
+                g.restore(block, slot, old);
                 return Err(LiveError::Gate {
                     path,
                     value,
                     reasons,
                 });
             }
-            g.passing = report.loops.iter().map(|l| l.passes()).collect();
+            passing = Some(report.loops.iter().map(|l| l.passes()).collect());
         }
         let update = ParamUpdate { param, value };
-        match self.ring.push(update) {
-            Ok(()) => {}
-            Err(_) if self.ring.is_abandoned() => return Err(LiveError::Closed { path }),
-            Err(_) => {
-                return Err(LiveError::Full {
+        if self.ring.push(update).is_err() {
+            if let Some(g) = &mut self.gate {
+                g.restore(block, slot, old);
+            }
+            return Err(if self.ring.is_abandoned() {
+                LiveError::Closed { path }
+            } else {
+                LiveError::Full {
                     path,
                     slots: self.slots,
-                });
-            }
+                }
+            });
+        }
+        if let (Some(g), Some(p)) = (&mut self.gate, passing) {
+            g.passing = p;
         }
         if let Some(j) = &mut self.judges[block] {
             j.params = params;
