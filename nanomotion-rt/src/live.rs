@@ -100,7 +100,7 @@ pub fn live_params(sched: &Scheduler) -> Vec<LiveParam> {
 pub enum LiveError {
     /// The text is not `PATH=VALUE`.
     #[error("{0}")]
-    Syntax(GraphError),
+    Syntax(Box<GraphError>),
     /// The path names no live parameter.
     #[error("`{path}`: {problem} (fix: {fix})")]
     Path {
@@ -131,7 +131,7 @@ pub enum LiveError {
         /// Its type.
         type_name: String,
         /// The block's own message, field and fix.
-        source: ParamError,
+        source: Box<ParamError>,
     },
     /// The stability gate passed with the current parameters and fails with
     /// the new value.
@@ -314,7 +314,7 @@ impl ParamSender {
     /// `blocks.ctrl.kp=1.2`, the value as YAML) at the loop's next tick
     /// boundary. Returns the update sent.
     pub fn set_text(&mut self, text: &str) -> Result<ParamUpdate, LiveError> {
-        let o = Override::parse(text).map_err(LiveError::Syntax)?;
+        let o = Override::parse(text).map_err(|e| LiveError::Syntax(Box::new(e)))?;
         let value = match o.value.as_f64() {
             Some(v) if o.value.is_number() => v,
             _ => {
@@ -331,7 +331,8 @@ impl ParamSender {
     /// Set live parameter `path` (`ctrl.kp` or `blocks.ctrl.kp`) to `value` at
     /// the loop's next tick boundary.
     pub fn set(&mut self, path: &str, value: f64) -> Result<(), LiveError> {
-        let parsed = nanomotion_core::overrides::Path::parse(path).map_err(LiveError::Syntax)?;
+        let parsed = nanomotion_core::overrides::Path::parse(path)
+            .map_err(|e| LiveError::Syntax(Box::new(e)))?;
         let param = self.resolve(path, &parsed.0)?;
         self.send(param, value).map(|_| ())
     }
@@ -444,7 +445,7 @@ impl ParamSender {
             value,
             block: judge.name.clone(),
             type_name: judge.type_name.clone(),
-            source,
+            source: Box::new(source),
         };
         let mut copy: Box<dyn Block> = serde_json::from_value(params.clone()).map_err(|e| {
             refused(ParamError::new(
