@@ -275,8 +275,12 @@ fn run_loop<D: Device>(
         // Live updates from standard input, judged by the stability gate on a
         // second build of the same graph (never ticked).
         let sender = runner.param_sender().map_err(|e| e.to_string())?;
-        let spec = load(graph, lp)?;
+        let mut spec = load(graph, lp)?;
         let require = spec.require.clone().unwrap_or_default();
+        // The gate reads blocks and wiring only: no log buffers for the copy.
+        spec.log.clear();
+        spec.score.clear();
+        spec.compare.clear();
         let (copy, _) = spec.build().map_err(|e| e.to_string())?;
         let sender = sender.gated(copy, require).map_err(|e| e.to_string())?;
         if !params.is_empty() && std::io::IsTerminal::is_terminal(&std::io::stdin()) {

@@ -14,9 +14,10 @@
 //!    next deadline) is counted and handled by the [`OverrunPolicy`].
 //!
 //! Nothing in 0–5 allocates, locks or makes a system call other than the sleep
-//! and the device's own I/O (`tests/no_alloc.rs` counts allocations over the
-//! whole loop). Status and events leave the thread through a wait-free ring
-//! ([`rtrb`]); when it is full they are dropped and counted, never waited for.
+//! and the device's own I/O (`tests/runner.rs`, `ticks_do_not_allocate`,
+//! counts allocations over the whole loop, with live updates too). Status and
+//! events leave the thread through a wait-free ring ([`rtrb`]); when it is
+//! full they are dropped and counted, never waited for.
 
 use crate::clock::{self, BadCpu, Missing, Privileges};
 use crate::device::{Device, DeviceError, HW_INPUT, HW_OUTPUT};
