@@ -564,12 +564,16 @@ pub fn replay(a: ReplayArgs) -> Result<(), String> {
     let r = nanomotion_rt::replay(&mut sched, &rec).map_err(|e| e.to_string())?;
     match &r.first {
         None => {
+            let updates = match rec.param_changes.len() {
+                0 => String::new(),
+                1 => " with its live parameter update".to_string(),
+                n => format!(" with its {n} live parameter updates"),
+            };
             say!(
-                "{}: replayed {} ticks through {} with {} live parameter updates: all {} output samples bit-identical",
+                "{}: replayed {} ticks through {}{updates}: all {} output samples bit-identical",
                 a.recording.display(),
                 r.ticks,
                 a.graph.display(),
-                rec.param_changes.len(),
                 r.compared
             );
             Ok(())

@@ -330,7 +330,7 @@ fn a_gain_set_from_stdin_is_recorded_and_replays_bit_for_bit() {
         String::from_utf8_lossy(&same.stderr)
     );
     assert!(
-        text.contains("with 1 live parameter updates: all 2400 output samples bit-identical"),
+        text.contains("with its live parameter update: all 2400 output samples bit-identical"),
         "{text}"
     );
     let _ = std::fs::remove_dir_all(&dir);
