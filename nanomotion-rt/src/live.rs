@@ -277,12 +277,22 @@ impl ParamSender {
     /// passes the gate with the parameters accepted so far fails it with the
     /// new value. (A loop that already fails, e.g. one run unproven, does not
     /// block updates; the gate has nothing to lose there.)
-    pub fn gated(mut self, copy: Scheduler, require: Require) -> Result<Self, LiveError> {
+    /// The copy's live parameters are set to the values the loop runs with
+    /// (those it was built with and the updates accepted so far).
+    pub fn gated(mut self, mut copy: Scheduler, require: Require) -> Result<Self, LiveError> {
         if copy.block_names() != self.names.as_slice() {
             return Err(LiveError::NotTheSameGraph {
                 copy: copy.block_names().to_vec(),
                 runs: self.names.clone(),
             });
+        }
+        for row in &self.table {
+            let value = self.judges[row.block]
+                .as_ref()
+                .and_then(|j| j.params[row.name].as_f64());
+            if let (Some(b), Some(v)) = (copy.block_at_mut(row.block), value) {
+                b.set_live_param(row.slot, v);
+            }
         }
         let report = gate::analyse(&copy, &require);
         self.gate = Some(Gate {
