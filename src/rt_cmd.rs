@@ -1,6 +1,11 @@
 //! `nanomotion rt` (a graph on the wall clock, against a device) and
 //! `nanomotion plant` (a plant graph served to a controller in another process),
 //! on top of the `nanomotion-rt` crate. See docs/realtime.md.
+//!
+//! While `rt` runs, lines on standard input (a terminal, or a pipe from a
+//! script) change live parameters: `set ctrl.kp=1.2` (the grammar of `--set`),
+//! judged by the block's validation and the stability gate before they reach
+//! the loop, acknowledged on standard error with the tick they took effect at.
 
 use nanomotion::core::graph::GraphSpec;
 use nanomotion::core::{Override, Scheduler};
@@ -8,8 +13,8 @@ use nanomotion::output::{Manifest, OutputFolder};
 use nanomotion::plot::{Figure, Scale, Series, draw_svg_panels};
 use nanomotion_rt::clock::Privileges;
 use nanomotion_rt::{
-    Device, DeviceError, Event, Histogram, NoDevice, OverrunPolicy, PlantInfo, RealtimeRunner,
-    RealtimeSpec, RtConfig, ShmDevice, ShmPlant, Stop, TimingReport, hw_blocks,
+    Device, DeviceError, Event, Histogram, NoDevice, OverrunPolicy, ParamSender, PlantInfo,
+    RealtimeRunner, RealtimeSpec, RtConfig, ShmDevice, ShmPlant, Stop, TimingReport, hw_blocks,
 };
 use std::path::{Path, PathBuf};
 use std::time::Duration;
@@ -95,13 +100,19 @@ pub struct PlantArgs {
     lp: Loop,
 }
 
-/// The graph built, and its `realtime:` settings.
-fn build(graph: &Path, lp: &Loop) -> Result<(Scheduler, RealtimeSpec), String> {
+/// The graph file with the command line's overrides and duration.
+fn load(graph: &Path, lp: &Loop) -> Result<GraphSpec, String> {
     let mut spec =
         GraphSpec::from_file_with_overrides(graph, &lp.set).map_err(|e| e.to_string())?;
     if let Some(d) = lp.duration {
         spec.duration_s = d;
     }
+    Ok(spec)
+}
+
+/// The graph built, and its `realtime:` settings.
+fn build(graph: &Path, lp: &Loop) -> Result<(Scheduler, RealtimeSpec), String> {
+    let spec = load(graph, lp)?;
     let settings = spec.realtime.unwrap_or_default();
     let (sched, report) = spec.build().map_err(|e| e.to_string())?;
     for r in &report.rate_transitions {
@@ -145,9 +156,14 @@ fn watchdog(lp: &Loop) -> Result<Duration, String> {
     Ok(Duration::from_secs_f64(lp.watchdog_ms * 1e-3))
 }
 
-/// Print a status line on a terminal (stderr) for each status event; pass
-/// Ctrl-C on to the loop.
-fn status(stop: std::sync::Arc<std::sync::atomic::AtomicBool>, rate_hz: f64) -> impl FnMut(Event) {
+/// Print a status line on a terminal (stderr) for each status event, and
+/// every live parameter update applied (`params`: the paths of the graph's
+/// live parameters); pass Ctrl-C on to the loop.
+fn status(
+    stop: std::sync::Arc<std::sync::atomic::AtomicBool>,
+    rate_hz: f64,
+    params: Vec<String>,
+) -> impl FnMut(Event) {
     let tty = std::io::IsTerminal::is_terminal(&std::io::stderr());
     move |e| {
         if nanomotion::output::signals::interrupted().is_some() {
@@ -167,6 +183,15 @@ fn status(stop: std::sync::Arc<std::sync::atomic::AtomicBool>, rate_hz: f64) -> 
                     worst_execution_ns as f64 * 1e-3
                 );
             }
+            Event::Param { tick, param, value } => {
+                let path = params.get(param as usize).map_or("?", String::as_str);
+                tell!(
+                    "{}  set {path} = {value} at tick {tick} (t = {:.6} s){:20}",
+                    if tty { "\r" } else { "" },
+                    tick as f64 / rate_hz,
+                    ""
+                );
+            }
             Event::Overrun { tick, late_ns } if tty => {
                 eprint!(
                     "\r  overrun at tick {tick}: {:.1} µs late{:40}\n",
@@ -176,6 +201,47 @@ fn status(stop: std::sync::Arc<std::sync::atomic::AtomicBool>, rate_hz: f64) -> 
             }
             _ => {}
         }
+    }
+}
+
+/// Read `set PATH=VALUE` lines from standard input on a thread of its own
+/// (detached: it may stay blocked on a terminal after the loop ends) and send
+/// them into the loop; refusals are printed and the loop goes on.
+fn read_updates(mut sender: ParamSender) {
+    use std::io::BufRead as _;
+    let usage = |sender: &ParamSender| {
+        let live: Vec<&str> = sender.params().iter().map(|p| p.path.as_str()).collect();
+        format!(
+            "write `set BLOCK.PARAM=VALUE`, e.g. `set {}=1.2` (live parameters: {})",
+            live.first().copied().unwrap_or("ctrl.kp"),
+            if live.is_empty() {
+                "none in this graph".to_string()
+            } else {
+                live.join(", ")
+            }
+        )
+    };
+    let spawned = std::thread::Builder::new()
+        .name("nanomotion-rt-stdin".into())
+        .spawn(move || {
+            for line in std::io::stdin().lock().lines() {
+                let Ok(line) = line else { break };
+                let line = line.trim();
+                if line.is_empty() {
+                    continue;
+                }
+                match line.strip_prefix("set ") {
+                    Some(text) => {
+                        if let Err(e) = sender.set_text(text.trim()) {
+                            tell!("  refused: {e}");
+                        }
+                    }
+                    None => tell!("  `{line}`: unknown command ({})", usage(&sender)),
+                }
+            }
+        });
+    if let Err(e) = spawned {
+        tell!("note: live parameter updates from standard input are off: {e}");
     }
 }
 
@@ -204,7 +270,31 @@ fn run_loop<D: Device>(
         graph.display(),
         runner.device().name()
     );
-    let report = runner.run(status(stop, rate)).map_err(|e| e.to_string())?;
+    let params: Vec<String> = runner.live_params().into_iter().map(|p| p.path).collect();
+    if command == "rt" {
+        // Live updates from standard input, judged by the stability gate on a
+        // second build of the same graph (never ticked).
+        let sender = runner.param_sender().map_err(|e| e.to_string())?;
+        let mut spec = load(graph, lp)?;
+        let require = spec.require.clone().unwrap_or_default();
+        // The gate reads blocks and wiring only: no log buffers for the copy.
+        spec.log.clear();
+        spec.score.clear();
+        spec.compare.clear();
+        let (copy, _) = spec.build().map_err(|e| e.to_string())?;
+        let sender = sender.gated(copy, require).map_err(|e| e.to_string())?;
+        if !params.is_empty() && std::io::IsTerminal::is_terminal(&std::io::stdin()) {
+            tell!(
+                "live parameters: {} (type `set {}=VALUE` and Enter to change one while the loop runs)",
+                params.join(", "),
+                params[0]
+            );
+        }
+        read_updates(sender);
+    }
+    let report = runner
+        .run(status(stop, rate, params))
+        .map_err(|e| e.to_string())?;
     if std::io::IsTerminal::is_terminal(&std::io::stderr()) {
         eprintln!();
     }
@@ -245,7 +335,7 @@ fn run_loop<D: Device>(
 
 fn print_report(r: &TimingReport) {
     say!(
-        "{} ticks at {} Hz ({}), {}; overruns {}, missed ticks {} (policy {}, limit {}), events dropped {}",
+        "{} ticks at {} Hz ({}), {}; overruns {}, missed ticks {} (policy {}, limit {}), events dropped {}, live parameter updates {}",
         r.ticks,
         r.rate_hz,
         r.scheduling,
@@ -254,7 +344,8 @@ fn print_report(r: &TimingReport) {
         r.missed_ticks,
         r.overrun_policy,
         r.max_overruns.map_or("none".to_string(), |m| m.to_string()),
-        r.events_dropped
+        r.events_dropped,
+        r.param_updates
     );
     for m in &r.missing_privileges {
         say!("soft run: {m}");
@@ -473,8 +564,13 @@ pub fn replay(a: ReplayArgs) -> Result<(), String> {
     let r = nanomotion_rt::replay(&mut sched, &rec).map_err(|e| e.to_string())?;
     match &r.first {
         None => {
+            let updates = match rec.param_changes.len() {
+                0 => String::new(),
+                1 => " with its live parameter update".to_string(),
+                n => format!(" with its {n} live parameter updates"),
+            };
             say!(
-                "{}: replayed {} ticks through {}: all {} output samples bit-identical",
+                "{}: replayed {} ticks through {}{updates}: all {} output samples bit-identical",
                 a.recording.display(),
                 r.ticks,
                 a.graph.display(),

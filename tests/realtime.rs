@@ -245,6 +245,97 @@ fn a_recorded_two_process_run_replays_bit_for_bit_and_a_changed_gain_does_not() 
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// `nanomotion rt` with `lines` written to its standard input `after` the
+/// start; its output.
+fn rt_with_stdin(args: &[&str], lines: &str, after: Duration) -> std::process::Output {
+    use std::io::Write as _;
+    let mut child = Command::new(env!("CARGO_BIN_EXE_nanomotion"))
+        .arg("rt")
+        .args(args)
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(after);
+    let mut stdin = child.stdin.take().unwrap();
+    stdin.write_all(lines.as_bytes()).unwrap();
+    drop(stdin);
+    child.wait_with_output().unwrap()
+}
+
+#[test]
+fn rt_applies_a_gain_typed_on_stdin_and_refuses_bad_lines_with_their_reason() {
+    // The single-process quickstart: its PI loop passes the gate, k_p = 3.1416e8
+    // makes it unstable (tests of nanomotion-rt compare the gate's figures).
+    let graph = format!("{EXAMPLES}/quickstart.yaml");
+    let out = rt_with_stdin(
+        &[&graph, "--duration", "0.6", "--allow-soft"],
+        "set pi.kp=3.1416e8\nset pi.kq=1\nhello\nset pi.kp=4e7\n",
+        Duration::from_millis(100),
+    );
+    let err = String::from_utf8_lossy(&out.stderr);
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{err}");
+    assert!(
+        err.contains("`pi.kp` = 314160000 refused by the stability gate: loop `pi` is unstable"),
+        "{err}"
+    );
+    assert!(
+        err.contains("`kq` of block `pi` cannot change while the loop runs (its live parameters: kp, zero_hz)"),
+        "{err}"
+    );
+    assert!(err.contains("`hello`: unknown command"), "{err}");
+    assert!(err.contains("set pi.kp = 40000000 at tick "), "{err}");
+    assert!(text.contains("live parameter updates 1"), "{text}");
+}
+
+#[test]
+fn a_gain_set_from_stdin_is_recorded_and_replays_bit_for_bit() {
+    let name = format!("test-live-{}", std::process::id());
+    let dir = std::env::temp_dir().join(format!("nanomotion-rt-live-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let plant = serve_quickstart_plant(&name, &[]);
+    let controller = format!("{EXAMPLES}/realtime/quickstart_controller.yaml");
+    let out = rt_with_stdin(
+        &[
+            &controller,
+            "--device",
+            &format!("shm:{name}"),
+            "--duration",
+            "0.6",
+            "--allow-soft",
+            "--record",
+            "--out",
+            dir.to_str().unwrap(),
+        ],
+        "set pi.kp=4e7\n",
+        Duration::from_millis(300),
+    );
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{err}");
+    assert!(err.contains("set pi.kp = 40000000 at tick "), "{err}");
+    let plant = plant.wait_with_output().unwrap();
+    assert!(plant.status.success());
+    let same = Command::new(env!("CARGO_BIN_EXE_nanomotion"))
+        .arg("replay")
+        .arg(dir.join("run.mcap"))
+        .arg(&controller)
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&same.stdout);
+    assert!(
+        same.status.success(),
+        "{}",
+        String::from_utf8_lossy(&same.stderr)
+    );
+    assert!(
+        text.contains("with its live parameter update: all 2400 output samples bit-identical"),
+        "{text}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 #[test]
 fn rt_refuses_without_cap_sys_nice_and_runs_soft_when_allowed() {
     // As root, drop CAP_SYS_NICE for the child (util-linux `setpriv`); the
@@ -475,6 +566,7 @@ fn diagnose_reads_a_recording_as_its_measured_data_like_the_same_csv() {
         t_ns: (0..n as u64).map(|k| 987_654_321 + k * 500_000).collect(),
         input_values: csv.column("y").unwrap().to_vec(),
         output_values: csv.column("u").unwrap().to_vec(),
+        ..Recording::default()
     };
     let mcap = dir.join("run.mcap");
     nanomotion::rt::write_mcap(&mcap, &rec).unwrap();

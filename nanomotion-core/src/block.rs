@@ -305,6 +305,24 @@ pub trait Block: Send + Debug {
     fn tunable_mut(&mut self) -> Option<&mut dyn Tunable> {
         None
     }
+    /// Names (as spelled in YAML) of the parameters that may change while the
+    /// graph runs, between two ticks, **keeping the block's state** (an
+    /// integrator keeps its value when a gain changes): slot `i` of
+    /// [`Block::set_live_param`] is `live_params()[i]`. The default: none.
+    /// `nanomotion rt` applies such changes from the terminal
+    /// (`set ctrl.kp=1.2`), see `nanomotion-rt`'s `ParamSender`.
+    fn live_params(&self) -> &'static [&'static str] {
+        &[]
+    }
+    /// Set live parameter `slot` (an index into [`Block::live_params`]) to
+    /// `value` between two ticks and re-derive what depends on it, keeping the
+    /// state. **Real-time path**: must not allocate, lock or look up strings.
+    /// The caller has validated the value beforehand, by building a copy of
+    /// the block with it ([`Block::build`] gives the block's own message for a
+    /// bad value); a slot out of range is ignored.
+    fn set_live_param(&mut self, slot: usize, value: f64) {
+        let _ = (slot, value);
+    }
 }
 
 /// What [`Block::linearisation`] returns: the model(s) the block is judged on and

@@ -848,6 +848,13 @@ impl Scheduler {
         Some(self.blocks.get_mut(i)?.as_mut())
     }
 
+    /// The context block `i` (execution order) was built with: what building a
+    /// copy of it needs (to validate a parameter change off the real-time
+    /// path, as `nanomotion-rt`'s live updates do).
+    pub fn build_context(&self, i: usize) -> Option<&BuildContext> {
+        self.ctxs.get(i)
+    }
+
     /// The block called `name`, mutable.
     pub fn block_mut(&mut self, name: &str) -> Option<&mut dyn Block> {
         let i = self.block_index(name)?;

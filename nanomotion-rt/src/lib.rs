@@ -15,8 +15,12 @@
 //! - [`Device`]: the hardware boundary (read at the start of a tick, write after
 //!   it, safe state, watchdog), connected to a graph by the `hw_input` and
 //!   `hw_output` blocks of the same name.
-//! - [`record`]: every hardware sample of a run as MCAP, and a bit-exact
-//!   replay of it through the graph.
+//! - [`live`]: parameter updates while the loop runs (`set ctrl.kp=1.2`),
+//!   judged off the loop (the block's own validation, optionally the
+//!   stability gate), applied at a tick boundary through a wait-free ring,
+//!   recorded and replayed.
+//! - [`record`]: every hardware sample and live parameter update of a run as
+//!   MCAP, and a bit-exact replay of it through the graph.
 //! - [`shm`]: a plant graph in another process (`nanomotion plant --serve`)
 //!   behind a [`ShmDevice`], over shared memory.
 //!
@@ -39,6 +43,7 @@
 pub mod clock;
 pub mod device;
 pub mod histogram;
+pub mod live;
 pub mod record;
 pub mod runner;
 pub mod shm;
@@ -46,13 +51,14 @@ pub mod shm;
 pub use clock::{Missing, Privileges};
 pub use device::{Channel, Device, DeviceError, HwInput, HwOutput};
 pub use histogram::{Histogram, Summary};
+pub use live::{LiveError, LiveParam, ParamSender, ParamUpdate, live_params};
 pub use nanomotion_core::graph::RealtimeSpec;
 pub use record::{
     ReplayReport, SimRecorder, hw_log_names, load_dataset, read_mcap, replay, write_mcap,
 };
 pub use runner::{
-    BlockTime, Event, NoDevice, OverrunPolicy, RealtimeRunner, Recording, RtConfig, RtError, Stop,
-    Timing, TimingReport, hw_blocks,
+    BlockTime, Event, NoDevice, OverrunPolicy, ParamChange, RealtimeRunner, Recording, RtConfig,
+    RtError, Stop, Timing, TimingReport, hw_blocks,
 };
 pub use shm::{PlantInfo, ShmDevice, ShmPlant};
 

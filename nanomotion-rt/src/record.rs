@@ -7,6 +7,12 @@
 //! `value`; [`read_mcap`] takes the exact `bits`, so a replay compares outputs
 //! bit for bit.
 //!
+//! Live parameter updates ([`crate::live`]) have a channel per live parameter,
+//! `param/BLOCK.PARAM`, with the same messages: `tick` is the first tick
+//! computed with the new value, `log_time` that tick's wake-up time (the last
+//! tick's for an update that arrived after it); the `nanomotion` metadata
+//! record lists the live parameters (`live_params`, comma-separated).
+//!
 //! A simulated run (`nanomotion run --record`) is recorded the same way by a
 //! [`SimRecorder`]: the `hw_input`/`hw_output` signals taken from the run's
 //! logs, `log_time` the simulated time of the tick.
@@ -16,20 +22,25 @@
 //! `nanomotion diagnose MODEL RUN.mcap` and `run`/`check --data RUN.mcap`.
 //!
 //! [`replay`] feeds the recorded inputs into the `hw_input` blocks of a freshly
-//! built graph, tick by tick, and compares every `hw_output` sample with the
+//! built graph, tick by tick, applies the recorded live parameter updates
+//! before the ticks they took effect at, and compares every `hw_output` sample with the
 //! recording. A graph is deterministic (seeded), so the same graph reproduces
 //! the recorded outputs exactly; any difference names its first tick and
 //! channel.
 
 use crate::Channel;
 use crate::device::{HW_INPUT, HW_OUTPUT};
-use crate::runner::{Recording, hw_blocks};
+use crate::live::live_params;
+use crate::runner::{ParamChange, Recording, hw_blocks};
 use nanomotion_core::Scheduler;
 use nanomotion_core::graph::GraphSpec;
 use nanomotion_core::scheduler::LogChunk;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::path::Path;
+
+/// Channel kind of live parameter updates (`param/BLOCK.PARAM`).
+const PARAM: &str = "param";
 
 /// Schema name of a sample message.
 const SCHEMA: &str = "nanomotion.HwSample";
@@ -103,12 +114,18 @@ pub fn write_mcap(path: &Path, rec: &Recording) -> Result<(), RecordError> {
             .iter()
             .map(|c| channel(HW_OUTPUT, c, rec.rate_hz))
             .collect::<Result<_, _>>()?;
+        let params: Vec<u16> = rec
+            .params
+            .iter()
+            .map(|p| channel(PARAM, &Channel::new(p, None), rec.rate_hz))
+            .collect::<Result<_, _>>()?;
         let mut meta = BTreeMap::new();
         meta.insert("rate_hz".to_string(), format!("{}", rec.rate_hz));
         meta.insert("ticks".to_string(), rec.ticks().to_string());
         if let Some(t) = &rec.title {
             meta.insert("title".to_string(), t.clone());
         }
+        meta.insert("live_params".to_string(), rec.params.join(","));
         w.write_metadata(&mcap::records::Metadata {
             name: "nanomotion".into(),
             metadata: meta,
@@ -138,6 +155,33 @@ pub fn write_mcap(path: &Path, rec: &Recording) -> Result<(), RecordError> {
             for (i, &id) in outs.iter().enumerate() {
                 put(id, k, t, rec.output_values[k * no + i])?;
             }
+        }
+        // Updates: `sequence` is the order applied (several may share a tick).
+        for (seq, u) in rec.param_changes.iter().enumerate() {
+            let Some(&id) = params.get(u.param as usize) else {
+                continue;
+            };
+            let t = rec
+                .t_ns
+                .get(u.tick as usize)
+                .or(rec.t_ns.last())
+                .copied()
+                .unwrap_or(0);
+            let data = serde_json::to_vec(&Sample {
+                tick: u.tick,
+                value: Some(u.value),
+                bits: format!("{:016x}", u.value.to_bits()),
+            })
+            .expect("a sample serialises");
+            w.write_to_known_channel(
+                &mcap::records::MessageHeader {
+                    channel_id: id,
+                    sequence: seq as u32,
+                    log_time: t,
+                    publish_time: t,
+                },
+                &data,
+            )?;
         }
         w.finish()?;
         Ok(())
@@ -178,15 +222,60 @@ pub fn read_mcap(path: &Path) -> Result<Recording, RecordError> {
                 .get("ticks")
                 .and_then(|t| t.parse::<usize>().ok());
             rec.title = md.metadata.get("title").cloned();
+            rec.params = md
+                .metadata
+                .get("live_params")
+                .map(|l| {
+                    l.split(',')
+                        .filter(|p| !p.is_empty())
+                        .map(str::to_string)
+                        .collect()
+                })
+                .unwrap_or_default();
         }
     }
     let ticks = ticks.ok_or_else(|| content("no `nanomotion` metadata record".into()))?;
-    // Channel id -> (is input, index).
+    // Channel id -> (is input, index); live parameter channel id -> row.
     let mut index: BTreeMap<u16, (bool, usize)> = BTreeMap::new();
+    let mut param_rows: BTreeMap<u16, usize> = BTreeMap::new();
     let mut samples: Vec<(bool, usize, u64, u64, f64)> = Vec::new();
+    let mut changes: Vec<(u32, ParamChange)> = Vec::new();
+    let bits_of = |topic: &str, s: &Sample| {
+        u64::from_str_radix(&s.bits, 16)
+            .map(f64::from_bits)
+            .map_err(|e| content(format!("{topic} tick {}: bits `{}`: {e}", s.tick, s.bits)))
+    };
     for m in mcap::MessageStream::new(&bytes).map_err(|e| content(e.to_string()))? {
         let m = m.map_err(|e| content(e.to_string()))?;
         let ch = &m.channel;
+        if let Some(name) = ch.topic.strip_prefix("param/") {
+            let row = match param_rows.get(&ch.id) {
+                Some(&r) => r,
+                None => {
+                    let r = rec.params.iter().position(|p| p == name).ok_or_else(|| {
+                        content(format!(
+                            "channel `{}` is not among the live parameters the metadata lists ({})",
+                            ch.topic,
+                            rec.params.join(", ")
+                        ))
+                    })?;
+                    param_rows.insert(ch.id, r);
+                    r
+                }
+            };
+            let s: Sample = serde_json::from_slice(&m.data)
+                .map_err(|e| content(format!("{} message {}: {e}", ch.topic, m.sequence)))?;
+            let value = bits_of(&ch.topic, &s)?;
+            changes.push((
+                m.sequence,
+                ParamChange {
+                    tick: s.tick,
+                    param: row as u32,
+                    value,
+                },
+            ));
+            continue;
+        }
         let (is_in, i) = match index.get(&ch.id) {
             Some(&x) => x,
             None => {
@@ -215,14 +304,11 @@ pub fn read_mcap(path: &Path) -> Result<Recording, RecordError> {
         };
         let s: Sample = serde_json::from_slice(&m.data)
             .map_err(|e| content(format!("{} message {}: {e}", ch.topic, m.sequence)))?;
-        let bits = u64::from_str_radix(&s.bits, 16).map_err(|e| {
-            content(format!(
-                "{} tick {}: bits `{}`: {e}",
-                ch.topic, s.tick, s.bits
-            ))
-        })?;
-        samples.push((is_in, i, s.tick, m.log_time, f64::from_bits(bits)));
+        let value = bits_of(&ch.topic, &s)?;
+        samples.push((is_in, i, s.tick, m.log_time, value));
     }
+    changes.sort_by_key(|(seq, _)| *seq);
+    rec.param_changes = changes.into_iter().map(|(_, c)| c).collect();
     let (ni, no) = (rec.inputs.len(), rec.outputs.len());
     rec.t_ns = vec![0; ticks];
     rec.input_values = vec![f64::NAN; ticks * ni];
@@ -303,6 +389,24 @@ pub fn replay(sched: &mut Scheduler, rec: &Recording) -> Result<ReplayReport, Re
         .iter()
         .map(|(n, _)| Ok((find(&rec.outputs, n, HW_OUTPUT)?, id(n)?, n.clone())))
         .collect::<Result<Vec<_>, RecordError>>()?;
+    // The recorded live parameters, resolved once: (block, slot) per row.
+    let table = live_params(sched);
+    let slots = rec
+        .params
+        .iter()
+        .map(|p| {
+            table
+                .iter()
+                .find(|l| &l.path == p)
+                .map(|l| (l.block, l.slot))
+                .ok_or_else(|| {
+                    RecordError::Graph(format!(
+                        "the recording changed `{p}` while running, which is not a live parameter of this graph (fix: replay with the graph that was recorded)"
+                    ))
+                })
+        })
+        .collect::<Result<Vec<_>, RecordError>>()?;
+    let mut changes = rec.param_changes.iter().peekable();
     let (ni, no) = (rec.inputs.len(), rec.outputs.len());
     let mut report = ReplayReport {
         ticks: rec.ticks(),
@@ -311,6 +415,19 @@ pub fn replay(sched: &mut Scheduler, rec: &Recording) -> Result<ReplayReport, Re
         first: None,
     };
     for k in 0..rec.ticks() {
+        while let Some(c) = changes.next_if(|c| c.tick <= k as u64) {
+            let (block, slot) = *slots.get(c.param as usize).ok_or_else(|| {
+                RecordError::Graph(format!(
+                    "tick {}: update of live parameter {} of {}",
+                    c.tick,
+                    c.param,
+                    rec.params.len()
+                ))
+            })?;
+            if let Some(b) = sched.block_at_mut(block) {
+                b.set_live_param(slot, c.value);
+            }
+        }
         for &(i, sid) in &ins {
             sched.write(sid, &rec.input_values[k * ni + i..k * ni + i + 1]);
         }

@@ -2,6 +2,8 @@
 //! [`Device`].
 //!
 //! One tick of the loop thread:
+//! 0. apply the live parameter updates waiting in their ring ([`crate::live`]:
+//!    resolved and judged off the loop, applied here without look-ups);
 //! 1. sleep until the absolute deadline `t0 + slot · T` (`clock_nanosleep`,
 //!    `TIMER_ABSTIME`), optionally spinning the last few µs;
 //! 2. [`Device::read`] into the `hw_input` signals ([`Scheduler::write`]);
@@ -11,14 +13,16 @@
 //! 5. timing into fixed-memory histograms; an overrun (the tick ended after the
 //!    next deadline) is counted and handled by the [`OverrunPolicy`].
 //!
-//! Nothing in 1–5 allocates, locks or makes a system call other than the sleep
-//! and the device's own I/O (`tests/no_alloc.rs` counts allocations over the
-//! whole loop). Status and events leave the thread through a wait-free ring
-//! ([`rtrb`]); when it is full they are dropped and counted, never waited for.
+//! Nothing in 0–5 allocates, locks or makes a system call other than the sleep
+//! and the device's own I/O (`tests/runner.rs`, `ticks_do_not_allocate`,
+//! counts allocations over the whole loop, with live updates too). Status and
+//! events leave the thread through a wait-free ring ([`rtrb`]); when it is
+//! full they are dropped and counted, never waited for.
 
 use crate::clock::{self, BadCpu, Missing, Privileges};
 use crate::device::{Device, DeviceError, HW_INPUT, HW_OUTPUT};
 use crate::histogram::{Histogram, Summary};
+use crate::live::{LiveParam, ParamSender, ParamUpdate, live_params};
 use nanomotion_core::Scheduler;
 pub use nanomotion_core::graph::OverrunPolicy;
 use nanomotion_core::graph::RealtimeSpec;
@@ -52,6 +56,13 @@ pub struct RtConfig {
     /// Time every block of every tick ([`Timing::blocks`]): two clock reads per
     /// block phase, in a histogram per block allocated at build.
     pub block_timing: bool,
+    /// Slots of the ring of live parameter updates into the loop
+    /// ([`RealtimeRunner::param_sender`]); the loop empties it at every tick
+    /// boundary.
+    pub param_slots: usize,
+    /// Live parameter updates one [`ParamSender`] sends at most (the
+    /// recording of them is allocated at build for this many).
+    pub max_param_updates: usize,
 }
 
 impl Default for RtConfig {
@@ -75,6 +86,8 @@ impl Default for RtConfig {
             ring_slots: 1024,
             record: false,
             block_timing: false,
+            param_slots: 64,
+            max_param_updates: 4096,
         }
     }
 }
@@ -169,6 +182,16 @@ pub enum Event {
         worst_latency_ns: u64,
         /// Largest execution time since the previous status (ns).
         worst_execution_ns: u64,
+    },
+    /// A live parameter update was applied ([`crate::live`]).
+    Param {
+        /// The first tick computed with the new value (ticks run before it).
+        tick: u64,
+        /// Row of the graph's table of live parameters
+        /// ([`ParamSender::path`] names it).
+        param: u32,
+        /// The new value.
+        value: f64,
     },
     /// A tick ended after the next deadline.
     Overrun {
@@ -289,6 +312,8 @@ pub struct TimingReport {
     pub missing_privileges: Vec<Missing>,
     /// Events the ring could not take (dropped, never waited for).
     pub events_dropped: u64,
+    /// Live parameter updates applied.
+    pub param_updates: u64,
     /// Transport delay the device declares (ticks).
     pub device_latency_ticks: u32,
     /// Grid origin, last deadline and last wake-up on CLOCK_MONOTONIC (ns).
@@ -329,6 +354,22 @@ pub struct Recording {
     pub input_values: Vec<f64>,
     /// Output samples, tick-major (`ticks × outputs.len()`).
     pub output_values: Vec<f64>,
+    /// The graph's live parameters (`BLOCK.PARAM`): the table
+    /// [`ParamChange::param`] indexes.
+    pub params: Vec<String>,
+    /// The live parameter updates applied, in the order applied.
+    pub param_changes: Vec<ParamChange>,
+}
+
+/// A live parameter update as recorded: applied before tick `tick`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ParamChange {
+    /// The first tick computed with the new value.
+    pub tick: u64,
+    /// Row of [`Recording::params`].
+    pub param: u32,
+    /// The new value.
+    pub value: f64,
 }
 
 impl Recording {
@@ -346,6 +387,7 @@ struct Counters {
     overruns: u64,
     missed: u64,
     dropped: u64,
+    param_updates: u64,
     t0: u64,
     last_deadline: u64,
     last_wake: u64,
@@ -367,6 +409,9 @@ struct LoopCore<D: Device> {
     block_clock: Option<BlockClock>,
     record: Option<Recording>,
     events: rtrb::Producer<Event>,
+    /// Live parameter updates in; (block, slot) of each row of the table.
+    params: rtrb::Consumer<ParamUpdate>,
+    param_slots: Box<[(usize, usize)]>,
     stop: Arc<AtomicBool>,
 }
 
@@ -383,6 +428,9 @@ struct LoopCore<D: Device> {
 pub struct RealtimeRunner<D: Device> {
     core: LoopCore<D>,
     events: rtrb::Consumer<Event>,
+    /// The sending end of the update ring, until [`RealtimeRunner::param_sender`]
+    /// takes it.
+    params: Option<rtrb::Producer<ParamUpdate>>,
 }
 
 impl<D: Device> std::fmt::Debug for RealtimeRunner<D> {
@@ -507,6 +555,8 @@ impl<D: Device> RealtimeRunner<D> {
             cfg.status_every = ((rate / 10.0).round() as u64).max(1);
         }
         let (producer, consumer) = rtrb::RingBuffer::new(cfg.ring_slots.max(1));
+        let (param_in, param_out) = rtrb::RingBuffer::new(cfg.param_slots.max(1));
+        let table = live_params(&sched);
         let in_buf = vec![0.0; device.inputs().len()];
         let out_buf = vec![0.0; device.outputs().len()];
         let record = cfg.record.then(|| {
@@ -526,6 +576,8 @@ impl<D: Device> RealtimeRunner<D> {
                 t_ns: Vec::with_capacity(n),
                 input_values: Vec::with_capacity(n * inputs.len()),
                 output_values: Vec::with_capacity(n * outputs.len()),
+                params: table.iter().map(|p| p.path.clone()).collect(),
+                param_changes: Vec::with_capacity(cfg.max_param_updates),
             }
         });
         let n_blocks = sched.block_names().len();
@@ -551,10 +603,35 @@ impl<D: Device> RealtimeRunner<D> {
                 block_clock,
                 record,
                 events: producer,
+                params: param_out,
+                param_slots: table.iter().map(|p| (p.block, p.slot)).collect(),
                 stop: Arc::new(AtomicBool::new(false)),
             },
             events: consumer,
+            params: Some(param_in),
         })
+    }
+
+    /// The sender of live parameter updates into the loop ([`crate::live`]),
+    /// once: take it before [`RealtimeRunner::run`] (it may be moved to
+    /// another thread). Updates sent before the run take effect at tick 0.
+    pub fn param_sender(&mut self) -> Result<ParamSender, RtError> {
+        let ring = self.params.take().ok_or_else(|| {
+            RtError::Thread(
+                "the parameter sender was already taken (fix: keep the one `param_sender()` returned; clone nothing, one sender per runner)".into(),
+            )
+        })?;
+        Ok(ParamSender::new(
+            &self.core.sched,
+            ring,
+            self.core.cfg.max_param_updates,
+        ))
+    }
+
+    /// The graph's live parameters: row `i` is what [`Event::Param`]'s
+    /// `param: i` means.
+    pub fn live_params(&self) -> Vec<LiveParam> {
+        live_params(&self.core.sched)
     }
 
     /// A flag that stops the loop at the next tick boundary (outputs safe).
@@ -698,6 +775,35 @@ impl<D: Device> LoopCore<D> {
         t0 + (slot as f64 * period_ns).round() as u64
     }
 
+    /// Apply one live parameter update before tick `c.ticks`: the block's
+    /// own in-place setter (no allocation), then the record and the event.
+    #[inline]
+    fn apply(&mut self, c: &mut Counters, u: ParamUpdate) {
+        let Some(&(block, slot)) = self.param_slots.get(u.param as usize) else {
+            return;
+        };
+        if let Some(b) = self.sched.block_at_mut(block) {
+            b.set_live_param(slot, u.value);
+        }
+        c.param_updates += 1;
+        // Within the capacity reserved at build (the sender's limit).
+        if let Some(r) = &mut self.record
+            && r.param_changes.len() < r.param_changes.capacity()
+        {
+            r.param_changes.push(ParamChange {
+                tick: c.ticks,
+                param: u.param,
+                value: u.value,
+            });
+        }
+        let e = Event::Param {
+            tick: c.ticks,
+            param: u.param,
+            value: u.value,
+        };
+        self.push(c, e);
+    }
+
     #[inline]
     fn push(&mut self, c: &mut Counters, e: Event) {
         if self.events.push(e).is_err() {
@@ -730,6 +836,7 @@ impl<D: Device> LoopCore<D> {
             r.t_ns.clear();
             r.input_values.clear();
             r.output_values.clear();
+            r.param_changes.clear();
         }
         let period_ns = 1.0e9 / self.sched.base_rate_hz();
         let n = self.cfg.ticks.unwrap_or_else(|| {
@@ -751,6 +858,10 @@ impl<D: Device> LoopCore<D> {
             }
             if self.stop.load(Ordering::Relaxed) {
                 break Stop::Interrupted;
+            }
+            // Live parameter updates, at the boundary before this tick.
+            while let Ok(u) = self.params.pop() {
+                self.apply(&mut c, u);
             }
             let deadline = Self::deadline(c.t0, period_ns, slot);
             clock::sleep_until(deadline, self.cfg.spin_ns);
@@ -864,6 +975,7 @@ impl<D: Device> LoopCore<D> {
             memory_locked,
             missing_privileges: missing,
             events_dropped: c.dropped,
+            param_updates: c.param_updates,
             device_latency_ticks: self.device.latency_ticks(),
             t0_ns: c.t0,
             last_deadline_ns: c.last_deadline,

@@ -1,13 +1,15 @@
 //! Acceptance tests of the real-time runner: the grid is held against
 //! CLOCK_MONOTONIC, injected overruns are counted exactly under both policies,
 //! `max_overruns` and the watchdog stop the loop with outputs safe, a refused
-//! privilege is refused unless soft running is allowed, and ticks do not allocate.
+//! privilege is refused unless soft running is allowed, and ticks do not allocate;
+//! live parameter updates take effect at the tick they are applied at, are
+//! refused with the block's or the gate's reason, and replay bit for bit.
 
 use nanomotion_core::GraphSpec;
 use nanomotion_rt::clock::{self, Privileges};
 use nanomotion_rt::{
-    Channel, Device, DeviceError, OverrunPolicy, PlantInfo, RealtimeRunner, RealtimeSpec, RtConfig,
-    RtError, ShmDevice, ShmPlant, Stop,
+    Channel, Device, DeviceError, Event, LiveError, NoDevice, OverrunPolicy, ParamChange,
+    PlantInfo, RealtimeRunner, RealtimeSpec, RtConfig, RtError, ShmDevice, ShmPlant, Stop,
 };
 use std::time::Duration;
 
@@ -439,8 +441,9 @@ fn a_granted_priority_is_what_the_kernel_reports() {
 #[test]
 fn ticks_do_not_allocate() {
     // The loop's allocations (the report's strings, at the end) do not depend
-    // on how many ticks ran: none per tick, with per-block timing off or on.
-    let count = |n: u64, block_timing: bool| {
+    // on how many ticks ran nor on how many live parameter updates it applied:
+    // none per tick, with per-block timing off or on, recording or not.
+    let count = |n: u64, block_timing: bool, updates: usize| {
         let mut r = RealtimeRunner::new(
             graph(20_000.0, n),
             TestDevice::new(n as usize, &[], 0),
@@ -451,19 +454,225 @@ fn ticks_do_not_allocate() {
                     lock_memory: false,
                 },
                 block_timing,
+                record: updates > 0,
                 ..RtConfig::default()
             },
         )
         .unwrap();
-        let info = allocation_counter::measure(|| {
-            let rep = r.run_here().unwrap();
-            assert_eq!(rep.ticks, n);
-            assert_eq!(rep.blocks.len(), if block_timing { 5 } else { 0 });
+        // Updates come from another thread while the loop runs (its own
+        // allocations, judging them, are counted on that thread, not here).
+        let mut sender = r.param_sender().unwrap();
+        let info = std::thread::scope(|s| {
+            s.spawn(move || {
+                for i in 0..updates {
+                    std::thread::sleep(Duration::from_millis(2));
+                    sender.set("k.k", 2.0 + i as f64).unwrap();
+                }
+            });
+            allocation_counter::measure(|| {
+                let rep = r.run_here().unwrap();
+                assert_eq!(rep.ticks, n);
+                assert_eq!(rep.blocks.len(), if block_timing { 5 } else { 0 });
+                assert_eq!(rep.param_updates, updates as u64);
+            })
         });
+        if updates > 0 {
+            let changes = &r.recording().unwrap().param_changes;
+            assert_eq!(changes.len(), updates);
+            // Applied in order, each at a tick boundary inside the run.
+            assert!(changes.windows(2).all(|w| w[0].tick <= w[1].tick));
+            assert!(changes.iter().all(|c| c.tick > 0 && c.tick < n));
+        }
         info.count_total
     };
-    assert_eq!(count(100, false), count(4000, false));
-    assert_eq!(count(100, true), count(4000, true));
+    assert_eq!(count(100, false, 0), count(4000, false, 0));
+    assert_eq!(count(100, true, 0), count(4000, true, 0));
+    // 20 updates, 2 ms apart, into a 0.4 s run (8000 ticks at 20 kHz).
+    assert_eq!(count(8000, false, 20), count(8000, false, 0));
+}
+
+/// The loop of [`graph`] with a live change of `k.k` from 2 to 3 sent from
+/// another thread 40 ms into a 0.3 s run at 2 kHz, recorded: the runner and
+/// the tick the change took effect at.
+fn run_with_a_live_gain_change() -> (RealtimeRunner<TestDevice>, u64) {
+    let n = 600u64;
+    let mut cfg = config(OverrunPolicy::Skip);
+    cfg.record = true;
+    let mut r =
+        RealtimeRunner::new(graph(2000.0, n), TestDevice::new(n as usize, &[], 0), cfg).unwrap();
+    let mut sender = r.param_sender().unwrap();
+    assert_eq!(sender.params()[0].path, "k.k");
+    let mut applied = Vec::new();
+    let report = std::thread::scope(|s| {
+        s.spawn(move || {
+            std::thread::sleep(Duration::from_millis(40));
+            sender.set("k.k", 3.0).unwrap();
+        });
+        r.run(|e| {
+            if let Event::Param { tick, param, value } = e {
+                applied.push((tick, param, value));
+            }
+        })
+        .unwrap()
+    });
+    assert_eq!(report.stopped, Stop::Completed);
+    assert_eq!(report.param_updates, 1);
+    assert_eq!(applied.len(), 1);
+    let (tick, param, value) = applied[0];
+    assert_eq!((param, value), (0, 3.0));
+    assert!(tick > 0 && tick < n, "applied at tick {tick}");
+    (r, tick)
+}
+
+#[test]
+fn a_live_gain_change_takes_effect_exactly_at_the_tick_it_was_applied() {
+    let (r, at) = run_with_a_live_gain_change();
+    // Tick k reads k + 1: cmd = k_gain·(k + 1) + 1.5, with k_gain = 2 before
+    // the tick the update was applied at and 3 from it on.
+    let written = &r.device().written;
+    assert_eq!(written.len(), 600);
+    for (k, &y) in written.iter().enumerate() {
+        let gain = if (k as u64) < at { 2.0 } else { 3.0 };
+        assert_eq!(y, gain * (k + 1) as f64 + 1.5, "tick {k} (update at {at})");
+    }
+    let rec = r.recording().unwrap();
+    assert_eq!(rec.params, ["k.k"]);
+    assert_eq!(
+        rec.param_changes,
+        [ParamChange {
+            tick: at,
+            param: 0,
+            value: 3.0
+        }]
+    );
+}
+
+#[test]
+fn a_run_with_a_live_update_replays_bit_for_bit_from_its_mcap_file() {
+    let (r, at) = run_with_a_live_gain_change();
+    let rec = r.recording().unwrap().clone();
+    let path = std::env::temp_dir().join(format!("nanomotion-live-{}.mcap", std::process::id()));
+    nanomotion_rt::write_mcap(&path, &rec).unwrap();
+    let back = nanomotion_rt::read_mcap(&path).unwrap();
+    let _ = std::fs::remove_file(&path);
+    assert_eq!(back, rec, "the file holds every sample and update exactly");
+    let rep = nanomotion_rt::replay(&mut graph(2000.0, 600), &back).unwrap();
+    assert_eq!((rep.ticks, rep.compared, rep.mismatches), (600, 600, 0));
+    // Without the update, the replay parts from the recording exactly at its
+    // tick, by the gain step times the input there.
+    let mut without = back.clone();
+    without.param_changes.clear();
+    let rep = nanomotion_rt::replay(&mut graph(2000.0, 600), &without).unwrap();
+    assert_eq!(rep.mismatches, 600 - at as usize);
+    let x = (at + 1) as f64;
+    assert_eq!(
+        rep.first,
+        Some((at as usize, "cmd".into(), 3.0 * x + 1.5, 2.0 * x + 1.5))
+    );
+}
+
+#[test]
+fn a_bad_update_is_refused_with_its_reason_and_never_reaches_the_loop() {
+    let yaml = "base_rate_hz: 1000\nduration_s: 0.02\nblocks:\n  - { name: one, type: constant, value: 1.0 }\n  - { name: c, type: pid, kp: 1.0, ki: 10.0 }\n  - { name: z, type: pi, kp: 1.0, zero_hz: 2.0 }\nconnections:\n  - { from: one.y, to: c.e }\n  - { from: one.y, to: z.e }\nlog: [c.u]\n";
+    let (sched, _) = GraphSpec::from_yaml(yaml, "t.yaml")
+        .unwrap()
+        .build()
+        .unwrap();
+    let mut r = RealtimeRunner::new(sched, NoDevice, config(OverrunPolicy::Skip)).unwrap();
+    let mut sender = r.param_sender().unwrap();
+    let paths: Vec<&str> = sender.params().iter().map(|p| p.path.as_str()).collect();
+    assert_eq!(paths, ["c.kp", "c.ki", "c.kd", "z.kp", "z.zero_hz"]);
+    // The block's own validation: a derivative gain needs a cut-off.
+    match sender.set("c.kd", 1e-3) {
+        Err(LiveError::Refused { block, source, .. }) => {
+            assert_eq!(block, "c");
+            assert_eq!(source.field, "derivative_cutoff_hz");
+        }
+        other => panic!("{other:?}"),
+    }
+    match sender.set_text("z.zero_hz=-1") {
+        Err(e @ LiveError::Refused { .. }) => {
+            let m = e.to_string();
+            assert!(m.contains("zero_hz") && m.contains("≥ 0"), "{m}");
+        }
+        other => panic!("{other:?}"),
+    }
+    // Paths and values.
+    let m = sender.set("c.kq", 1.0).unwrap_err().to_string();
+    assert!(m.contains("its live parameters: kp, ki, kd"), "{m}");
+    let m = sender.set("one.value", 1.0).unwrap_err().to_string();
+    assert!(m.contains("no parameter that can change"), "{m}");
+    assert!(m.contains("--set blocks.one.value=VALUE"), "{m}");
+    let m = sender.set("nope.kp", 1.0).unwrap_err().to_string();
+    assert!(
+        m.contains("no block `nope`") && m.contains("c.kp, c.ki"),
+        "{m}"
+    );
+    assert!(matches!(
+        sender.set_text("c.kp=fast"),
+        Err(LiveError::NotANumber { .. })
+    ));
+    assert!(matches!(
+        sender.set("c.kp", f64::NAN),
+        Err(LiveError::NotANumber { .. })
+    ));
+    assert!(matches!(sender.set_text("c.kp"), Err(LiveError::Syntax(_))));
+    // One good update, in `blocks.` form: the only one the loop sees.
+    sender.set_text("blocks.c.kp=2.5").unwrap();
+    let report = r.run(|_| {}).unwrap();
+    assert_eq!(report.param_updates, 1);
+    // Applied before tick 0: u[k] = 2.5 + 10·T·(k + ½) (Tustin, unit error).
+    let (u, _, _) = r.scheduler().log_view("c.u").unwrap();
+    for (k, &v) in u.iter().enumerate() {
+        let expect = 2.5 + 10.0 * 1e-3 * (k as f64 + 0.5);
+        assert!((v - expect).abs() < 1e-12, "k = {k}: {v} vs {expect}");
+    }
+}
+
+#[test]
+fn the_stability_gate_refuses_an_update_that_destabilises_the_loop() {
+    // The quickstart loop (PI on the walking piezo) passes the gate as
+    // written; the gate is the judge of a change of the PI's gain.
+    let file = "../examples/quickstart.yaml";
+    let spec = |kp: Option<f64>| {
+        let set: Vec<nanomotion_core::Override> = kp
+            .map(|kp| nanomotion_core::Override::parse(&format!("blocks.pi.kp={kp}")).unwrap())
+            .into_iter()
+            .collect();
+        GraphSpec::from_file_with_overrides(file, &set).unwrap()
+    };
+    let require = spec(None).require.clone().unwrap_or_default();
+    let gate = |kp: Option<f64>| {
+        let (s, _) = spec(kp).build().unwrap();
+        nanomotion_core::gate::analyse(&s, &require)
+    };
+    assert!(gate(None).passes());
+    let (unstable, stable) = (3.1416e8, 6.0e7);
+    let refused = gate(Some(unstable));
+    assert!(!refused.passes() && gate(Some(stable)).passes());
+
+    let (sched, _) = spec(None).build().unwrap();
+    let (copy, _) = spec(None).build().unwrap();
+    let cfg = RtConfig {
+        ticks: Some(200),
+        ..config(OverrunPolicy::Skip)
+    };
+    let mut r = RealtimeRunner::new(sched, NoDevice, cfg).unwrap();
+    let mut sender = r
+        .param_sender()
+        .unwrap()
+        .gated(copy, require.clone())
+        .unwrap();
+    match sender.set("pi.kp", unstable) {
+        Err(LiveError::Gate { reasons, .. }) => assert_eq!(reasons, refused.failures()),
+        other => panic!("{other:?}"),
+    }
+    sender.set("pi.kp", stable).unwrap();
+    let report = r.run(|_| {}).unwrap();
+    assert_eq!(report.param_updates, 1);
+    // The loop's PI is now the PI built with that gain, to the bit.
+    let (fresh, _) = spec(Some(stable)).build().unwrap();
+    assert_eq!(r.scheduler().lti_of("pi"), fresh.lti_of("pi"));
 }
 
 #[test]
@@ -722,6 +931,7 @@ fn a_recording_reads_as_data_only_when_its_ticks_are_on_the_grid() {
             .collect(),
         input_values: (0..n).map(|k| k as f64).collect(),
         output_values: (0..n).map(|k| 2.0 * k as f64 + 1.5).collect(),
+        ..Default::default()
     };
     let d = rec.to_dataset("r.mcap").unwrap();
     assert_eq!(d.names(), ["pos", "cmd"]);

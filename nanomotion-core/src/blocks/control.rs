@@ -186,6 +186,31 @@ impl Pid {
 
     /// Validate, derive the coefficients for period `dt` and clear the state.
     fn prepare(&mut self, dt: f64) -> Result<(), ParamError> {
+        self.derive(dt)?;
+        self.reset();
+        Ok(())
+    }
+
+    /// Set live parameter `slot` (`kp`, `ki`, `kd`) and re-derive the
+    /// coefficients at the prepared period, keeping the state x_i, x_d. A
+    /// value the block refuses leaves it unchanged. No allocation unless the
+    /// value is refused (callers validate first).
+    fn retune(&mut self, slot: usize, value: f64) {
+        let keep = self.clone();
+        match slot {
+            0 => self.kp = value,
+            1 => self.ki = value,
+            2 => self.kd = value,
+            _ => return,
+        }
+        if self.derive(keep.c.dt).is_err() {
+            *self = keep;
+        }
+    }
+
+    /// Validate and derive the coefficients for period `dt`; the state is left
+    /// as it is.
+    fn derive(&mut self, dt: f64) -> Result<(), ParamError> {
         if !(dt.is_finite() && dt > 0.0) {
             return Err(ParamError::new(
                 "rate_hz",
@@ -271,7 +296,6 @@ impl Pid {
             hi,
             kb: dt / tt,
         };
-        self.reset();
         Ok(())
     }
 
@@ -350,6 +374,12 @@ impl Block for Pid {
     }
     fn output(&mut self, _tick: Tick, u: &[f64], y: &mut [f64]) {
         self.control(u, y);
+    }
+    fn live_params(&self) -> &'static [&'static str] {
+        &["kp", "ki", "kd"]
+    }
+    fn set_live_param(&mut self, slot: usize, value: f64) {
+        self.retune(slot, value);
     }
     fn lti(&self) -> Option<StateSpace> {
         Some(self.state_space())
@@ -525,6 +555,24 @@ impl Block for Pi {
     fn output(&mut self, _tick: Tick, u: &[f64], y: &mut [f64]) {
         self.control(u, y);
     }
+    fn live_params(&self) -> &'static [&'static str] {
+        &["kp", "zero_hz"]
+    }
+    /// k_p or f_i changed, the integrator's value kept (bumpless at zero error).
+    fn set_live_param(&mut self, slot: usize, value: f64) {
+        let keep = self.clone();
+        match slot {
+            0 => self.kp = value,
+            1 => self.zero_hz = value,
+            _ => return,
+        }
+        // The inner PID's gains follow (k_i = k_p·2π f_i); its state stays.
+        self.pid.kp = self.kp;
+        self.pid.ki = self.kp * TAU * self.zero_hz;
+        if !self.pid.ki.is_finite() || self.pid.derive(self.dt).is_err() {
+            *self = keep;
+        }
+    }
     fn lti(&self) -> Option<StateSpace> {
         Some(self.pid.state_space())
     }
@@ -645,6 +693,55 @@ mod tests {
                 );
             }
         }
+    }
+
+    #[test]
+    fn a_live_gain_change_keeps_the_integrator() {
+        // PI (Tustin) on a unit step, k_p changed before sample K: the
+        // integrator keeps k_i1·T·K, so u[K+j] = k_p2 + k_i1 T K + k_i2 T (j + ½)
+        // (k_i = k_p·2π f_i); before K, u[k] = k_p1 + k_i1 T (k + ½).
+        let (kp1, kp2, fi, big_k) = (1.5, 4.0, 30.0, 100);
+        let (ki1, ki2) = (kp1 * TAU * fi, kp2 * TAU * fi);
+        let mut b = built(&format!("type: pi\nkp: {kp1}\nzero_hz: {fi}\n"));
+        assert_eq!(b.live_params(), ["kp", "zero_hz"]);
+        let before = run(b.as_mut(), &vec![1.0; big_k]);
+        b.set_live_param(0, kp2);
+        let after = run(b.as_mut(), &[1.0; 50]);
+        for (k, &u) in before.iter().enumerate() {
+            let expect = kp1 + ki1 * DT * (k as f64 + 0.5);
+            assert!(
+                (u - expect).abs() < 1e-12 * expect,
+                "k = {k}: {u} vs {expect}"
+            );
+        }
+        for (j, &u) in after.iter().enumerate() {
+            let expect = kp2 + ki1 * DT * big_k as f64 + ki2 * DT * (j as f64 + 0.5);
+            assert!(
+                (u - expect).abs() < 1e-12 * expect,
+                "K + {j}: {u} vs {expect}"
+            );
+        }
+        // The same change on a PID (slot 0 = kp): only the proportional term moves.
+        let mut p = built("type: pid\nkp: 1.5\nki: 200\n");
+        let u0 = run(p.as_mut(), &[1.0; 10]);
+        p.set_live_param(0, 2.5);
+        let u1 = run(p.as_mut(), &[1.0]);
+        let expect = u0[9] + 1.0 + 200.0 * DT;
+        assert!(
+            (u1[0] - expect).abs() < 1e-12 * expect,
+            "{} vs {expect}",
+            u1[0]
+        );
+        // A refused value (the block's own validation, here a non-finite k_i)
+        // leaves the block as it was.
+        p.set_live_param(1, f64::INFINITY);
+        let u2 = run(p.as_mut(), &[1.0]);
+        let expect = u1[0] + 200.0 * DT;
+        assert!(
+            (u2[0] - expect).abs() < 1e-12 * expect,
+            "{} vs {expect}",
+            u2[0]
+        );
     }
 
     #[test]

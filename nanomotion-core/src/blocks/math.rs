@@ -111,6 +111,14 @@ impl Block for Gain {
     fn output(&mut self, _tick: Tick, u: &[f64], y: &mut [f64]) {
         self.apply(u, y);
     }
+    fn live_params(&self) -> &'static [&'static str] {
+        &["k"]
+    }
+    fn set_live_param(&mut self, slot: usize, value: f64) {
+        if slot == 0 {
+            self.k = value;
+        }
+    }
     fn lti(&self) -> Option<StateSpace> {
         Some(static_ss(
             DMatrix::identity(self.width, self.width) * self.k,
