@@ -5,7 +5,8 @@
 //! one flat signal buffer, and a list of copies ("gathers") that assemble each
 //! block's inputs into a contiguous slice. A tick is then two passes over arrays of
 //! indices: no heap allocation, no string or hash look-up, no locking, no I/O
-//! (`tests/no_alloc.rs` counts allocations over 10 000 ticks to prove it).
+//! (`tests/scheduler.rs::ticks_do_not_allocate` counts allocations over 10 000
+//! ticks to prove it).
 //!
 //! Per base tick `k`:
 //! 1. output phase, in topological order: every block whose period divides `k`
