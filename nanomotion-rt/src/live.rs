@@ -2,7 +2,7 @@
 //! [`ParamSender::set`] from Rust.
 //!
 //! A block declares the parameters it can change between two ticks, keeping
-//! its state ([`Block::live_params`](nanomotion_core::Block::live_params): a
+//! its state ([`Block::live_params`]: a
 //! `gain`'s `k`, a `pi`'s `kp` and `zero_hz`, a `pid`'s `kp`, `ki`, `kd`).
 //! An update is resolved and judged **outside** the loop, by the
 //! [`ParamSender`] on the caller's thread:
