@@ -212,18 +212,7 @@ fn a_recorded_two_process_run_replays_bit_for_bit_and_a_changed_gain_does_not() 
         String::from_utf8_lossy(&plant.stderr)
     );
     let mcap = dir.join("run.mcap");
-    let same = Command::new(bin)
-        .arg("replay")
-        .arg(&mcap)
-        .arg(&controller)
-        .output()
-        .unwrap();
-    let text = String::from_utf8_lossy(&same.stdout);
-    assert!(
-        same.status.success(),
-        "{}",
-        String::from_utf8_lossy(&same.stderr)
-    );
+    let text = replay_ok(&mcap, &controller);
     assert!(text.contains("replayed 2400 ticks"), "{text}");
     assert!(
         text.contains("all 2400 output samples bit-identical"),
@@ -243,6 +232,22 @@ fn a_recorded_two_process_run_replays_bit_for_bit_and_a_changed_gain_does_not() 
         "{err}"
     );
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// `nanomotion replay MCAP CONTROLLER` that must succeed; its standard output.
+fn replay_ok(mcap: &std::path::Path, controller: &str) -> String {
+    let out = Command::new(env!("CARGO_BIN_EXE_nanomotion"))
+        .arg("replay")
+        .arg(mcap)
+        .arg(controller)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8_lossy(&out.stdout).into_owned()
 }
 
 /// `nanomotion rt` with `lines` written to its standard input `after` the
@@ -317,18 +322,7 @@ fn a_gain_set_from_stdin_is_recorded_and_replays_bit_for_bit() {
     assert!(err.contains("set pi.kp = 40000000 at tick "), "{err}");
     let plant = plant.wait_with_output().unwrap();
     assert!(plant.status.success());
-    let same = Command::new(env!("CARGO_BIN_EXE_nanomotion"))
-        .arg("replay")
-        .arg(dir.join("run.mcap"))
-        .arg(&controller)
-        .output()
-        .unwrap();
-    let text = String::from_utf8_lossy(&same.stdout);
-    assert!(
-        same.status.success(),
-        "{}",
-        String::from_utf8_lossy(&same.stderr)
-    );
+    let text = replay_ok(&dir.join("run.mcap"), &controller);
     assert!(
         text.contains("with its live parameter update: all 2400 output samples bit-identical"),
         "{text}"
@@ -498,18 +492,7 @@ fn a_simulated_run_records_its_hw_samples_and_replays_bit_for_bit() {
         "the PI drove something"
     );
     // `nanomotion replay` reproduces it, and parts from it with another gain.
-    let same = Command::new(bin)
-        .arg("replay")
-        .arg(dir.join("run.mcap"))
-        .arg(&controller)
-        .output()
-        .unwrap();
-    let text = String::from_utf8_lossy(&same.stdout);
-    assert!(
-        same.status.success(),
-        "{}",
-        String::from_utf8_lossy(&same.stderr)
-    );
+    let text = replay_ok(&dir.join("run.mcap"), &controller);
     assert!(
         text.contains("all 2400 output samples bit-identical"),
         "{text}"
