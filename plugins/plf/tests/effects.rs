@@ -430,12 +430,13 @@ fn creep_step_response_is_a_sum_of_exponentials() {
             .map(|&(gain, tau_s)| CreepTerm { gain, tau_s })
             .collect(),
     );
-    // At rest at 0, then a step of 2 at k = 1.
-    let u: Vec<f64> = (0..3000).map(|k| if k == 0 { 0.0 } else { 2.0 }).collect();
+    // The lags start at rest for a zero drive, as a plant at zero state does:
+    // a drive of 2 from the first sample on is a step of 2 at t = 0.
+    let u = vec![2.0; 3000];
     let y = run(&mut b, DT, &siso(&u));
-    assert_eq!(y[0], 0.0);
-    for k in 1..u.len() {
-        let t = (k - 1) as f64 * DT;
+    assert_eq!(y[0], 2.0);
+    for k in 0..u.len() {
+        let t = k as f64 * DT;
         let want = 2.0
             * (1.0
                 + terms
@@ -992,8 +993,8 @@ fn time_delay_declares_its_buffer_and_many_long_ones_are_refused_before_allocati
 }
 
 /// Issue 25: `creep` is linear and says so (`Block::lti`), so loops through it
-/// can be analysed: its model, stepped from rest, reproduces the block's
-/// output on a random input sample by sample.
+/// can be analysed: its model, stepped from zero state, reproduces the block's
+/// output on a random input sample by sample from the first sample on.
 #[test]
 fn creep_lti_model_reproduces_the_block() {
     use nanomotion_core::rng::Rng;
@@ -1014,11 +1015,8 @@ fn creep_lti_model_reproduces_the_block() {
     let mut rng = Rng::new(9);
     let mut y = [0.0];
     for k in 0..2000u64 {
-        let u = if k == 0 {
-            0.0
-        } else {
-            rng.uniform_in(-1.0, 1.0)
-        };
+        // From the first sample on (the block starts at the model's zero state).
+        let u = rng.uniform_in(-1.0, 1.0);
         b.output(Tick::new(k, DT), &[u], &mut y);
         let want = sim.step_siso(u);
         assert!((y[0] - want).abs() < 1e-12, "k = {k}: {} vs {want}", y[0]);

@@ -194,3 +194,20 @@ fn a_pole_pair_without_a_half_power_bandwidth_is_not_named_a_resonance() {
     assert!(refused, "{:#?}", r.steps[0].candidates);
     assert!(r.steps[0].site.contains("plant.u"), "{}", r.steps[0].site);
 }
+
+/// Scenario 717 hides logarithmic creep (total 0.105 over eight lags) in a PD
+/// loop whose first drive is a kick of the reference's jump. The creep block
+/// used to start its lags at rest at that first drive, so a slow lag held a
+/// share of the kick for the whole record — an offset the plant, which starts
+/// at zero state, never sees — and no creep fit cut anything: nothing was
+/// named. Started at rest for a zero drive, as the plant is, one lag is
+/// fitted with a growth of a few per cent, within the record's total.
+#[test]
+fn creep_starts_at_rest_like_the_plant_and_is_named() {
+    let step = named_alone(717, "creep", "fitted creep");
+    let gain = step.final_params["terms[0].gain"];
+    assert!(gain > 0.0 && gain <= 0.105, "gain {gain}");
+    let tau = step.final_params["terms[0].tau_s"];
+    assert!(tau > 0.01 && tau < 1.0, "τ {tau} s");
+    assert!(step.cut_percent > 40.0, "{}", step.cut_percent);
+}

@@ -34,7 +34,13 @@ pub struct CreepTerm {
 /// of height A is A·(1 + Σ k_i(1 − e^{−t/τ_i})): a linear, sum-of-exponentials
 /// approximation of piezo creep, whose measured step response grows with the
 /// logarithm of time (time constants spread over decades approximate a log).
-/// 1 to [`MAX_TERMS`] terms. The lags start at rest at the first input.
+/// 1 to [`MAX_TERMS`] terms. The lags start at rest for a zero drive (x = 0), as
+/// a `state_space` plant starts at zero state: a record whose drive begins at
+/// u₀ ≠ 0 is a step to u₀ for the creep as for the plant. (Started at rest at
+/// u₀ instead, a slow lag holds k·u₀ for the whole record — an offset the plant
+/// never sees; on closed-loop records whose first drive is a spike this hid the
+/// creep from every fit: tuning 66, 717, 1743, 2304 named nothing or another
+/// effect.)
 ///
 /// [`Tunable`] vector: `[gain_1, tau_1, gain_2, tau_2, ...]` (YAML
 /// `terms[i].gain`, `terms[i].tau_s`).
@@ -49,8 +55,6 @@ pub struct Creep {
     a: [f64; MAX_TERMS],
     #[serde(skip)]
     x: [f64; MAX_TERMS],
-    #[serde(skip)]
-    started: bool,
     /// The period it was built for (s); 0 before `build`.
     #[serde(skip)]
     dt: f64,
@@ -64,7 +68,6 @@ impl Creep {
             a: [0.0; MAX_TERMS],
             x: [0.0; MAX_TERMS],
             dt: 0.0,
-            started: false,
         }
     }
 
@@ -138,17 +141,12 @@ impl Block for Creep {
             *a = (-ctx.dt / t.tau_s).exp();
         }
         self.x = [0.0; MAX_TERMS];
-        self.started = false;
         self.dt = ctx.dt;
         Ok(())
     }
     fn output(&mut self, _tick: Tick, u: &[f64], y: &mut [f64]) {
         let x = u[0];
         let n = self.terms.len().min(MAX_TERMS);
-        if !self.started {
-            self.x[..n].iter_mut().for_each(|s| *s = x);
-            self.started = true;
-        }
         let mut out = x;
         for i in 0..n {
             out += self.terms[i].gain * self.x[i];
@@ -158,8 +156,7 @@ impl Block for Creep {
         y[0] = out;
     }
     /// The exact discrete model of [`Block::output`] (what the stability gate
-    /// analyses): x⁺ = diag(a_i)x + (1 − a_i)u, y = Σ k_i x_i + u. (The lags
-    /// start at the first input, an initial state of this model.)
+    /// analyses): x⁺ = diag(a_i)x + (1 − a_i)u, y = Σ k_i x_i + u, from x = 0.
     fn lti(&self) -> Option<StateSpace> {
         if self.dt <= 0.0 {
             return None;
