@@ -211,3 +211,46 @@ fn creep_starts_at_rest_like_the_plant_and_is_named() {
     assert!(tau > 0.01 && tau < 1.0, "τ {tau} s");
     assert!(step.cut_percent > 40.0, "{}", step.cut_percent);
 }
+
+/// Scenario 248 hides a cogging force (periodic in the stage's position) in a
+/// PD loop on a nominal a few per cent off. Added to the measured position, a
+/// disturbance periodic in position cut nothing after the calibration: the
+/// loop's reaction to the force was missing, and nothing was named. The force
+/// is now also tried where it acts — added to the drive, read from the
+/// position — with its pitch read from the controller output's residual
+/// binned against the position (the position's own residual shows another
+/// line).
+#[test]
+fn a_force_periodic_in_position_is_named_in_the_force_balance() {
+    let step = named_alone(248, "repetitive_disturbance", "binned against plant.y");
+    assert!(step.site.starts_with("input side"), "{}", step.site);
+    assert!(step.cut_percent > 80.0, "{}", step.cut_percent);
+    let period = step.final_params["period"];
+    let sigma = step.uncertainty["period"];
+    assert!(sigma < 0.01 * period, "period {period} ± {sigma}");
+}
+
+/// Scenario 213 hides slit errors behind the encoder's rounding, which the
+/// nominal carries, on a nominal a few per cent off. Through a quantizer the
+/// calibration's cost is a staircase in every scale; the fit stopped where it
+/// started and reported σ ≈ 10⁻⁷ that it had not earned. The quantizers now
+/// pass through while the scales are fitted and are put back to judge them:
+/// the scales move, with uncertainties the data give, and the calibration
+/// cuts the held-out residual.
+#[test]
+fn the_calibration_is_fitted_through_the_models_rounding() {
+    let r = diagnose_scenario(213);
+    let cal = r.calibration.expect("the nominal has scales to calibrate");
+    assert!(cal.accepted, "{cal:?}");
+    assert!(
+        (cal.params["plant.frequency_scale"] - 1.0).abs() > 1e-3,
+        "{cal:?}"
+    );
+    for (name, sigma) in &cal.uncertainty {
+        assert!(*sigma > 1e-5, "{name}: σ = {sigma}");
+    }
+    assert!(
+        cal.holdout_rms_after < 0.95 * cal.holdout_rms_before,
+        "{cal:?}"
+    );
+}
