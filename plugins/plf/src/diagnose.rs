@@ -2512,13 +2512,16 @@ fn enumerate(ctx: &Ctx<'_>, cur: &Current, opts: &Options) -> Result<Vec<Cand>, 
         }
         // A compared signal that also feeds back (closed-loop data): the sensor
         // effects are tried in the measurement path too, where the controller
-        // acts on them; the held-out score decides which place it is.
+        // acts on them; the held-out score decides which place it is. A
+        // compared drive is no measurement (`Channel::drive`): tuning 220 named
+        // a drift "on controller.y as the controller sees it", a drive offset
+        // that the input side's drift already offers.
         let compared = spec_now
             .compare
             .get(i)
             .map(|c| c.signal.clone())
             .unwrap_or_default();
-        if spec_now.connections.iter().any(|k| k.from == compared) {
+        if !ch.drive && spec_now.connections.iter().any(|k| k.from == compared) {
             let in_loop: Vec<Cand> = out[first_of_channel..]
                 .iter()
                 .filter(|c| matches!(c.effect, "time_delay" | "quantization" | "drift"))

@@ -119,6 +119,12 @@ pub struct Channel {
     /// controller, where no actuator, friction or creep acts — the drive's own
     /// effects sit on the connection into that other plant).
     pub plant_inputs: Vec<(String, String)>,
+    /// Whether the compared signal is the drive of another compared output's
+    /// plant (a controller's output compared beside the position): no plant
+    /// of its own, and no sensor either — the controller computes it, nothing
+    /// reads it through a sensor, and a delay, rounding or offset of the drive
+    /// is tried where it acts, on the connection into that plant.
+    pub drive: bool,
     /// Rate (Hz) of the compared signal's block, `None` for the base rate.
     pub rate_hz: Option<f64>,
     /// The axis the output measures: outputs of blocks on one single-input
@@ -278,6 +284,7 @@ pub fn channels(
             position,
             plant: block.to_string(),
             plant_inputs,
+            drive: false,
             rate_hz,
             axis: axis_of(spec, block, &c.signal, &width_in, &probe_types),
         });
@@ -289,6 +296,7 @@ pub fn channels(
     for ch in &mut out {
         if drives.contains(&ch.signal) {
             ch.plant_inputs.clear();
+            ch.drive = true;
         }
     }
     Ok(out)

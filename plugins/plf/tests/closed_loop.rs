@@ -160,6 +160,9 @@ fn the_compared_drive_of_a_plant_is_not_itself_a_plant() {
         "{:?}",
         channels[1].plant_inputs
     );
+    // The drive is no measurement either (no sensor-path sites on it); the
+    // position is.
+    assert!(channels[1].drive && !channels[0].drive);
     // Both outputs measure one axis (one SISO loop).
     assert!(channels[0].same_axis(&channels[1]));
 }
