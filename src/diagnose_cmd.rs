@@ -316,6 +316,9 @@ fn print_report(r: &Report) {
         }
     );
     say!("stopped because {}", r.stopped_because);
+    for note in &r.excitation_notes {
+        say!("note: {note}");
+    }
     if !r.rejected_candidates.is_empty() {
         say!("  (the last step's best candidates:");
         for c in r.rejected_candidates.iter().take(4) {

@@ -146,6 +146,8 @@ fn diagnose_command_reports_bad_input_and_writes_its_files() {
         assert!(v.get(key).is_some(), "report.json lacks `{key}`");
     }
     assert_eq!(v["steps"][0]["block"]["type"], "hysteresis");
+    // The example's drive is no single tone: nothing it cannot show is noted.
+    assert_eq!(v["excitation_notes"], serde_json::json!([]));
     let _ = std::fs::remove_dir_all(&tmp);
     let _ = std::fs::remove_file(&json);
 }

@@ -306,6 +306,9 @@ pub struct Report {
     pub final_tests: Vec<ResidualTests>,
     /// Why the workflow stopped.
     pub stopped_because: String,
+    /// What the record's excitation cannot show (a single tone: linear
+    /// effects indistinguishable from the nominal's gain and phase there).
+    pub excitation_notes: Vec<String>,
     /// The candidates of the step that named nothing (best first), if it came to one.
     pub rejected_candidates: Vec<Candidate>,
     /// The records: the estimation record first, then the held-out ones (one
@@ -1020,6 +1023,7 @@ pub fn diagnose_records(
         holdout_cut_percent,
         final_tests,
         stopped_because: stopped,
+        excitation_notes: single_tone_notes(&ctx, spec),
         rejected_candidates,
         records: records
             .parts
@@ -1991,17 +1995,7 @@ fn phase_locked(ctx: &Ctx<'_>, spec: &GraphSpec, period_s: f64) -> Option<String
     if !(lag0.is_finite() && lag0 >= 2.0) {
         return None;
     }
-    for b in &spec.blocks {
-        if b.block.typetag_name() != "data_column" {
-            continue;
-        }
-        let json = surgery::block_to_json(b.block.as_ref());
-        let Some(col) = json.get("column").and_then(|c| c.as_str()) else {
-            continue;
-        };
-        let Some(x) = ctx.data.column(col) else {
-            continue;
-        };
+    for (col, x) in excitations(ctx, spec) {
         let m0 = stats::mean(x);
         for m in 1..=PHASE_LOCK_HARMONICS {
             let lag = m as f64 * lag0;
@@ -2028,6 +2022,49 @@ fn phase_locked(ctx: &Ctx<'_>, spec: &GraphSpec, period_s: f64) -> Option<String
         }
     }
     None
+}
+
+/// The measured columns the graph plays (its `data_column` blocks: the drive
+/// in open loop, the reference in a closed one), with their samples.
+fn excitations<'d>(ctx: &Ctx<'d>, spec: &GraphSpec) -> Vec<(String, &'d [f64])> {
+    spec.blocks
+        .iter()
+        .filter(|b| b.block.typetag_name() == "data_column")
+        .filter_map(|b| {
+            let json = surgery::block_to_json(b.block.as_ref());
+            let col = json.get("column")?.as_str()?.to_string();
+            let x = ctx.data.column(&col)?;
+            Some((col, x))
+        })
+        .collect()
+}
+
+/// The share of an excitation's power at one frequency above which the
+/// record is said to show the system at that frequency only
+/// ([`single_tone_notes`]).
+const SINGLE_TONE_SHARE: f64 = 0.95;
+
+/// What the excitation cannot show: for each excitation column whose power
+/// sits at one frequency ([`stats::tone_share`] ≥ [`SINGLE_TONE_SHARE`]), a
+/// note that at one frequency a linear effect is a gain and a phase — the
+/// nominal calibration's — so in steady state creep, a delay or a resonance
+/// cannot be told from the nominal's error there (the start-up transient
+/// still can: tuning 717 names its creep under a sine), whatever is named.
+fn single_tone_notes(ctx: &Ctx<'_>, spec: &GraphSpec) -> Vec<String> {
+    excitations(ctx, spec)
+        .into_iter()
+        .filter_map(|(col, x)| {
+            let (share, f) = stats::tone_share(x);
+            (share >= SINGLE_TONE_SHARE).then(|| {
+                format!(
+                    "the excitation `{col}` is a single tone at {:.4} Hz ({:.0} % of its power within ±{} bins): at one frequency a linear effect (creep, a delay, an unmodelled resonance) is a gain and a phase, which the nominal calibration takes as well — in steady state this record cannot tell them apart (only its start-up transient can); a multisine or a sweep through the band would",
+                    f * ctx.fs,
+                    100.0 * share,
+                    stats::TONE_BINS
+                )
+            })
+        })
+        .collect()
 }
 
 /// The period (in samples) of the strongest line of `r`, if at least three periods

@@ -202,9 +202,19 @@ fn a_pole_pair_without_a_half_power_bandwidth_is_not_named_a_resonance() {
 /// at zero state, never sees — and no creep fit cut anything: nothing was
 /// named. Started at rest for a zero drive, as the plant is, one lag is
 /// fitted with a growth of a few per cent, within the record's total.
+/// The reference is a single sine: the report says what such a record cannot
+/// show (a linear effect is a gain and a phase at one frequency).
 #[test]
 fn creep_starts_at_rest_like_the_plant_and_is_named() {
-    let step = named_alone(717, "creep", "fitted creep");
+    let r = diagnose_scenario(717);
+    assert_eq!(r.excitation_notes.len(), 1, "{:?}", r.excitation_notes);
+    assert!(
+        r.excitation_notes[0].contains("`r` is a single tone"),
+        "{}",
+        r.excitation_notes[0]
+    );
+    assert_eq!(r.found, ["creep"], "{}", r.stopped_because);
+    let step = r.steps.into_iter().next().expect("one step");
     let gain = step.final_params["terms[0].gain"];
     assert!(gain > 0.0 && gain <= 0.105, "gain {gain}");
     let tau = step.final_params["terms[0].tau_s"];
@@ -222,7 +232,16 @@ fn creep_starts_at_rest_like_the_plant_and_is_named() {
 /// line).
 #[test]
 fn a_force_periodic_in_position_is_named_in_the_force_balance() {
-    let step = named_alone(248, "repetitive_disturbance", "binned against plant.y");
+    let r = diagnose_scenario(248);
+    // A multisine reference: nothing it cannot show is noted.
+    assert!(r.excitation_notes.is_empty(), "{:?}", r.excitation_notes);
+    assert_eq!(r.found, ["repetitive_disturbance"], "{}", r.stopped_because);
+    let step = r.steps.into_iter().next().expect("one step");
+    assert!(
+        step.evidence.contains("binned against plant.y"),
+        "{}",
+        step.evidence
+    );
     assert!(step.site.starts_with("input side"), "{}", step.site);
     assert!(step.cut_percent > 80.0, "{}", step.cut_percent);
     let period = step.final_params["period"];
