@@ -199,11 +199,7 @@ fn a_recorded_two_process_run_replays_bit_for_bit_and_a_changed_gain_does_not() 
         .arg(&dir)
         .output()
         .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    succeeded(&out);
     let plant = plant.wait_with_output().unwrap();
     assert!(
         plant.status.success(),
@@ -234,6 +230,15 @@ fn a_recorded_two_process_run_replays_bit_for_bit_and_a_changed_gain_does_not() 
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// Asserts that a command exited with success, showing its standard error if not.
+fn succeeded(out: &std::process::Output) {
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
 /// `nanomotion replay MCAP CONTROLLER` that must succeed; its standard output.
 fn replay_ok(mcap: &std::path::Path, controller: &str) -> String {
     let out = Command::new(env!("CARGO_BIN_EXE_nanomotion"))
@@ -242,11 +247,7 @@ fn replay_ok(mcap: &std::path::Path, controller: &str) -> String {
         .arg(controller)
         .output()
         .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    succeeded(&out);
     String::from_utf8_lossy(&out.stdout).into_owned()
 }
 
@@ -362,11 +363,7 @@ fn rt_refuses_without_cap_sys_nice_and_runs_soft_when_allowed() {
     assert!(!String::from_utf8_lossy(&hard.stdout).contains("ticks at"));
     let soft = run(true);
     let out = String::from_utf8_lossy(&soft.stdout);
-    assert!(
-        soft.status.success(),
-        "{}",
-        String::from_utf8_lossy(&soft.stderr)
-    );
+    succeeded(&soft);
     assert!(
         out.contains("24000 ticks at 40000 Hz (SCHED_OTHER (normal priority))"),
         "{out}"
@@ -409,7 +406,7 @@ fn rt_takes_the_overrun_policy_from_the_graph_and_the_command_line_over_it() {
     };
     let with_section = graph("realtime:\n  overrun: catch-up\n  max_overruns: 7\n");
     let (o, t) = rt(&with_section, &[]);
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    succeeded(&o);
     let t = t.unwrap();
     assert_eq!(
         (t["overrun_policy"].as_str(), t["max_overruns"].as_u64()),
@@ -455,11 +452,7 @@ fn a_simulated_run_records_its_hw_samples_and_replays_bit_for_bit() {
         .arg(&dir)
         .output()
         .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    succeeded(&out);
     let rec = nanomotion::rt::read_mcap(&dir.join("run.mcap")).unwrap();
     assert_eq!((rec.ticks(), rec.rate_hz), (2400, 4000.0));
     let names = |c: &[nanomotion::rt::Channel]| {
@@ -571,7 +564,7 @@ fn diagnose_reads_a_recording_as_its_measured_data_like_the_same_csv() {
             .arg(dir.join(out))
             .output()
             .unwrap();
-        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        succeeded(&o);
         std::fs::read_to_string(dir.join(out).join("report.json"))
             .unwrap()
             .replace(&mcap.display().to_string(), "DATA")
@@ -584,7 +577,7 @@ fn diagnose_reads_a_recording_as_its_measured_data_like_the_same_csv() {
             .args(["run", &model, "--no-files", "--data", data])
             .output()
             .unwrap();
-        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        succeeded(&o);
         let text = String::from_utf8_lossy(&o.stdout).into_owned();
         text.lines()
             .find(|l| l.starts_with("stage.y"))
@@ -624,11 +617,7 @@ fn rt_lets_its_plant_go_before_writing_its_files() {
         .arg(&dir)
         .output()
         .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    succeeded(&out);
     assert!(dir.join("run.mcap").exists());
     let plant = plant.wait_with_output().unwrap();
     let log = String::from_utf8_lossy(&plant.stdout).into_owned()
