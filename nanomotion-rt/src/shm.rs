@@ -550,6 +550,16 @@ impl Device for ShmDevice {
         self.seg.word(W_CTRL_HB).fetch_add(1, Ordering::Release);
         Ok(())
     }
+    /// Zeros to the plant, then detach: the loop has stopped and writes no
+    /// more, so the plant stops now ("the controller closed the connection"),
+    /// from the loop thread, rather than on its watchdog when the thread that
+    /// drops this device is scheduled late.
+    fn safe_state(&mut self) -> Result<(), DeviceError> {
+        let zeros = vec![0.0; self.outputs.len()];
+        self.write(crate::clock::now_ns(), &zeros)?;
+        self.seg.word(W_CTRL_DETACHED).store(1, Ordering::Release);
+        Ok(())
+    }
     fn latency_ticks(&self) -> u32 {
         1
     }
