@@ -3041,10 +3041,10 @@ const SLIT_SMOOTHING: usize = 4;
 /// The least share of a slit table's variance that must change from one slit
 /// to the next ([`roughness`]): slit errors are each line's own (independent
 /// errors: 8/9 of it; the measured US Digital E2 disc of
-/// `shared/data/usdigital_e2_slit_errors`, 0.8), while a smooth error of the
+/// `shared/data/usdigital_e2_slit_errors`, 0.83), while a smooth error of the
 /// position (a gain, a force periodic in position, the once-per-revolution
 /// eccentricity alone) is the other effects' — a sine over 60 lines keeps
-/// 0.3 % of its variance.
+/// 0.2 % of its variance (over 300 lines).
 const MIN_SLIT_ROUGHNESS: f64 = 0.5;
 
 /// The largest BIC charge k ln N / N (method step 3) of a slit table fitted
@@ -3737,5 +3737,31 @@ mod tests {
         assert!(slit_table(&swept(300, |_| 0.0).1, &y, 1.0, 300).is_none());
         let smooth = |i: i64| 0.1 * (i as f64 / 60.0 * std::f64::consts::TAU).sin();
         assert!(slit_table(&swept(300, smooth).1, &y, 1.0, 300).is_none());
+    }
+
+    /// A measured disc's slit errors pass the roughness a slit table needs:
+    /// the US Digital E2 profile of the shared data (100 slits; a check that
+    /// the threshold does not exclude a real encoder, not where it came from).
+    #[test]
+    fn a_measured_discs_slit_errors_are_rough_enough_to_be_named() {
+        let path = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join(
+            "../../../shared/data/usdigital_e2_slit_errors/us_digital_e2_100cpr_tick_errors.csv",
+        );
+        let Some(path) =
+            nanomotion_core::data::shared_data_or_skip(&path, "US Digital E2 roughness")
+        else {
+            return;
+        };
+        // tick_index, angle_error_elec_deg, ...: the second column.
+        let text = std::fs::read_to_string(&path).unwrap();
+        let e: Vec<f64> = text
+            .lines()
+            .skip(1)
+            .map(|l| l.split(',').nth(1).unwrap().trim().parse().unwrap())
+            .collect();
+        assert_eq!(e.len(), 100);
+        let r = roughness(&e, true);
+        assert!((0.8..0.87).contains(&r), "{r}");
+        assert!(r > MIN_SLIT_ROUGHNESS);
     }
 }
