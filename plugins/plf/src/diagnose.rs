@@ -2967,10 +2967,7 @@ fn slit_table(r: &[f64], y: &[f64], pitch: f64, slits: usize) -> Option<SlitTabl
     let n = r.len() as f64;
     let sse0: f64 = r.iter().map(|v| v * v).sum();
     let bic = |sse: f64, k: usize| n * (sse.max(1e-300) / n).ln() + k as f64 * n.ln();
-    let index: Vec<i64> = y
-        .iter()
-        .map(|p| ((p + 0.5 * pitch) / pitch).floor() as i64)
-        .collect();
+    let index: Vec<i64> = y.iter().map(|&p| slit_of(p, pitch)).collect();
     // Per-entry sums and counts of a table of `nn` entries.
     let table = |nn: usize| {
         let mut sum = vec![0.0; nn];
@@ -3062,14 +3059,18 @@ struct SlitTable {
     fitted: Vec<usize>,
 }
 
+/// The slit a position `p` is on, slits of `pitch` centred on its multiples:
+/// the index the inserted `encoder_slit_error` block (origin −pitch/2) looks up
+/// before the modulo.
+fn slit_of(p: f64, pitch: f64) -> i64 {
+    ((p + 0.5 * pitch) / pitch).floor() as i64
+}
+
 /// The entries of a table of `nn` slits of `pitch` that the positions `y` are on.
 fn slits_seen(y: &[f64], pitch: f64, nn: usize) -> Vec<usize> {
     let mut seen = vec![false; nn];
-    for p in y {
-        let i = ((p + 0.5 * pitch) / pitch).floor();
-        if i.is_finite() {
-            seen[i.rem_euclid(nn as f64) as usize % nn] = true;
-        }
+    for &p in y.iter().filter(|p| p.is_finite()) {
+        seen[slit_of(p, pitch).rem_euclid(nn as i64) as usize] = true;
     }
     (0..nn).filter(|&k| seen[k]).collect()
 }
