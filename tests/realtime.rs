@@ -102,6 +102,7 @@ fn the_quickstart_split_in_two_processes_tracks_like_the_simulation() {
             priority: Some(80),
             cpu: None,
             lock_memory: false,
+            hold_cpu_latency: false,
         },
         allow_soft: true,
         overrun: OverrunPolicy::CatchUp,

@@ -60,6 +60,52 @@ pub struct Privileges {
     pub cpu: Option<usize>,
     /// `mlockall(MCL_CURRENT | MCL_FUTURE)`: no page fault in a tick.
     pub lock_memory: bool,
+    /// Keep the CPUs out of deep idle states for the run ([`CpuLatencyHold`]).
+    pub hold_cpu_latency: bool,
+}
+
+/// The CPUs kept out of deep idle states while this lives: 0 µs written to
+/// `/dev/cpu_dma_latency` (the kernel's PM QoS request) and the file kept open;
+/// dropping it closes the file and withdraws the request. A CPU woken from a
+/// deep idle state takes tens of µs more to run the loop; cyclictest holds the
+/// same request by default.
+#[derive(Debug)]
+pub struct CpuLatencyHold {
+    _file: std::fs::File,
+}
+
+/// The PM QoS file of the CPUs' wake-up latency.
+pub const CPU_LATENCY_FILE: &str = "/dev/cpu_dma_latency";
+
+impl CpuLatencyHold {
+    /// Ask for 0 µs wake-up latency until the hold is dropped.
+    pub fn new() -> Result<Self, Missing> {
+        use std::io::Write;
+        let refused = |e: std::io::Error| {
+            Missing {
+            what: format!("holding {CPU_LATENCY_FILE} at 0 µs (CPUs out of deep idle states)"),
+            reason: e.to_string(),
+            fix: "run as root, or give the user write access to /dev/cpu_dma_latency (a udev rule); or boot with `processor.max_cstate=1`".into(),
+        }
+        };
+        let mut file = std::fs::OpenOptions::new()
+            .write(true)
+            .open(CPU_LATENCY_FILE)
+            .map_err(refused)?;
+        // The request is a binary 32-bit integer (µs).
+        file.write_all(&0i32.to_ne_bytes()).map_err(refused)?;
+        Ok(Self { _file: file })
+    }
+}
+
+/// The CPUs' wake-up latency the kernel now grants (µs; the least of every
+/// open request, 2·10⁹ when there is none), or `None` if it cannot be read.
+pub fn cpu_latency_us() -> Option<i32> {
+    use std::io::Read;
+    let mut buf = [0u8; 4];
+    let mut f = std::fs::File::open(CPU_LATENCY_FILE).ok()?;
+    f.read_exact(&mut buf).ok()?;
+    Some(i32::from_ne_bytes(buf))
 }
 
 /// A privilege the operating system refused, with how to grant it.
@@ -209,6 +255,7 @@ mod tests {
             priority: None,
             cpu: Some(100_000),
             lock_memory: false,
+            hold_cpu_latency: false,
         };
         let e = std::thread::spawn(move || acquire(&p))
             .join()

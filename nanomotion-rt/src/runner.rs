@@ -66,7 +66,8 @@ pub struct RtConfig {
 }
 
 impl Default for RtConfig {
-    /// SCHED_FIFO 80, memory locked, no pinning, refuse without privilege, skip
+    /// SCHED_FIFO 80, memory locked, the CPUs held out of deep idle states
+    /// (where permitted), no pinning, refuse without privilege, skip
     /// overruns without limit, no spin, the graph's duration, no recording; a
     /// status event every 100 ms of ticks ([`RealtimeRunner::new`] turns the
     /// `status_every: 0` here into the graph's rate / 10).
@@ -76,6 +77,7 @@ impl Default for RtConfig {
                 priority: Some(80),
                 cpu: None,
                 lock_memory: true,
+                hold_cpu_latency: true,
             },
             allow_soft: false,
             overrun: OverrunPolicy::Skip,
@@ -308,6 +310,12 @@ pub struct TimingReport {
     pub cpu: Option<usize>,
     /// Whether `mlockall` succeeded.
     pub memory_locked: bool,
+    /// Whether the CPUs were held out of deep idle states for the run
+    /// ([`clock::CpuLatencyHold`]).
+    pub cpu_latency_held: bool,
+    /// Why they were not, when it was asked for and refused (the run goes on:
+    /// it only wakes later).
+    pub cpu_latency_refused: Option<Missing>,
     /// Privileges refused (the run was soft).
     pub missing_privileges: Vec<Missing>,
     /// Events the ring could not take (dropped, never waited for).
@@ -820,6 +828,12 @@ impl<D: Device> LoopCore<D> {
         }
         let memory_locked = self.cfg.privileges.lock_memory
             && !missing.iter().any(|m| m.what.starts_with("mlockall"));
+        // Held until this function returns, whichever way it does.
+        let cpu_latency = self
+            .cfg
+            .privileges
+            .hold_cpu_latency
+            .then(clock::CpuLatencyHold::new);
         // Normal-priority threads sleep up to 50 µs past a deadline (timer
         // slack); SCHED_FIFO ones have none. Ask for 1 ns either way, so a soft
         // run is as punctual as the scheduler lets it be.
@@ -973,6 +987,8 @@ impl<D: Device> LoopCore<D> {
             },
             cpu: self.cfg.privileges.cpu,
             memory_locked,
+            cpu_latency_held: matches!(cpu_latency, Some(Ok(_))),
+            cpu_latency_refused: cpu_latency.and_then(Result::err),
             missing_privileges: missing,
             events_dropped: c.dropped,
             param_updates: c.param_updates,

@@ -63,6 +63,7 @@ fn config(policy: OverrunPolicy) -> RtConfig {
             priority: Some(50),
             cpu: None,
             lock_memory: false,
+            hold_cpu_latency: false,
         },
         allow_soft: true,
         overrun: policy,
@@ -387,6 +388,7 @@ fn without_the_privilege_the_run_is_refused_unless_soft_running_is_allowed() {
                 priority: Some(80),
                 cpu: None,
                 lock_memory: false,
+                hold_cpu_latency: false,
             },
             ..RtConfig::default()
         };
@@ -452,6 +454,7 @@ fn ticks_do_not_allocate() {
                     priority: None,
                     cpu: None,
                     lock_memory: false,
+                    hold_cpu_latency: false,
                 },
                 block_timing,
                 record: updates > 0,
@@ -832,6 +835,7 @@ fn the_loop_thread_sleeps_without_timer_slack() {
                     priority: None,
                     cpu: None,
                     lock_memory: false,
+                    hold_cpu_latency: false,
                 },
                 ..RtConfig::default()
             },
@@ -957,4 +961,37 @@ fn a_recording_reads_as_data_only_when_its_ticks_are_on_the_grid() {
     rec.t_ns.truncate(5);
     let e = rec.to_dataset("r.mcap").unwrap_err().to_string();
     assert!(e.contains("holds 5 ticks, fewer than the 16"), "{e}");
+}
+
+#[test]
+fn the_cpus_are_held_out_of_deep_idle_for_the_run_and_let_go_after() {
+    // The kernel's PM QoS request: 0 µs while the loop runs (seen from the
+    // status events, on the caller's thread), the previous value after.
+    let before = nanomotion_rt::clock::cpu_latency_us();
+    let n = 2_000u64;
+    let mut cfg = config(OverrunPolicy::Skip);
+    cfg.privileges.hold_cpu_latency = true;
+    cfg.status_every = 100;
+    let mut r =
+        RealtimeRunner::new(graph(1000.0, n), TestDevice::new(n as usize, &[], 0), cfg).unwrap();
+    let mut during = Vec::new();
+    let report = r
+        .run(|_| during.push(nanomotion_rt::clock::cpu_latency_us()))
+        .unwrap();
+    assert_eq!(report.stopped, Stop::Completed);
+    let writable = std::fs::OpenOptions::new()
+        .write(true)
+        .open(nanomotion_rt::clock::CPU_LATENCY_FILE)
+        .is_ok();
+    if writable {
+        assert!(report.cpu_latency_held, "{:?}", report.cpu_latency_refused);
+        // (Events drained after the loop's end see the request withdrawn.)
+        assert!(during.contains(&Some(0)), "{during:?}");
+        assert_eq!(nanomotion_rt::clock::cpu_latency_us(), before);
+    } else {
+        // Refused: said with its fix, and the run went on.
+        let why = report.cpu_latency_refused.expect("a refusal");
+        assert!(why.fix.contains("root"), "{why}");
+        assert!(!report.cpu_latency_held);
+    }
 }
