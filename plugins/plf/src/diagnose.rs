@@ -2206,16 +2206,38 @@ fn force_split(force: &[f64], pos: &[f64], fs: f64) -> Option<ForceSplit> {
     })
 }
 
+/// How much of a rate-independent map's nonlinear part has memory (see
+/// [`memory_share`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Memory {
+    /// The map is linear to round-off.
+    Linear,
+    /// The share of the nonlinear part that depends on the path (0–1).
+    Share(f64),
+    /// The input holds too few levels to tell a loop from a curve through
+    /// them.
+    Undetermined,
+}
+
 /// Share of the nonlinear part of a rate-independent map x ↦ y that has
-/// memory: y minus its straight-line fit on x is the nonlinear part; its
-/// single-valued part is its mean in 64 bins of equal count over x; the rest
-/// depends on the path (the loop). `None` when the map is linear to round-off.
-fn memory_share(x: &[f64], y: &[f64]) -> Option<f64> {
+/// memory: y minus its straight-line fit on x is the nonlinear part; the
+/// rest after its single-valued part depends on the path (the loop).
+///
+/// Where the input moves through its levels (a sweep, a noisy drive), the
+/// single-valued part is the mean in 64 bins of equal count over x. Where it
+/// holds a few levels (a step excitation: m plateaus, m < 3·64), a bin holds
+/// one plateau, one branch, and any single-valued map passes through it; the
+/// single-valued part is then a polynomial of degree 7 in x, and the share of
+/// what it leaves is scaled by m/(m − 8), the degrees of freedom it has left
+/// (a loop's share at random levels is otherwise taken in part by the
+/// polynomial), at most 1. Fewer than 16 levels: [`Memory::Undetermined`].
+fn memory_share(x: &[f64], y: &[f64]) -> Memory {
     let n = x.len().min(y.len());
     if n < 128 {
-        return None;
+        return Memory::Undetermined;
     }
-    let (xm, ym) = (stats::mean(&x[..n]), stats::mean(&y[..n]));
+    let (x, y) = (&x[..n], &y[..n]);
+    let (xm, ym) = (stats::mean(x), stats::mean(y));
     let (mut sxy, mut sxx) = (0.0, 0.0);
     for k in 0..n {
         sxy += (x[k] - xm) * (y[k] - ym);
@@ -2224,23 +2246,60 @@ fn memory_share(x: &[f64], y: &[f64]) -> Option<f64> {
     let slope = if sxx > 0.0 { sxy / sxx } else { 0.0 };
     let nl: Vec<f64> = (0..n).map(|k| y[k] - ym - slope * (x[k] - xm)).collect();
     let nl_ms = stats::mean_square(&nl);
-    let y_ms = stats::mean_square(&y[..n].iter().map(|v| v - ym).collect::<Vec<_>>());
+    let y_ms = stats::mean_square(&y.iter().map(|v| v - ym).collect::<Vec<_>>());
     if nl_ms.is_nan() || nl_ms <= 1e-12 * y_ms {
-        return None;
+        return Memory::Linear;
     }
-    let mut idx: Vec<usize> = (0..n).collect();
-    idx.sort_by(|&a, &b| x[a].total_cmp(&x[b]));
     let bins = 64;
-    let mut mem = 0.0;
-    for b in 0..bins {
-        let part = &idx[b * n / bins..(b + 1) * n / bins];
-        if part.is_empty() {
-            continue;
+    let tiny = 1e-9 * range(x);
+    let levels = 1 + (1..n).filter(|&k| (x[k] - x[k - 1]).abs() > tiny).count();
+    if levels >= 3 * bins {
+        let mut idx: Vec<usize> = (0..n).collect();
+        idx.sort_by(|&a, &b| x[a].total_cmp(&x[b]));
+        let mut mem = 0.0;
+        for b in 0..bins {
+            let part = &idx[b * n / bins..(b + 1) * n / bins];
+            if part.is_empty() {
+                continue;
+            }
+            let m = part.iter().map(|&k| nl[k]).sum::<f64>() / part.len() as f64;
+            mem += part.iter().map(|&k| (nl[k] - m).powi(2)).sum::<f64>();
         }
-        let m = part.iter().map(|&k| nl[k]).sum::<f64>() / part.len() as f64;
-        mem += part.iter().map(|&k| (nl[k] - m).powi(2)).sum::<f64>();
+        return Memory::Share(mem / n as f64 / nl_ms);
     }
-    Some(mem / n as f64 / nl_ms)
+    const TERMS: usize = 8;
+    if levels < 2 * TERMS {
+        return Memory::Undetermined;
+    }
+    // Chebyshev polynomials of x mapped onto [−1, 1], by least squares.
+    let lo = x.iter().copied().fold(f64::INFINITY, f64::min);
+    let span = range(x).max(f64::MIN_POSITIVE);
+    let basis = |v: f64| {
+        let t = 2.0 * (v - lo) / span - 1.0;
+        let mut p = nalgebra::SVector::<f64, TERMS>::zeros();
+        p[0] = 1.0;
+        p[1] = t;
+        for i in 2..TERMS {
+            p[i] = 2.0 * t * p[i - 1] - p[i - 2];
+        }
+        p
+    };
+    let mut ata = nalgebra::SMatrix::<f64, TERMS, TERMS>::zeros();
+    let mut atb = nalgebra::SVector::<f64, TERMS>::zeros();
+    for k in 0..n {
+        let p = basis(x[k]);
+        ata += p * p.transpose();
+        atb += p * nl[k];
+    }
+    let Some(c) = ata.svd(true, true).solve(&atb, 1e-12).ok() else {
+        return Memory::Undetermined;
+    };
+    let left = (0..n)
+        .map(|k| (nl[k] - basis(x[k]).dot(&c)).powi(2))
+        .sum::<f64>()
+        / n as f64;
+    let m = levels as f64;
+    Memory::Share((left / nl_ms * m / (m - TERMS as f64)).min(1.0))
 }
 
 /// The least share of its nonlinear part a fitted hysteresis map must owe to
@@ -2311,15 +2370,15 @@ fn not_hysteresis(ctx: &Ctx<'_>, f: &Fitted, on_drive: bool) -> Option<String> {
         ));
     }
     match memory_share(&x, &y) {
-        Some(share) if share >= MIN_MEMORY_SHARE => None,
-        Some(share) => Some(format!(
+        Memory::Share(share) if share < MIN_MEMORY_SHARE => Some(format!(
             "the fitted map from {input} has no loop to speak of ({:.0} % of its nonlinear part has memory, {:.0} % needed): a single-valued map, not hysteresis",
             100.0 * share,
             100.0 * MIN_MEMORY_SHARE
         )),
-        None => Some(format!(
+        Memory::Linear => Some(format!(
             "the fitted map from {input} is linear: a gain, not hysteresis"
         )),
+        Memory::Share(_) | Memory::Undetermined => None,
     }
 }
 
@@ -3684,6 +3743,64 @@ mod tests {
         assert!(got > MAX_REVERSED_TRAVEL);
         // A map that does not move has no direction.
         assert_eq!(reversed_travel(&x, &vec![1.0; x.len()]), None);
+    }
+
+    /// A play (backlash) of half-width r after a saturating curve, and the
+    /// same curve alone: (memory share of the play, of the curve) on `x`.
+    fn play_and_curve_shares(x: &[f64], r: f64) -> (f64, f64) {
+        let curve = |v: f64| v.tanh();
+        let mut p = x[0];
+        let play: Vec<f64> = x
+            .iter()
+            .map(|&v| {
+                p = p.clamp(v - r, v + r);
+                curve(p)
+            })
+            .collect();
+        let single: Vec<f64> = x.iter().map(|&v| curve(v)).collect();
+        let share = |y: &[f64]| match memory_share(x, y) {
+            Memory::Share(s) => s,
+            other => panic!("{other:?}"),
+        };
+        (share(&play), share(&single))
+    }
+
+    #[test]
+    fn a_loop_shows_its_memory_under_sweeps_and_under_steps_a_curve_does_not() {
+        // Ten triangle strokes over ±2 (2000 samples each): every bin is
+        // entered on both branches.
+        let x: Vec<f64> = (0..20_000)
+            .map(|k| {
+                let s = (k % 2000) as f64 / 2000.0;
+                if (k / 2000) % 2 == 0 {
+                    -2.0 + 4.0 * s
+                } else {
+                    2.0 - 4.0 * s
+                }
+            })
+            .collect();
+        let (play, curve) = play_and_curve_shares(&x, 0.3);
+        assert!(
+            play > 0.5 && curve < 0.01,
+            "triangle: play {play}, curve {curve}"
+        );
+        // Twenty plateaus of 300 samples at levels drawn once each: a bin of
+        // 64 holds one plateau (one branch); the polynomial through the
+        // plateaus leaves the curve nothing and the play its shifts.
+        let mut rng = nanomotion_core::rng::Rng::new(11);
+        let levels: Vec<f64> = (0..20).map(|_| rng.uniform_in(-2.0, 2.0)).collect();
+        let x: Vec<f64> = (0..6000).map(|k| levels[k / 300]).collect();
+        let (play, curve) = play_and_curve_shares(&x, 0.3);
+        assert!(
+            play >= MIN_MEMORY_SHARE && curve < 0.1 * MIN_MEMORY_SHARE,
+            "steps: play {play}, curve {curve}"
+        );
+        // Twelve levels cannot tell a loop from a curve through them.
+        let x: Vec<f64> = (0..6000).map(|k| levels[k / 500]).collect();
+        assert_eq!(
+            memory_share(&x, &x.iter().map(|v| v.tanh()).collect::<Vec<_>>()),
+            Memory::Undetermined
+        );
     }
 
     /// A stage swept back and forth over `lines` lines of pitch 1, 40 times,
