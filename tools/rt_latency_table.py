@@ -2,7 +2,8 @@
 """Wake-up latency of `nanomotion rt` (the quickstart loop) next to cyclictest.
 
 For each rate, runs the quickstart single-rate at that rate on the wall clock
-(SCHED_FIFO, memory locked, same priority and CPU as cyclictest), then
+(SCHED_FIFO, memory locked, /dev/cpu_dma_latency held at 0 as cyclictest holds
+it, same priority and CPU as cyclictest), then
 cyclictest (Debian `rt-tests`) at the same period and priority, in the same
 minutes, and prints one Markdown table row per tool and rate: wake-up latency
 p50/p99/p99.9/max (µs), period jitter (max |period − T|, µs) and overruns.
@@ -57,6 +58,9 @@ def nanomotion(rate, cycles, prio, cpu):
         t = json.load(f)
     shutil.rmtree(out)
     us = lambda ns: ns / 1000.0
+    if not t.get("cpu_latency_held"):
+        print(f"note: {rate} Hz run without the CPUs held out of deep idle states: "
+              f"{t.get('cpu_latency_refused')}", file=sys.stderr)
     lat = t["wakeup_latency"]
     jitter = t["period_jitter"]["max_ns"]
     return dict(
