@@ -13,6 +13,7 @@
 //! | `axis_coupling` (on the measurement) | static decoupling −c | `axis_coupling` | in the measurement path |
 //! | `backlash` (on the drive) | its inverse: ± half the play by the direction | `backlash_inverse` | before the actuator |
 //! | `creep` (on the drive) | its exact discrete inverse (creep feed-forward) | `state_space` | before the actuator |
+//! | `saturation` (on the drive), driven by a core `pid`/`pi` | anti-windup: the fitted limits as that controller's output limits, clamping | none inserted: your `pid` changed | the controller itself |
 //! | the rest | none; the report says what it limits | — | — |
 
 use crate::named::{Placement, Where, source_of, split};
@@ -49,6 +50,14 @@ pub(crate) enum Edit {
     },
     /// Before `to`, its `sigma` reading `sigma`.
     Scheduled { to: String, sigma: String },
+    /// No block inserted: the user's controller `block` (a `pid` or `pi`) gets
+    /// output limits [`lower`, `upper`] and the anti-windup `scheme`.
+    Limits {
+        block: String,
+        lower: f64,
+        upper: f64,
+        scheme: String,
+    },
 }
 
 /// A synthesised compensator.
@@ -56,7 +65,8 @@ pub(crate) enum Edit {
 pub struct Compensator {
     /// The effect.
     pub effect: String,
-    /// Block name, `comp_<effect>`.
+    /// Block name, `comp_<effect>` (for anti-windup: the user's controller,
+    /// which is changed instead of a block inserted).
     pub name: String,
     /// The block (`type:` and parameters).
     pub block: Value,
@@ -81,6 +91,15 @@ pub enum Outcome {
 }
 
 impl Compensator {
+    /// What the traces and messages call it: the inserted block's name, or
+    /// "`pid`'s output limits" when the user's controller itself is changed.
+    pub fn label(&self) -> String {
+        match &self.edit {
+            Edit::Limits { block, .. } => format!("{block}'s output limits"),
+            _ => self.name.clone(),
+        }
+    }
+
     /// Its `type:`.
     pub fn type_name(&self) -> String {
         self.block
@@ -120,6 +139,27 @@ impl Compensator {
                     .map_err(|e| no_place(e.to_string()))
             };
         match &self.edit {
+            Edit::Limits {
+                block,
+                lower,
+                upper,
+                scheme,
+            } => {
+                let b = spec
+                    .blocks
+                    .iter_mut()
+                    .find(|b| b.name == *block)
+                    .ok_or_else(|| no_place(format!("has no controller block `{block}`")))?;
+                let mut params = surgery::block_to_json(b.block.as_ref());
+                params["output_min"] = json!(lower);
+                params["output_max"] = json!(upper);
+                params["anti_windup"] = json!(scheme);
+                b.block = surgery::block_from_json(params).map_err(|e| CompError::Design {
+                    effect: self.effect.clone(),
+                    problem: format!("`{block}` with the output limits: {e}"),
+                })?;
+                return Ok(());
+            }
             Edit::Before { to, ff } => {
                 let site = Site::Input {
                     from: from(to)?,
@@ -533,32 +573,11 @@ pub(crate) fn synthesise(
                 ),
             }
         }
-        ("saturation", Where::Input { to }) => {
-            let (lo, hi) = (num(params, "lower"), num(params, "upper"));
-            let share = clipped_share(controller, to, info.from_s, lo, hi);
-            none(
-                &e.effect,
-                format!(
-                    "no compensator in this version (anti-windup: give your controller the output limits [{lo:.4e}, {hi:.4e}]): {}",
-                    match share {
-                        Some(p) => format!(
-                            "your loop on the nominal plant asks for more than the limits {:.1} % of the scored window",
-                            100.0 * p
-                        ),
-                        None => "the command into the limits could not be simulated".into(),
-                    }
-                ),
-                &[
-                    ("lower", lo),
-                    ("upper", hi),
-                    ("clipped_share", share.unwrap_or(f64::NAN)),
-                ],
-            )
-        }
+        ("saturation", Where::Input { to }) => anti_windup(e, params, to, controller, info)?,
         (other, place) => none(
             other,
             format!(
-                "no compensator in this version for `{other}` {} (drift/creep feed-forward, anti-windup, backlash inverse and slit tables are not synthesised yet)",
+                "no compensator in this version for `{other}` {} (drift compensation and slit tables are not synthesised yet; creep, backlash and saturation are compensated on the drive only)",
                 match place {
                     Where::Input { to } => format!("on the drive into {to}"),
                     Where::Feedback { to, .. } => format!("inside the loop at {to}"),
@@ -639,6 +658,162 @@ fn loop_margins(controller: &GraphSpec) -> Option<(f64, f64, f64)> {
         .find_map(|p| p.margins.as_ref())
         .filter(|m| m.gain_crossover_hz.is_finite())
         .map(|m| (m.phase_margin_deg, m.delay_margin_s, m.gain_crossover_hz))
+}
+
+/// Anti-windup for a saturation on the drive into `to`: when the block driving
+/// `to` is a core `pid` or `pi`, that controller itself gets the fitted limits
+/// as its output limits (intersected with any it has) and clamping
+/// (conditional integration), or keeps back-calculation if it already uses it;
+/// no block is inserted. Otherwise (or when it already limits itself within the
+/// fitted limits with anti-windup on) a stated "no compensator" saying what to
+/// do, with how often the loop asks for more than the limits.
+fn anti_windup(
+    e: &crate::NamedEffect,
+    params: &Value,
+    to: &str,
+    controller: &GraphSpec,
+    info: &LoopInfo,
+) -> Result<Outcome, CompError> {
+    let (lo, hi) = (num(params, "lower"), num(params, "upper"));
+    if !(lo.is_finite() && hi.is_finite() && lo <= hi) {
+        return Err(CompError::Design {
+            effect: e.effect.clone(),
+            problem: format!(
+                "the fitted saturation's limits [{lo:e}, {hi:e}] are not finite with lower ≤ upper: give the model_augmented.yaml that `nanomotion diagnose` wrote"
+            ),
+        });
+    }
+    let share = clipped_share(controller, to, info.from_s, lo, hi);
+    // Over the whole run too: a step's windup happens before a window that
+    // starts after the move.
+    let run_share = clipped_share(controller, to, 0.0, lo, hi);
+    let asks = match (share, run_share) {
+        (Some(p), Some(q)) => format!(
+            "your loop on the nominal plant asks for more than the limits {:.1} % of the scored window ({:.1} % of the whole run)",
+            100.0 * p,
+            100.0 * q
+        ),
+        _ => "the command into the limits could not be simulated".into(),
+    };
+    let figures = [
+        ("lower", lo),
+        ("upper", hi),
+        ("clipped_share", share.unwrap_or(f64::NAN)),
+        ("clipped_share_run", run_share.unwrap_or(f64::NAN)),
+    ];
+    let driver = source_of(controller, to).map(|s| split(s).0.to_string());
+    let found = driver
+        .as_deref()
+        .and_then(|d| controller.blocks.iter().find(|b| b.name == d));
+    let Some(spec) = found else {
+        return Ok(none(
+            &e.effect,
+            format!(
+                "no compensator: nothing in your graph drives `{to}`, so no controller can be given the limits [{lo:.4e}, {hi:.4e}]"
+            ),
+            &figures,
+        ));
+    };
+    let b = spec.name.clone();
+    let current = surgery::block_to_json(spec.block.as_ref());
+    let ty = current.get("type").and_then(Value::as_str).unwrap_or("");
+    if ty != "pid" && ty != "pi" {
+        return Ok(none(
+            &e.effect,
+            format!(
+                "no compensator: anti-windup needs the controller to know the limits, and `{to}` is driven by `{b}`, a `{ty}` block, which has no output limits. Fix: if `{b}` is a PID or PI, write it as a core `pid` (kp, ki, kd, derivative_cutoff_hz) or `pi` block driving `{to}` directly, and `nanomotion compensate` gives it `output_min: {lo:?}`, `output_max: {hi:?}` with `anti_windup: clamping` and validates it; otherwise keep its reference moves within what [{lo:.4e}, {hi:.4e}] can follow ({asks})"
+            ),
+            &figures,
+        ));
+    }
+    let old = |k: &str| current.get(k).and_then(Value::as_f64);
+    let (old_lo, old_hi) = (old("output_min"), old("output_max"));
+    let scheme = current
+        .get("anti_windup")
+        .and_then(Value::as_str)
+        .unwrap_or("clamping")
+        .to_string();
+    let limited = old_lo.is_some() || old_hi.is_some();
+    let (new_lo, new_hi) = (
+        old_lo.map_or(lo, |m| m.max(lo)),
+        old_hi.map_or(hi, |m| m.min(hi)),
+    );
+    if new_lo > new_hi {
+        return Ok(none(
+            &e.effect,
+            format!(
+                "no compensator: `{b}`'s own output limits [{}, {}] do not overlap the fitted saturation [{lo:.4e}, {hi:.4e}]; fix: set its `output_min`/`output_max` within the fitted limits",
+                old_lo.unwrap_or(f64::NEG_INFINITY),
+                old_hi.unwrap_or(f64::INFINITY)
+            ),
+            &figures,
+        ));
+    }
+    if limited && scheme != "none" && old_lo == Some(new_lo) && old_hi == Some(new_hi) {
+        return Ok(none(
+            &e.effect,
+            format!(
+                "no compensator needed: `{b}` already limits its output to [{new_lo:.4e}, {new_hi:.4e}], within the fitted saturation [{lo:.4e}, {hi:.4e}], with `{scheme}` anti-windup ({asks})"
+            ),
+            &figures,
+        ));
+    }
+    // Clamping needs no tuning (the integrator holds while the output is at a
+    // limit and the error pushes further); a back-calculation the user chose
+    // is kept with its tracking time.
+    let scheme = if scheme == "back_calculation" {
+        scheme
+    } else {
+        "clamping".to_string()
+    };
+    let mut block = current.clone();
+    block["output_min"] = json!(new_lo);
+    block["output_max"] = json!(new_hi);
+    block["anti_windup"] = json!(scheme);
+    let mut design = vec![
+        ("lower", lo),
+        ("upper", hi),
+        ("output_min", new_lo),
+        ("output_max", new_hi),
+        ("clipped_share", share.unwrap_or(f64::NAN)),
+        ("clipped_share_run", run_share.unwrap_or(f64::NAN)),
+    ];
+    design.retain(|(_, v)| v.is_finite());
+    let how = if scheme == "clamping" {
+        "clamping (conditional integration: the integrator holds while the output is at a limit and the error pushes further)"
+    } else {
+        "back-calculation (your pid's scheme, kept: the excess u − v fed back into the integrator)"
+    };
+    Ok(Outcome::Compensator(Compensator {
+        effect: e.effect.clone(),
+        name: b.clone(),
+        block,
+        why: format!(
+            "anti-windup: no block inserted; your `{ty}` `{b}` is given the fitted saturation's limits as its output limits with {how}, so its integrator stops winding up on the error the actuator cannot act on"
+        ),
+        place: format!(
+            "the controller `{b}` itself (output_min, output_max, anti_windup), which drives {to}"
+        ),
+        design: design.iter().map(|(k, v)| (k.to_string(), *v)).collect(),
+        note: Some(format!(
+            "{asks}{}",
+            if limited {
+                format!(
+                    "; its own limits [{}, {}] are intersected with the fitted ones",
+                    old_lo.unwrap_or(f64::NEG_INFINITY),
+                    old_hi.unwrap_or(f64::INFINITY)
+                )
+            } else {
+                String::new()
+            }
+        )),
+        edit: Edit::Limits {
+            block: b,
+            lower: new_lo,
+            upper: new_hi,
+            scheme,
+        },
+    }))
 }
 
 /// Share of the samples from `from_s` on where the command into `to` lies

@@ -133,9 +133,10 @@ fn a_time_delay_is_stated_with_the_phase_margin_it_takes() {
 }
 
 #[test]
-fn a_saturation_is_stated_with_how_often_the_loop_asks_for_more() {
+fn a_saturation_before_a_pid_gives_it_the_limits_with_how_often_the_loop_asks_for_more() {
     // Limits at ±0.3 on a loop whose PID command (a 0.5 sine on a unit-gain
-    // stage) is about ±0.5: clipped for a good part of the window.
+    // stage) is about ±0.5: clipped for a good part of the window. The pid
+    // drives the saturating input, so it is given the limits (anti-windup).
     let aug = GraphSpec::from_yaml(
         "base_rate_hz: 1000\nduration_s: 1\nblocks:\n  - { name: drive, type: data_column, column: u }\n  - { name: stage, type: state_space, a: [[0.0, 1.0], [-1000.0, -10.0]], b: [[0.0], [1000.0]], c: [[1.0, 0.0]], discretisation: zoh }\n  - { name: plf_saturation, type: saturation, lower: -0.3, upper: 0.3 }\nconnections:\n  - { from: drive.y, to: plf_saturation.u }\n  - { from: plf_saturation.y, to: stage.u }\ncompare:\n  - { signal: stage.y, column: y }\n",
         "model_augmented.yaml",
@@ -143,9 +144,23 @@ fn a_saturation_is_stated_with_how_often_the_loop_asks_for_more() {
     .unwrap();
     let ctl = controller("score:\n  - { signal: err.y, from_s: 0.5 }\n");
     let out = compensate(&aug, &ctl, &named::from_graph(&aug), &Options::default()).unwrap();
-    let n = &out.report.not_compensated[0];
-    assert_eq!(n.effect, "saturation");
-    assert!(n.reason.contains("anti-windup"), "{}", n.reason);
+    let c = &out.report.compensators[0];
+    assert_eq!((c.effect.as_str(), c.block.as_str()), ("saturation", "pid"));
+    assert!(c.why.contains("anti-windup"), "{}", c.why);
+    assert_eq!(
+        (c.design["output_min"], c.design["output_max"]),
+        (-0.3, 0.3)
+    );
+    // Kept exactly when it cuts the rms by 1 %; then the written pid has them.
+    assert_eq!(c.kept, c.cut_percent >= 1.0, "{c:?}");
+    let p = out
+        .compensated
+        .blocks
+        .iter()
+        .find(|b| b.name == "pid")
+        .unwrap();
+    let p = nanomotion_plf::surgery::block_to_json(p.block.as_ref());
+    assert_eq!(p["output_max"].as_f64(), c.kept.then_some(0.3), "{p}");
     // Independently: the share of |pid.u| > 0.3 over t ≥ 0.5 s of the user's loop.
     let mut g = nanomotion_plf::surgery::clone_spec(&ctl).unwrap();
     g.log = vec!["pid.u".into()];
@@ -154,5 +169,6 @@ fn a_saturation_is_stated_with_how_often_the_loop_asks_for_more() {
     let tail = &u[500..];
     let share = tail.iter().filter(|v| v.abs() > 0.3).count() as f64 / tail.len() as f64;
     assert!(share > 0.1, "{share}");
-    assert_eq!(n.figures["clipped_share"], share);
+    assert_eq!(c.design["clipped_share"], share);
+    eprintln!("{}", serde_json::to_string_pretty(&out.report).unwrap());
 }
