@@ -1521,12 +1521,10 @@ fn smooth_quantizers(spec: &GraphSpec) -> Result<GraphSpec, PlfError> {
     Ok(smooth)
 }
 
-/// Start each mode's frequency scale of the calibration (the time scale
-/// `frequency_scale` of a block with an oscillatory mode — its first mode —
-/// and each `mode_K_frequency_scale`) at the best of a grid over ± 15 % in
-/// 1.5 % steps around its start, the others held: a lightly damped mode
-/// (ζ ≈ 0.01) that is 10 % off sits in a cost basin about ζ wide, which
-/// descent from the start does not reach.
+/// Start each per-mode frequency scale (`mode_K_frequency_scale`) of the
+/// calibration at the best of a grid over ± 15 % in 1.5 % steps, the others
+/// held: a lightly damped mode (ζ ≈ 0.01) that is 10 % off sits in a cost
+/// basin about ζ wide, which descent from 1 does not reach.
 fn scan_mode_scales(
     ev: &mut Evaluator,
     spec: &GraphSpec,
@@ -1536,19 +1534,15 @@ fn scan_mode_scales(
 ) {
     let mut buf = Vec::new();
     for j in 0..free.len() {
-        // The first mode's frequency is the block's time scale; it is a mode
-        // scale where the block has a lightly damped mode (a damping scale).
         let is_mode_scale = spec
             .blocks
             .iter()
             .find(|b| b.name == free[j].block)
             .and_then(|b| b.block.tunable())
             .is_some_and(|t| {
-                let names = t.param_names();
-                names.get(free[j].index).is_some_and(|n| {
-                    n.starts_with("mode_")
-                        || (n == "frequency_scale" && names.iter().any(|m| m == "damping_scale"))
-                })
+                t.param_names()
+                    .get(free[j].index)
+                    .is_some_and(|n| n.starts_with("mode_"))
             });
         if !is_mode_scale {
             continue;
