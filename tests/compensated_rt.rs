@@ -10,12 +10,13 @@
 //! --allow-soft` does. Wall-clock execution must not change a single value:
 //! every logged sample of (b) equals (a)'s bit for bit.
 
+mod common;
+
 use nanomotion::compensate::{Options, compensate, named};
 use nanomotion::core::data::Dataset;
 use nanomotion::core::graph::GraphSpec;
 use nanomotion::plf::diagnose::{self, diagnose};
-use nanomotion::rt::clock::Privileges;
-use nanomotion::rt::{NoDevice, OverrunPolicy, RealtimeRunner, RtConfig, Stop};
+use nanomotion::rt::{NoDevice, RealtimeRunner, Stop};
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
@@ -85,17 +86,7 @@ fn offline_equals_wall_clock(path: &Path, extra_log: &[&str]) {
     // (b) On the wall clock, without a device, at normal priority where
     // SCHED_FIFO is refused; late ticks caught up, none dropped.
     let (sched, _) = load(path, extra_log).build().unwrap();
-    let cfg = RtConfig {
-        privileges: Privileges {
-            priority: Some(80),
-            cpu: None,
-            lock_memory: false,
-            hold_cpu_latency: false,
-        },
-        allow_soft: true,
-        overrun: OverrunPolicy::CatchUp,
-        ..RtConfig::default()
-    };
+    let cfg = common::soft_catch_up();
     let mut runner = RealtimeRunner::new(sched, NoDevice, cfg).unwrap();
     let report = runner.run(|_| {}).unwrap();
     let (wall, _) = runner.into_parts();

@@ -2,9 +2,10 @@
 //! in `nanomotion plant` — tracks like the single-process simulation; `nanomotion
 //! rt` writes its timing report.
 
+mod common;
+
 use nanomotion::core::graph::GraphSpec;
-use nanomotion::rt::clock::Privileges;
-use nanomotion::rt::{OverrunPolicy, RealtimeRunner, RtConfig, ShmDevice, Stop};
+use nanomotion::rt::{RealtimeRunner, ShmDevice, Stop};
 use std::process::{Command, Stdio};
 use std::time::Duration;
 
@@ -97,17 +98,7 @@ fn the_quickstart_split_in_two_processes_tracks_like_the_simulation() {
         .unwrap();
     let device =
         ShmDevice::connect(&name, Duration::from_secs(20), Duration::from_millis(200)).unwrap();
-    let cfg = RtConfig {
-        privileges: Privileges {
-            priority: Some(80),
-            cpu: None,
-            lock_memory: false,
-            hold_cpu_latency: false,
-        },
-        allow_soft: true,
-        overrun: OverrunPolicy::CatchUp,
-        ..RtConfig::default()
-    };
+    let cfg = common::soft_catch_up();
     let mut runner = RealtimeRunner::new(sched, device, cfg).unwrap();
     let report = runner.run(|_| {}).unwrap();
     let (sched, device) = runner.into_parts();
