@@ -18,18 +18,9 @@ use nanomotion_core::rng::Rng;
 use std::hint::black_box;
 use std::time::Duration;
 
-fn random(rng: &mut Rng, r: usize, c: usize) -> DMatrix<f64> {
-    DMatrix::from_fn(r, c, |_, _| rng.normal())
-}
-
-fn hurwitz(rng: &mut Rng, n: usize) -> DMatrix<f64> {
-    let a = random(rng, n, n);
-    let worst = eigvals(&a)
-        .iter()
-        .map(|p| p.re)
-        .fold(f64::NEG_INFINITY, f64::max);
-    a - DMatrix::identity(n, n) * (worst + 0.5)
-}
+#[path = "support/hinf_systems.rs"]
+mod hinf_systems;
+use hinf_systems::{hinf_ratio_systems, hurwitz, random};
 
 /// A group of 10 samples, 0.3 s warm-up and 1 s of measurement: every
 /// group of this bench is timed alike.
@@ -113,32 +104,13 @@ fn bench(c: &mut Criterion) {
 /// and discrete), and the eigenvalue solvers at n = 100 … 400.
 fn issue_29(c: &mut Criterion) {
     let mut group = quick_group(c, "hinf_ratio");
-    for n in [10usize, 20, 40, 80] {
-        let mut rng = Rng::new(29 + n as u64);
-        let ah = hurwitz(&mut rng, n);
-        let rho = eigvals(&ah).iter().map(|p| p.norm()).fold(0.0, f64::max);
-        for (kind, a, dt) in [
-            ("c", ah.clone(), None),
-            ("d", &ah * (0.95 / rho), Some(0.01)),
-        ] {
-            let sys = StateSpace::new(
-                a,
-                random(&mut rng, n, 2),
-                random(&mut rng, 2, n),
-                DMatrix::zeros(2, 2),
-                dt,
-            )
-            .unwrap();
-            if !sys.is_stable() {
-                continue;
-            }
-            group.bench_function(format!("after/{kind}{n}"), |bch| {
-                bch.iter(|| hinfnorm(black_box(&sys)).unwrap())
-            });
-            group.bench_function(format!("before/{kind}{n}"), |bch| {
-                bch.iter(|| hinfnorm_schur_eigensolver(black_box(&sys)).unwrap())
-            });
-        }
+    for (name, sys) in hinf_ratio_systems() {
+        group.bench_function(format!("after/{name}"), |bch| {
+            bch.iter(|| hinfnorm(black_box(&sys)).unwrap())
+        });
+        group.bench_function(format!("before/{name}"), |bch| {
+            bch.iter(|| hinfnorm_schur_eigensolver(black_box(&sys)).unwrap())
+        });
     }
     group.finish();
     let mut group = quick_group(c, "eig");
