@@ -27,6 +27,8 @@ use nanomotion_plf::surgery::{self, Site};
 use serde_json::{Value, json};
 use std::collections::BTreeMap;
 
+mod delay;
+
 /// How a compensator enters a graph (names of the user's controller graph).
 #[derive(Debug, Clone, PartialEq)]
 pub(crate) enum Edit {
@@ -58,6 +60,9 @@ pub(crate) enum Edit {
         upper: f64,
         scheme: String,
     },
+    /// No block inserted: the user's controller `block` (a `pid` or `pi`) gets
+    /// the compensator's block map as its parameters (re-tuned).
+    Retune { block: String },
 }
 
 /// A synthesised compensator.
@@ -96,6 +101,7 @@ impl Compensator {
     pub fn label(&self) -> String {
         match &self.edit {
             Edit::Limits { block, .. } => format!("{block}'s output limits"),
+            Edit::Retune { block } => format!("{block} re-tuned"),
             _ => self.name.clone(),
         }
     }
@@ -159,6 +165,9 @@ impl Compensator {
                     problem: format!("`{block}` with the output limits: {e}"),
                 })?;
                 return Ok(());
+            }
+            Edit::Retune { block } => {
+                return delay::set_params(spec, block, &self.block).map_err(no_place);
             }
             Edit::Before { to, ff } => {
                 let site = Site::Input {
@@ -539,40 +548,7 @@ pub(crate) fn synthesise(
                 &[("lsb", lsb), ("rms_floor", lsb / 12f64.sqrt())],
             )
         }
-        ("time_delay", _) => {
-            let d = num(params, "delay_s");
-            match loop_margins(controller) {
-                Some((pm, dm, fc)) => {
-                    let left = pm - 360.0 * fc * d;
-                    none(
-                        &e.effect,
-                        format!(
-                            "no compensator in this version (re-tune the loop for it, or a Smith predictor): the delay of {d:.3e} s costs 360°·f_c·d = {:.1}° of your loop's {pm:.1}° phase margin at its {fc:.2} Hz crossover, leaving {left:.1}° (delay margin {dm:.3e} s{})",
-                            360.0 * fc * d,
-                            if d >= dm {
-                                ": the loop is unstable with it"
-                            } else {
-                                ""
-                            }
-                        ),
-                        &[
-                            ("delay_s", d),
-                            ("phase_margin_deg", pm),
-                            ("crossover_hz", fc),
-                            ("delay_margin_s", dm),
-                            ("phase_margin_left_deg", left),
-                        ],
-                    )
-                }
-                None => none(
-                    &e.effect,
-                    format!(
-                        "no compensator in this version: a delay of {d:.3e} s costs 360°·f·d of phase at frequency f; re-tune the loop for it (or a Smith predictor)"
-                    ),
-                    &[("delay_s", d)],
-                ),
-            }
-        }
+        ("time_delay", _) => delay::time_delay(e, params, placement, controller, info, opts)?,
         ("saturation", Where::Input { to }) => anti_windup(e, params, to, controller, info)?,
         (other, place) => none(
             other,
@@ -642,22 +618,6 @@ fn static_feedforward(
         )));
     }
     Ok(Ok((r, g0, y0)))
-}
-
-/// Phase margin (°), delay margin (s) and gain crossover (Hz) of the first SISO
-/// loop of `controller` the stability gate analyses, if any.
-fn loop_margins(controller: &GraphSpec) -> Option<(f64, f64, f64)> {
-    let g = surgery::clone_spec(controller).ok()?;
-    let require = g.require.clone().unwrap_or_default();
-    let (sched, _) = g.build().ok()?;
-    let report = nanomotion_core::gate::analyse(&sched, &require);
-    report
-        .loops
-        .iter()
-        .flat_map(|l| l.points.first())
-        .find_map(|p| p.margins.as_ref())
-        .filter(|m| m.gain_crossover_hz.is_finite())
-        .map(|m| (m.phase_margin_deg, m.delay_margin_s, m.gain_crossover_hz))
 }
 
 /// Anti-windup for a saturation on the drive into `to`: when the block driving
