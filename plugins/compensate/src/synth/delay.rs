@@ -237,9 +237,36 @@ pub(super) fn time_delay(
             ""
         }
     );
-    let smith = "a Smith predictor (the controller around a nominal plant model P̂ and P̂·e^{−sd}) is not synthesised in this version: it needs a linear plant model in your graph and, on a stage whose model has an integrator or a lightly damped mode, it does not reject a disturbance at the plant input (the model's internal loop is open there)";
+    let smith = "A Smith predictor (the controller around a nominal plant model P̂ and P̂·e^{−sd}) is not synthesised in this version: it needs a linear plant model in your graph and, on a stage whose model has an integrator or a lightly damped mode, it does not reject a disturbance at the plant input (the model's internal loop is open there)";
+    let target = (pm - MARGIN_GIVEN_UP_DEG).max(
+        nominal
+            .required_phase_margin_deg
+            .unwrap_or(f64::NEG_INFINITY),
+    );
+    figures.push(("target_phase_margin_deg", target));
+    if before
+        .as_ref()
+        .is_some_and(|b| b.stable && b.passes && b.phase_margin_deg >= target)
+    {
+        return Ok(none(
+            &e.effect,
+            format!(
+                "no re-tune needed: {said}, at least the target {target:.1}° (your margin less {MARGIN_GIVEN_UP_DEG}°, or the gate's minimum)"
+            ),
+            &figures,
+        ));
+    }
     // The controller the scored error drives.
-    let ctrl_in = controller_input(e, controller, info, opts)?;
+    let Ok(ctrl_in) = controller_input(e, controller, info, opts) else {
+        return Ok(none(
+            &e.effect,
+            format!(
+                "no compensator: {said}. No controller block reads the scored error `{}`, and re-tuning needs the core `pid` or `pi` that does. {smith}",
+                info.error
+            ),
+            &figures,
+        ));
+    };
     let name = split(&ctrl_in).0.to_string();
     let spec = controller
         .blocks
@@ -256,27 +283,9 @@ pub(super) fn time_delay(
         return Ok(none(
             &e.effect,
             format!(
-                "no compensator: {said}. Re-tuning needs the controller as a core `pid` or `pi`, and the error drives `{name}`, a `{ty}` block. Fix: write it as a core `pid` (kp, ki, kd, derivative_cutoff_hz) or `pi` reading `{}`, and `nanomotion compensate` lowers its crossover until the margin with the delay is back; or lower its crossover by hand to about {:.3} Hz. {smith}",
+                "no compensator: {said}. Re-tuning needs the controller as a core `pid` or `pi`, and the error drives `{name}`, a `{ty}` block. Fix: write it as a core `pid` (kp, ki, kd, derivative_cutoff_hz) or `pi` reading `{}`, and `nanomotion compensate` lowers its crossover until the margin with the delay is back; or lower its crossover by hand to about {:.3} Hz (where 360°·f·d leaves the target {target:.1}° of your {pm:.1}°, if the margin without the delay stays as the crossover moves, as on a mass line). {smith}",
                 info.error,
-                fc * (MARGIN_GIVEN_UP_DEG / cost).min(1.0)
-            ),
-            &figures,
-        ));
-    }
-    let target = (pm - MARGIN_GIVEN_UP_DEG).max(
-        nominal
-            .required_phase_margin_deg
-            .unwrap_or(f64::NEG_INFINITY),
-    );
-    figures.push(("target_phase_margin_deg", target));
-    if before
-        .as_ref()
-        .is_some_and(|b| b.stable && b.passes && b.phase_margin_deg >= target)
-    {
-        return Ok(none(
-            &e.effect,
-            format!(
-                "no re-tune needed: {said}, at least the target {target:.1}° (your margin less {MARGIN_GIVEN_UP_DEG}°, or the gate's minimum)"
+                (pm - target) / (360.0 * d)
             ),
             &figures,
         ));
