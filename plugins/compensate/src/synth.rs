@@ -14,6 +14,8 @@
 //! | `backlash` (on the drive) | its inverse: ± half the play by the direction | `backlash_inverse` | before the actuator |
 //! | `creep` (on the drive) | its exact discrete inverse (creep feed-forward) | `state_space` | before the actuator |
 //! | `saturation` (on the drive), driven by a core `pid`/`pi` | anti-windup: the fitted limits as that controller's output limits, clamping | none inserted: your `pid` changed | the controller itself |
+//! | `time_delay`, the scored error driving a core `pid`/`pi` | re-tune ([`delay`]): the crossover lowered by β (zero/pole ratios kept, gain placing it at β·f_c) to the largest β whose loop *with the fitted delay* the gate finds stable with a phase margin ≥ max(yours − 5°, `require:`) | none inserted: your `pid` changed | the controller itself |
+//! | `time_delay`, another controller | none: the phase 360°·f_c·d it takes, the fix (a core `pid`/`pi`, or the crossover by hand); a Smith predictor is a note | — | — |
 //! | the rest | none; the report says what it limits | — | — |
 
 use crate::named::{Placement, Where, source_of, split};
@@ -27,7 +29,7 @@ use nanomotion_plf::surgery::{self, Site};
 use serde_json::{Value, json};
 use std::collections::BTreeMap;
 
-mod delay;
+pub mod delay;
 
 /// How a compensator enters a graph (names of the user's controller graph).
 #[derive(Debug, Clone, PartialEq)]

@@ -36,8 +36,8 @@ const F_R: f64 = 5.0;
 /// has decayed.
 const FROM_S: f64 = 3.0;
 const DURATION_S: f64 = 4.0;
-/// The margin the re-tune may give up (the crate's `MARGIN_GIVEN_UP_DEG`).
-const GIVEN_UP_DEG: f64 = 5.0;
+/// The margin the re-tune may give up (a design choice, not a result).
+const GIVEN_UP_DEG: f64 = nanomotion_compensate::synth::delay::MARGIN_GIVEN_UP_DEG;
 
 /// The PID loop of tests/effects.rs around `stage` (the nominal's block): a
 /// crossover near `fc` on the mass line (k_d = mω_c/1.054, k_p = k_dω_c/3,
