@@ -6,6 +6,9 @@
 //! the eigenvalue-only QR iteration (`eigvals_fast`) against nalgebra's Schur
 //! form (`eigvals`) at n = 100 … 400, so their ratios come from one run:
 //! `cargo bench -p nanomotion-core --bench lti_numerics -- 'hinf_ratio|eig/'`.
+//! The `hinf_ratio` systems come from `support/hinf_systems.rs`, shared with
+//! the `hinf_systems` example that `tools/hinfnorm_vs_ab13dd.py` runs to time
+//! SLICOT's `ab13dd` on the same matrices.
 
 use criterion::measurement::WallTime;
 use criterion::{BenchmarkGroup, Criterion, criterion_group, criterion_main};
