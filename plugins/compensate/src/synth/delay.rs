@@ -61,15 +61,21 @@ pub(crate) struct LoopFigures {
 }
 
 /// The gate's figures of the first SISO loop of `spec` with margins and a
-/// gain crossover, if any.
-pub(crate) fn loop_figures(spec: &GraphSpec) -> Option<LoopFigures> {
+/// gain crossover — the first such loop through block `through` when one
+/// is — if any.
+pub(crate) fn loop_figures(spec: &GraphSpec, through: Option<&str>) -> Option<LoopFigures> {
     let g = surgery::clone_spec(spec).ok()?;
     let require = g.require.clone().unwrap_or_default();
     let (sched, _) = g.build().ok()?;
     let report = nanomotion_core::gate::analyse(&sched, &require);
     let stable = report.loops.iter().all(|l| l.stable());
     let passes = report.passes();
-    report.loops.iter().find_map(|l| {
+    let has = |l: &&nanomotion_core::gate::LoopReport| {
+        through.is_none_or(|b| l.blocks.iter().any(|x| x == b))
+    };
+    let mut loops: Vec<_> = report.loops.iter().filter(has).collect();
+    loops.extend(report.loops.iter().filter(|l| !has(l)));
+    loops.into_iter().find_map(|l| {
         let p = l.points.first()?;
         let m = p.margins.as_ref()?;
         m.gain_crossover_hz.is_finite().then(|| LoopFigures {
@@ -202,7 +208,12 @@ pub(super) fn time_delay(
             ),
         });
     }
-    let Some(nominal) = loop_figures(controller) else {
+    // The controller the scored error drives, if a block does.
+    let driven = controller_input(e, controller, info, opts)
+        .ok()
+        .map(|to| split(&to).0.to_string());
+    let through = driven.as_deref();
+    let Some(nominal) = loop_figures(controller, through) else {
         return Ok(none(
             &e.effect,
             format!(
@@ -218,7 +229,7 @@ pub(super) fn time_delay(
         nominal.delay_margin_s,
     );
     let delayed = with_delay(controller, params, placement, &e.effect, opts)?;
-    let before = loop_figures(&delayed);
+    let before = loop_figures(&delayed, through);
     let pm_d = before.as_ref().map_or(f64::NAN, |b| b.phase_margin_deg);
     let cost = 360.0 * fc * d;
     let mut figures = vec![
@@ -256,8 +267,10 @@ pub(super) fn time_delay(
             &figures,
         ));
     }
-    // The controller the scored error drives.
-    let Ok(ctrl_in) = controller_input(e, controller, info, opts) else {
+    let Some(spec) = driven
+        .as_deref()
+        .and_then(|n| controller.blocks.iter().find(|b| b.name == n))
+    else {
         return Ok(none(
             &e.effect,
             format!(
@@ -267,12 +280,7 @@ pub(super) fn time_delay(
             &figures,
         ));
     };
-    let name = split(&ctrl_in).0.to_string();
-    let spec = controller
-        .blocks
-        .iter()
-        .find(|b| b.name == name)
-        .expect("controller_input names a block of the graph");
+    let name = spec.name.clone();
     let current = surgery::block_to_json(spec.block.as_ref());
     let ty = current
         .get("type")
@@ -313,7 +321,7 @@ pub(super) fn time_delay(
         let p = scaled(&current, beta, gamma);
         let mut g = surgery::clone_spec(&delayed).ok()?;
         set_params(&mut g, &name, &p).ok()?;
-        let f = loop_figures(&g)?;
+        let f = loop_figures(&g, through)?;
         Some((p, f))
     };
     let ok = |f: &LoopFigures| f.stable && f.passes && f.phase_margin_deg >= target;
