@@ -48,6 +48,11 @@ pub struct Loop {
     /// tens of µs sooner on a quiet machine, at the cost of power.
     #[arg(long)]
     allow_idle_states: bool,
+    /// Run even if the stability gate refuses the graph (an unstable, unproven
+    /// or out-of-bounds loop inside it), as `run --allow-unproven` does; the
+    /// run's report says so. Without it such a graph never starts.
+    #[arg(long)]
+    allow_unproven: bool,
     /// Busy-wait the last µs before each deadline (lower latency, one CPU busy).
     #[arg(long, default_value_t = 0.0, value_name = "US")]
     spin_us: f64,
@@ -115,15 +120,40 @@ fn load(graph: &Path, lp: &Loop) -> Result<GraphSpec, String> {
     Ok(spec)
 }
 
-/// The graph built, and its `realtime:` settings.
-fn build(graph: &Path, lp: &Loop) -> Result<(Scheduler, RealtimeSpec), String> {
+/// A graph built for the wall clock.
+struct Built {
+    sched: Scheduler,
+    /// Its `realtime:` settings.
+    settings: RealtimeSpec,
+    /// What the stability gate said, for the run's report (empty when every
+    /// loop passed without a note).
+    gate: Vec<String>,
+}
+
+/// The graph built, judged by the stability gate as `run` judges it — before
+/// the loop drives anything: a graph the gate refuses never starts unless
+/// `--allow-unproven`, and then the run says so first.
+fn build(graph: &Path, lp: &Loop) -> Result<Built, String> {
     let spec = load(graph, lp)?;
+    let require = spec.require.clone();
     let settings = spec.realtime.unwrap_or_default();
     let (sched, report) = spec.build().map_err(|e| e.to_string())?;
     for r in &report.rate_transitions {
         tell!("note: rate transition {r}");
     }
-    Ok((sched, settings))
+    let gate = crate::gate_cmd::before_run(
+        &crate::gate_cmd::analyse(&sched, require.as_ref()),
+        lp.allow_unproven,
+    )
+    .map_err(|e| format!("{}: {e}", graph.display()))?;
+    for l in &gate {
+        say!("stability gate: {l}");
+    }
+    Ok(Built {
+        sched,
+        settings,
+        gate,
+    })
 }
 
 /// The loop's configuration: the command line's settings over the graph's.
@@ -253,7 +283,11 @@ fn read_updates(mut sender: ParamSender) {
 
 fn run_loop<D: Device>(
     graph: &Path,
-    (sched, settings): (Scheduler, RealtimeSpec),
+    Built {
+        sched,
+        settings,
+        gate,
+    }: Built,
     device: D,
     lp: &Loop,
     command: &str,
@@ -325,7 +359,7 @@ fn run_loop<D: Device>(
                 command,
                 graph: &graph.display().to_string(),
                 title: &result.title,
-                stability_gate: &[],
+                stability_gate: &gate,
             }))
             .map_err(|e| e.to_string())?;
         say!(
@@ -507,12 +541,12 @@ pub fn plant(a: PlantArgs) -> Result<(), String> {
     let mut lp = a.lp;
     // Without --duration the plant runs until the controller leaves.
     let ticks = lp.duration.take();
-    let (sched, settings) = build(&a.graph, &lp)?;
-    let (to_plant, from_plant) = hw_blocks(&sched);
+    let built = build(&a.graph, &lp)?;
+    let (to_plant, from_plant) = hw_blocks(&built.sched);
     let channel = |(name, unit): (String, Option<String>)| nanomotion_rt::Channel { name, unit };
     let info = PlantInfo {
-        title: sched.result().title,
-        rate_hz: sched.base_rate_hz(),
+        title: built.sched.result().title,
+        rate_hz: built.sched.base_rate_hz(),
         to_plant: to_plant.into_iter().map(channel).collect(),
         from_plant: from_plant.into_iter().map(channel).collect(),
     };
@@ -522,7 +556,7 @@ pub fn plant(a: PlantArgs) -> Result<(), String> {
             a.graph.display()
         ));
     }
-    let rate = sched.base_rate_hz();
+    let rate = built.sched.base_rate_hz();
     let device = ShmPlant::serve(&a.serve, info, watchdog(&lp)?).map_err(|e| e.to_string())?;
     say!(
         "serving `{}` ({} in, {} out): connect with `nanomotion rt CONTROLLER.yaml --device shm:{}`",
@@ -536,7 +570,7 @@ pub fn plant(a: PlantArgs) -> Result<(), String> {
     let ticks = ticks.map_or(u64::MAX, |d| (d * rate).round() as u64);
     let (report, _, _) = run_loop(
         &a.graph,
-        (sched, settings),
+        built,
         device,
         &lp,
         "plant",

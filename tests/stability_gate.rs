@@ -1,6 +1,6 @@
 //! The stability gate through the facade (issue 17): every shipped example passes
 //! it or states why it may run unproven; `nanomotion check` names the loop and the
-//! violated bound and fails; `nanomotion run` refuses an unstable graph unless
+//! violated bound and fails; `nanomotion run` (and `rt`) refuses an unstable graph unless
 //! `--allow-unproven`, and then says so.
 
 use nanomotion::core::data::Dataset;
@@ -201,6 +201,45 @@ fn check_and_run_obey_the_gate() {
         gate_lines
             .iter()
             .any(|l| l.as_str().unwrap_or("").contains("--allow-unproven")),
+        "{manifest}"
+    );
+    // `rt` judges the graph the same way before the loop drives anything: an
+    // unstable graph never starts on the wall clock, and with the flag it runs
+    // and says so first, in its report and in the run folder's manifest.
+    let rt = |extra: &[&str]| {
+        out(nm()
+            .arg("rt")
+            .arg(&g)
+            .args(["--allow-soft", "--duration", "0.01"])
+            .args(extra))
+    };
+    let (code, stdout, stderr) = rt(&[]);
+    assert_eq!(code, Some(1));
+    assert!(
+        stderr.contains("--allow-unproven") && stderr.contains("loop `pi` is unstable"),
+        "{stderr}"
+    );
+    assert!(!stdout.contains("ticks at"), "the loop started: {stdout}");
+    let rt_dir = dir.join("rt");
+    let (code, stdout, stderr) = rt(&["--allow-unproven", "--out", rt_dir.to_str().unwrap()]);
+    assert_eq!(code, Some(0), "{stderr}");
+    let (said, started) = (
+        stdout
+            .find("running anyway because of --allow-unproven")
+            .expect(&stdout),
+        stdout.find("ticks at").expect(&stdout),
+    );
+    assert!(said < started, "{stdout}");
+    let manifest: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(rt_dir.join("nanomotion-run.json")).unwrap(),
+    )
+    .unwrap();
+    assert!(
+        manifest["stability_gate"]
+            .as_array()
+            .expect("stability_gate")
+            .iter()
+            .any(|l| l.as_str().unwrap_or("").contains("unstable")),
         "{manifest}"
     );
     std::fs::remove_dir_all(&dir).ok();
