@@ -568,14 +568,7 @@ pub fn plant(a: PlantArgs) -> Result<(), String> {
     // Logs hold the graph's duration; a longer plant run drops (and counts)
     // the samples beyond it, without allocating.
     let ticks = ticks.map_or(u64::MAX, |d| (d * rate).round() as u64);
-    let (report, _, _) = run_loop(
-        &a.graph,
-        built,
-        device,
-        &lp,
-        "plant",
-        Some(ticks),
-    )?;
+    let (report, _, _) = run_loop(&a.graph, built, device, &lp, "plant", Some(ticks))?;
     match report.stopped {
         Stop::Completed | Stop::Interrupted | Stop::Device(DeviceError::Closed(_)) => Ok(()),
         other => Err(format!("{}: {other}", a.graph.display())),

@@ -230,10 +230,9 @@ fn check_and_run_obey_the_gate() {
         stdout.find("ticks at").expect(&stdout),
     );
     assert!(said < started, "{stdout}");
-    let manifest: serde_json::Value = serde_json::from_str(
-        &std::fs::read_to_string(rt_dir.join("nanomotion-run.json")).unwrap(),
-    )
-    .unwrap();
+    let manifest: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(rt_dir.join("nanomotion-run.json")).unwrap())
+            .unwrap();
     assert!(
         manifest["stability_gate"]
             .as_array()
