@@ -37,10 +37,27 @@ fn sigma_max(ev: &FrequencyEvaluator, dense: Option<&StateSpace>, nu: f64) -> f6
     if g.nrows() == 1 && g.ncols() == 1 {
         return g[(0, 0)].norm();
     }
+    if dense.is_none()
+        && g.shape() == (2, 2)
+        && g.iter().all(|v| v.re.is_finite() && v.im.is_finite())
+    {
+        return sigma_max_2x2(&g);
+    }
     if g.is_empty() {
         return 0.0;
     }
     g.singular_values().iter().copied().fold(0.0, f64::max)
+}
+
+/// Largest singular value of a complex 2 × 2 matrix in closed form, for the
+/// search's Hessenberg evaluations of a 2 × 2 model (no iterative SVD): with
+/// h = ‖G‖_F²/2 and δ = |det G|,
+/// σ̄² = h + √((h − δ)(h + δ)) (σ̄² and σ̲² are the roots of
+/// x² − ‖G‖_F² x + |det G|², and σ̄² ≥ h sums positive terms).
+fn sigma_max_2x2(g: &DMatrix<Complex<f64>>) -> f64 {
+    let h = 0.5 * g.iter().map(|v| v.norm_sqr()).sum::<f64>();
+    let det = (g[(0, 0)] * g[(1, 1)] - g[(0, 1)] * g[(1, 0)]).norm();
+    (h + ((h - det) * (h + det)).max(0.0).sqrt()).sqrt()
 }
 
 /// H∞ norm and peak frequency of a stable model (python-control `hinfnorm`,
@@ -634,6 +651,41 @@ mod tests {
             }
         }
         assert!(on_axis >= 16, "{on_axis} imaginary-axis eigenvalues");
+    }
+
+    /// The closed-form σ̄ of complex 2 × 2 matrices against nalgebra's SVD:
+    /// random (seeded), rank one, diagonal and zero matrices, to 1e-14
+    /// relative.
+    #[test]
+    fn closed_form_sigma_max_2x2_matches_the_svd() {
+        let mut rng = crate::rng::Rng::new(2931);
+        let mut cases: Vec<DMatrix<Complex<f64>>> = (0..200)
+            .map(|k| {
+                let scale = 10f64.powi(k % 13 - 6);
+                DMatrix::from_fn(2, 2, |_, _| {
+                    Complex::new(rng.normal(), rng.normal()) * scale
+                })
+            })
+            .collect();
+        let (u, v) = (
+            DMatrix::from_fn(2, 1, |_, _| Complex::new(rng.normal(), rng.normal())),
+            DMatrix::from_fn(1, 2, |_, _| Complex::new(rng.normal(), rng.normal())),
+        );
+        cases.push(&u * &v);
+        cases.push(DMatrix::from_diagonal(&nalgebra::DVector::from_vec(vec![
+            Complex::new(3.0, 4.0),
+            Complex::new(0.0, -2.0),
+        ])));
+        cases.push(DMatrix::zeros(2, 2));
+        for g in &cases {
+            let svd = g.singular_values().iter().copied().fold(0.0, f64::max);
+            let ours = sigma_max_2x2(g);
+            assert!(
+                (ours - svd).abs() <= 1e-14 * svd,
+                "{g}: {ours} vs SVD {svd}"
+            );
+        }
+        assert_eq!(sigma_max_2x2(&cases[201]), 5.0);
     }
 
     #[test]
