@@ -322,6 +322,59 @@ fn poles(l: &Tf) -> (f64, f64) {
     (rho, -s.re / s.norm())
 }
 
+/// The step response's error of `spec`'s pid and stage with the delay `d`
+/// on the drive (the plant as diagnosed), a unit step at 0.1 s: its first
+/// difference Δe from the step on (the slow tail of the integral action
+/// nearly cancels in it, the ringing stays).
+fn step_ringing(spec: &GraphSpec, d: f64) -> Vec<f64> {
+    let mut pid = block_params(spec, "pid");
+    pid["name"] = "pid".into();
+    let mut stage = block_params(spec, "stage");
+    stage["name"] = "stage".into();
+    let g = GraphSpec::from_yaml(
+        &format!(
+            "base_rate_hz: {}\nduration_s: 0.5\nblocks:\n  - {{ name: ref, type: step, time_s: 0.09975, initial: 0.0, final: 1.0 }}\n  - {{ name: err, type: sum, signs: \"+-\" }}\n  - {pid}\n  - {{ name: delay, type: time_delay, max_delay_s: 0.01, delay_s: {d:?} }}\n  - {stage}\nconnections:\n  - {{ from: ref.y, to: err.in0 }}\n  - {{ from: stage.y, to: err.in1 }}\n  - {{ from: err.y, to: pid.e }}\n  - {{ from: pid.u, to: delay.u }}\n  - {{ from: delay.y, to: stage.u }}\nlog: [err.y]\n",
+            generate::RATE_HZ
+        ),
+        "step.yaml",
+    )
+    .unwrap();
+    let (mut s, _) = g.build().unwrap();
+    let e = s.run(|_| {}).logs[0].data.clone();
+    let k0 = (0.1 / T).round() as usize;
+    e[k0..].windows(2).map(|w| w[1] - w[0]).collect()
+}
+
+/// Ratio of the third to the second positive peak of `x` after its largest
+/// |x| (the step's kick; the first peak still carries the faster modes), and
+/// the distance between them (samples); each peak interpolated by the
+/// parabola through its three samples.
+fn peak_ratio(x: &[f64]) -> (f64, f64) {
+    let start = (0..x.len())
+        .max_by(|&a, &b| x[a].abs().total_cmp(&x[b].abs()))
+        .unwrap();
+    let peaks: Vec<(f64, f64)> = (start + 1..x.len() - 1)
+        .filter(|&k| x[k] > 0.0 && x[k] >= x[k - 1] && x[k] > x[k + 1])
+        .skip(1)
+        .take(2)
+        .map(|k| {
+            let (y0, y1, y2) = (x[k - 1], x[k], x[k + 1]);
+            let delta = 0.5 * (y0 - y2) / (y0 - 2.0 * y1 + y2);
+            (k as f64 + delta, y1 - 0.25 * (y0 - y2) * delta)
+        })
+        .collect();
+    (peaks[1].1 / peaks[0].1, peaks[1].0 - peaks[0].0)
+}
+
+/// The dominant oscillatory closed-loop pole (largest modulus off the real axis).
+fn dominant_pair(l: &Tf) -> Complex<f64> {
+    l.closed_loop_poles()
+        .into_iter()
+        .filter(|z| z.im > 1e-9)
+        .max_by(|a, b| a.norm().total_cmp(&b.norm()))
+        .unwrap()
+}
+
 fn retuned(out: &Outcome) -> &nanomotion_compensate::CompensatorReport {
     let c = &out.report.compensators[0];
     assert_eq!(
@@ -515,6 +568,27 @@ fn a_delay_that_leaves_the_loop_ringing_is_re_tuned_and_judged_on_the_reference(
     assert!(s_d >= bound(pm_d) * (1.0 - 1e-9) && s1 >= bound(pm1) * (1.0 - 1e-9));
     assert!(s1 < 0.4 * bound(pm_d), "{s_d} -> {s1}");
     assert!(zeta1 > 2.0 * zeta_d, "{zeta_d} -> {zeta1}");
+    // The ringing in the simulated step response (the plant as diagnosed):
+    // successive peaks of Δe (interpolated between samples) decay by |p|^N
+    // over the N samples of one period of the dominant pair p, N = 2π/∠p;
+    // re-tuned the pair loses more than twice as much per period of its own
+    // (too little is left after the kick to find two peaks in the run).
+    let p = dominant_pair(&user);
+    let period = 2.0 * PI / p.arg();
+    let (ratio, n) = peak_ratio(&step_ringing(&loop_, d));
+    let predicted = p.norm().powf(period);
+    let p1 = dominant_pair(&re);
+    let predicted1 = p1.norm().powf(2.0 * PI / p1.arg());
+    eprintln!(
+        "with the delay: ringing at {:.1} Hz, peaks {ratio:.4} apart {n:.2} samples; dominant pair: {predicted:.4} per {period:.1} samples; re-tuned: {predicted1:.4} per period",
+        p.arg() / (2.0 * PI * T)
+    );
+    assert!((n - period).abs() < 0.05 * period, "{n} vs {period}");
+    assert!(
+        (ratio / predicted - 1.0).abs() < 0.05,
+        "{ratio} vs {predicted}"
+    );
+    assert!(predicted1 < 0.5 * predicted, "{predicted1} vs {predicted}");
     // The tracking error on the sine, both loops stable and settled:
     // A|S(ω_r)|/√2.
     assert!(rho_d.max(rho1).powf(FROM_S / T) < 1e-3, "{rho_d} {rho1}");
