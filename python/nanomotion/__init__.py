@@ -8,7 +8,8 @@ The Rust library behind the ``nanomotion`` command, in-process:
 
 - graphs: :func:`load`, :func:`check` (the stability gate), :func:`run`
   (overrides by dotted path, seed, duration, measured data; signals as numpy
-  arrays, scores), :func:`diagnose` (name what a model misses),
+  arrays, scores), :func:`rt` (the same on the wall clock, with its timing
+  report), :func:`diagnose` (name what a model misses),
   :func:`compensate` (compensate what it named in a controller graph);
 - studies: :func:`sweep` over a SWEEP.yaml, on local cores or on Ray;
 - analysis: :func:`psd_welch`, :func:`cumulative_psd`, :func:`frf_h1`,
@@ -71,6 +72,7 @@ __all__ = [
     "Lti",
     "ModelError",
     "NanomotionError",
+    "RtResult",
     "RunResult",
     "Score",
     "SweepError",
@@ -85,6 +87,7 @@ __all__ = [
     "load",
     "psd_welch",
     "read_results",
+    "rt",
     "run",
     "run_chunk",
     "sweep",
@@ -122,6 +125,17 @@ class RunResult:
         """Sample times (s) of a logged signal: t_i = i / rate."""
         n = self.signals[signal].shape[0]
         return np.arange(n) / self.rates_hz[signal]
+
+
+@dataclass
+class RtResult(RunResult):
+    """A run on the wall clock: what :class:`RunResult` holds, and ``timing``,
+    the loop's timing report (``timing.json`` of ``nanomotion rt --out``:
+    ``ticks``, ``overruns``, ``missed_ticks``, ``scheduling``, ``stop``, and
+    the ``wakeup_latency`` / ``period_jitter`` / ``execution`` summaries with
+    ``p50_ns``, ``p99_ns``, ``p999_ns``, ``max_ns``; docs/realtime.md)."""
+
+    timing: dict[str, Any] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -226,6 +240,18 @@ class Graph:
         r["scores"] = {k: Score(**v) for k, v in r["scores"].items()}
         return RunResult(**r)
 
+    def rt(self, overrides: Mapping[str, Any] | None = None, *, duration: float | None = None,
+           allow_unproven: bool = False, allow_soft: bool = False, priority: int = 80,
+           cpu: int | None = None, overrun: str | None = None, max_overruns: int | None = None,
+           allow_idle_states: bool = False) -> RtResult:
+        """Run the graph on the wall clock (``nanomotion rt`` without files). See :func:`rt`."""
+        r, timing = _nm.rt_graph(**self._source(overrides), duration=duration,
+                                 allow_unproven=allow_unproven, allow_soft=allow_soft,
+                                 priority=priority, cpu=cpu, overrun=overrun,
+                                 max_overruns=max_overruns, allow_idle_states=allow_idle_states)
+        r["scores"] = {k: Score(**v) for k, v in r["scores"].items()}
+        return RtResult(**r, timing=json.loads(timing))
+
     def __repr__(self) -> str:
         return f"Graph({self.origin!r}, {len(self.blocks)} blocks, {self.duration_s} s at {self.base_rate_hz} Hz)"
 
@@ -277,6 +303,29 @@ def run(graph: PathLike | Graph, overrides: Mapping[str, Any] | None = None, *,
     """
     return _graph(graph).run(overrides, seed=seed, duration=duration, data=data,
                              data_rate=data_rate, allow_unproven=allow_unproven)
+
+
+def rt(graph: PathLike | Graph, overrides: Mapping[str, Any] | None = None, *,
+       duration: float | None = None, allow_unproven: bool = False, allow_soft: bool = False,
+       priority: int = 80, cpu: int | None = None, overrun: str | None = None,
+       max_overruns: int | None = None, allow_idle_states: bool = False) -> RtResult:
+    """Run a graph on the wall clock as ``nanomotion rt GRAPH`` does (no device:
+    the loop closes inside the graph), keeping the logs in memory.
+
+    The stability gate judges the graph first (:class:`GateError` unless
+    ``allow_unproven``). The loop thread runs SCHED_FIFO at ``priority``
+    (pinned to ``cpu``), with memory locked and the CPUs held out of deep idle
+    states (unless ``allow_idle_states``); where a privilege is refused the run
+    is refused, or runs at normal priority with ``allow_soft``. ``overrun`` is
+    ``"skip"`` (stay on the grid, count missed ticks) or ``"catch-up"`` (run
+    late ticks back to back: every tick runs, so the logs equal :func:`run`'s);
+    the default is the graph's ``realtime:`` section, else ``"skip"``. The
+    loop stops, outputs safe, after more than ``max_overruns``. The GIL is
+    released while the loop runs. See docs/realtime.md.
+    """
+    return _graph(graph).rt(overrides, duration=duration, allow_unproven=allow_unproven,
+                            allow_soft=allow_soft, priority=priority, cpu=cpu, overrun=overrun,
+                            max_overruns=max_overruns, allow_idle_states=allow_idle_states)
 
 
 def diagnose(model: PathLike, data: PathLike, *, max_effects: int = 3, holdout: float = 0.3,

@@ -38,6 +38,20 @@ def run_graph(
     data_rate: float | None = None,
     allow_unproven: bool = False,
 ) -> dict[str, Any]: ...
+def rt_graph(
+    path: _Path | None = None,
+    text: str | None = None,
+    origin: str = "<string>",
+    overrides: list[tuple[str, str]] = ...,
+    duration: float | None = None,
+    allow_unproven: bool = False,
+    allow_soft: bool = False,
+    priority: int = 80,
+    cpu: int | None = None,
+    overrun: str | None = None,
+    max_overruns: int | None = None,
+    allow_idle_states: bool = False,
+) -> tuple[dict[str, Any], str]: ...
 def diagnose_graph(
     model: _Path,
     data: _Path,

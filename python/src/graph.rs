@@ -54,7 +54,7 @@ fn load_data(files: &[PathBuf], rate_hz: Option<f64>) -> PyResult<Option<Arc<Dat
     Ok(merged.map(Arc::new))
 }
 
-fn analyse(sched: &nanomotion::Scheduler, require: Option<&Require>) -> GateReport {
+pub(crate) fn analyse(sched: &nanomotion::Scheduler, require: Option<&Require>) -> GateReport {
     let default = Require::default();
     gate::analyse(sched, require.unwrap_or(&default))
 }
@@ -89,7 +89,7 @@ fn check_graph<'py>(
 
 /// What the gate lets through, or the refusal (`nanomotion run`'s rule, from
 /// the library, with the Python spelling of the escape hatch).
-fn gate_before_run(report: &GateReport, allow: bool) -> PyResult<Vec<String>> {
+pub(crate) fn gate_before_run(report: &GateReport, allow: bool) -> PyResult<Vec<String>> {
     report
         .before_run(allow, &FrontEnd::PYTHON)
         .map_err(gate_err)

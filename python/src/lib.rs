@@ -13,6 +13,8 @@
 //! - models ([`models`]): Coleman–Hodgdon hysteresis (6.3), its exact inverse
 //!   feed-forward (6.6) on the extended model (6.4), the time-stamping estimator
 //!   (8.1)–(8.4) with the encoder of Ch. 8;
+//! - the wall clock ([`rt`]): a graph run in real time as `nanomotion rt` runs
+//!   it, with its timing report;
 //! - sweeps ([`sweep`]): the pieces of `nanomotion::sweep` a distributed engine
 //!   (Ray) needs, and the local rayon path.
 //!
@@ -26,6 +28,7 @@ pub mod analysis;
 pub mod errors;
 pub mod graph;
 pub mod models;
+pub mod rt;
 pub mod sweep;
 
 /// The module `nanomotion._nanomotion`.
@@ -39,5 +42,6 @@ fn _nanomotion(m: &Bound<'_, PyModule>) -> PyResult<()> {
     analysis::register(m)?;
     models::register(m)?;
     sweep::register(m)?;
+    rt::register(m)?;
     Ok(())
 }
