@@ -633,6 +633,37 @@ fn a_bad_update_is_refused_with_its_reason_and_never_reaches_the_loop() {
 }
 
 #[test]
+fn a_saturations_limits_change_live_and_a_crossed_pair_is_refused() {
+    // A ramp 0, 1, 2, … through a saturation [0, 100]: its upper limit is
+    // lowered to 5 before tick 0; a lower limit above it never reaches the loop.
+    let yaml = "base_rate_hz: 1000\nduration_s: 0.02\nblocks:\n  - { name: ramp, type: constant_velocity, velocity_m_s: 1000.0 }\n  - { name: lim, type: saturation, lower: 0.0, upper: 100.0 }\nconnections:\n  - { from: ramp.y, to: lim.u }\nlog: [ramp.y, lim.y]\n";
+    let (sched, _) = GraphSpec::from_yaml(yaml, "t.yaml")
+        .unwrap()
+        .build()
+        .unwrap();
+    let mut r = RealtimeRunner::new(sched, NoDevice, config(OverrunPolicy::Skip)).unwrap();
+    let mut sender = r.param_sender().unwrap();
+    let paths: Vec<&str> = sender.params().iter().map(|p| p.path.as_str()).collect();
+    assert_eq!(paths, ["lim.lower", "lim.upper"]);
+    sender.set("lim.upper", 5.0).unwrap();
+    match sender.set("lim.lower", 6.0) {
+        Err(LiveError::Refused { block, source, .. }) => {
+            assert_eq!(block, "lim");
+            assert_eq!(source.field, "lower");
+        }
+        other => panic!("{other:?}"),
+    }
+    let report = r.run(|_| {}).unwrap();
+    assert_eq!(report.param_updates, 1);
+    let (x, _, _) = r.scheduler().log_view("ramp.y").unwrap();
+    let (y, _, _) = r.scheduler().log_view("lim.y").unwrap();
+    assert!(x.iter().any(|&v| v > 5.0), "{x:?}");
+    for (&x, &y) in x.iter().zip(y) {
+        assert_eq!(y, x.clamp(0.0, 5.0), "x = {x}");
+    }
+}
+
+#[test]
 fn the_stability_gate_refuses_an_update_that_destabilises_the_loop() {
     // The quickstart loop (PI on the walking piezo) passes the gate as
     // written; the gate is the judge of a change of the PI's gain.

@@ -388,6 +388,19 @@ impl Block for Saturation {
     fn output(&mut self, _tick: Tick, u: &[f64], y: &mut [f64]) {
         self.apply(u, y);
     }
+    /// The limits (a drive's voltage or current limit tightened or relaxed
+    /// while the stage moves); the sender's copy of the block refuses a
+    /// `lower` above `upper` before it reaches the loop.
+    fn live_params(&self) -> &'static [&'static str] {
+        &["lower", "upper"]
+    }
+    fn set_live_param(&mut self, slot: usize, value: f64) {
+        match slot {
+            0 => self.lower = value,
+            1 => self.upper = value,
+            _ => {}
+        }
+    }
     fn linearisation(&self) -> Option<crate::block::Linearisation> {
         Some(crate::block::Linearisation::single(
             StateSpace::gain(nalgebra::DMatrix::identity(self.width, self.width), None),
@@ -767,6 +780,27 @@ mod tests {
                 .field,
             "upper"
         );
+    }
+
+    #[test]
+    fn live_limits_take_effect_at_the_next_sample() {
+        let mut s = Saturation::new(0.0, 46.0);
+        s.build(&ctx()).unwrap();
+        assert_eq!(s.live_params(), ["lower", "upper"]);
+        assert_eq!(run(&mut s, &[40.0]), vec![40.0]);
+        s.set_live_param(1, 30.0);
+        assert_eq!(run(&mut s, &[40.0]), vec![30.0]);
+        s.set_live_param(0, -5.0);
+        assert_eq!(run(&mut s, &[-9.0]), vec![-5.0]);
+        // A slot out of range changes nothing.
+        s.set_live_param(2, 1.0);
+        assert_eq!((s.lower, s.upper), (-5.0, 30.0));
+        // The same as a block built with those limits.
+        let mut built = Saturation::new(-5.0, 30.0);
+        built.build(&ctx()).unwrap();
+        for u in [-40.0, -5.0, 0.3, 29.9, 31.0] {
+            assert_eq!(run(&mut s, &[u]), run(&mut built, &[u]), "u = {u}");
+        }
     }
 
     #[test]
