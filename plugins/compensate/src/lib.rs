@@ -23,17 +23,21 @@
 //!    pole–zero pair (a notch); gain scheduling (2.13) on 1/g of a
 //!    position-dependent gain; static decoupling; anti-windup for a saturation
 //!    on the drive of a core `pid`/`pi` (the controller itself gets the fitted
-//!    limits as its output limits, with clamping: no block is inserted); and for
-//!    the rest a stated "no compensation: this is what it limits" with its
-//!    figure (a quantiser's lsb/√12, a delay's phase at the crossover, how often
-//!    a saturation clips a controller that has no output limits);
+//!    limits as its output limits, with clamping: no block is inserted); a
+//!    core `pid`/`pi` re-tuned for a fitted delay (its crossover lowered, the
+//!    zero/pole ratios kept, until the gate finds the loop *with the delay*
+//!    within its margin; no block is inserted); and for the rest a stated "no
+//!    compensation: this is what it limits" with its figure (a quantiser's
+//!    lsb/√12, a delay's phase at the crossover under another controller, how
+//!    often a saturation clips a controller that has no output limits);
 //! 2. **validates** on the augmented model: the user's loop with the fitted
 //!    effects transplanted where the diagnosis put them (the plant as
 //!    diagnosed), simulated before, with each compensator alone and with all;
 //!    a compensator that does not cut the tracking error's rms is dropped
 //!    (unless [`Options::keep`]);
 //! 3. returns the user's graph with the kept compensators (`comp_<effect>`
-//!    blocks; anti-windup changes the user's `pid` instead), which the
+//!    blocks; anti-windup and the delay's re-tune change the user's `pid`
+//!    instead), which the
 //!    stability gate ([`nanomotion_core::gate`]) must pass.
 //!
 //! This crate is the one plugin allowed to depend on other plugins
@@ -144,8 +148,9 @@ pub struct ErrorStats {
 pub struct CompensatorReport {
     /// The effect it compensates.
     pub effect: String,
-    /// Its block in the compensated graph (`comp_<effect>`; for anti-windup,
-    /// the user's `pid`/`pi` given output limits, as no block is inserted).
+    /// Its block in the compensated graph (`comp_<effect>`; for anti-windup
+    /// and a delay's re-tune, the user's `pid`/`pi`, changed in place, as no
+    /// block is inserted).
     pub block: String,
     /// Its block type.
     #[serde(rename = "type")]
