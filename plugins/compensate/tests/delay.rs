@@ -89,21 +89,7 @@ fn case(seed: u64, fc: f64, extra: &str, keep: bool) -> Case {
     let fitted_delay_s = rep.steps[0].final_params["delay_s"];
     let stage = nominal.blocks.iter().find(|b| b.name == "stage").unwrap();
     let loop_ = controller(&surgery::block_to_json(stage.block.as_ref()), fc, extra);
-    let out = compensate(
-        rep.augmented.as_ref().unwrap(),
-        &loop_,
-        &named::from_report(&rep),
-        &Options {
-            keep,
-            ..Options::default()
-        },
-    )
-    .unwrap();
-    eprintln!(
-        "seed {seed}: {}\n{}",
-        rec.truth,
-        serde_json::to_string_pretty(&out.report).unwrap()
-    );
+    let out = support::compensate_named(&rep, &loop_, keep, &format!("seed {seed}: {}", rec.truth));
     Case {
         delay_samples,
         site: rep.steps[0].site.clone(),

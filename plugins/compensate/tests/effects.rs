@@ -59,21 +59,7 @@ fn case_with(
     );
     let stage = nominal.blocks.iter().find(|b| b.name == "stage").unwrap();
     let loop_ = controller(&surgery::block_to_json(stage.block.as_ref()), reference);
-    let out = compensate(
-        rep.augmented.as_ref().unwrap(),
-        &loop_,
-        &named::from_report(&rep),
-        &Options {
-            keep,
-            ..Options::default()
-        },
-    )
-    .unwrap();
-    eprintln!(
-        "{hidden}: {}\n{}",
-        rec.truth,
-        serde_json::to_string_pretty(&out.report).unwrap()
-    );
+    let out = support::compensate_named(&rep, &loop_, keep, &format!("{hidden}: {}", rec.truth));
     (rep, out)
 }
 

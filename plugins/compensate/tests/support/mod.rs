@@ -67,3 +67,28 @@ pub fn score_rms(spec: &GraphSpec) -> f64 {
     let (mut s, _) = g.build().expect("loop builds");
     s.run(|_| {}).scores[0].rms
 }
+
+/// Compensate in the user's loop `loop_` what the diagnosis `rep` named
+/// (every compensator kept with `keep`), printing the report under `label`.
+pub fn compensate_named(
+    rep: &nanomotion_plf::Report,
+    loop_: &GraphSpec,
+    keep: bool,
+    label: &str,
+) -> nanomotion_compensate::Outcome {
+    let out = nanomotion_compensate::compensate(
+        rep.augmented.as_ref().expect("an augmented model"),
+        loop_,
+        &nanomotion_compensate::named::from_report(rep),
+        &nanomotion_compensate::Options {
+            keep,
+            ..nanomotion_compensate::Options::default()
+        },
+    )
+    .unwrap();
+    eprintln!(
+        "{label}\n{}",
+        serde_json::to_string_pretty(&out.report).unwrap()
+    );
+    out
+}
