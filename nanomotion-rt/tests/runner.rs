@@ -9,7 +9,8 @@ use nanomotion_core::GraphSpec;
 use nanomotion_rt::clock::{self, Privileges};
 use nanomotion_rt::{
     Channel, Device, DeviceError, Event, LiveError, NoDevice, OverrunPolicy, ParamChange,
-    PlantInfo, RealtimeRunner, RealtimeSpec, RtConfig, RtError, ShmDevice, ShmPlant, Stop,
+    ParamSender, PlantInfo, RealtimeRunner, RealtimeSpec, RtConfig, RtError, ShmDevice, ShmPlant,
+    Stop,
 };
 use std::time::Duration;
 
@@ -574,15 +575,22 @@ fn a_run_with_a_live_update_replays_bit_for_bit_from_its_mcap_file() {
     );
 }
 
-#[test]
-fn a_bad_update_is_refused_with_its_reason_and_never_reaches_the_loop() {
-    let yaml = "base_rate_hz: 1000\nduration_s: 0.02\nblocks:\n  - { name: one, type: constant, value: 1.0 }\n  - { name: c, type: pid, kp: 1.0, ki: 10.0 }\n  - { name: z, type: pi, kp: 1.0, zero_hz: 2.0 }\nconnections:\n  - { from: one.y, to: c.e }\n  - { from: one.y, to: z.e }\nlog: [c.u]\n";
+/// The graph `yaml` built for a run without a device (skip policy, soft),
+/// and a sender of live updates into it.
+fn without_device(yaml: &str) -> (RealtimeRunner<NoDevice>, ParamSender) {
     let (sched, _) = GraphSpec::from_yaml(yaml, "t.yaml")
         .unwrap()
         .build()
         .unwrap();
     let mut r = RealtimeRunner::new(sched, NoDevice, config(OverrunPolicy::Skip)).unwrap();
-    let mut sender = r.param_sender().unwrap();
+    let sender = r.param_sender().unwrap();
+    (r, sender)
+}
+
+#[test]
+fn a_bad_update_is_refused_with_its_reason_and_never_reaches_the_loop() {
+    let yaml = "base_rate_hz: 1000\nduration_s: 0.02\nblocks:\n  - { name: one, type: constant, value: 1.0 }\n  - { name: c, type: pid, kp: 1.0, ki: 10.0 }\n  - { name: z, type: pi, kp: 1.0, zero_hz: 2.0 }\nconnections:\n  - { from: one.y, to: c.e }\n  - { from: one.y, to: z.e }\nlog: [c.u]\n";
+    let (mut r, mut sender) = without_device(yaml);
     let paths: Vec<&str> = sender.params().iter().map(|p| p.path.as_str()).collect();
     assert_eq!(paths, ["c.kp", "c.ki", "c.kd", "z.kp", "z.zero_hz"]);
     // The block's own validation: a derivative gain needs a cut-off.
@@ -637,12 +645,7 @@ fn a_saturations_limits_change_live_and_a_crossed_pair_is_refused() {
     // A ramp 0, 1, 2, … through a saturation [0, 100]: its upper limit is
     // lowered to 5 before tick 0; a lower limit above it never reaches the loop.
     let yaml = "base_rate_hz: 1000\nduration_s: 0.02\nblocks:\n  - { name: ramp, type: constant_velocity, velocity_m_s: 1000.0 }\n  - { name: lim, type: saturation, lower: 0.0, upper: 100.0 }\nconnections:\n  - { from: ramp.y, to: lim.u }\nlog: [ramp.y, lim.y]\n";
-    let (sched, _) = GraphSpec::from_yaml(yaml, "t.yaml")
-        .unwrap()
-        .build()
-        .unwrap();
-    let mut r = RealtimeRunner::new(sched, NoDevice, config(OverrunPolicy::Skip)).unwrap();
-    let mut sender = r.param_sender().unwrap();
+    let (mut r, mut sender) = without_device(yaml);
     let paths: Vec<&str> = sender.params().iter().map(|p| p.path.as_str()).collect();
     assert_eq!(paths, ["lim.lower", "lim.upper"]);
     sender.set("lim.upper", 5.0).unwrap();
