@@ -39,27 +39,16 @@ const DURATION_S: f64 = 4.0;
 /// The margin the re-tune may give up (a design choice, not a result).
 const GIVEN_UP_DEG: f64 = nanomotion_compensate::synth::delay::MARGIN_GIVEN_UP_DEG;
 
-/// The PID loop of tests/effects.rs around `stage` (the nominal's block): a
-/// crossover near `fc` on the mass line (k_d = mω_c/1.054, k_p = k_dω_c/3,
-/// k_i = k_pω_c/10), the derivative filtered at 5 f_c; `extra` is appended
-/// (e.g. a `require:` section).
+/// The PID loop of [`support::pid_loop`] with a crossover near `fc`, the
+/// sine reference, `extra` appended (e.g. a `require:` section).
 fn controller(stage: &Value, fc: f64, extra: &str) -> GraphSpec {
-    let m = 1.0 / stage["b"][1][0].as_f64().unwrap();
-    let wc = 2.0 * PI * fc;
-    let kd = m * wc / 1.054;
-    let kp = kd * wc / 3.0;
-    let ki = kp * wc / 10.0;
-    let mut stage = stage.clone();
-    stage["name"] = "stage".into();
-    GraphSpec::from_yaml(
-        &format!(
-            "title: PID loop\nbase_rate_hz: {}\nduration_s: {DURATION_S:?}\nblocks:\n  - {{ name: ref, type: sinusoid, amplitude: {A:?}, frequency_hz: {F_R:?} }}\n  - {{ name: err, type: sum, signs: \"+-\" }}\n  - {{ name: pid, type: pid, kp: {kp:?}, ki: {ki:?}, kd: {kd:?}, derivative_cutoff_hz: {:?} }}\n  - {stage}\nconnections:\n  - {{ from: ref.y, to: err.in0 }}\n  - {{ from: stage.y, to: err.in1 }}\n  - {{ from: err.y, to: pid.e }}\n  - {{ from: pid.u, to: stage.u }}\nscore:\n  - {{ signal: err.y, from_s: {FROM_S:?} }}\n{extra}",
-            generate::RATE_HZ,
-            5.0 * fc
-        ),
-        "controller.yaml",
+    support::pid_loop(
+        stage,
+        fc,
+        &format!("type: sinusoid, amplitude: {A:?}, frequency_hz: {F_R:?}"),
+        (DURATION_S, FROM_S),
+        extra,
     )
-    .unwrap()
 }
 
 /// A generated record with the delay hidden, its diagnosis, the loop and the

@@ -10,27 +10,11 @@ use nanomotion_core::graph::GraphSpec;
 use nanomotion_plf::diagnose::{self, diagnose};
 use nanomotion_plf::{generate, surgery};
 use serde_json::Value;
-use std::f64::consts::PI;
 
-/// A PID loop around `stage` (the nominal's state-space block) at the record's
-/// 2 kHz: an 80 Hz crossover on the mass line, derivative filtered at 400 Hz,
-/// the reference `reference` (a block map), scored from 1.5 s of 3 s.
+/// The PID loop of [`support::pid_loop`] at an 80 Hz crossover, the reference
+/// `reference` (a block map), scored from 1.5 s of 3 s.
 fn controller(stage: &Value, reference: &str) -> GraphSpec {
-    let m = 1.0 / stage["b"][1][0].as_f64().unwrap();
-    let wc = 2.0 * PI * 80.0;
-    let kd = m * wc / 1.054;
-    let kp = kd * wc / 3.0;
-    let ki = kp * wc / 10.0;
-    let mut stage = stage.clone();
-    stage["name"] = "stage".into();
-    GraphSpec::from_yaml(
-        &format!(
-            "title: PID loop\nbase_rate_hz: {}\nduration_s: 3.0\nblocks:\n  - {{ name: ref, {reference} }}\n  - {{ name: err, type: sum, signs: \"+-\" }}\n  - {{ name: pid, type: pid, kp: {kp:?}, ki: {ki:?}, kd: {kd:?}, derivative_cutoff_hz: 400.0 }}\n  - {stage}\nconnections:\n  - {{ from: ref.y, to: err.in0 }}\n  - {{ from: stage.y, to: err.in1 }}\n  - {{ from: err.y, to: pid.e }}\n  - {{ from: pid.u, to: stage.u }}\nscore:\n  - {{ signal: err.y, from_s: 1.5 }}\n",
-            generate::RATE_HZ
-        ),
-        "controller.yaml",
-    )
-    .unwrap()
+    support::pid_loop(stage, 80.0, reference, (3.0, 1.5), "")
 }
 
 /// Diagnose a generated record with `hidden`, then compensate the PID loop.

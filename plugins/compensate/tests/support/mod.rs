@@ -92,3 +92,34 @@ pub fn compensate_named(
     );
     out
 }
+
+/// The PID loop around `stage` (the nominal's state-space block, as JSON) at
+/// the generator's rate: a crossover near `fc` Hz on the mass line
+/// (k_d = mω_c/1.054, k_p = k_dω_c/3, k_i = k_pω_c/10), the derivative
+/// filtered at 5 f_c, the reference block `reference` (a block map without
+/// its name), `duration_s` long, scored from `from_s`; `extra` is appended
+/// (e.g. a `require:` section).
+pub fn pid_loop(
+    stage: &serde_json::Value,
+    fc: f64,
+    reference: &str,
+    (duration_s, from_s): (f64, f64),
+    extra: &str,
+) -> GraphSpec {
+    let m = 1.0 / stage["b"][1][0].as_f64().unwrap();
+    let wc = 2.0 * std::f64::consts::PI * fc;
+    let kd = m * wc / 1.054;
+    let kp = kd * wc / 3.0;
+    let ki = kp * wc / 10.0;
+    let mut stage = stage.clone();
+    stage["name"] = "stage".into();
+    GraphSpec::from_yaml(
+        &format!(
+            "title: PID loop\nbase_rate_hz: {}\nduration_s: {duration_s:?}\nblocks:\n  - {{ name: ref, {reference} }}\n  - {{ name: err, type: sum, signs: \"+-\" }}\n  - {{ name: pid, type: pid, kp: {kp:?}, ki: {ki:?}, kd: {kd:?}, derivative_cutoff_hz: {:?} }}\n  - {stage}\nconnections:\n  - {{ from: ref.y, to: err.in0 }}\n  - {{ from: stage.y, to: err.in1 }}\n  - {{ from: err.y, to: pid.e }}\n  - {{ from: pid.u, to: stage.u }}\nscore:\n  - {{ signal: err.y, from_s: {from_s:?} }}\n{extra}",
+            nanomotion_plf::generate::RATE_HZ,
+            5.0 * fc
+        ),
+        "controller.yaml",
+    )
+    .unwrap()
+}
