@@ -13,7 +13,7 @@
 //! | `axis_coupling` (on the measurement) | static decoupling −c | `axis_coupling` | in the measurement path |
 //! | `backlash` (on the drive) | its inverse: ± half the play by the direction | `backlash_inverse` | before the actuator |
 //! | `creep` (on the drive) | its exact discrete inverse (creep feed-forward) | `state_space` | before the actuator |
-//! | `saturation` (on the drive), driven by a core `pid`/`pi` | anti-windup: the fitted limits as that controller's output limits, clamping | none inserted: your `pid` changed | the controller itself |
+//! | `saturation` (on the drive), driven by a core `pid`/`pi` (directly or through a scalar `gain` k) | anti-windup: the fitted limits (÷ k) as that controller's output limits, clamping | none inserted: your `pid` changed | the controller itself |
 //! | `time_delay`, the scored error driving a core `pid`/`pi` | re-tune ([`delay`]): the crossover lowered by β (zero/pole ratios kept, gain placing it at β·f_c) to the largest β whose loop *with the fitted delay* the gate finds stable with a phase margin ≥ max(yours − 5°, `require:`) | none inserted: your `pid` changed | the controller itself |
 //! | `time_delay`, another controller | none: the phase 360°·f_c·d it takes, the fix (a core `pid`/`pi`, or the crossover by hand); a Smith predictor is a note | — | — |
 //! | the rest | none; the report says what it limits | — | — |
@@ -623,7 +623,8 @@ fn static_feedforward(
 }
 
 /// Anti-windup for a saturation on the drive into `to`: when the block driving
-/// `to` is a core `pid` or `pi`, that controller itself gets the fitted limits
+/// `to` is a core `pid` or `pi` (directly, or through a scalar `gain` k: the
+/// limits ÷ k), that controller itself gets the fitted limits
 /// as its output limits (intersected with any it has) and clamping
 /// (conditional integration), or keeps back-calculation if it already uses it;
 /// no block is inserted. Otherwise (or when it already limits itself within the
@@ -663,10 +664,35 @@ fn anti_windup(
         ("clipped_share", share.unwrap_or(f64::NAN)),
         ("clipped_share_run", run_share.unwrap_or(f64::NAN)),
     ];
-    let driver = source_of(controller, to).map(|s| split(s).0.to_string());
-    let found = driver
-        .as_deref()
-        .and_then(|d| controller.blocks.iter().find(|b| b.name == d));
+    let driver_of = |input: &str| {
+        source_of(controller, input)
+            .map(|s| split(s).0.to_string())
+            .and_then(|d| controller.blocks.iter().find(|b| b.name == d))
+    };
+    let mut found = driver_of(to);
+    // A static gain k between the controller and the limited input (an
+    // amplifier, a unit conversion): the controller's output is limited to
+    // the fitted limits divided by k (their order swapped when k < 0).
+    let mut through: Option<(String, f64)> = None;
+    if let Some(g) = found
+        && let json = surgery::block_to_json(g.block.as_ref())
+        && json.get("type").and_then(Value::as_str) == Some("gain")
+        && let Some(k) = json.get("k").and_then(Value::as_f64)
+        && k.is_finite()
+        && k != 0.0
+        && json.get("width").and_then(Value::as_u64).unwrap_or(1) == 1
+    {
+        through = Some((g.name.clone(), k));
+        found = driver_of(&format!("{}.u", g.name));
+    }
+    let (lo, hi) = match &through {
+        Some((_, k)) if *k > 0.0 => (lo / k, hi / k),
+        Some((_, k)) => (hi / k, lo / k),
+        None => (lo, hi),
+    };
+    let via = through.as_ref().map_or(String::new(), |(g, k)| {
+        format!(" through the gain `{g}` (k = {k:?})")
+    });
     let Some(spec) = found else {
         return Ok(none(
             &e.effect,
@@ -683,7 +709,7 @@ fn anti_windup(
         return Ok(none(
             &e.effect,
             format!(
-                "no compensator: anti-windup needs the controller to know the limits, and `{to}` is driven by `{b}`, a `{ty}` block, which has no output limits. Fix: if `{b}` is a PID or PI, write it as a core `pid` (kp, ki, kd, derivative_cutoff_hz) or `pi` block driving `{to}` directly, and `nanomotion compensate` gives it `output_min: {lo:?}`, `output_max: {hi:?}` with `anti_windup: clamping` and validates it; otherwise keep its reference moves within what [{lo:.4e}, {hi:.4e}] can follow ({asks})"
+                "no compensator: anti-windup needs the controller to know the limits, and `{to}` is driven{via} by `{b}`, a `{ty}` block, which has no output limits. Fix: if `{b}` is a PID or PI, write it as a core `pid` (kp, ki, kd, derivative_cutoff_hz) or `pi` block driving `{to}` directly, and `nanomotion compensate` gives it `output_min: {lo:?}`, `output_max: {hi:?}` with `anti_windup: clamping` and validates it; otherwise keep its reference moves within what [{lo:.4e}, {hi:.4e}] can follow ({asks})"
             ),
             &figures,
         ));
@@ -733,8 +759,9 @@ fn anti_windup(
     block["output_max"] = json!(new_hi);
     block["anti_windup"] = json!(scheme);
     let mut design = vec![
-        ("lower", lo),
-        ("upper", hi),
+        ("lower", num(params, "lower")),
+        ("upper", num(params, "upper")),
+        ("gain_between", through.as_ref().map_or(f64::NAN, |t| t.1)),
         ("output_min", new_lo),
         ("output_max", new_hi),
         ("clipped_share", share.unwrap_or(f64::NAN)),
@@ -751,10 +778,15 @@ fn anti_windup(
         name: b.clone(),
         block,
         why: format!(
-            "anti-windup: no block inserted; your `{ty}` `{b}` is given the fitted saturation's limits as its output limits with {how}, so its integrator stops winding up on the error the actuator cannot act on"
+            "anti-windup: no block inserted; your `{ty}` `{b}` is given the fitted saturation's limits{} as its output limits with {how}, so its integrator stops winding up on the error the actuator cannot act on",
+            if via.is_empty() {
+                String::new()
+            } else {
+                format!(" divided by the gain between them{via}")
+            }
         ),
         place: format!(
-            "the controller `{b}` itself (output_min, output_max, anti_windup), which drives {to}"
+            "the controller `{b}` itself (output_min, output_max, anti_windup), which drives {to}{via}"
         ),
         design: design.iter().map(|(k, v)| (k.to_string(), *v)).collect(),
         note: Some(format!(

@@ -60,6 +60,12 @@ fn augmented() -> GraphSpec {
 /// `saturation`, the fitted limits on the drive as well (the plant as
 /// diagnosed, built by hand).
 fn closed_loop(ctl: &str, saturation: bool) -> GraphSpec {
+    closed_loop_through(ctl, saturation, None)
+}
+
+/// [`closed_loop`] with, when `amplifier` is `Some(k)`, a `gain` block `amp`
+/// of gain k between the controller and the drive.
+fn closed_loop_through(ctl: &str, saturation: bool, amplifier: Option<f64>) -> GraphSpec {
     let (name, rest) = ctl.split_once(',').unwrap();
     let name = name.trim();
     let (input, output) = if rest.contains("type: pid") {
@@ -67,19 +73,22 @@ fn closed_loop(ctl: &str, saturation: bool) -> GraphSpec {
     } else {
         ("u", "y")
     };
-    let drive = if saturation {
-        format!("  - {{ from: {name}.{output}, to: sat.u }}\n  - {{ from: sat.y, to: stage.u }}\n")
-    } else {
-        format!("  - {{ from: {name}.{output}, to: stage.u }}\n")
-    };
-    let sat = if saturation {
-        format!(
+    let (mut sat, mut source) = (String::new(), format!("{name}.{output}"));
+    let mut drive = String::new();
+    if let Some(k) = amplifier {
+        sat += &format!("  - {{ name: amp, type: gain, k: {k:?} }}\n");
+        drive += &format!("  - {{ from: {source}, to: amp.u }}\n");
+        source = "amp.y".into();
+    }
+    if saturation {
+        sat += &format!(
             "  - {{ name: sat, type: saturation, lower: {:?}, upper: {U:?} }}\n",
             -U
-        )
-    } else {
-        String::new()
-    };
+        );
+        drive += &format!("  - {{ from: {source}, to: sat.u }}\n");
+        source = "sat.y".into();
+    }
+    drive += &format!("  - {{ from: {source}, to: stage.u }}\n");
     GraphSpec::from_yaml(
         &format!(
             "base_rate_hz: {RATE}\nduration_s: {DURATION}\nblocks:\n  - {{ name: ref, type: step, time_s: {:?}, initial: 0.0, final: {R:?} }}\n  - {{ name: err, type: sum, signs: \"+-\" }}\n  - {{ name: {name},{rest} }}\n  - {{ name: stage, type: state_space, a: [[0.0]], b: [[1.0]], c: [[1.0]], discretisation: zoh }}\n{sat}connections:\n  - {{ from: ref.y, to: err.in0 }}\n  - {{ from: stage.y, to: err.in1 }}\n  - {{ from: err.y, to: {name}.{input} }}\n{drive}score:\n  - {{ signal: err.y, from_s: {:?} }}\n",
@@ -164,18 +173,24 @@ fn a_pid_winding_up_against_the_saturation_gets_the_limits_and_clamping() {
         rms(&after)
     );
 
-    // The invariants (module docs), from the closed forms.
+    windup_invariants(r, &before, &after);
+}
+
+/// The invariants of the module docs, from the closed forms, on the report
+/// `r` and the scored windows `before` and `after` of its loops.
+fn windup_invariants(r: &nanomotion_compensate::Report, before: &[f64], after: &[f64]) {
+    let close = |a: f64, b: f64| (a - b).abs() <= 1e-12 * b.abs();
     let j1 = j1() as f64;
     let s = j1 * R - T * U * j1 * (j1 - 1.0) / 2.0;
     let e0 = R - j1 * T * U;
     let n = before.len() as f64;
     let sum = |x: &[f64]| x.iter().sum::<f64>();
     assert!(
-        (sum(&before) + s).abs() < 0.01 * s,
+        (sum(before) + s).abs() < 0.01 * s,
         "{} vs −{s}",
-        sum(&before)
+        sum(before)
     );
-    assert!(sum(&after).abs() < 0.01 * s, "{}", sum(&after));
+    assert!(sum(after).abs() < 0.01 * s, "{}", sum(after));
     assert!((after[0] - e0).abs() < 1e-12, "{} {e0}", after[0]);
     assert!(r.after.max_abs <= e0 + 1e-12, "{} > {e0}", r.after.max_abs);
     let floor = 0.99 * s / n;
@@ -196,6 +211,61 @@ fn a_pid_winding_up_against_the_saturation_gets_the_limits_and_clamping() {
         "rms {:.4e} -> {:.4e} ({:.1} % cut; at least {least:.1} %: S = {s}, N = {n}, e0 = {e0})",
         r.before.rms, r.after.rms, r.cut_percent
     );
+}
+
+#[test]
+fn through_a_gain_the_pid_gets_the_limits_divided_by_it() {
+    // An amplifier of gain K = −2 between the PI and the limited drive, the
+    // PI's gains divided by K: the same loop as above. The PI's limits must
+    // be the drive's ±U divided by K, their order swapped (unswapped they
+    // would cross), and the windup figures are those of the direct loop.
+    const K: f64 = -2.0;
+    let ctl = |limits: bool| {
+        let mut s = format!("pid, type: pid, kp: {:?}, ki: {:?}", KP / K, KI / K);
+        if limits {
+            s += &format!(
+                ", output_min: {:?}, output_max: {:?}, anti_windup: clamping",
+                U / K,
+                -U / K
+            );
+        }
+        s
+    };
+    let aug = augmented();
+    let out = compensate(
+        &aug,
+        &closed_loop_through(&ctl(false), false, Some(K)),
+        &named::from_graph(&aug),
+        &Options::default(),
+    )
+    .unwrap();
+    let r = &out.report;
+    eprintln!("{}", serde_json::to_string_pretty(r).unwrap());
+    let c = &r.compensators[0];
+    assert_eq!((c.effect.as_str(), c.block.as_str()), ("saturation", "pid"));
+    assert!(c.place.contains("through the gain `amp`"), "{}", c.place);
+    assert_eq!(c.design["gain_between"], K);
+    assert_eq!(
+        (c.design["output_min"], c.design["output_max"]),
+        (U / K, -U / K)
+    );
+    assert!(c.kept && r.gate.passes, "{r:?}");
+    let before = window(&closed_loop_through(&ctl(false), true, Some(K)));
+    let after = window(&closed_loop_through(&ctl(true), true, Some(K)));
+    let close = |a: f64, b: f64| (a - b).abs() <= 1e-12 * b.abs();
+    assert!(
+        close(r.before.rms, rms(&before)),
+        "{} {}",
+        r.before.rms,
+        rms(&before)
+    );
+    assert!(
+        close(r.after.rms, rms(&after)),
+        "{} {}",
+        r.after.rms,
+        rms(&after)
+    );
+    windup_invariants(r, &before, &after);
 }
 
 #[test]
