@@ -14,7 +14,8 @@
 //!    it has one: the inverse hysteresis feed-forward (6.6) before the actuator
 //!    (the exact Lambert-W inverse of the fitted Coleman–Hodgdon loop,
 //!    [`inverse`], fed with the reference through the nominal's static gain and
-//!    the feedback); standard repetitive control (5.1) — or delay-varying RC
+//!    the feedback) — for a Bouc–Wen loop on the drive its exact inverse
+//!    ([`bouc_wen`]); standard repetitive control (5.1) — or delay-varying RC
 //!    (5.7)–(5.8) for a disturbance periodic in the position — with L =
 //!    ZPETC(T) of the loop's own T and the FIR Q of the largest cut-off that
 //!    keeps (5.5)/(5.9), the criterion reported; friction (and a hysteretic
@@ -45,11 +46,13 @@
 //! branch inverse, dvrc's RC, Q design and criterion).
 
 pub mod backlash;
+pub mod bouc_wen;
 pub mod inverse;
 pub mod named;
 pub mod synth;
 
 pub use backlash::BacklashInverse;
+pub use bouc_wen::BoucWenInverse;
 pub use inverse::HysteresisInverse;
 pub use named::NamedEffect;
 

@@ -364,6 +364,38 @@ pub(crate) fn synthesise(
                 Edit::Before { to: to.clone(), ff },
             )
         }
+        ("hysteresis", Where::Input { to }) if ty == "bouc_wen" => {
+            let inv = crate::BoucWenInverse::new(
+                num(params, "a"),
+                num(params, "beta"),
+                num(params, "gamma"),
+                num(params, "linear"),
+            );
+            let design = [
+                ("a", inv.a),
+                ("beta", inv.beta),
+                ("gamma", inv.gamma),
+                ("linear", inv.linear),
+            ];
+            match inv.slope_bounds() {
+                Ok((m, big_m)) => make(
+                    json!({"type": "bouc_wen_inverse", "a": inv.a, "beta": inv.beta, "gamma": inv.gamma, "linear": inv.linear}),
+                    "inverse Bouc–Wen feed-forward: for each drive the controller asks for, the input that makes the fitted Bouc–Wen loop give it (its exact per-sample integration inverted by bisection), before the actuator",
+                    format!("before the actuator, on the connection into {to}"),
+                    &[&design[..], &[("slope_min", m), ("slope_max", big_m)]].concat(),
+                    Some("no reference feed-forward: the inverse linearises the actuator for the feedback".into()),
+                    Edit::Before {
+                        to: to.clone(),
+                        ff: None,
+                    },
+                ),
+                Err(why) => none(
+                    &e.effect,
+                    format!("no compensator: the fitted Bouc–Wen loop on the drive has no inverse: {why}"),
+                    &design,
+                ),
+            }
+        }
         ("hysteresis", Where::Feedback { to, .. }) => {
             // A hysteretic restoring force of the position (Bouc–Wen or
             // Coleman–Hodgdon inside the loop): the fitted force at the
@@ -384,7 +416,7 @@ pub(crate) fn synthesise(
         ("hysteresis", _) => none(
             &e.effect,
             format!(
-                "no compensator in this version for a `{ty}` hysteresis {}: the inverse is synthesised for a Coleman–Hodgdon loop on the drive",
+                "no compensator in this version for a `{ty}` hysteresis {}: the inverse is synthesised for a Coleman–Hodgdon or Bouc–Wen loop on the drive",
                 if matches!(placement.place, Where::Input { .. }) {
                     "on the drive"
                 } else {
