@@ -97,24 +97,17 @@ mod tests {
     /// fits), for a wanted output with reversals and holds.
     #[test]
     fn the_inverse_cancels_the_play() {
-        let ctx = BuildContext::new("b", 1e-3, 0);
-        let mut inv = BacklashInverse::new(0.4);
-        inv.build(&ctx).unwrap();
-        let mut play = Backlash::new(0.4);
-        play.build(&ctx).unwrap();
-        let mut worst: f64 = 0.0;
-        for k in 0..5000u64 {
-            let t = k as f64 * 1e-3;
-            let w = (2.0 * std::f64::consts::PI * 0.7 * t)
-                .sin()
-                .clamp(-0.8, 0.8)
-                + 0.2 * (2.0 * std::f64::consts::PI * 3.1 * t).sin();
-            let mut u = [0.0];
-            inv.output(Tick::new(k, 1e-3), &[w], &mut u);
-            let mut y = [0.0];
-            play.output(Tick::new(k, 1e-3), &u, &mut y);
-            worst = worst.max((y[0] - w).abs());
-        }
+        let worst = crate::worst_of_pair(
+            &mut BacklashInverse::new(0.4),
+            &mut Backlash::new(0.4),
+            5000,
+            |_, t| {
+                (2.0 * std::f64::consts::PI * 0.7 * t)
+                    .sin()
+                    .clamp(-0.8, 0.8)
+                    + 0.2 * (2.0 * std::f64::consts::PI * 3.1 * t).sin()
+            },
+        );
         assert!(worst < 1e-12, "{worst:e}");
     }
 

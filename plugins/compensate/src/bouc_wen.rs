@@ -194,33 +194,26 @@ mod tests {
     /// both signs of γ and both signs of a.
     #[test]
     fn the_inverse_cancels_the_loop() {
-        let ctx = BuildContext::new("b", 1e-3, 0);
         for (a, beta, gamma, linear) in [
             (0.5, 4.0, 1.0, 0.5),
             (0.8, 15.0, -3.0, 0.3),
             (-0.2, 2.0, 0.5, 1.0),
         ] {
-            let mut inv = BoucWenInverse::new(a, beta, gamma, linear);
-            inv.build(&ctx).unwrap();
             let mut op = BoucWen::new(a, beta, gamma);
             op.linear = linear;
-            op.build(&ctx).unwrap();
-            let mut worst: f64 = 0.0;
-            for k in 0..6000u64 {
-                let t = k as f64 * 1e-3;
-                let w = 0.3
-                    + 0.6
+            let worst = crate::worst_of_pair(
+                &mut BoucWenInverse::new(a, beta, gamma, linear),
+                &mut op,
+                6000,
+                |k, t| {
+                    0.3 + 0.6
                         * (2.0 * std::f64::consts::PI * 0.7 * t)
                             .sin()
                             .clamp(-0.8, 0.8)
-                    + 0.15 * (2.0 * std::f64::consts::PI * 4.3 * t).sin()
-                    + if k % 1500 < 40 { 0.2 } else { 0.0 };
-                let mut u = [0.0];
-                inv.output(Tick::new(k, 1e-3), &[w], &mut u);
-                let mut y = [0.0];
-                op.output(Tick::new(k, 1e-3), &u, &mut y);
-                worst = worst.max((y[0] - w).abs());
-            }
+                        + 0.15 * (2.0 * std::f64::consts::PI * 4.3 * t).sin()
+                        + if k % 1500 < 40 { 0.2 } else { 0.0 }
+                },
+            );
             assert!(worst < 1e-12, "({a}, {beta}, {gamma}, {linear}): {worst:e}");
         }
     }

@@ -687,3 +687,28 @@ pub(crate) fn connect(spec: &mut GraphSpec, from: String, to: String) {
 // Blocks the compensators name by `type:` (gain scheduling) register through
 // the linker: reference the crate so they are never missing.
 use gain_scheduling as _;
+
+/// For the inverse blocks' tests: the largest |op(inv(w_k)) − w_k| over
+/// k < `n` samples at 1 kHz, `inv` feeding `op` sample by sample (both built).
+#[cfg(test)]
+pub(crate) fn worst_of_pair(
+    inv: &mut dyn nanomotion_core::Block,
+    op: &mut dyn nanomotion_core::Block,
+    n: u64,
+    w: impl Fn(u64, f64) -> f64,
+) -> f64 {
+    use nanomotion_core::{BuildContext, Tick};
+    let ctx = BuildContext::new("b", 1e-3, 0);
+    inv.build(&ctx).unwrap();
+    op.build(&ctx).unwrap();
+    let mut worst: f64 = 0.0;
+    for k in 0..n {
+        let w = w(k, k as f64 * 1e-3);
+        let mut u = [0.0];
+        inv.output(Tick::new(k, 1e-3), &[w], &mut u);
+        let mut y = [0.0];
+        op.output(Tick::new(k, 1e-3), &u, &mut y);
+        worst = worst.max((y[0] - w).abs());
+    }
+    worst
+}
