@@ -913,14 +913,18 @@ fn the_graph_sets_the_overrun_policy_and_limit_and_a_bad_value_is_named() {
         }
     );
     // Run with the graph's settings: catch-up (no tick missed) and a limit of
-    // one overrun, so the second injected overrun (tick 120) stops the loop.
+    // one overrun, so the second overrun stops the loop — the injected one at
+    // tick 120, or earlier when the machine itself made a tick late (a VM
+    // stall of several ms under load happens here: CI once stopped at tick 59
+    // with 2 overruns), never later.
     let (sched, _) = spec.build().unwrap();
     let cfg = config(OverrunPolicy::Skip).with_settings(settings);
     let mut r =
         RealtimeRunner::new(sched, TestDevice::new(400, &[50, 120, 300], SLEEP_NS), cfg).unwrap();
     let rep = r.run(|_| {}).unwrap();
     assert_eq!(rep.stopped, Stop::MaxOverruns);
-    assert_eq!((rep.overruns, rep.ticks, rep.missed_ticks), (2, 121, 0));
+    assert_eq!((rep.overruns, rep.missed_ticks), (2, 0));
+    assert!(rep.ticks <= 121, "{} ticks", rep.ticks);
     assert_eq!(
         (rep.overrun_policy, rep.max_overruns),
         ("catch-up", Some(1))
