@@ -4,6 +4,7 @@
 //! | effect | compensator | block | place |
 //! |---|---|---|---|
 //! | `hysteresis` (Coleman–Hodgdon on the drive) | inverse feed-forward (6.6): H⁻¹(r/G₀ + feedback), Lambert W | `hysteresis_inverse` (+ `position_feedforward`) | before the actuator |
+//! | `hysteresis` (Bouc–Wen on the drive) | its exact inverse: the drive giving each wanted output, by bisection on the operator's exact step ([`crate::bouc_wen`]); none where its slope can reach 0 | `bouc_wen_inverse` | before the actuator |
 //! | `repetitive_disturbance` periodic in time | standard RC (5.1), L = ZPETC(T), FIR Q of the largest cut-off keeping (5.5) | `repetitive_control` | on the error before the controller (Fig. 5.1) |
 //! | `repetitive_disturbance` periodic in a signal | delay-varying RC (5.7)–(5.8), α = the signal, [m, M] from the loop's motion, (5.9) | `dvrc` | as RC, `alpha` ← the signal |
 //! | `friction` | the fitted friction of the reference's velocity, subtracted | `friction` | added at the plant input |
