@@ -4,7 +4,7 @@
 //! quotes its output:
 //!
 //! ```text
-//! cargo run --release -p nanomotion-plf --example scenarios -- [COUNT] [--from SEED] [--tune] [--hidden EFFECT] [--csv FILE] [--visibility-only | --labels-only]
+//! cargo run --release -p nanomotion-plf --example scenarios -- [COUNT] [--from SEED] [--tune] [--hidden EFFECT] [--csv FILE] [--reports DIR] [--visibility-only | --labels-only]
 //! ```
 //!
 //! COUNT held-out records (default 300) from seed 0 on (`--from SEED`: from
@@ -33,12 +33,13 @@ use std::io::Write as _;
 use std::time::Instant;
 
 /// The usage line of the module doc, printed for `--help` and an unknown option.
-const USAGE: &str = "usage: scenarios [COUNT] [--from SEED] [--tune] [--hidden EFFECT] [--csv FILE] [--visibility-only | --labels-only]
+const USAGE: &str = "usage: scenarios [COUNT] [--from SEED] [--tune] [--hidden EFFECT] [--csv FILE] [--reports DIR] [--visibility-only | --labels-only]
   COUNT         records to diagnose (default 300), held-out families unless --tune
   --from SEED   start at this seed (records no change has been looked at yet)
   --tune        the tuning split instead (the only records the workflow may be tuned on)
   --hidden E    only records hiding effect E (`none`: the effect-free ones)
   --csv FILE    one row per record
+  --reports DIR each record's labels and diagnosis report as DIR/seed_SEED.json
   --visibility-only, --labels-only   diagnose nothing: print seed,visibility or seed,hidden,family";
 
 #[derive(Default)]
@@ -61,6 +62,7 @@ fn main() {
         "--hidden",
         "--csv",
         "--from",
+        "--reports",
     ];
     if let Some(a) = args
         .iter()
@@ -80,6 +82,16 @@ fn main() {
         .iter()
         .position(|a| a == "--csv")
         .and_then(|i| args.get(i + 1).cloned());
+    let reports_dir = args
+        .iter()
+        .position(|a| a == "--reports")
+        .and_then(|i| args.get(i + 1).map(std::path::PathBuf::from));
+    if let Some(d) = &reports_dir
+        && let Err(e) = std::fs::create_dir_all(d)
+    {
+        eprintln!("--reports {}: {e}", d.display());
+        std::process::exit(2);
+    }
     let first_seed: u64 = args
         .iter()
         .position(|a| a == "--from")
@@ -89,7 +101,13 @@ fn main() {
     let count: usize = args
         .iter()
         .enumerate()
-        .find(|(i, _)| *i == 0 || !matches!(args[i - 1].as_str(), "--csv" | "--hidden" | "--from"))
+        .find(|(i, _)| {
+            *i == 0
+                || !matches!(
+                    args[i - 1].as_str(),
+                    "--csv" | "--hidden" | "--from" | "--reports"
+                )
+        })
         .and_then(|(_, a)| a.parse().ok())
         .unwrap_or(300);
     let mut csv = String::from(
@@ -148,6 +166,9 @@ fn main() {
         let (found, cut, calibrated) = match diagnose(&spec, &s.record.data, &Options::default()) {
             Ok(r) => (
                 {
+                    if let Some(d) = &reports_dir {
+                        write_report(d, seed - 1, &hidden, &format!("{family:?}"), &r);
+                    }
                     for st in &r.steps {
                         steps_text += &format!(
                             " {}@{} {}{:.0}%{}",
@@ -316,5 +337,28 @@ fn main() {
     {
         eprintln!("error: cannot write {p}: {e}");
         std::process::exit(1);
+    }
+}
+
+/// `DIR/seed_SEED.json`: the record's labels and its whole diagnosis report
+/// (the CLI's report.json), for looking at what decided each step; written
+/// to a temporary file and renamed, so a file is whole or absent.
+fn write_report(
+    dir: &std::path::Path,
+    seed: u64,
+    hidden: &[&str],
+    family: &str,
+    report: &nanomotion_plf::diagnose::Report,
+) {
+    let path = dir.join(format!("seed_{seed}.json"));
+    let tmp = dir.join(format!(".seed_{seed}.json.tmp"));
+    let text =
+        serde_json::json!({"seed": seed, "hidden": hidden, "family": family, "report": report});
+    let done = serde_json::to_string_pretty(&text)
+        .map_err(|e| e.to_string())
+        .and_then(|t| std::fs::write(&tmp, t).map_err(|e| e.to_string()))
+        .and_then(|()| std::fs::rename(&tmp, &path).map_err(|e| e.to_string()));
+    if let Err(e) = done {
+        eprintln!("seed {seed}: report not written to {}: {e}", path.display());
     }
 }
