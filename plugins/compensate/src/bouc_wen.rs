@@ -15,7 +15,7 @@
 //! is the identity to rounding (tested). A loop whose slope can reach 0 (a
 //! saturating loop with no linear part) has no inverse: refused at build.
 
-use nanomotion_core::block::{Linearisation, check};
+use nanomotion_core::block::Linearisation;
 use nanomotion_core::lti::StateSpace;
 use nanomotion_core::{Block, BuildContext, ParamError, Params, Port, Role, Tick};
 use nanomotion_plf::effects::BoucWen;
@@ -151,7 +151,6 @@ impl Block for BoucWenInverse {
     }
     fn build(&mut self, _ctx: &BuildContext) -> Result<(), ParamError> {
         self.check_params()?;
-        check::finite("linear", self.linear)?;
         self.slopes = self.slope_bounds().map_err(|why| {
             ParamError::new(
                 "linear",

@@ -8,7 +8,8 @@
 //! user's loop does on the nominal stage — a figure computed without the
 //! effect, not taken from the code under test.
 
-use nanomotion_compensate::{Options, compensate, named};
+mod support;
+
 use nanomotion_core::graph::GraphSpec;
 use nanomotion_plf::surgery;
 
@@ -69,15 +70,8 @@ fn score_rms(spec: &GraphSpec) -> f64 {
 #[test]
 fn a_bouc_wen_loop_on_the_drive_is_cancelled_by_its_inverse() {
     let aug = augmented();
-    let out = compensate(
-        &aug,
-        &closed_loop(false),
-        &named::from_graph(&aug),
-        &Options::default(),
-    )
-    .unwrap();
+    let out = support::compensate_augmented(&aug, &closed_loop(false));
     let r = &out.report;
-    eprintln!("{}", serde_json::to_string_pretty(r).unwrap());
     let c = &r.compensators[0];
     assert_eq!(c.effect, "hysteresis");
     assert_eq!(c.type_name, "bouc_wen_inverse");
@@ -124,13 +118,7 @@ fn a_loop_without_a_linear_part_gets_no_inverse_and_says_why() {
         t
     };
     let aug = GraphSpec::from_yaml(&text, "model_augmented.yaml").unwrap();
-    let out = compensate(
-        &aug,
-        &closed_loop(false),
-        &named::from_graph(&aug),
-        &Options::default(),
-    )
-    .unwrap();
+    let out = support::compensate_augmented(&aug, &closed_loop(false));
     let r = &out.report;
     assert!(
         r.compensators.is_empty() || r.compensators.iter().all(|c| !c.kept),

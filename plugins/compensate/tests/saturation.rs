@@ -19,7 +19,8 @@
 //!
 //! So the rms cut is at least 1 − e₀/(S/N), computed below.
 
-use nanomotion_compensate::{Options, compensate, named};
+mod support;
+
 use nanomotion_core::graph::GraphSpec;
 use nanomotion_plf::surgery;
 use serde_json::Value;
@@ -126,15 +127,8 @@ fn rms(x: &[f64]) -> f64 {
 #[test]
 fn a_pid_winding_up_against_the_saturation_gets_the_limits_and_clamping() {
     let aug = augmented();
-    let out = compensate(
-        &aug,
-        &closed_loop(&pid(false), false),
-        &named::from_graph(&aug),
-        &Options::default(),
-    )
-    .unwrap();
+    let out = support::compensate_augmented(&aug, &closed_loop(&pid(false), false));
     let r = &out.report;
-    eprintln!("{}", serde_json::to_string_pretty(r).unwrap());
     let c = &r.compensators[0];
     assert_eq!((c.effect.as_str(), c.block.as_str()), ("saturation", "pid"));
     assert_eq!(c.type_name, "pid");
@@ -232,15 +226,9 @@ fn through_a_gain_the_pid_gets_the_limits_divided_by_it() {
         s
     };
     let aug = augmented();
-    let out = compensate(
-        &aug,
-        &closed_loop_through(&ctl(false), false, Some(K)),
-        &named::from_graph(&aug),
-        &Options::default(),
-    )
-    .unwrap();
+    let out =
+        support::compensate_augmented(&aug, &closed_loop_through(&ctl(false), false, Some(K)));
     let r = &out.report;
-    eprintln!("{}", serde_json::to_string_pretty(r).unwrap());
     let c = &r.compensators[0];
     assert_eq!((c.effect.as_str(), c.block.as_str()), ("saturation", "pid"));
     assert!(c.place.contains("through the gain `amp`"), "{}", c.place);
@@ -265,7 +253,7 @@ fn a_transfer_function_controller_gets_no_compensator_and_the_fix() {
         ),
         false,
     );
-    let out = compensate(&aug, &ctl, &named::from_graph(&aug), &Options::default()).unwrap();
+    let out = support::compensate_augmented(&aug, &ctl);
     let r = &out.report;
     assert!(r.compensators.is_empty(), "{r:?}");
     let n = &r.not_compensated[0];
@@ -307,7 +295,7 @@ fn a_pid_already_limited_within_the_saturation_needs_nothing() {
         &format!("pid, type: pid, kp: {KP:?}, ki: {KI:?}, output_min: -0.5, output_max: 0.5"),
         false,
     );
-    let out = compensate(&aug, &ctl, &named::from_graph(&aug), &Options::default()).unwrap();
+    let out = support::compensate_augmented(&aug, &ctl);
     let n = &out.report.not_compensated[0];
     assert!(
         n.reason

@@ -123,3 +123,18 @@ pub fn pid_loop(
     )
     .unwrap()
 }
+
+/// Compensate in the user's loop `loop_` the effects of the augmented model
+/// `aug` found from its `plf_*` blocks (no report), with the default
+/// options, printing the report.
+pub fn compensate_augmented(aug: &GraphSpec, loop_: &GraphSpec) -> nanomotion_compensate::Outcome {
+    let out = nanomotion_compensate::compensate(
+        aug,
+        loop_,
+        &nanomotion_compensate::named::from_graph(aug),
+        &nanomotion_compensate::Options::default(),
+    )
+    .unwrap();
+    eprintln!("{}", serde_json::to_string_pretty(&out.report).unwrap());
+    out
+}
