@@ -22,7 +22,9 @@
 //!    restoring force) feed-forward from the reference; the exact inverses of
 //!    fitted creep and backlash ([`backlash`]); the inverse of a fitted
 //!    pole–zero pair (a notch); gain scheduling (2.13) on 1/g of a
-//!    position-dependent gain; static decoupling; anti-windup for a saturation
+//!    position-dependent gain; static decoupling; the slit-error correction
+//!    table of a diagnosed encoder (hots' `slit_correction`, ê = −e/pitch: each
+//!    reading back on its slit's centre); anti-windup for a saturation
 //!    on the drive of a core `pid`/`pi` (the controller itself gets the fitted
 //!    limits as its output limits, with clamping: no block is inserted); a
 //!    core `pid`/`pi` re-tuned for a fitted delay (its crossover lowered, the
@@ -43,7 +45,7 @@
 //!
 //! This crate is the one plugin allowed to depend on other plugins
 //! (docs/ARCHITECTURE.md): the compensators are theirs (afm-stage's Lambert-W
-//! branch inverse, dvrc's RC, Q design and criterion).
+//! branch inverse, dvrc's RC, Q design and criterion, hots' slit table).
 
 pub mod backlash;
 pub mod bouc_wen;

@@ -12,6 +12,7 @@
 //! | `unmodeled_resonance` | its inverse R⁻¹ (poles ↔ zeros): a notch | `unmodeled_resonance` | before the plant |
 //! | `position_dependent_gain` | gain scheduling (2.13) on 1/g(position) | `gain_scheduled` | before the plant |
 //! | `axis_coupling` (on the measurement) | static decoupling −c | `axis_coupling` | in the measurement path |
+//! | `encoder_slit_error` (on the measurement) | slit-error correction table (hots' calibration format): ê = −e/pitch, each reading put back on its slit's centre ([`slit_correction`]) | `slit_correction` | in the measurement path, after the reading |
 //! | `backlash` (on the drive) | its inverse: ± half the play by the direction | `backlash_inverse` | before the actuator |
 //! | `creep` (on the drive) | its exact discrete inverse (creep feed-forward) | `state_space` | before the actuator |
 //! | `saturation` (on the drive), driven by a core `pid`/`pi` (directly or through a scalar `gain` k) | anti-windup: the fitted limits (÷ k) as that controller's output limits, clamping | none inserted: your `pid` changed | the controller itself |
@@ -46,6 +47,10 @@ pub(crate) enum Edit {
     SubtractAt { to: String, reads: String },
     /// In the measurement path after `signal`; port `s` reads `s`.
     Sensor { signal: String, s: Vec<String> },
+    /// In the measurement path after the reading `signal` and after the
+    /// effect blocks chained on it in the validation loop (blocks not in the
+    /// user's graph): a correction of what they do to the reading.
+    Reading { signal: String },
     /// Learning on the error (Fig. 5.1): `e` ← error, error + `w` → `controller_input`;
     /// DVRC's `alpha` ← `alpha`.
     Learning {
@@ -231,6 +236,28 @@ impl Compensator {
                 if let Some(b) = spec.blocks.iter_mut().find(|b| b.name == sum) {
                     b.block = minus;
                 }
+            }
+            Edit::Reading { signal } => {
+                let mut at = signal.clone();
+                for _ in 0..32 {
+                    let readers: Vec<&str> = spec
+                        .connections
+                        .iter()
+                        .filter(|c| c.from == at)
+                        .map(|c| c.to.as_str())
+                        .collect();
+                    match readers.as_slice() {
+                        [one] if !crate::has_block(controller, split(one).0) => {
+                            at = format!("{}.y", split(one).0);
+                        }
+                        _ => break,
+                    }
+                }
+                let site = Site::Sensor {
+                    compare: 0,
+                    signal: at,
+                };
+                insert(spec, block, &site, &[])?;
             }
             Edit::Sensor { signal, s } => {
                 let site = Site::Sensor {
@@ -583,12 +610,20 @@ pub(crate) fn synthesise(
                 &[("lsb", lsb), ("rms_floor", lsb / 12f64.sqrt())],
             )
         }
+        ("encoder_slit_error", Where::Output { signal }) => {
+            slit_correction(e, params, signal, controller)?
+        }
+        ("encoder_slit_error", _) => none(
+            &e.effect,
+            "no compensator: the fitted slit errors are not on the measured position (a slit table corrects an encoder's reading)".into(),
+            &[],
+        ),
         ("time_delay", _) => delay::time_delay(e, params, placement, controller, info, opts)?,
         ("saturation", Where::Input { to }) => anti_windup(e, params, to, controller, info)?,
         (other, place) => none(
             other,
             format!(
-                "no compensator in this version for `{other}` {} (drift compensation and slit tables are not synthesised yet; creep, backlash and saturation are compensated on the drive only)",
+                "no compensator in this version for `{other}` {} (creep, backlash and saturation are compensated on the drive only)",
                 match place {
                     Where::Input { to } => format!("on the drive into {to}"),
                     Where::Feedback { to, .. } => format!("inside the loop at {to}"),
@@ -1283,5 +1318,97 @@ fn delay_varying(
         design,
         note: None,
         edit,
+    }))
+}
+
+/// The slit-error correction of a fitted `encoder_slit_error` (y = u + e[⌊(u −
+/// origin)/pitch⌋ mod N]) on the reading `signal`: hots' `slit_correction`
+/// with the table ê = −e/pitch in counts, Δ = pitch and count 0 read at slit
+/// 0's centre, origin + pitch/2 ([`hots::SlitCorrection::inverse_of_slit_errors`]).
+/// On a reading quantised to the slits' centres (a quantiser of lsb = pitch
+/// before the errors, as the diagnosis fits them) it gives back the quantised
+/// position exactly; the design figure `noise_margin` is how far a reading may
+/// move (noise) and still be put on its own slit: half the smallest |j + (e_k −
+/// e_{k−j})/pitch|·pitch over the slits k and the other counts j searched.
+fn slit_correction(
+    e: &crate::NamedEffect,
+    params: &Value,
+    signal: &str,
+    controller: &GraphSpec,
+) -> Result<Outcome, CompError> {
+    let design_err = |problem: String| CompError::Design {
+        effect: e.effect.clone(),
+        problem,
+    };
+    let (pitch, origin) = (num(params, "pitch"), num(params, "origin"));
+    let errors: Vec<f64> = params
+        .get("errors")
+        .and_then(Value::as_array)
+        .map(|v| v.iter().map(|x| x.as_f64().unwrap_or(f64::NAN)).collect())
+        .unwrap_or_default();
+    let mut block = hots::SlitCorrection::inverse_of_slit_errors(pitch, origin, &errors);
+    nanomotion_core::Block::build(
+        &mut block,
+        &nanomotion_core::BuildContext::new("comp_encoder_slit_error", 1.0, 0),
+    )
+    .map_err(|err| {
+        design_err(format!(
+            "the fitted slit errors (pitch {pitch:e}, origin {origin:e}, {} entries) give no table: {err}; give the model_augmented.yaml that `nanomotion diagnose` wrote",
+            errors.len()
+        ))
+    })?;
+    let n = errors.len() as i64;
+    let reach = errors.iter().fold(0.0f64, |m, x| m.max(x.abs())) / pitch;
+    let reach = 2 * (reach.ceil() as i64 + 1);
+    let mut closest = f64::INFINITY;
+    for k in 0..n {
+        for j in (-reach..=reach).filter(|&j| j != 0) {
+            let other = errors[(k - j).rem_euclid(n) as usize];
+            closest = closest.min((j as f64 + (errors[k as usize] - other) / pitch).abs());
+        }
+    }
+    let largest = errors.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+    // Exact where the reading before the errors is on the slits' centres.
+    let quantiser = controller
+        .blocks
+        .iter()
+        .find(|b| b.name == split(signal).0)
+        .map(|b| surgery::block_to_json(b.block.as_ref()))
+        .filter(|b| b.get("type").and_then(Value::as_str) == Some("quantizer"));
+    let on_centres = quantiser.is_some_and(|q| {
+        let lsb = num(&q, "lsb");
+        let offset = q.get("offset").and_then(Value::as_f64).unwrap_or(0.0);
+        let shift = (origin + 0.5 * pitch - offset) / pitch;
+        (lsb - pitch).abs() <= 1e-9 * pitch && (shift - shift.round()).abs() < 1e-9
+    });
+    let note = (!on_centres).then(|| {
+        format!(
+            "`{signal}` is not a quantiser of lsb {pitch:e} whose levels are the slits' centres: the table puts each reading on the nearest slit centre, exact only for positions on them"
+        )
+    });
+    Ok(Outcome::Compensator(Compensator {
+        effect: e.effect.clone(),
+        name: format!("comp_{}", e.effect),
+        block: json!({
+            "type": "slit_correction",
+            "resolution": block.resolution,
+            "zero": block.zero,
+            "edge_offsets_counts": block.edge_offsets_counts,
+        }),
+        why: "slit-error correction table (the hots calibration's per-edge table ê = −e/pitch, counts): each reading goes back to its slit's centre, so the loop acts on the position, not on the encoder's line errors".into(),
+        place: format!("in the measurement path after {signal}, before every reader"),
+        design: [
+            ("pitch", pitch),
+            ("slits", errors.len() as f64),
+            ("largest_error", largest),
+            ("noise_margin", 0.5 * closest * pitch),
+        ]
+        .iter()
+        .map(|(k, v)| (k.to_string(), *v))
+        .collect(),
+        note,
+        edit: Edit::Reading {
+            signal: signal.to_string(),
+        },
     }))
 }

@@ -13,6 +13,7 @@
 //! | error model: truncation bias² + variance of the LS fit for (m, n, σ), from slit-error statistics and the clock; optimiser over a grid | [`model`] | — |
 //! | slit-error calibration: per-edge table jointly with a smooth motion by LS, serde-storable | [`calibration`] | — |
 //! | estimator with a stored calibration (loaded from a JSON file or given inline) | [`HotsEstimator`] | `hots_estimator` |
+//! | the calibration's table on a position reading (the count nearest its corrected reading) | [`SlitCorrection`] | `slit_correction` |
 //! | simulation harness (brute-force check, Sec. 8.5) | [`sim`] | — |
 //!
 //! Examples: `cargo run --release -p nanomotion-hots --example sec8_5` reproduces
@@ -41,10 +42,12 @@
 //! ```
 
 pub mod calibration;
+pub mod correction;
 pub mod model;
 pub mod sim;
 
 pub use calibration::{CalibrationError, SlitCalibration};
+pub use correction::SlitCorrection;
 pub use model::{ErrorModel, Grid, MotionSample, Settings, Target};
 
 use nanomotion_core::Params;
@@ -144,37 +147,11 @@ impl HotsEstimator {
     /// Validate, read the calibration (a relative `calibration_file` resolves
     /// against the graph file's folder, `ctx.base_dir`) and build the estimator.
     fn prepare(&mut self, ctx: &BuildContext) -> Result<(), ParamError> {
-        let table = match &self.calibration_file {
-            Some(path) => {
-                if !self.edge_offsets_counts.is_empty() {
-                    return Err(ParamError::new(
-                        "calibration_file",
-                        "given together with edge_offsets_counts",
-                        "give one of calibration_file and edge_offsets_counts",
-                    ));
-                }
-                let resolved = ctx.resolve(path);
-                let text =
-                    nanomotion_core::graph::read_text_capped(&resolved, MAX_CALIBRATION_BYTES)
-                        .map_err(|e| {
-                            ParamError::new(
-                                "calibration_file",
-                                format!("cannot read `{}`: {e}", resolved.display()),
-                                "give the path of a JSON calibration, relative to the graph file's folder or absolute",
-                            )
-                        })?;
-                let cal: SlitCalibration = serde_json::from_str(&text).map_err(|e| {
-                    ParamError::new(
-                        "calibration_file",
-                        format!("`{path}` is not a calibration: {e}"),
-                        "write it with serde_json::to_string(&SlitCalibration)",
-                    )
-                })?;
-                cal.edge_offsets_counts
-            }
-            None => self.edge_offsets_counts.clone(),
-        };
-        check::all_finite("edge_offsets_counts", &table)?;
+        let table = calibration_table(
+            self.calibration_file.as_deref(),
+            &self.edge_offsets_counts,
+            ctx,
+        )?;
         let mut e = TimestampEstimator::new(self.order, self.register_len, self.resolution)?;
         e.band_counts = self.band_counts;
         e.fallback = self.fallback;
@@ -184,6 +161,48 @@ impl HotsEstimator {
         self.inner = Some(e);
         Ok(())
     }
+}
+
+/// The calibration table ê of a block: read from `calibration_file` (a JSON
+/// [`SlitCalibration`], relative to the graph file's folder, at most
+/// [`MAX_CALIBRATION_BYTES`]) or the inline `edge_offsets_counts` (not both),
+/// every entry finite.
+pub(crate) fn calibration_table(
+    calibration_file: Option<&str>,
+    edge_offsets_counts: &[f64],
+    ctx: &BuildContext,
+) -> Result<Vec<f64>, ParamError> {
+    let table = match calibration_file {
+        Some(path) => {
+            if !edge_offsets_counts.is_empty() {
+                return Err(ParamError::new(
+                    "calibration_file",
+                    "given together with edge_offsets_counts",
+                    "give one of calibration_file and edge_offsets_counts",
+                ));
+            }
+            let resolved = ctx.resolve(path);
+            let text = nanomotion_core::graph::read_text_capped(&resolved, MAX_CALIBRATION_BYTES)
+                .map_err(|e| {
+                    ParamError::new(
+                        "calibration_file",
+                        format!("cannot read `{}`: {e}", resolved.display()),
+                        "give the path of a JSON calibration, relative to the graph file's folder or absolute",
+                    )
+                })?;
+            let cal: SlitCalibration = serde_json::from_str(&text).map_err(|e| {
+                ParamError::new(
+                    "calibration_file",
+                    format!("`{path}` is not a calibration: {e}"),
+                    "write it with serde_json::to_string(&SlitCalibration)",
+                )
+            })?;
+            cal.edge_offsets_counts
+        }
+        None => edge_offsets_counts.to_vec(),
+    };
+    check::all_finite("edge_offsets_counts", &table)?;
+    Ok(table)
 }
 
 impl Estimator for HotsEstimator {
