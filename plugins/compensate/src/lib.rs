@@ -22,7 +22,8 @@
 //!    restoring force) feed-forward from the reference; the exact inverses of
 //!    fitted creep and backlash ([`backlash`]); the inverse of a fitted
 //!    pole–zero pair (a notch); gain scheduling (2.13) on 1/g of a
-//!    position-dependent gain; static decoupling; the slit-error correction
+//!    position-dependent gain; static decoupling; the offset of a drive fed
+//!    forward ([`offset`]); the slit-error correction
 //!    table of a diagnosed encoder (hots' `slit_correction`, ê = −e/pitch: each
 //!    reading back on its slit's centre); anti-windup for a saturation
 //!    on the drive of a core `pid`/`pi` (the controller itself gets the fitted
@@ -32,7 +33,8 @@
 //!    within its margin; no block is inserted); and for the rest a stated "no
 //!    compensation: this is what it limits" with its figure (a quantiser's
 //!    lsb/√12, a delay's phase at the crossover under another controller, how
-//!    often a saturation clips a controller that has no output limits);
+//!    often a saturation clips a controller that has no output limits, how
+//!    far a drift of the reading moves the stage over the scored window);
 //! 2. **validates** on the augmented model: the user's loop with the fitted
 //!    effects transplanted where the diagnosis put them (the plant as
 //!    diagnosed), simulated before, with each compensator alone and with all;
@@ -51,12 +53,14 @@ pub mod backlash;
 pub mod bouc_wen;
 pub mod inverse;
 pub mod named;
+pub mod offset;
 pub mod synth;
 
 pub use backlash::BacklashInverse;
 pub use bouc_wen::BoucWenInverse;
 pub use inverse::HysteresisInverse;
 pub use named::NamedEffect;
+pub use offset::DriveOffset;
 
 use named::{Where, locate, source_of, split};
 use nanomotion_core::graph::{Connection, GraphSpec};
@@ -343,14 +347,16 @@ pub fn compensate(
             note: match (helps, opts.keep) {
                 (true, _) => c.note.clone(),
                 (false, true) => Some(format!(
-                    "kept because of --keep although it does not cut the rms by {:.0} %",
-                    100.0 * opts.min_cut
+                    "kept because of --keep although it does not cut the rms by {:.0} %{}",
+                    100.0 * opts.min_cut,
+                    c.note.as_ref().map_or(String::new(), |n| format!("; {n}"))
                 )),
                 (false, false) => Some(format!(
-                    "dropped: alone it does not cut the rms by {:.0} % ({:.3e} -> {:.3e}); keep it with --keep",
+                    "dropped: alone it does not cut the rms by {:.0} % ({:.3e} -> {:.3e}); keep it with --keep{}",
                     100.0 * opts.min_cut,
                     before.stats.rms,
-                    t.stats.rms
+                    t.stats.rms,
+                    c.note.as_ref().map_or(String::new(), |n| format!("; {n}"))
                 )),
             },
         });

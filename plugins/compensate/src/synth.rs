@@ -16,6 +16,8 @@
 //! | `backlash` (on the drive) | its inverse: ± half the play by the direction | `backlash_inverse` | before the actuator |
 //! | `creep` (on the drive) | its exact discrete inverse (creep feed-forward) | `state_space` | before the actuator |
 //! | `saturation` (on the drive), driven by a core `pid`/`pi` (directly or through a scalar `gain` k) | anti-windup: the fitted limits (÷ k) as that controller's output limits, clamping | none inserted: your `pid` changed | the controller itself |
+//! | `drift` on the drive (a drive's zero that is off: the diagnosis fits its offset o) | offset feed-forward ([`drift_offset`]): −o added to the drive, the exact inverse; a fitted trend is not fed forward (a note with its rate) | `drive_offset` | before the actuator |
+//! | `drift` of the measured position (the sensor's zero moves) | none ([`drift_of_the_reading`]): feedback makes the reading follow the reference, so the stage moves by the drift; figures: its rate and its change over the scored window | — | — |
 //! | `time_delay`, the scored error driving a core `pid`/`pi` | re-tune ([`delay`]): the crossover lowered by β (zero/pole ratios kept, gain placing it at β·f_c) to the largest β whose loop *with the fitted delay* the gate finds stable with a phase margin ≥ max(yours − 5°, `require:`) | none inserted: your `pid` changed | the controller itself |
 //! | `time_delay`, another controller | none: the phase 360°·f_c·d it takes, the fix (a core `pid`/`pi`, or the crossover by hand); a Smith predictor is a note | — | — |
 //! | the rest | none; the report says what it limits | — | — |
@@ -618,6 +620,8 @@ pub(crate) fn synthesise(
             "no compensator: the fitted slit errors are not on the measured position (a slit table corrects an encoder's reading)".into(),
             &[],
         ),
+        ("drift", Where::Input { to }) => drift_offset(e, params, to, controller)?,
+        ("drift", Where::Output { signal }) => drift_of_the_reading(e, params, signal, controller, info)?,
         ("time_delay", _) => delay::time_delay(e, params, placement, controller, info, opts)?,
         ("saturation", Where::Input { to }) => anti_windup(e, params, to, controller, info)?,
         (other, place) => none(
@@ -1411,4 +1415,118 @@ fn slit_correction(
             signal: signal.to_string(),
         },
     }))
+}
+
+/// The fitted drift's (offset, rate, curvature) (`params`: the `drift`
+/// block), each finite, or why not.
+fn drift_terms(e: &crate::NamedEffect, params: &Value) -> Result<[f64; 3], CompError> {
+    let terms = ["offset", "rate", "curvature"].map(|k| num(params, k));
+    if terms.iter().all(|v| v.is_finite()) {
+        Ok(terms)
+    } else {
+        Err(CompError::Design {
+            effect: e.effect.clone(),
+            problem: format!(
+                "the fitted drift's offset, rate and curvature {terms:?} are not all finite: give the model_augmented.yaml that `nanomotion diagnose` wrote"
+            ),
+        })
+    }
+}
+
+/// A drift on the drive into `to` (an amplifier's zero that is off, a
+/// constant force): its offset o fed forward, −o added to the drive before
+/// the actuator ([`crate::DriveOffset`], so the pair is the identity to
+/// round-off). A fitted trend (rate, curvature) is the time since the
+/// record started, not of the next run: not fed forward, said in the note.
+/// Integral action of the controller driving `to` is noted: it removes the
+/// offset in steady state; the feed-forward removes it from the start.
+fn drift_offset(
+    e: &crate::NamedEffect,
+    params: &Value,
+    to: &str,
+    controller: &GraphSpec,
+) -> Result<Outcome, CompError> {
+    let [o, rate, curvature] = drift_terms(e, params)?;
+    if o == 0.0 {
+        return Ok(none(
+            &e.effect,
+            format!(
+                "no compensator: the fitted drift on the drive into {to} has no offset to feed forward (offset {o:e}); a drift of the drive that is a trend is followed by your loop's integral action with an error of about rate/k_i"
+            ),
+            &[("offset", o), ("rate", rate), ("curvature", curvature)],
+        ));
+    }
+    let driver = source_of(controller, to)
+        .map(|s| split(s).0)
+        .and_then(|d| controller.blocks.iter().find(|b| b.name == d))
+        .map(|b| (b.name.clone(), surgery::block_to_json(b.block.as_ref())));
+    let integral = driver.as_ref().and_then(|(name, b)| {
+        let ty = b.get("type").and_then(Value::as_str)?;
+        let ki = match ty {
+            "pid" => num(b, "ki"),
+            // A `pi`: k_p(1 + 2π f_i/s).
+            "pi" => num(b, "kp") * std::f64::consts::TAU * num(b, "zero_hz"),
+            _ => return None,
+        };
+        (ki.is_finite() && ki != 0.0).then(|| (name.clone(), ki))
+    });
+    let mut notes = Vec::new();
+    if let Some((name, ki)) = &integral {
+        notes.push(format!(
+            "your `{name}`'s integral action (k_i = {ki:e}) removes a constant offset in steady state; the feed-forward removes it from the start"
+        ));
+    }
+    if rate != 0.0 || curvature != 0.0 {
+        notes.push(format!(
+            "the fitted trend (rate {rate:e}/s, curvature {curvature:e}/s²) is the time since the diagnosed record started, not of this run: not fed forward"
+        ));
+    }
+    Ok(Outcome::Compensator(Compensator {
+        effect: e.effect.clone(),
+        name: format!("comp_{}", e.effect),
+        block: json!({"type": "drive_offset", "offset": -o}),
+        why: "offset feed-forward: the fitted offset of the drive subtracted before the actuator (a drive's zero that is off), so the plant gets the drive the controller asks for".into(),
+        place: format!("before the actuator, on the connection into {to}"),
+        design: [("offset", o)]
+            .iter()
+            .map(|(k, v)| (k.to_string(), *v))
+            .collect(),
+        note: (!notes.is_empty()).then(|| notes.join("; ")),
+        edit: Edit::Before {
+            to: to.to_string(),
+            ff: None,
+        },
+    }))
+}
+
+/// A drift of the measured position `signal` (the sensor's zero moves): no
+/// compensation. Feedback makes the reading follow the reference, so the
+/// stage moves by the drift below the crossover (x = T(r − d)); integral
+/// action makes that exact rather than helping. Figures: the fitted offset,
+/// rate and curvature, and d(T) − d(t₀) over the scored window of the user's
+/// graph, t₀ = `from_s`, T = `duration_s` — how far the stage moves while
+/// the reading says it tracks.
+fn drift_of_the_reading(
+    e: &crate::NamedEffect,
+    params: &Value,
+    signal: &str,
+    controller: &GraphSpec,
+    info: &LoopInfo,
+) -> Result<Outcome, CompError> {
+    let [offset, rate, curvature] = drift_terms(e, params)?;
+    let (t0, t1) = (info.from_s, controller.duration_s);
+    // d(t) = offset + rate·t + curvature·t²: the offset cancels.
+    let moved = rate * (t1 - t0) + curvature * (t1 * t1 - t0 * t0);
+    Ok(none(
+        &e.effect,
+        format!(
+            "no compensation: the drift is of the reading {signal} (the sensor's zero moves), which feedback cannot tell from motion: your loop holds the reading on the reference, so the stage moves by the drift instead (x = T(r − d), all of it below the crossover; integral action makes that exact). It limits the absolute position: {rate:.3e} per second, {moved:.3e} over your scored window [{t0} s, {t1} s]; what helps is a reference for the sensor's zero (an index mark, a second stable sensor, re-zeroing), not the controller"
+        ),
+        &[
+            ("offset", offset),
+            ("rate", rate),
+            ("curvature", curvature),
+            ("drift_over_window", moved),
+        ],
+    ))
 }
