@@ -1362,8 +1362,9 @@ fn slit_correction(
         ))
     })?;
     let n = errors.len() as i64;
-    let reach = errors.iter().fold(0.0f64, |m, x| m.max(x.abs())) / pitch;
-    let reach = 2 * (reach.ceil() as i64 + 1);
+    let largest = errors.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+    // Every count the block can search, from any slit's reading.
+    let reach = 2 * ((largest / pitch).ceil() as i64 + 1);
     let mut closest = f64::INFINITY;
     for k in 0..n {
         for j in (-reach..=reach).filter(|&j| j != 0) {
@@ -1371,7 +1372,6 @@ fn slit_correction(
             closest = closest.min((j as f64 + (errors[k as usize] - other) / pitch).abs());
         }
     }
-    let largest = errors.iter().fold(0.0f64, |m, x| m.max(x.abs()));
     // Exact where the reading before the errors is on the slits' centres.
     let quantiser = controller
         .blocks
