@@ -36,17 +36,32 @@ use std::ops::Range;
 /// One block's place in the tick loop.
 #[derive(Debug, Clone)]
 pub(crate) struct Node {
+    /// Period in base ticks.
     pub period: u64,
-    /// Base ticks until this block is due again (0: due on this tick).
-    pub countdown: u64,
-    /// Whether the block ran its output phase on the current tick.
-    pub due: bool,
+    /// Index of its [`Rate`] (set by [`Scheduler::new_internal`]).
+    pub rate: usize,
     pub dt: f64,
     pub k_local: u64,
     pub inputs: Range<usize>,
     pub outputs: Range<usize>,
     pub gathers: Range<usize>,
     pub feedthrough: bool,
+    /// An inserted [`RateTransition`]: the tick copies its one gathered input
+    /// straight to its output (the block is not called; same values).
+    pub transition: bool,
+}
+
+/// The countdown of every block of one period: due blocks are found per rate,
+/// not per block, and a tick on which only the base rate is due runs just
+/// the base-rate blocks.
+#[derive(Debug, Clone)]
+struct Rate {
+    /// Period in base ticks.
+    period: u64,
+    /// Base ticks until due again (0: due on this tick).
+    countdown: u64,
+    /// Whether its blocks are due on the current tick.
+    due: bool,
 }
 
 /// Copy `len` values from the signal buffer at `src` to the input buffer at `dst`.
@@ -283,8 +298,14 @@ pub struct Scheduler {
     scores: Vec<ScoreChannel>,
     compares: Vec<(String, String, usize)>,
     rate_transitions: Vec<String>,
+    /// One countdown per distinct period.
+    rates: Vec<Rate>,
     /// Indices (execution order) of blocks without feed-through.
     updaters: Vec<usize>,
+    /// Indices (execution order) of the blocks at the base rate, and of those
+    /// without feed-through: all a tick runs when no slower rate is due.
+    base_rate_blocks: Vec<usize>,
+    base_rate_updaters: Vec<usize>,
     /// The first non-finite output, once located: (execution index, output
     /// offset, base tick, value).
     non_finite: Option<(usize, usize, u64, f64)>,
@@ -306,14 +327,25 @@ impl std::fmt::Debug for Scheduler {
 }
 
 impl Scheduler {
-    pub(crate) fn new_internal(p: Parts) -> Self {
-        let updaters = p
-            .nodes
-            .iter()
-            .enumerate()
-            .filter(|(_, n)| !n.feedthrough)
-            .map(|(i, _)| i)
-            .collect();
+    pub(crate) fn new_internal(mut p: Parts) -> Self {
+        let mut rates: Vec<Rate> = Vec::new();
+        let mut rate_of_period = std::collections::HashMap::new();
+        for node in &mut p.nodes {
+            node.rate = *rate_of_period.entry(node.period).or_insert_with(|| {
+                rates.push(Rate {
+                    period: node.period,
+                    countdown: 0,
+                    due: false,
+                });
+                rates.len() - 1
+            });
+        }
+        let blocks_where = |keep: &dyn Fn(&Node) -> bool| -> Vec<usize> {
+            (0..p.nodes.len()).filter(|&i| keep(&p.nodes[i])).collect()
+        };
+        let updaters = blocks_where(&|n| !n.feedthrough);
+        let base_rate_blocks = blocks_where(&|n| n.period == 1);
+        let base_rate_updaters = blocks_where(&|n| n.period == 1 && !n.feedthrough);
         Self {
             title: p.title,
             base_rate_hz: p.base_rate_hz,
@@ -332,7 +364,10 @@ impl Scheduler {
             scores: p.scores,
             compares: p.compares,
             rate_transitions: p.rate_transitions,
+            rates,
             updaters,
+            base_rate_blocks,
+            base_rate_updaters,
             non_finite: None,
             seen_non_finite: None,
             chunk_ticks: p.chunk_ticks,
@@ -341,8 +376,8 @@ impl Scheduler {
 
     /// One base tick: output phase, update phase, logging. Allocation-free.
     ///
-    /// Due blocks are found with per-block countdowns (no division per tick); inputs
-    /// are gathered by copies whose indices were resolved at build time.
+    /// Due blocks are found with one countdown per rate (no division per tick);
+    /// inputs are gathered by copies whose indices were resolved at build time.
     #[inline]
     pub fn tick(&mut self) {
         self.tick_probed(&mut ());
@@ -354,65 +389,59 @@ impl Scheduler {
     /// which compiles to nothing.
     #[inline]
     pub fn tick_probed<P: TickProbe>(&mut self, probe: &mut P) {
+        let mut slower_rate_due = false;
+        for rate in self.rates.iter_mut() {
+            rate.due = rate.countdown == 0;
+            if rate.due {
+                rate.countdown = rate.period - 1;
+                slower_rate_due |= rate.period > 1;
+            } else {
+                rate.countdown -= 1;
+            }
+        }
         let Self {
+            blocks,
+            nodes,
+            rates,
+            gathers,
+            signals,
+            inputs,
+            updaters,
+            base_rate_blocks,
+            base_rate_updaters,
+            logs,
+            ..
+        } = self;
+        let mut run = Run {
             blocks,
             nodes,
             gathers,
             signals,
             inputs,
-            updaters,
-            logs,
-            ..
-        } = self;
-        // Phase 1: outputs in topological order.
-        for (i, (node, block)) in nodes.iter_mut().zip(blocks.iter_mut()).enumerate() {
-            if node.countdown != 0 {
-                node.countdown -= 1;
-                node.due = false;
-                continue;
+            probe,
+        };
+        if slower_rate_due {
+            // Phase 1: outputs of the due blocks in topological order; phase 2:
+            // state updates of due blocks without feed-through, with this
+            // sample's inputs (all outputs of this sample exist now).
+            for i in 0..run.nodes.len() {
+                if rates[run.nodes[i].rate].due {
+                    run.output(i);
+                }
             }
-            node.countdown = node.period - 1;
-            node.due = true;
-            let tick = Tick {
-                k: node.k_local,
-                t: node.k_local as f64 * node.dt,
-                dt: node.dt,
-            };
-            probe.enter(i);
-            if node.feedthrough {
-                gather(&gathers[node.gathers.clone()], signals, inputs);
-                block.output(
-                    tick,
-                    &inputs[node.inputs.clone()],
-                    &mut signals[node.outputs.clone()],
-                );
-                node.k_local += 1;
-            } else {
-                block.output(
-                    tick,
-                    &inputs[node.inputs.clone()],
-                    &mut signals[node.outputs.clone()],
-                );
+            for &i in updaters.iter() {
+                if rates[run.nodes[i].rate].due {
+                    run.update(i);
+                }
             }
-            probe.leave(i);
-        }
-        // Phase 2: state updates of blocks without feed-through, with this sample's
-        // inputs (all outputs of this sample exist now).
-        for &i in updaters.iter() {
-            let node = &mut nodes[i];
-            if !node.due {
-                continue;
+        } else {
+            // The same two phases, over the base-rate blocks (all that is due).
+            for &i in base_rate_blocks.iter() {
+                run.output(i);
             }
-            probe.enter(i);
-            gather(&gathers[node.gathers.clone()], signals, inputs);
-            let tick = Tick {
-                k: node.k_local,
-                t: node.k_local as f64 * node.dt,
-                dt: node.dt,
-            };
-            blocks[i].update(tick, &inputs[node.inputs.clone()]);
-            node.k_local += 1;
-            probe.leave(i);
+            for &i in base_rate_updaters.iter() {
+                run.update(i);
+            }
         }
         // Phase 3: logging into preallocated buffers (capacity reserved at build).
         for log in logs.iter_mut() {
@@ -787,8 +816,10 @@ impl Scheduler {
         }
         for n in &mut self.nodes {
             n.k_local = 0;
-            n.countdown = 0;
-            n.due = false;
+        }
+        for r in &mut self.rates {
+            r.countdown = 0;
+            r.due = false;
         }
         self.signals.iter_mut().for_each(|v| *v = 0.0);
         self.inputs.iter_mut().for_each(|v| *v = 0.0);
@@ -1012,6 +1043,86 @@ pub struct BlockWiring {
     pub sources: Vec<(usize, usize)>,
     /// Whether the block has direct feed-through.
     pub feedthrough: bool,
+}
+
+/// What one tick works on: the phases of a due block.
+struct Run<'a, P> {
+    blocks: &'a mut [Box<dyn Block>],
+    nodes: &'a mut [Node],
+    gathers: &'a [Gather],
+    signals: &'a mut [f64],
+    inputs: &'a mut [f64],
+    probe: &'a mut P,
+}
+
+impl<P: TickProbe> Run<'_, P> {
+    /// Output phase of due block `i`: a rate transition copies its input to its
+    /// output; a block with feed-through gathers its inputs first.
+    #[inline(always)]
+    fn output(&mut self, i: usize) {
+        let node = &mut self.nodes[i];
+        self.probe.enter(i);
+        if node.transition {
+            let g = self.gathers[node.gathers.start];
+            hold(self.signals, g.src, node.outputs.start, g.len);
+        } else {
+            if node.feedthrough {
+                gather(
+                    &self.gathers[node.gathers.clone()],
+                    self.signals,
+                    self.inputs,
+                );
+            }
+            self.blocks[i].output(
+                node.tick(),
+                &self.inputs[node.inputs.clone()],
+                &mut self.signals[node.outputs.clone()],
+            );
+            if node.feedthrough {
+                node.k_local += 1;
+            }
+        }
+        self.probe.leave(i);
+    }
+
+    /// Update phase of due block `i` (no feed-through): gather, advance.
+    #[inline(always)]
+    fn update(&mut self, i: usize) {
+        let node = &mut self.nodes[i];
+        self.probe.enter(i);
+        gather(
+            &self.gathers[node.gathers.clone()],
+            self.signals,
+            self.inputs,
+        );
+        self.blocks[i].update(node.tick(), &self.inputs[node.inputs.clone()]);
+        node.k_local += 1;
+        self.probe.leave(i);
+    }
+}
+
+impl Node {
+    /// This block's current sample: `Tick::new(k_local, dt)`, with the count
+    /// converted through `i64` (one instruction instead of `u64`'s several;
+    /// the same value below 2⁶³ ticks).
+    #[inline(always)]
+    fn tick(&self) -> Tick {
+        Tick {
+            k: self.k_local,
+            t: self.k_local as i64 as f64 * self.dt,
+            dt: self.dt,
+        }
+    }
+}
+
+/// A rate transition's work: its source's `len` values copied to its output.
+#[inline(always)]
+fn hold(signals: &mut [f64], src: usize, dst: usize, len: usize) {
+    if len == 1 {
+        signals[dst] = signals[src];
+    } else {
+        signals.copy_within(src..src + len, dst);
+    }
 }
 
 /// Copy each gather's source values into the input buffer.

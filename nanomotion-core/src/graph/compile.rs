@@ -750,14 +750,14 @@ fn lay_out(mut pending: Vec<Pending>, order: &[usize], report: &mut BuildReport)
         let out_len: usize = p.outputs.iter().map(|o| o.width).sum();
         l.nodes.push(Node {
             period: p.period,
-            countdown: 0,
-            due: false,
+            rate: 0,
             dt: p.ctx.dt,
             k_local: 0,
             inputs: in_start..l.input_len,
             outputs: out_start..out_start + out_len,
             gathers: g_start..l.gathers.len(),
             feedthrough: p.feedthrough,
+            transition: p.name.starts_with(RATE_TRANSITION_PREFIX),
         });
         l.blocks
             .push(slots[i].take().expect("each block taken once"));
