@@ -191,6 +191,10 @@ fn a_drive_offset_gets_its_feed_forward() {
             };
             assert!(connected("pid.u", "comp_drift.u") && connected("comp_drift.y", "stage.u"));
             assert!(r.gate.passes);
+            support::runs_on_the_wall_clock_as_offline(
+                &out.compensated,
+                &["pid.u", "comp_drift.y", "err.y"],
+            );
         } else {
             // The integrator has removed the offset before the scored window
             // (its share is round-off), so the 1 % rule drops the

@@ -115,6 +115,10 @@ fn slit_errors_get_the_correction_table_and_the_loop_tracks_as_on_the_nominal() 
     assert!(connected("encoder.y", "comp_encoder_slit_error.u"));
     assert!(connected("comp_encoder_slit_error.y", "err.in1"));
     assert!(r.gate.passes);
+    support::runs_on_the_wall_clock_as_offline(
+        &out.compensated,
+        &["encoder.y", "comp_encoder_slit_error.y", "err.y"],
+    );
     // The exact inverse: every reading kq + e_k goes back to kq, so the loop on
     // the augmented model with the table is the user's loop on the nominal
     // plant, simulated here on its own, to round-off.

@@ -138,3 +138,68 @@ pub fn compensate_augmented(aug: &GraphSpec, loop_: &GraphSpec) -> nanomotion_co
     eprintln!("{}", serde_json::to_string_pretty(&out.report).unwrap());
     out
 }
+
+/// Run `spec` (a compensated graph) offline, as `nanomotion run` does, and on
+/// the wall clock by `RealtimeRunner` without a device, as `nanomotion rt
+/// --allow-soft` does (SCHED_FIFO 80 where permitted, late ticks caught up so
+/// every tick runs), logging `log` besides the graph's own; assert that it
+/// completes every tick at the graph's rate and that every logged sample and
+/// the scores equal the offline run's bit for bit (a graph without a device
+/// computes the same values whenever a tick runs).
+pub fn runs_on_the_wall_clock_as_offline(spec: &GraphSpec, log: &[&str]) {
+    use nanomotion_rt::{NoDevice, OverrunPolicy, Privileges, RealtimeRunner, RtConfig, Stop};
+    let load = || {
+        let mut g = nanomotion_plf::surgery::clone_spec(spec).unwrap();
+        g.log.extend(log.iter().map(|s| s.to_string()));
+        g.build().unwrap().0
+    };
+    let mut offline = load();
+    let want = offline.run(|_| {});
+    let ticks = offline.ticks_done();
+    let cfg = RtConfig {
+        privileges: Privileges {
+            priority: Some(80),
+            cpu: None,
+            lock_memory: false,
+            hold_cpu_latency: false,
+        },
+        allow_soft: true,
+        overrun: OverrunPolicy::CatchUp,
+        ..RtConfig::default()
+    };
+    let mut runner = RealtimeRunner::new(load(), NoDevice, cfg).unwrap();
+    let report = runner.run(|_| {}).unwrap();
+    let (wall, _) = runner.into_parts();
+    assert_eq!(report.stopped, Stop::Completed, "{}", report.stop);
+    assert_eq!((report.ticks, report.missed_ticks), (ticks, 0));
+    assert_eq!(report.rate_hz, spec.base_rate_hz);
+    eprintln!(
+        "{}: {} ticks at {} Hz on the wall clock ({}), {} overruns caught up",
+        spec.title.as_deref().unwrap_or("the graph"),
+        report.ticks,
+        report.rate_hz,
+        report.scheduling,
+        report.overruns
+    );
+    let got = wall.result();
+    assert_eq!(got.logs.len(), want.logs.len());
+    for (w, g) in want.logs.iter().zip(&got.logs) {
+        assert_eq!((&g.name, g.data.len()), (&w.name, w.data.len()));
+        assert!(
+            w.data
+                .iter()
+                .zip(&g.data)
+                .all(|(a, b)| a.to_bits() == b.to_bits()),
+            "{}: the wall-clock run differs from the offline run",
+            w.name
+        );
+    }
+    for (w, g) in want.scores.iter().zip(&got.scores) {
+        assert_eq!(
+            (g.rms.to_bits(), g.max_abs.to_bits()),
+            (w.rms.to_bits(), w.max_abs.to_bits()),
+            "{}",
+            w.signal
+        );
+    }
+}
