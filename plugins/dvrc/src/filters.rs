@@ -237,6 +237,9 @@ fn dot(a: &[f64], b: &[f64]) -> f64 {
     s
 }
 
+// The state-space variant carries the small-model stepper's fixed arrays
+// inline (no allocation, no indirection in the tick); a filter holds one.
+#[allow(clippy::large_enum_variant)]
 #[derive(Debug, Clone)]
 enum Runtime {
     Fir(FirState),

@@ -2493,31 +2493,21 @@ fn degenerate_twin(c: &Cand, f: &Fitted) -> Option<Cand> {
     })
 }
 
-/// The least share of what an effect's fit cuts (of the held-out mean
-/// square) that must be owed to what makes it the effect, beyond its
-/// degenerate form ([`degenerate_twin`]): a tenth. Below it the fit is a gain
-/// or a stiffness with a trace of the effect — a Coleman–Hodgdon force of
-/// the position fitted to a spring 10 % stiff owes 0.02 % of its cut to its
-/// loop — while a true hysteresis that also changes the gain owes a quarter
-/// or more to its loop (tuning 179: 27 %, 723: 40 %).
-const MIN_DEFINING_SHARE: f64 = 0.1;
-
 /// Why fitted `f` is not evidence of its effect, or `None`: its degenerate
 /// form ([`degenerate_twin`], a gain or a stiffness) fitted in its place
 /// explains nearly as much. What makes it the effect (a hysteresis's loop,
-/// a gain's variation) must pass the test a name passes against what the
-/// degenerate form leaves — cut it significantly (at `level`) and by
-/// `min_cut` of its excess over the noise floor — and be at least
-/// [`MIN_DEFINING_SHARE`] of the fit's whole cut. A Coleman–Hodgdon force of
+/// a gain's variation) must pass the test a name passes, against what the
+/// degenerate form leaves: cut it significantly (at `level`) and by
+/// `min_cut` of its excess over the noise floor. A Coleman–Hodgdon force of
 /// the position with b ≈ c is a stiffness; fitted to an attached mass below
 /// its resonance (an added mass at one tone) or to a nominal's stiffness
 /// error, it cut 56–92 % of the held-out residual with a loop that cut
 /// nothing of what the stiffness leaves; after friction, a hysteresis on the
 /// drive with b ≈ c took the friction form's leftover (tuning 306, 796).
-/// The share catches what the excess cannot: the floor read off a large
-/// first residual is too high (a spring 10 % stiff: floor 3.2e-3, the fit's
-/// residual 8.4e-4), and the small leftover of the stiffness alone (the
-/// sampled force's phase error) then passes as most of an excess.
+/// Not a share of the fit's whole cut: a true hysteresis that also changes
+/// the gain by a third owes 2 % of its mean-square cut to its loop — the
+/// loop is what takes the residual from twice the noise to the noise
+/// (generator seed 1).
 fn degenerate_explains(
     ctx: &Ctx<'_>,
     cur: &Current,
@@ -2528,16 +2518,9 @@ fn degenerate_explains(
     let twin = degenerate_twin(c, f)?;
     let t = fit_candidate(ctx, cur, &twin).ok()?;
     let (test, cut) = held_out_gain(ctx, (excess, at_floor), &t.residual, &f.residual);
-    let [before, degenerate, fit] =
-        [&cur.residual, &t.residual, &f.residual].map(|r| weighted_holdout_ms(ctx, r));
-    let share = if before > fit {
-        (degenerate - fit) / (before - fit)
-    } else {
-        0.0
-    };
-    (test.p_value >= level || cut < min_cut || share < MIN_DEFINING_SHARE).then(|| {
+    (test.p_value >= level || cut < min_cut).then(|| {
         format!(
-            "{} explains little beyond {}: fitted alone, that leaves held-out rms {:.4e}, the whole fit {:.4e} (from {:.4e}): p = {:.1e} (needed < {:.1e}), {:.0} % of the excess over the noise floor it leaves (at least {:.0} % needed), {:.0} % of the fit's cut (at least {:.0} % needed)",
+            "{} explains little beyond {}: fitted alone, that leaves held-out rms {:.4e}, the whole fit {:.4e} (from {:.4e}): p = {:.1e} (needed < {:.1e}), {:.0} % of the excess over the noise floor it leaves (at least {:.0} % needed)",
             if c.effect == "hysteresis" { "its loop" } else { "its variation" },
             if c.effect == "hysteresis" {
                 "its linear part (a gain, or a stiffness inside the loop)"
@@ -2551,8 +2534,6 @@ fn degenerate_explains(
             level,
             100.0 * cut,
             100.0 * min_cut,
-            100.0 * share.max(0.0),
-            100.0 * MIN_DEFINING_SHARE,
         )
     })
 }
