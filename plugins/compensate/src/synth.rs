@@ -12,12 +12,12 @@
 //! | `unmodeled_resonance` | its inverse R⁻¹ (poles ↔ zeros): a notch | `unmodeled_resonance` | before the plant |
 //! | `position_dependent_gain` | gain scheduling (2.13) on 1/g(position) | `gain_scheduled` | before the plant |
 //! | `axis_coupling` (on the measurement) | static decoupling −c | `axis_coupling` | in the measurement path |
-//! | `encoder_slit_error` (on the measurement) | slit-error correction table (hots' calibration format): ê = −e/pitch, each reading put back on its slit's centre ([`slit_correction`]) | `slit_correction` | in the measurement path, after the reading |
+//! | `encoder_slit_error` (on the measurement) | slit-error correction table (hots' calibration format): ê = −e/pitch, each reading put back on its slit's centre (`slit_correction`) | `slit_correction` | in the measurement path, after the reading |
 //! | `backlash` (on the drive) | its inverse: ± half the play by the direction | `backlash_inverse` | before the actuator |
 //! | `creep` (on the drive) | its exact discrete inverse (creep feed-forward) | `state_space` | before the actuator |
 //! | `saturation` (on the drive), driven by a core `pid`/`pi` (directly or through a scalar `gain` k) | anti-windup: the fitted limits (÷ k) as that controller's output limits, clamping | none inserted: your `pid` changed | the controller itself |
-//! | `drift` on the drive (a drive's zero that is off: the diagnosis fits its offset o) | offset feed-forward ([`drift_offset`]): −o added to the drive, the exact inverse; a fitted trend is not fed forward (a note with its rate) | `drive_offset` | before the actuator |
-//! | `drift` of the measured position (the sensor's zero moves) | none ([`drift_of_the_reading`]): feedback makes the reading follow the reference, so the stage moves by the drift; figures: its rate and its change over the scored window | — | — |
+//! | `drift` on the drive (a drive's zero that is off: the diagnosis fits its offset o) | offset feed-forward (`drift_offset`): −o added to the drive, the exact inverse; a fitted trend is not fed forward (a note with its rate) | `drive_offset` | before the actuator |
+//! | `drift` of the measured position (the sensor's zero moves) | none (`drift_of_the_reading`): feedback makes the reading follow the reference, so the stage moves by the drift; figures: its rate and its change over the scored window | — | — |
 //! | `time_delay`, the scored error driving a core `pid`/`pi` | re-tune ([`delay`]): the crossover lowered by β (zero/pole ratios kept, gain placing it at β·f_c) to the largest β whose loop *with the fitted delay* the gate finds stable with a phase margin ≥ max(yours − 5°, `require:`) | none inserted: your `pid` changed | the controller itself |
 //! | `time_delay`, another controller | none: the phase 360°·f_c·d it takes, the fix (a core `pid`/`pi`, or the crossover by hand); a Smith predictor is a note | — | — |
 //! | the rest | none; the report says what it limits | — | — |
