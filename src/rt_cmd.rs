@@ -164,22 +164,21 @@ fn config(lp: &Loop, graph: RealtimeSpec) -> Result<RtConfig, String> {
             lp.spin_us
         ));
     }
-    Ok(RtConfig {
-        privileges: Privileges {
-            priority: Some(lp.priority),
-            cpu: lp.cpu,
-            lock_memory: true,
-            hold_cpu_latency: !lp.allow_idle_states,
-        },
-        allow_soft: lp.allow_soft,
-        spin_ns: (lp.spin_us * 1e3) as u64,
-        block_timing: lp.block_timing,
-        ..RtConfig::default()
-    }
-    .with_settings(graph.overridden_by(RealtimeSpec {
+    let privileges = Privileges {
+        priority: Some(lp.priority),
+        cpu: lp.cpu,
+        lock_memory: true,
+        hold_cpu_latency: !lp.allow_idle_states,
+    };
+    let settings = graph.overridden_by(RealtimeSpec {
         overrun: lp.overrun,
         max_overruns: lp.max_overruns,
-    })))
+    });
+    Ok(RtConfig {
+        spin_ns: (lp.spin_us * 1e3) as u64,
+        block_timing: lp.block_timing,
+        ..RtConfig::new(privileges, lp.allow_soft, settings)
+    })
 }
 
 fn watchdog(lp: &Loop) -> Result<Duration, String> {

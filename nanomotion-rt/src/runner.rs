@@ -95,6 +95,40 @@ impl Default for RtConfig {
 }
 
 impl RtConfig {
+    /// The loop asked for: `privileges`, running at normal priority where one is
+    /// refused if `allow_soft`, and the overrun policy and limit of `settings`
+    /// (see [`RtConfig::with_settings`]); everything else as
+    /// [`RtConfig::default`]. `nanomotion rt`, `nanomotion plant`, Python's
+    /// `rt` and [`RtConfig::soft_catch_up`] all build their loop here.
+    pub fn new(privileges: Privileges, allow_soft: bool, settings: RealtimeSpec) -> Self {
+        Self {
+            privileges,
+            allow_soft,
+            ..Self::default()
+        }
+        .with_settings(settings)
+    }
+
+    /// A real-time run that works on any machine (tests, examples): SCHED_FIFO
+    /// 80 where permitted, normal priority where not (`allow_soft`), memory
+    /// unlocked, the CPUs' idle states left alone, and late ticks caught up so
+    /// that every tick runs.
+    pub fn soft_catch_up() -> Self {
+        Self::new(
+            Privileges {
+                priority: Some(80),
+                cpu: None,
+                lock_memory: false,
+                hold_cpu_latency: false,
+            },
+            true,
+            RealtimeSpec {
+                overrun: Some(OverrunPolicy::CatchUp),
+                max_overruns: None,
+            },
+        )
+    }
+
     /// With the overrun policy and limit of `settings` (a graph's `realtime:`
     /// section, already [overridden](RealtimeSpec::overridden_by) by the command
     /// line's); what it leaves out keeps [`RtConfig::default`]'s value.
@@ -1012,5 +1046,58 @@ impl<D: Device> LoopCore<D> {
                 .collect(),
             stopped: stop,
         })
+    }
+}
+
+#[cfg(test)]
+mod config_tests {
+    use super::*;
+
+    /// The one constructor: privileges, soft running and the graph's settings
+    /// set, everything else the default.
+    #[test]
+    fn new_sets_the_asked_and_keeps_the_rest() {
+        let privileges = Privileges {
+            priority: Some(42),
+            cpu: Some(1),
+            lock_memory: true,
+            hold_cpu_latency: false,
+        };
+        let c = RtConfig::new(
+            privileges,
+            true,
+            RealtimeSpec {
+                overrun: Some(OverrunPolicy::CatchUp),
+                max_overruns: Some(7),
+            },
+        );
+        let want = RtConfig {
+            privileges,
+            allow_soft: true,
+            overrun: OverrunPolicy::CatchUp,
+            max_overruns: Some(7),
+            ..RtConfig::default()
+        };
+        assert_eq!(c, want);
+        // settings left out: skip, no limit (the defaults)
+        let c = RtConfig::new(privileges, false, RealtimeSpec::default());
+        assert_eq!((c.overrun, c.max_overruns), (OverrunPolicy::Skip, None));
+    }
+
+    /// `soft_catch_up` is the configuration the tests wrote out by hand before.
+    #[test]
+    fn soft_catch_up_is_fifo_80_soft_unlocked_catching_up() {
+        let want = RtConfig {
+            privileges: Privileges {
+                priority: Some(80),
+                cpu: None,
+                lock_memory: false,
+                hold_cpu_latency: false,
+            },
+            allow_soft: true,
+            overrun: OverrunPolicy::CatchUp,
+            ..RtConfig::default()
+        };
+        assert_eq!(RtConfig::soft_catch_up(), want);
     }
 }

@@ -66,20 +66,19 @@ fn rt_graph<'py>(
         &crate::graph::analyse(&sched, require.as_ref()),
         allow_unproven,
     )?;
-    let cfg = RtConfig {
-        privileges: Privileges {
+    let cfg = RtConfig::new(
+        Privileges {
             priority: Some(priority),
             cpu,
             lock_memory: true,
             hold_cpu_latency: !allow_idle_states,
         },
         allow_soft,
-        ..RtConfig::default()
-    }
-    .with_settings(settings.overridden_by(RealtimeSpec {
-        overrun,
-        max_overruns,
-    }));
+        settings.overridden_by(RealtimeSpec {
+            overrun,
+            max_overruns,
+        }),
+    );
     let mut runner = RealtimeRunner::new(sched, NoDevice, cfg).map_err(graph_err)?;
     let start = std::time::Instant::now();
     let report = py.detach(|| runner.run(|_| {})).map_err(graph_err)?;

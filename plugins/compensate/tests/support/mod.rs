@@ -147,7 +147,7 @@ pub fn compensate_augmented(aug: &GraphSpec, loop_: &GraphSpec) -> nanomotion_co
 /// the scores equal the offline run's bit for bit (a graph without a device
 /// computes the same values whenever a tick runs).
 pub fn runs_on_the_wall_clock_as_offline(spec: &GraphSpec, log: &[&str]) {
-    use nanomotion_rt::{NoDevice, OverrunPolicy, Privileges, RealtimeRunner, RtConfig, Stop};
+    use nanomotion_rt::{NoDevice, RealtimeRunner, RtConfig, Stop};
     let load = || {
         let mut g = nanomotion_plf::surgery::clone_spec(spec).unwrap();
         g.log.extend(log.iter().map(|s| s.to_string()));
@@ -156,17 +156,7 @@ pub fn runs_on_the_wall_clock_as_offline(spec: &GraphSpec, log: &[&str]) {
     let mut offline = load();
     let want = offline.run(|_| {});
     let ticks = offline.ticks_done();
-    let cfg = RtConfig {
-        privileges: Privileges {
-            priority: Some(80),
-            cpu: None,
-            lock_memory: false,
-            hold_cpu_latency: false,
-        },
-        allow_soft: true,
-        overrun: OverrunPolicy::CatchUp,
-        ..RtConfig::default()
-    };
+    let cfg = RtConfig::soft_catch_up();
     let mut runner = RealtimeRunner::new(load(), NoDevice, cfg).unwrap();
     let report = runner.run(|_| {}).unwrap();
     let (wall, _) = runner.into_parts();
