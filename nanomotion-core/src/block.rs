@@ -516,6 +516,116 @@ pub mod check {
             ))
         }
     }
+    /// One end of an interval: the value itself allowed (`Inclusive`: ≥ or ≤)
+    /// or not (`Exclusive`: > or <).
+    #[derive(Debug, Clone, Copy, PartialEq)]
+    pub enum Limit<T> {
+        /// The end belongs to the interval.
+        Inclusive(T),
+        /// The end does not belong to the interval.
+        Exclusive(T),
+    }
+
+    /// The interval in words: `> 0`, `≤ 1`, `(0, 1]`; the bracket or operator
+    /// says whether an end is included.
+    fn interval<T: std::fmt::Display>(lo: Option<Limit<T>>, hi: Option<Limit<T>>) -> String {
+        match (lo, hi) {
+            (Some(lo), Some(hi)) => {
+                let (a, l) = match lo {
+                    Limit::Inclusive(x) => ('[', x),
+                    Limit::Exclusive(x) => ('(', x),
+                };
+                let (b, h) = match hi {
+                    Limit::Inclusive(x) => (']', x),
+                    Limit::Exclusive(x) => (')', x),
+                };
+                format!("in {a}{l}, {h}{b}")
+            }
+            (Some(Limit::Inclusive(x)), None) => format!("≥ {x}"),
+            (Some(Limit::Exclusive(x)), None) => format!("> {x}"),
+            (None, Some(Limit::Inclusive(x))) => format!("≤ {x}"),
+            (None, Some(Limit::Exclusive(x))) => format!("< {x}"),
+            (None, None) => "any value".into(),
+        }
+    }
+
+    /// `value` must be finite and within `lo` and `hi`, each end inclusive or
+    /// exclusive, either left out (`> 0`, `in (0, 1]`, `≤ 1`). Two inclusive
+    /// ends give exactly [`in_range`]'s message.
+    pub fn between(
+        field: &str,
+        value: f64,
+        lo: Option<Limit<f64>>,
+        hi: Option<Limit<f64>>,
+    ) -> Result<(), ParamError> {
+        if let (Some(Limit::Inclusive(l)), Some(Limit::Inclusive(h))) = (lo, hi) {
+            return in_range(field, value, l, h);
+        }
+        finite(field, value)?;
+        let above = match lo {
+            None => true,
+            Some(Limit::Inclusive(l)) => value >= l,
+            Some(Limit::Exclusive(l)) => value > l,
+        };
+        let below = match hi {
+            None => true,
+            Some(Limit::Inclusive(h)) => value <= h,
+            Some(Limit::Exclusive(h)) => value < h,
+        };
+        if above && below {
+            return Ok(());
+        }
+        let words = interval(lo, hi);
+        let problem = match (lo, hi) {
+            (Some(_), Some(_)) => format!("is {value}, not {words}"),
+            _ => format!("is {value}, must be {words}"),
+        };
+        Err(ParamError::new(
+            field,
+            problem,
+            format!("give a value {words}"),
+        ))
+    }
+
+    /// A whole number (a count, an order, an iteration cap) within `lo` and
+    /// `hi`, each end inclusive or exclusive, either left out. The interval is
+    /// said as the whole numbers it holds (`> 0` is `≥ 1`); two ends give
+    /// [`size`]'s message, so a `usize` and a `u32` count read the same.
+    pub fn whole(
+        field: &str,
+        value: i128,
+        lo: Option<Limit<i128>>,
+        hi: Option<Limit<i128>>,
+    ) -> Result<(), ParamError> {
+        let lo = lo.map(|l| match l {
+            Limit::Inclusive(x) => x,
+            Limit::Exclusive(x) => x.saturating_add(1),
+        });
+        let hi = hi.map(|h| match h {
+            Limit::Inclusive(x) => x,
+            Limit::Exclusive(x) => x.saturating_sub(1),
+        });
+        if lo.is_none_or(|l| value >= l) && hi.is_none_or(|h| value <= h) {
+            return Ok(());
+        }
+        let (problem, fix) = match (lo, hi) {
+            (Some(l), Some(h)) => (
+                format!("is {value}, outside the allowed range [{l}, {h}]"),
+                format!("give a whole number in [{l}, {h}]"),
+            ),
+            (Some(l), None) => (
+                format!("is {value}, must be ≥ {l}"),
+                format!("give a whole number ≥ {l}"),
+            ),
+            (None, Some(h)) => (
+                format!("is {value}, must be ≤ {h}"),
+                format!("give a whole number ≤ {h}"),
+            ),
+            (None, None) => unreachable!("no bound refuses nothing"),
+        };
+        Err(ParamError::new(field, problem, fix))
+    }
+
     /// `lo` must be ≤ `hi` (both finite).
     pub fn ordered(field_lo: &str, lo: f64, field_hi: &str, hi: f64) -> Result<(), ParamError> {
         finite(field_lo, lo)?;

@@ -20,12 +20,27 @@
 //! | `finite` | [`check::finite`](crate::block::check::finite) (a vector: [`check::all_finite`](crate::block::check::all_finite)) | number |
 //! | `positive` | [`check::positive`](crate::block::check::positive) | `exclusiveMinimum: 0` |
 //! | `non_negative` | [`check::non_negative`](crate::block::check::non_negative) | `minimum: 0` |
-//! | `range(lo, hi)` | [`check::in_range`](crate::block::check::in_range) | `minimum`, `maximum` |
+//! | `range(lo, hi)` | [`check::in_range`](crate::block::check::in_range) (both ends inclusive) | `minimum`, `maximum` |
+//! | `range(> lo)`, `range(>= lo)`, `range(< hi)`, `range(<= hi)`, `range(> lo, <= hi)`, … | [`check::between`](crate::block::check::between): each end with its operator, either left out | `exclusiveMinimum` (`>`) or `minimum` (`>=`), `exclusiveMaximum` (`<`) or `maximum` (`<=`) |
 //! | `width` | [`check::width`](crate::block::check::width) | 1 to [`MAX_WIDTH`](crate::block::MAX_WIDTH) |
 //! | `size(lo, hi)` | [`check::size`](crate::block::check::size) | `minimum`, `maximum` |
 //! | `at_least_one` | [`check::at_least_one`](crate::block::check::at_least_one) | `minimum: 1` |
 //! | `at_most = other` | [`check::ordered`](crate::block::check::ordered) (this ≤ `other`), after every field's own bounds | — |
 //! | `nested` | the field's own [`Params::check_params`], field names prefixed `field.` | the field type's schema |
+//! | `hint = "…"` | adds its words to the fix of the field's bound errors (`give a whole number in [1, 1000], or raise the block's rate_hz`) | — |
+//!
+//! **Integer fields** (`u8` … `u64`, `usize`, `i8` … `i64`, `isize`) take the same
+//! bounds, checked as whole numbers by [`check::whole`](crate::block::check::whole)
+//! (`positive` is ≥ 1, `non_negative` ≥ 0, `range(> 0)` ≥ 1, …; a `usize`'s
+//! `width`, `size` and `at_least_one` keep their own checks); their schema is
+//! `type: integer` with the bounds as declared. `finite` or a fractional bound
+//! (`range(0.5, 2)`) on an integer field is a compile error.
+//!
+//! **Enum fields**: an enum that derives `Params` (unit variants, serde's
+//! `rename`/`rename_all`/`alias` honoured) is a `type: string` with an `enum`
+//! list of the names serde accepts, and `nanomotion blocks` prints the choices
+//! (`[zoh | tustin]`); variants with data are an `anyOf` of their forms. An enum
+//! without the derive is "any value" in the schema.
 //!
 //! A bound on an `Option<T>` applies when the value is present, on a `Vec<T>` to
 //! every element (named `field[i]`). `default_doc = "…"` says in words what a
@@ -359,6 +374,7 @@ pub fn block_docs() -> Vec<&'static BlockDoc> {
 #[doc(hidden)]
 pub mod __derive {
     use super::{ParamDoc, ParamSchema, add_properties};
+    pub use crate::block::check::Limit;
     use crate::error::ParamError;
     use serde::Serialize;
     pub use serde_json::Value;
@@ -445,9 +461,8 @@ pub mod __derive {
         }
     }
 
-    /// Add a lower (`exclusive`: strict) and/or upper bound to `s`, into the
-    /// non-null branch of an optional value and the items of an array; its words
-    /// to `words`.
+    /// Add a lower (`exclusive`: strict) and/or upper (inclusive) bound to `s`
+    /// (see [`limits`]).
     pub fn bound(
         s: &mut Value,
         words: &mut Vec<String>,
@@ -455,6 +470,33 @@ pub mod __derive {
         exclusive: bool,
         max: Option<f64>,
     ) {
+        let lo = min.map(|x| {
+            if exclusive {
+                Limit::Exclusive(x)
+            } else {
+                Limit::Inclusive(x)
+            }
+        });
+        limits(s, words, lo, max.map(Limit::Inclusive));
+    }
+
+    /// Add a lower and/or upper bound, each inclusive (`minimum`, `maximum`)
+    /// or exclusive (`exclusiveMinimum`, `exclusiveMaximum`), to `s`, into the
+    /// non-null branch of an optional value and the items of an array; its
+    /// words to `words` (`1 to 1024` for two inclusive ends as before; `> 0`,
+    /// `≤ 1`, `in (0, 1]` otherwise).
+    pub fn limits(
+        s: &mut Value,
+        words: &mut Vec<String>,
+        lo: Option<Limit<f64>>,
+        hi: Option<Limit<f64>>,
+    ) {
+        let split = |l: Limit<f64>| match l {
+            Limit::Inclusive(x) => (x, false),
+            Limit::Exclusive(x) => (x, true),
+        };
+        let lo = lo.map(split);
+        let hi = hi.map(split);
         let mut each = false;
         let mut target = &mut *s;
         loop {
@@ -467,24 +509,37 @@ pub mod __derive {
                 break;
             }
         }
-        let text = match (min, max) {
-            (Some(lo), Some(hi)) => format!("{} to {}", fmt_num(lo), fmt_num(hi)),
-            (Some(lo), None) if exclusive => format!("> {}", fmt_num(lo)),
-            (Some(lo), None) => format!("≥ {}", fmt_num(lo)),
-            (None, Some(hi)) => format!("≤ {}", fmt_num(hi)),
+        let text = match (lo, hi) {
+            (Some((l, false)), Some((h, false))) => format!("{} to {}", fmt_num(l), fmt_num(h)),
+            (Some((l, lx)), Some((h, hx))) => format!(
+                "in {}{}, {}{}",
+                if lx { '(' } else { '[' },
+                fmt_num(l),
+                fmt_num(h),
+                if hx { ')' } else { ']' }
+            ),
+            (Some((l, true)), None) => format!("> {}", fmt_num(l)),
+            (Some((l, false)), None) => format!("≥ {}", fmt_num(l)),
+            (None, Some((h, true))) => format!("< {}", fmt_num(h)),
+            (None, Some((h, false))) => format!("≤ {}", fmt_num(h)),
             (None, None) => return,
         };
         if let Some(o) = target.as_object_mut() {
-            if let Some(lo) = min {
+            if let Some((l, exclusive)) = lo {
                 let key = if exclusive {
                     "exclusiveMinimum"
                 } else {
                     "minimum"
                 };
-                o.insert(key.into(), num(lo));
+                o.insert(key.into(), num(l));
             }
-            if let Some(hi) = max {
-                o.insert("maximum".into(), num(hi));
+            if let Some((h, exclusive)) = hi {
+                let key = if exclusive {
+                    "exclusiveMaximum"
+                } else {
+                    "maximum"
+                };
+                o.insert(key.into(), num(h));
             }
         }
         words.push(if each { format!("each {text}") } else { text });
@@ -559,6 +614,12 @@ pub mod __derive {
             aliases,
             flatten,
         }
+    }
+
+    /// A bound error with the field's `hint = "…"` added to its fix.
+    pub fn hint(mut e: ParamError, hint: &str) -> ParamError {
+        e.fix = format!("{}, {hint}", e.fix);
+        e
     }
 
     /// A nested parameter struct's error, its field prefixed with `field.`.

@@ -219,12 +219,22 @@ fn serde_field(attrs: &[Attribute]) -> syn::Result<SerdeField> {
     Ok(s)
 }
 
+/// One end of a `range(…)`: its value and whether it is strict (`>`, `<`).
+struct End {
+    value: Expr,
+    exclusive: bool,
+}
+
 /// A declared bound of a parameter.
 enum Bound {
     Finite,
     Positive,
     NonNegative,
+    /// `range(lo, hi)`: both ends inclusive.
     Range(Expr, Expr),
+    /// `range(> lo)`, `range(>= lo, < hi)`, `range(<= hi)`, …: each end with
+    /// its operator, either end may be left out.
+    Between(Option<End>, Option<End>),
     Width,
     Size(Expr, Expr),
     AtLeastOne,
@@ -237,6 +247,69 @@ struct ParamAttr {
     nested: bool,
     schema: Option<syn::ExprPath>,
     at_most: Option<Ident>,
+    /// Words added to the fix of every bound error of the field.
+    hint: Option<String>,
+}
+
+/// The items of `range(…)`: two plain bounds (`lo, hi`, inclusive), or one or
+/// two bounds each led by its operator (`> lo`, `>= lo`, `< hi`, `<= hi`).
+fn range_items(meta: &ParseNestedMeta) -> syn::Result<Bound> {
+    let content;
+    syn::parenthesized!(content in meta.input);
+    // (operator, value); operator: Some((lower, exclusive))
+    let mut items: Vec<(Option<(bool, bool)>, Expr)> = Vec::new();
+    while !content.is_empty() {
+        let op = if content.peek(Token![>=]) {
+            content.parse::<Token![>=]>()?;
+            Some((true, false))
+        } else if content.peek(Token![<=]) {
+            content.parse::<Token![<=]>()?;
+            Some((false, false))
+        } else if content.peek(Token![>]) {
+            content.parse::<Token![>]>()?;
+            Some((true, true))
+        } else if content.peek(Token![<]) {
+            content.parse::<Token![<]>()?;
+            Some((false, true))
+        } else {
+            None
+        };
+        let value: Expr = content.parse()?;
+        items.push((op, value));
+        if content.is_empty() {
+            break;
+        }
+        content.parse::<Token![,]>()?;
+    }
+    const FORMS: &str = "expected range(lo, hi) (both inclusive) or one or two bounds with \
+                         their operators: range(> lo), range(>= lo), range(< hi), \
+                         range(<= hi), range(> lo, <= hi), …";
+    if items.iter().all(|(op, _)| op.is_none()) {
+        if items.len() != 2 {
+            return Err(meta.error(FORMS));
+        }
+        let hi = items.pop().map(|(_, e)| e);
+        let lo = items.pop().map(|(_, e)| e);
+        return match (lo, hi) {
+            (Some(lo), Some(hi)) => Ok(Bound::Range(lo, hi)),
+            _ => Err(meta.error(FORMS)),
+        };
+    }
+    let (mut lo, mut hi) = (None, None);
+    for (op, value) in items {
+        let Some((lower, exclusive)) = op else {
+            return Err(meta.error(FORMS));
+        };
+        let slot = if lower { &mut lo } else { &mut hi };
+        if slot.is_some() {
+            return Err(meta.error(format!(
+                "two {} bounds in range(…): give at most one lower (> or >=) and one upper (< or <=)",
+                if lower { "lower" } else { "upper" }
+            )));
+        }
+        *slot = Some(End { value, exclusive });
+    }
+    Ok(Bound::Between(lo, hi))
 }
 
 fn two_exprs(meta: &ParseNestedMeta) -> syn::Result<(Expr, Expr)> {
@@ -260,10 +333,7 @@ fn param_attr(attrs: &[Attribute]) -> syn::Result<ParamAttr> {
                 "non_negative" => p.bounds.push(Bound::NonNegative),
                 "width" => p.bounds.push(Bound::Width),
                 "at_least_one" => p.bounds.push(Bound::AtLeastOne),
-                "range" => {
-                    let (lo, hi) = two_exprs(&meta)?;
-                    p.bounds.push(Bound::Range(lo, hi));
-                }
+                "range" => p.bounds.push(range_items(&meta)?),
                 "size" => {
                     let (lo, hi) = two_exprs(&meta)?;
                     p.bounds.push(Bound::Size(lo, hi));
@@ -281,11 +351,16 @@ fn param_attr(attrs: &[Attribute]) -> syn::Result<ParamAttr> {
                     let id: Ident = meta.value()?.parse()?;
                     p.at_most = Some(id);
                 }
+                "hint" => {
+                    let lit: LitStr = meta.value()?.parse()?;
+                    p.hint = Some(lit.value());
+                }
                 other => {
                     return Err(meta.error(format!(
                         "unknown #[param] item `{other}`: expected finite, positive, \
-                         non_negative, range(lo, hi), width, size(lo, hi), at_least_one, \
-                         at_most = field, nested, default_doc = \"…\" or schema = \"path\""
+                         non_negative, range(lo, hi), range(> lo), range(>= lo, < hi), …, \
+                         width, size(lo, hi), at_least_one, at_most = field, nested, \
+                         default_doc = \"…\", hint = \"…\" or schema = \"path\""
                     )));
                 }
             }
@@ -410,6 +485,70 @@ fn schema_of(ty: &Type) -> TokenStream2 {
     }
 }
 
+/// Whether a (leaf) type is one of Rust's integer types.
+fn is_integer(ty: &Type) -> bool {
+    matches!(
+        last_ident(ty).as_deref(),
+        Some("u8" | "u16" | "u32" | "u64" | "usize" | "i8" | "i16" | "i32" | "i64" | "isize")
+    )
+}
+
+/// A bound written as a float literal (`0.5`, `-1.0`), which an integer field
+/// cannot take.
+fn is_float_literal(e: &Expr) -> bool {
+    match e {
+        Expr::Lit(l) => matches!(l.lit, syn::Lit::Float(_)),
+        Expr::Unary(u) => is_float_literal(&u.expr),
+        Expr::Paren(p) => is_float_literal(&p.expr),
+        _ => false,
+    }
+}
+
+/// `Some(Limit::Inclusive(x))`/`Some(Limit::Exclusive(x))`/`None` for one end,
+/// its value cast to `as_ty` (`f64` or `i128`).
+fn limit(end: Option<&End>, as_ty: TokenStream2) -> TokenStream2 {
+    let c = quote!(::nanomotion_core::block::check);
+    match end {
+        None => quote!(::core::option::Option::None),
+        Some(End {
+            value,
+            exclusive: false,
+        }) => quote!(::core::option::Option::Some(#c::Limit::Inclusive((#value) as #as_ty))),
+        Some(End {
+            value,
+            exclusive: true,
+        }) => quote!(::core::option::Option::Some(#c::Limit::Exclusive((#value) as #as_ty))),
+    }
+}
+
+/// The lower and upper end a bound declares (`None` for `finite`).
+fn ends(b: &Bound) -> Option<(Option<End>, Option<End>)> {
+    let end = |value: Expr, exclusive: bool| Some(End { value, exclusive });
+    let copy = |e: &Option<End>| {
+        e.as_ref().map(|e| End {
+            value: e.value.clone(),
+            exclusive: e.exclusive,
+        })
+    };
+    Some(match b {
+        Bound::Finite => return None,
+        Bound::Positive => (end(syn::parse_quote!(0), true), None),
+        Bound::NonNegative => (end(syn::parse_quote!(0), false), None),
+        Bound::Range(lo, hi) | Bound::Size(lo, hi) => {
+            (end(lo.clone(), false), end(hi.clone(), false))
+        }
+        Bound::Between(lo, hi) => (copy(lo), copy(hi)),
+        Bound::Width => (
+            end(syn::parse_quote!(1), false),
+            end(
+                syn::parse_quote!(::nanomotion_core::block::MAX_WIDTH),
+                false,
+            ),
+        ),
+        Bound::AtLeastOne => (end(syn::parse_quote!(1), false), None),
+    })
+}
+
 /// Code checking one bound on the value `access` (an expression of type `&T`).
 fn check_of(
     ty: &Type,
@@ -417,12 +556,12 @@ fn check_of(
     name: TokenStream2,
     b: &Bound,
     depth: usize,
-) -> TokenStream2 {
+) -> syn::Result<TokenStream2> {
     let c = quote!(::nanomotion_core::block::check);
     if let Some(inner) = generic_of(ty, "Option") {
         let v = format_ident!("__v{depth}");
-        let body = check_of(inner, quote!(#v), name, b, depth + 1);
-        return quote!(if let ::core::option::Option::Some(#v) = #access { #body });
+        let body = check_of(inner, quote!(#v), name, b, depth + 1)?;
+        return Ok(quote!(if let ::core::option::Option::Some(#v) = #access { #body }));
     }
     let elem = generic_of(ty, "Vec").or(match ty {
         Type::Array(a) => Some(&*a.elem),
@@ -430,26 +569,63 @@ fn check_of(
     });
     if let Some(inner) = elem {
         if matches!(b, Bound::Finite) && last_ident(inner).as_deref() == Some("f64") {
-            return quote!(#c::all_finite(#name, #access)?;);
+            return Ok(quote!(#c::all_finite(#name, #access)?;));
         }
         let v = format_ident!("__v{depth}");
         let i = format_ident!("__i{depth}");
         let n = format_ident!("__n{depth}");
-        let body = check_of(inner, quote!(#v), quote!(&#n), b, depth + 1);
-        return quote!(for (#i, #v) in (#access).iter().enumerate() {
+        let body = check_of(inner, quote!(#v), quote!(&#n), b, depth + 1)?;
+        return Ok(quote!(for (#i, #v) in (#access).iter().enumerate() {
             let #n = ::std::format!("{}[{}]", #name, #i);
             #body
-        });
+        }));
     }
-    match b {
+    if is_integer(ty) {
+        let usize_field = last_ident(ty).as_deref() == Some("usize");
+        // the usize checks of sizes keep their messages
+        match b {
+            Bound::Width if usize_field => return Ok(quote!(#c::width(#name, *#access)?;)),
+            Bound::Size(lo, hi) if usize_field => {
+                return Ok(quote!(#c::size(#name, *#access, #lo, #hi)?;));
+            }
+            Bound::AtLeastOne if usize_field => {
+                return Ok(quote!(#c::at_least_one(#name, *#access)?;));
+            }
+            _ => {}
+        }
+        let Some((lo, hi)) = ends(b) else {
+            return Err(syn::Error::new_spanned(
+                ty,
+                "`finite` on an integer field: a whole number is always finite; remove it",
+            ));
+        };
+        for e in lo.iter().chain(hi.iter()) {
+            if is_float_literal(&e.value) {
+                return Err(syn::Error::new_spanned(
+                    &e.value,
+                    "a fractional bound on an integer field: give a whole number \
+                     (`range(> 0)` rather than `range(> 0.0)`)",
+                ));
+            }
+        }
+        let lo = limit(lo.as_ref(), quote!(i128));
+        let hi = limit(hi.as_ref(), quote!(i128));
+        return Ok(quote!(#c::whole(#name, (*#access) as i128, #lo, #hi)?;));
+    }
+    Ok(match b {
         Bound::Finite => quote!(#c::finite(#name, *#access)?;),
         Bound::Positive => quote!(#c::positive(#name, *#access)?;),
         Bound::NonNegative => quote!(#c::non_negative(#name, *#access)?;),
         Bound::Range(lo, hi) => quote!(#c::in_range(#name, *#access, #lo, #hi)?;),
+        Bound::Between(lo, hi) => {
+            let lo = limit(lo.as_ref(), quote!(f64));
+            let hi = limit(hi.as_ref(), quote!(f64));
+            quote!(#c::between(#name, *#access, #lo, #hi)?;)
+        }
         Bound::Width => quote!(#c::width(#name, *#access)?;),
         Bound::Size(lo, hi) => quote!(#c::size(#name, *#access, #lo, #hi)?;),
         Bound::AtLeastOne => quote!(#c::at_least_one(#name, *#access)?;),
-    }
+    })
 }
 
 /// Code adding a bound to a schema `s` (a `Value` variable) and its text to `t`.
@@ -457,6 +633,11 @@ fn schema_bound(b: &Bound) -> TokenStream2 {
     let d = quote!(::nanomotion_core::doc::__derive);
     match b {
         Bound::Finite => quote!(),
+        Bound::Between(lo, hi) => {
+            let lo = limit(lo.as_ref(), quote!(f64));
+            let hi = limit(hi.as_ref(), quote!(f64));
+            quote!(#d::limits(&mut __s, &mut __b, #lo, #hi);)
+        }
         Bound::Positive => {
             quote!(#d::bound(&mut __s, &mut __b, ::core::option::Option::Some(0.0), true, ::core::option::Option::None);)
         }
@@ -576,12 +757,29 @@ fn field_code(
     let mut check = TokenStream2::new();
     let mut ordering = TokenStream2::new();
     if with_checks {
+        let mut own = TokenStream2::new();
         for b in &pa.bounds {
-            check.extend(check_of(ty, quote!(&self.#ident), quote!(#name), b, 0));
+            own.extend(check_of(ty, quote!(&self.#ident), quote!(#name), b, 0)?);
+        }
+        match &pa.hint {
+            Some(h) if !own.is_empty() => check.extend(quote!(
+                (|| -> ::core::result::Result<(), ::nanomotion_core::ParamError> {
+                    #own
+                    ::core::result::Result::Ok(())
+                })()
+                .map_err(|e| #d::hint(e, #h))?;
+            )),
+            Some(_) => {
+                return Err(syn::Error::new_spanned(
+                    ident,
+                    "`hint` adds words to a bound's error: declare a bound on this field",
+                ));
+            }
+            None => check.extend(own),
         }
         if let Some(other) = &pa.at_most {
             let other_name = other.to_string();
-            ordering = quote!(::nanomotion_core::block::check::ordered(#name, self.#ident, #other_name, self.#other)?;);
+            ordering = quote!(::nanomotion_core::block::check::ordered(#name, (self.#ident) as f64, #other_name, (self.#other) as f64)?;);
         }
         if pa.nested {
             if let Some(inner) = generic_of(ty, "Option") {
@@ -759,7 +957,7 @@ fn expand(input: &DeriveInput) -> syn::Result<TokenStream2> {
             fn param_docs() -> ::std::vec::Vec<::nanomotion_core::ParamDoc> {
                 #param_docs
             }
-            #[allow(unused_variables, clippy::needless_borrow)]
+            #[allow(unused_variables, clippy::needless_borrow, clippy::unnecessary_cast)]
             fn check_params(&self) -> ::core::result::Result<(), ::nanomotion_core::ParamError> {
                 #checks
                 ::core::result::Result::Ok(())
@@ -772,4 +970,116 @@ fn expand(input: &DeriveInput) -> syn::Result<TokenStream2> {
         }
         #registration
     ))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use syn::parse_quote;
+
+    fn bounds(attr: Attribute) -> syn::Result<Vec<Bound>> {
+        param_attr(&[attr]).map(|p| p.bounds)
+    }
+
+    fn end(e: &Option<End>) -> Option<(String, bool)> {
+        e.as_ref()
+            .map(|e| (e.value.to_token_stream().to_string(), e.exclusive))
+    }
+
+    use quote::ToTokens;
+
+    #[test]
+    fn range_reads_every_form() {
+        let b = bounds(parse_quote!(#[param(range(0.0, 46.0))])).unwrap();
+        assert!(matches!(&b[..], [Bound::Range(..)]));
+        type EndText = Option<(&'static str, bool)>;
+        let cases: [(Attribute, EndText, EndText); 6] = [
+            (parse_quote!(#[param(range(> 0))]), Some(("0", true)), None),
+            (
+                parse_quote!(#[param(range(>= 1))]),
+                Some(("1", false)),
+                None,
+            ),
+            (
+                parse_quote!(#[param(range(<= 1))]),
+                None,
+                Some(("1", false)),
+            ),
+            (
+                parse_quote!(#[param(range(< MAX))]),
+                None,
+                Some(("MAX", true)),
+            ),
+            (
+                parse_quote!(#[param(range(> 0.25, < 1))]),
+                Some(("0.25", true)),
+                Some(("1", true)),
+            ),
+            (
+                parse_quote!(#[param(range(<= - 1, >= - 5))]),
+                Some(("- 5", false)),
+                Some(("- 1", false)),
+            ),
+        ];
+        for (attr, lo, hi) in cases {
+            let b = bounds(attr).unwrap();
+            let [Bound::Between(l, h)] = &b[..] else {
+                panic!("not a Between");
+            };
+            let own = |x: Option<(&str, bool)>| x.map(|(s, e)| (s.to_string(), e));
+            assert_eq!((end(l), end(h)), (own(lo), own(hi)));
+        }
+    }
+
+    #[test]
+    fn range_refuses_what_it_cannot_mean() {
+        for attr in [
+            parse_quote!(#[param(range(0, < 1))]),
+            parse_quote!(#[param(range(> 0, > 1))]),
+            parse_quote!(#[param(range(1))]),
+            parse_quote!(#[param(range(1, 2, 3))]),
+        ] {
+            let attr: Attribute = attr;
+            assert!(bounds(attr).is_err());
+        }
+        let e = match bounds(parse_quote!(#[param(range(> 0, >= 1))])) {
+            Err(e) => e.to_string(),
+            Ok(_) => panic!("two lower bounds accepted"),
+        };
+        assert!(e.contains("two lower bounds"), "{e}");
+    }
+
+    #[test]
+    fn integer_fields_refuse_finite_and_fractional_bounds() {
+        let u32_ty: Type = parse_quote!(u32);
+        let opt: Type = parse_quote!(Option<i64>);
+        assert!(check_of(&u32_ty, quote!(&self.n), quote!("n"), &Bound::Finite, 0).is_err());
+        let b = bounds(parse_quote!(#[param(range(> 0.5))])).unwrap();
+        assert!(check_of(&opt, quote!(&self.n), quote!("n"), &b[0], 0).is_err());
+        let b = bounds(parse_quote!(#[param(range(1, 10))])).unwrap();
+        let code = check_of(&u32_ty, quote!(&self.n), quote!("n"), &b[0], 0)
+            .unwrap()
+            .to_string();
+        assert!(code.contains("check :: whole"), "{code}");
+        // a usize's `width` keeps `check::width`
+        let usize_ty: Type = parse_quote!(usize);
+        let code = check_of(&usize_ty, quote!(&self.w), quote!("w"), &Bound::Width, 0)
+            .unwrap()
+            .to_string();
+        assert!(code.contains("check :: width"), "{code}");
+        // a float keeps the float checks
+        let f: Type = parse_quote!(f64);
+        let code = check_of(&f, quote!(&self.x), quote!("x"), &b[0], 0)
+            .unwrap()
+            .to_string();
+        assert!(code.contains("check :: in_range"), "{code}");
+    }
+
+    #[test]
+    fn hint_reads_and_needs_a_bound() {
+        let p = param_attr(&[parse_quote!(#[param(range(1, 9), hint = "e.g. 3")])]).unwrap();
+        assert_eq!(p.hint.as_deref(), Some("e.g. 3"));
+        let f: syn::Field = parse_quote!(#[param(hint = "e.g. 3")] n: u32);
+        assert!(field_code(&f, &SerdeContainer::default(), true).is_err());
+    }
 }

@@ -225,7 +225,7 @@ fn default_standstill() -> f64 {
 }
 
 /// How the feed-forward's voltage range is chosen.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields, rename_all = "snake_case")]
 pub enum FfRange {
     /// Both branches on [v_min_v, v_max_v] (V).

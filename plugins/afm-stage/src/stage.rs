@@ -47,7 +47,7 @@ pub struct AxisHysteresis {
 }
 
 /// Sample topography h_s(x, y) (m).
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields, rename_all = "snake_case")]
 pub enum Topography {
     /// A flat sample.

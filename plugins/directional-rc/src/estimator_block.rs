@@ -50,7 +50,7 @@ use nanomotion_core::{Block, BuildContext, ParamError, Port, Role, Tick};
 use serde::{Deserialize, Serialize};
 
 /// What to output for α when the estimate fails.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default, Params)]
 #[serde(rename_all = "snake_case")]
 pub enum OnFailure {
     /// α = NaN: the run stops with a located non-finite error.
@@ -89,12 +89,15 @@ pub struct RotationEstimator {
     pub max_line_s: f64,
     /// Largest |α| admitted (rad), default 0.1.
     #[serde(default = "max_angle")]
+    #[param(range(> 0, < 1.5), hint = "e.g. 0.1")]
     pub max_angle_rad: f64,
     /// Smallest acceptable correlation peak, default 0.5.
     #[serde(default = "min_corr")]
+    #[param(range(> 0, < 1), hint = "e.g. 0.5")]
     pub min_correlation: f64,
     /// Autocorrelation level of a repeat (alias check), default 0.5.
     #[serde(default = "alias")]
+    #[param(range(> 0.25, < 1), hint = "e.g. 0.5")]
     pub alias_level: f64,
     /// `stop` (α = NaN, default) or `plain_rc` (α = 0) on failure.
     #[serde(default)]
@@ -287,28 +290,6 @@ impl Block for RotationEstimator {
         self.check_params()?;
         let cap = check::samples_of("max_line_s", self.max_line_s, ctx.dt, 1 << 24)? + 2;
         check::buffer("max_line_s", cap, 8, self.lines)?;
-        let o = self.options();
-        if !(o.max_angle_rad.is_finite() && o.max_angle_rad > 0.0 && o.max_angle_rad < 1.5) {
-            return Err(ParamError::new(
-                "max_angle_rad",
-                format!("is {}", o.max_angle_rad),
-                "give the largest rotation admitted in (0, 1.5) rad, e.g. 0.1",
-            ));
-        }
-        if !(o.min_correlation > 0.0 && o.min_correlation < 1.0) {
-            return Err(ParamError::new(
-                "min_correlation",
-                format!("is {}", o.min_correlation),
-                "give a level in (0, 1), e.g. 0.5",
-            ));
-        }
-        if !(o.alias_level > 0.25 && o.alias_level < 1.0) {
-            return Err(ParamError::new(
-                "alias_level",
-                format!("is {}", o.alias_level),
-                "give a level in (0.25, 1), e.g. 0.5",
-            ));
-        }
         self.state = Some(State {
             cap,
             z: vec![0.0; cap * self.lines],

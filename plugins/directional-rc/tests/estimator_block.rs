@@ -202,3 +202,38 @@ log: [est.status, to_a.y]
     let status = &r.logs.iter().find(|l| l.name == "est.status").unwrap().data;
     assert_eq!(*status.last().unwrap(), -7.0);
 }
+
+/// The open intervals of `max_angle_rad`, `min_correlation` and
+/// `alias_level` are declared on the fields (`range(> lo, < hi)`, #26): the
+/// schema says them with `exclusiveMinimum`/`exclusiveMaximum`, the check
+/// refuses the ends themselves, and `on_failure` lists its choices.
+#[test]
+fn open_intervals_and_choices_are_declared() {
+    use nanomotion_core::doc::Params;
+    let docs = RotationEstimator::param_docs();
+    let doc = |n: &str| docs.iter().find(|p| p.name == n).unwrap().clone();
+    for (name, lo, hi) in [
+        ("max_angle_rad", 0.0, 1.5),
+        ("min_correlation", 0.0, 1.0),
+        ("alias_level", 0.25, 1.0),
+    ] {
+        let d = doc(name);
+        assert_eq!(d.schema["exclusiveMinimum"].as_f64(), Some(lo), "{name}");
+        assert_eq!(d.schema["exclusiveMaximum"].as_f64(), Some(hi), "{name}");
+        for v in [lo, hi] {
+            let yaml =
+                format!("type: rotation_estimator\nlines: 4\nmax_line_s: 1.0\n{name}: {v}\n");
+            let mut b: Box<dyn Block> = nanomotion_core::yaml::from_str(&yaml, "t").unwrap();
+            let e = b.build(&BuildContext::new("e", DT, 0)).unwrap_err();
+            assert_eq!(e.field, name);
+            assert!(
+                e.fix.contains(&format!("give a value in ({lo}, {hi})")),
+                "{e:?}"
+            );
+        }
+    }
+    assert_eq!(
+        doc("on_failure").schema["enum"].to_string(),
+        r#"["stop","plain_rc"]"#
+    );
+}

@@ -217,7 +217,7 @@ impl GainSchedule {
 }
 
 /// Where the scheduled gain multiplies the controller (see the crate doc).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, Params)]
 #[serde(rename_all = "snake_case")]
 pub enum Placement {
     /// u = C(K·e): bumpless for linear controllers (default).

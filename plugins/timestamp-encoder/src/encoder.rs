@@ -123,6 +123,7 @@ pub struct TimestampEncoder {
     /// Skip σ (events skipped between stored ones), (8.5)–(8.7), default 0.
     /// The newest event is always kept.
     #[serde(default)]
+    #[param(range(0, 1_000_000))]
     pub skip: i64,
     /// Derivatives provided on the input: 0 → `[x]`, 1 → `[x, ẋ]` (default),
     /// 2 → `[x, ẋ, ẍ]`; sets the interpolant between ticks (linear, cubic, quintic).
@@ -203,20 +204,6 @@ impl TimestampEncoder {
     /// history. Called by [`Block::build`] with the block's seed.
     pub fn prepare(&mut self, seed: u64) -> Result<(), ParamError> {
         self.check_params()?;
-        if self.skip < 0 {
-            return Err(ParamError::new(
-                "skip",
-                format!("is {}, negative", self.skip),
-                "give σ ≥ 0",
-            ));
-        }
-        if self.skip > 1_000_000 {
-            return Err(ParamError::new(
-                "skip",
-                format!("is {}, absurdly large", self.skip),
-                "give σ ≤ 1e6",
-            ));
-        }
         let n_lines = self.lines;
         let n4 = 4 * n_lines;
         let table = &self.slit_errors_counts;

@@ -65,7 +65,7 @@ fn d_timeout() -> f64 {
 }
 
 /// What the estimator does when the fit leaves the ±band around the count (Sec. 8.3).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, Params)]
 #[serde(rename_all = "snake_case")]
 pub enum Fallback {
     /// The thesis's rule: the position is replaced by the count (cell centre),

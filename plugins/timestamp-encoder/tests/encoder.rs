@@ -652,3 +652,44 @@ fn encoder_tables_are_declared_and_many_large_encoders_are_refused_before_alloca
     );
     assert!(e.contains("checked before anything is allocated"), "{e}");
 }
+
+/// `skip` (an i64) is bounded by its declaration (`range(0, 1_000_000)`, #26):
+/// both ends refused outside with the same words, the schema an integer in
+/// [0, 10⁶]; `fallback` lists its choices.
+#[test]
+fn skip_is_a_declared_integer_bound_and_fallback_lists_its_choices() {
+    use nanomotion_core::doc::Params;
+    for (text, problem) in [
+        (
+            "type: timestamp_encoder\nskip: -1\n",
+            "is -1, outside the allowed range [0, 1000000]",
+        ),
+        (
+            "type: timestamp_encoder\nskip: 1000001\n",
+            "is 1000001, outside the allowed range [0, 1000000]",
+        ),
+    ] {
+        let mut b: Box<dyn Block> = nanomotion_core::yaml::from_str(text, "t").unwrap();
+        let e = b.build(&BuildContext::new("b", 1e-3, 0)).unwrap_err();
+        assert_eq!((e.field.as_str(), e.problem.as_str()), ("skip", problem));
+        assert_eq!(e.fix, "give a whole number in [0, 1000000]");
+    }
+    let docs = TimestampEncoder::param_docs();
+    let skip = docs.iter().find(|p| p.name == "skip").unwrap();
+    assert_eq!(skip.schema["type"], "integer");
+    assert_eq!(skip.schema["minimum"], 0);
+    assert_eq!(skip.schema["maximum"], 1_000_000);
+    let docs = TimestampEstimator::param_docs();
+    let fallback = docs.iter().find(|p| p.name == "fallback").unwrap();
+    let listed: Vec<String> = fallback.schema["enum"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_str().unwrap().to_string())
+        .collect();
+    for n in &listed {
+        let _: Fallback = nanomotion_core::yaml::from_str(n, "t").unwrap();
+    }
+    assert!(nanomotion_core::yaml::from_str::<Fallback>("Thesis", "t").is_err());
+    assert_eq!(listed, ["thesis", "zero_standstill", "pseudo_event"]);
+}

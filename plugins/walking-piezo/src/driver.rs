@@ -194,7 +194,7 @@ pub fn triangle_unit(theta: f64) -> f64 {
 // The free variant carries its 32 points inline: parameters are built once, and
 // a flat value keeps YAML and Rust construction plain.
 #[allow(clippy::large_enum_variant)]
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Params)]
 #[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
 pub enum WaveformShape {
     /// (2.2).

@@ -131,8 +131,8 @@ pub struct StageParams {
     pub strip_leg_pitch_m: f64,
     /// Internal sub-steps per block period (the thesis's Δt = 25 µs is one step at
     /// 40 kHz, or 10 sub-steps at 4 kHz).
-    /// 1 to 1000.
     #[serde(default = "d_substeps")]
+    #[param(range(1, MAX_SUBSTEPS), hint = "or raise the block's rate_hz")]
     pub substeps: u32,
     /// r of (4.18) (N·s/m); leave out for r* = 2/(λ_min(W) + λ_max(W)), the
     /// fastest; must be below 2/λ_max(W).
@@ -146,6 +146,7 @@ pub struct StageParams {
     /// Iteration cap of the fixed-point iteration; hitting it is counted and
     /// reported.
     #[serde(default = "d_max_iter")]
+    #[param(range(1, MAX_ITER), hint = "e.g. 200")]
     pub max_iter: u32,
     /// Add an input port `f_ext` (N): an external force on the stage.
     #[serde(default)]
@@ -296,29 +297,6 @@ impl StageParams {
         self.check_params()?;
         self.kinematics().validate()?;
         self.contact_law().validate()?;
-        if !(1..=MAX_SUBSTEPS).contains(&self.substeps) {
-            return Err(ParamError::new(
-                "substeps",
-                format!("is {}, outside [1, {MAX_SUBSTEPS}]", self.substeps),
-                format!(
-                    "give 1 to {MAX_SUBSTEPS} sub-steps per block period (or raise the block's rate_hz)"
-                ),
-            ));
-        }
-        if self.max_iter > MAX_ITER {
-            return Err(ParamError::new(
-                "max_iter",
-                format!("is {}, more than {MAX_ITER}", self.max_iter),
-                format!("give at most {MAX_ITER} (e.g. 200)"),
-            ));
-        }
-        if self.max_iter == 0 {
-            return Err(ParamError::new(
-                "max_iter",
-                "is 0",
-                "give at least 1 (e.g. 200)",
-            ));
-        }
         let xc = self.x_coefficients(dt / f64::from(self.substeps));
         if let Some(r) = self.prox_r {
             check::positive("prox_r", r)?;

@@ -599,3 +599,55 @@ fn steps_do_not_allocate() {
     assert!(y.iter().chain(&yb).all(|v| v.is_finite()));
     assert!(rough.signals().x_s.is_finite());
 }
+
+/// `substeps` and `max_iter` are whole-number bounds declared on the fields
+/// (`#[param(range(1, …))]`, #26): the check, its words and the schema come
+/// from the declaration, the block-specific advice from its `hint`.
+#[test]
+fn substeps_and_max_iter_are_declared_integer_bounds() {
+    use nanomotion_core::doc::Params;
+    let e = WalkingPiezoStage::new(
+        StageParams {
+            substeps: 1001,
+            ..Default::default()
+        },
+        DT,
+        0,
+    )
+    .unwrap_err();
+    assert_eq!(
+        (e.field.as_str(), e.problem.as_str(), e.fix.as_str()),
+        (
+            "substeps",
+            "is 1001, outside the allowed range [1, 1000]",
+            "give a whole number in [1, 1000], or raise the block's rate_hz"
+        )
+    );
+    let e = WalkingPiezoStage::new(
+        StageParams {
+            max_iter: 100_001,
+            ..Default::default()
+        },
+        DT,
+        0,
+    )
+    .unwrap_err();
+    assert_eq!(
+        (e.field.as_str(), e.fix.as_str()),
+        ("max_iter", "give a whole number in [1, 100000], e.g. 200")
+    );
+    let docs = StageParams::param_docs();
+    let doc = |n: &str| docs.iter().find(|d| d.name == n).unwrap().clone();
+    let s = doc("substeps");
+    assert_eq!(s.schema["type"], "integer");
+    assert_eq!(
+        (s.schema["minimum"].clone(), s.schema["maximum"].clone()),
+        (1.into(), 1000.into())
+    );
+    assert_eq!(s.bounds, ["1 to 1000"]);
+    let s = doc("max_iter");
+    assert_eq!(
+        (s.schema["minimum"].clone(), s.schema["maximum"].clone()),
+        (1.into(), 100_000.into())
+    );
+}
