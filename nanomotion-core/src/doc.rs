@@ -42,6 +42,10 @@
 //! (`[zoh | tustin]`); variants with data are an `anyOf` of their forms. An enum
 //! without the derive is "any value" in the schema.
 //!
+//! **Enum variants' fields** take bounds too: the enum's `check_params()` checks
+//! the fields of the variant present, and a struct field of that enum type marked
+//! `nested` calls it (`shape.overlap_q`).
+//!
 //! A bound on an `Option<T>` applies when the value is present, on a `Vec<T>` to
 //! every element (named `field[i]`). `default_doc = "…"` says in words what a
 //! default means when its value alone does not (`none` = computed from other

@@ -546,3 +546,100 @@ proptest! {
         }
     }
 }
+
+/// A choice with data: bounds on its variants' fields.
+#[derive(Debug, Clone, Serialize, Deserialize, Params)]
+#[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
+enum Filter {
+    /// No filter.
+    Identity,
+    /// A moving average.
+    Average {
+        /// Taps (-).
+        #[param(range(1, 99), hint = "an odd number")]
+        taps: u32,
+        /// Lowest weight (-).
+        #[param(non_negative, at_most = hi)]
+        lo: f64,
+        /// Highest weight (-).
+        hi: f64,
+    },
+    /// A low-pass.
+    LowPass {
+        /// Cut-off (Hz).
+        #[param(range(> 0))]
+        cutoff_hz: f64,
+    },
+}
+
+/// A block's parameters holding the choice.
+#[derive(Debug, Clone, Serialize, Deserialize, Params)]
+struct Holder {
+    /// The filter.
+    #[param(nested)]
+    filter: Filter,
+    /// An optional second one.
+    #[serde(default)]
+    #[param(nested)]
+    second: Option<Filter>,
+}
+
+#[test]
+fn bounds_on_enum_variant_fields_are_checked_through_nested() {
+    let ok = Holder {
+        filter: Filter::Average {
+            taps: 5,
+            lo: 0.0,
+            hi: 0.0,
+        },
+        second: Some(Filter::Identity),
+    };
+    assert!(ok.check_params().is_ok());
+    let e = Holder {
+        filter: Filter::Average {
+            taps: 100,
+            lo: 0.0,
+            hi: 0.0,
+        },
+        second: None,
+    }
+    .check_params()
+    .unwrap_err();
+    assert_eq!(
+        (e.field.as_str(), e.problem.as_str(), e.fix.as_str()),
+        (
+            "filter.taps",
+            "is 100, outside the allowed range [1, 99]",
+            "give a whole number in [1, 99], an odd number"
+        )
+    );
+    // at_most between two fields of the variant
+    let e = Filter::Average {
+        taps: 3,
+        lo: 0.5,
+        hi: 0.25,
+    }
+    .check_params()
+    .unwrap_err();
+    assert_eq!(e, check::ordered("lo", 0.5, "hi", 0.25).unwrap_err());
+    let e = Holder {
+        filter: Filter::Identity,
+        second: Some(Filter::LowPass { cutoff_hz: 0.0 }),
+    }
+    .check_params()
+    .unwrap_err();
+    assert_eq!(
+        (e.field.as_str(), e.problem.as_str()),
+        ("second.cutoff_hz", "is 0, must be > 0")
+    );
+    // the schema of the variant's field carries its bounds
+    let s = Filter::param_schema();
+    let avg = s["anyOf"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|b| b["properties"]["kind"]["const"] == "average")
+        .unwrap();
+    assert_eq!(avg["properties"]["taps"]["type"], "integer");
+    assert_eq!(avg["properties"]["taps"]["maximum"], 99);
+}

@@ -699,11 +699,40 @@ struct FieldCode {
     ordering: TokenStream2,
 }
 
+/// Where a field's value is read by its checks.
+#[derive(Clone, Copy, PartialEq)]
+enum Access {
+    /// No checks (documentation only).
+    None,
+    /// A struct's field: `self.field`.
+    SelfField,
+    /// A field of an enum variant, bound by reference in a `match self` arm.
+    Binding,
+}
+
+impl Access {
+    /// An expression of type `&T` for the field `id`.
+    fn place(self, id: &Ident) -> TokenStream2 {
+        match self {
+            Access::Binding => quote!(#id),
+            _ => quote!(&self.#id),
+        }
+    }
+    /// An expression of type `T` (a `Copy` value) for the field `id`.
+    fn value(self, id: &Ident) -> TokenStream2 {
+        match self {
+            Access::Binding => quote!((*#id)),
+            _ => quote!(self.#id),
+        }
+    }
+}
+
 fn field_code(
     f: &syn::Field,
     container: &SerdeContainer,
-    with_checks: bool,
+    access: Access,
 ) -> syn::Result<Option<FieldCode>> {
+    let with_checks = access != Access::None;
     let d = quote!(::nanomotion_core::doc::__derive);
     let sf = serde_field(&f.attrs)?;
     let pa = param_attr(&f.attrs)?;
@@ -759,7 +788,7 @@ fn field_code(
     if with_checks {
         let mut own = TokenStream2::new();
         for b in &pa.bounds {
-            own.extend(check_of(ty, quote!(&self.#ident), quote!(#name), b, 0)?);
+            own.extend(check_of(ty, access.place(ident), quote!(#name), b, 0)?);
         }
         match &pa.hint {
             Some(h) if !own.is_empty() => check.extend(quote!(
@@ -779,18 +808,17 @@ fn field_code(
         }
         if let Some(other) = &pa.at_most {
             let other_name = other.to_string();
-            ordering = quote!(::nanomotion_core::block::check::ordered(#name, (self.#ident) as f64, #other_name, (self.#other) as f64)?;);
+            let (this, that) = (access.value(ident), access.value(other));
+            ordering = quote!(::nanomotion_core::block::check::ordered(#name, (#this) as f64, #other_name, (#that) as f64)?;);
         }
         if pa.nested {
-            if let Some(inner) = generic_of(ty, "Option") {
-                let _ = inner;
-                check.extend(
-                    quote!(if let ::core::option::Option::Some(__v) = &self.#ident {
-                        #d::nested(#name, ::nanomotion_core::doc::Params::check_params(__v))?;
-                    }),
-                );
+            let place = access.place(ident);
+            if generic_of(ty, "Option").is_some() {
+                check.extend(quote!(if let ::core::option::Option::Some(__v) = #place {
+                    #d::nested(#name, ::nanomotion_core::doc::Params::check_params(__v))?;
+                }));
             } else {
-                check.extend(quote!(#d::nested(#name, ::nanomotion_core::doc::Params::check_params(&self.#ident))?;));
+                check.extend(quote!(#d::nested(#name, ::nanomotion_core::doc::Params::check_params(#place))?;));
             }
         }
     }
@@ -878,7 +906,7 @@ fn expand(input: &DeriveInput) -> syn::Result<TokenStream2> {
             let mut checks = Vec::new();
             let mut orderings = Vec::new();
             for f in &named.named {
-                if let Some(fc) = field_code(f, &container, true)? {
+                if let Some(fc) = field_code(f, &container, Access::SelfField)? {
                     docs.push(fc.doc);
                     checks.push(fc.check);
                     orderings.push(fc.ordering);
@@ -895,6 +923,8 @@ fn expand(input: &DeriveInput) -> syn::Result<TokenStream2> {
         Data::Enum(e) => {
             let rule = container.rename_all.as_deref();
             let mut variants = Vec::new();
+            // `match self` arms checking the bounds declared on variant fields
+            let mut arms = Vec::new();
             for v in &e.variants {
                 let sf = serde_field(&v.attrs)?;
                 if sf.skip {
@@ -918,10 +948,22 @@ fn expand(input: &DeriveInput) -> syn::Result<TokenStream2> {
                         let vcont = serde_container(&v.attrs)?;
                         let closed = vcont.deny_unknown_fields || container.deny_unknown_fields;
                         let mut docs = Vec::new();
+                        let mut bound = Vec::new();
+                        let mut checks = TokenStream2::new();
+                        let mut orderings = TokenStream2::new();
                         for f in &named.named {
-                            if let Some(fc) = field_code(f, &vcont, false)? {
+                            if let Some(fc) = field_code(f, &vcont, Access::Binding)? {
                                 docs.push(fc.doc);
+                                bound.extend(f.ident.clone());
+                                checks.extend(fc.check);
+                                orderings.extend(fc.ordering);
                             }
+                        }
+                        if !(checks.is_empty() && orderings.is_empty()) {
+                            let vident = &v.ident;
+                            arms.push(
+                                quote!(Self::#vident { #(#bound,)* .. } => { #checks #orderings }),
+                            );
                         }
                         quote!(::core::option::Option::Some(#d::object(#vdoc, &[#(#docs),*], #closed)))
                     }
@@ -936,9 +978,20 @@ fn expand(input: &DeriveInput) -> syn::Result<TokenStream2> {
                 (None, false) => quote!(#d::Tagging::External),
             };
             let closed = container.deny_unknown_fields;
+            let checks = if arms.is_empty() {
+                quote!()
+            } else {
+                quote!(
+                    #[allow(unreachable_patterns)]
+                    match self {
+                        #(#arms)*
+                        _ => {}
+                    }
+                )
+            };
             (
                 quote!(::std::vec::Vec::new()),
-                quote!(),
+                checks,
                 quote!(#d::enumeration(#description, #tagging, ::std::vec![#(#variants),*], #closed)),
             )
         }
@@ -1080,6 +1133,6 @@ mod tests {
         let p = param_attr(&[parse_quote!(#[param(range(1, 9), hint = "e.g. 3")])]).unwrap();
         assert_eq!(p.hint.as_deref(), Some("e.g. 3"));
         let f: syn::Field = parse_quote!(#[param(hint = "e.g. 3")] n: u32);
-        assert!(field_code(&f, &SerdeContainer::default(), true).is_err());
+        assert!(field_code(&f, &SerdeContainer::default(), Access::SelfField).is_err());
     }
 }

@@ -54,6 +54,7 @@ pub enum FilterSpec {
     /// `taps` (odd) coefficients: q = (taps − 1)/2 samples delay.
     FirLowpass {
         /// Number of taps (odd).
+        #[param(size(1, MAX_FIR_TAPS))]
         taps: usize,
         /// −6 dB cut-off frequency (Hz), below Nyquist.
         cutoff_hz: f64,
@@ -66,6 +67,7 @@ pub enum FilterSpec {
         /// Delay (Q: q) or preview (L: l) in samples that the memory loop
         /// compensates.
         #[serde(default)]
+        #[param(size(0, nanomotion_core::block::MAX_BUFFER_VALUES))]
         delay: usize,
     },
     /// Arbitrary stable proper IIR num(z)/den(z), descending powers of z, with a
@@ -77,6 +79,7 @@ pub enum FilterSpec {
         den: Vec<f64>,
         /// Delay (Q: q) or preview (L: l) in samples.
         #[serde(default)]
+        #[param(size(0, nanomotion_core::block::MAX_BUFFER_VALUES))]
         delay: usize,
     },
 }
@@ -95,6 +98,11 @@ impl FilterSpec {
     /// field (`learning`, `robustness`) in errors.
     pub fn build_named(&self, field: &str, dt: f64) -> Result<Filter, ParamError> {
         check::positive("dt", dt)?;
+        // the bounds declared on the variants' fields (`taps`, `delay`)
+        self.check_params().map_err(|mut e| {
+            e.field = format!("{field}.{}", e.field);
+            e
+        })?;
         match self {
             FilterSpec::Identity => Ok(Filter::fir(vec![1.0], 0, dt)),
             FilterSpec::Zpetc { num, den } => {
@@ -107,7 +115,6 @@ impl FilterSpec {
                 Filter::from_ss(ss, z.preview).map_err(|e| lti_err(field, e))
             }
             FilterSpec::FirLowpass { taps, cutoff_hz } => {
-                check::size(&format!("{field}.taps"), *taps, 1, MAX_FIR_TAPS)?;
                 let h = fir_lowpass(*taps, *cutoff_hz, dt).map_err(|e| {
                     ParamError::new(
                         field,
@@ -135,11 +142,9 @@ impl FilterSpec {
                     MAX_FIR_TAPS,
                 )?;
                 check::all_finite(&format!("{field}.coefficients"), coefficients)?;
-                check::buffer(&format!("{field}.delay"), *delay, 0, 1)?;
                 Ok(Filter::fir(coefficients.clone(), *delay, dt))
             }
             FilterSpec::Iir { num, den, delay } => {
-                check::buffer(&format!("{field}.delay"), *delay, 0, 1)?;
                 check::all_finite(&format!("{field}.num"), num)?;
                 check::all_finite(&format!("{field}.den"), den)?;
                 let t = TransferFunction::new(num.clone(), den.clone(), Some(dt))

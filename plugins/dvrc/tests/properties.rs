@@ -308,3 +308,52 @@ fn criterion_reports_norm_margin_and_tightest_frequency() {
     assert!((hinfnorm(&h).unwrap().norm - c.hinf).abs() < 1e-12);
     assert!(format!("{c}").contains("(5.5) fixed N"));
 }
+
+proptest! {
+    /// A FIR Q's `taps` outside [1, MAX_FIR_TAPS] is refused by the bound
+    /// declared on the variant's field (#26), named with the filter's field
+    /// and with `check::size`'s words, as the hand check before it.
+    #[test]
+    fn fir_taps_outside_the_declared_bound_are_refused_by_name(
+        taps in prop_oneof![Just(0usize), (dvrc::filters::MAX_FIR_TAPS + 1)..1_000_000usize]
+    ) {
+        let Err(e) = FilterSpec::FirLowpass { taps, cutoff_hz: 100.0 }
+            .build_named("robustness", 1e-3)
+        else {
+            panic!("{taps} taps accepted");
+        };
+        let want = nanomotion_core::block::check::size(
+            "robustness.taps",
+            taps,
+            1,
+            dvrc::filters::MAX_FIR_TAPS,
+        )
+        .unwrap_err();
+        prop_assert_eq!(e, want);
+    }
+}
+
+#[test]
+fn declared_filter_bounds_accept_what_they_allow() {
+    assert!(
+        FilterSpec::q_fir(11, 100.0)
+            .build_named("robustness", 1e-3)
+            .is_ok()
+    );
+    let Err(e) = FilterSpec::Fir {
+        coefficients: vec![1.0],
+        delay: nanomotion_core::block::MAX_BUFFER_VALUES + 1,
+    }
+    .build_named("learning", 1e-3) else {
+        panic!("a delay over the buffer bound was accepted");
+    };
+    assert_eq!(e.field, "learning.delay");
+    assert_eq!(
+        e.problem,
+        format!(
+            "is {}, outside the allowed range [0, {}]",
+            nanomotion_core::block::MAX_BUFFER_VALUES + 1,
+            nanomotion_core::block::MAX_BUFFER_VALUES
+        )
+    );
+}

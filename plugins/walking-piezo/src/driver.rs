@@ -203,6 +203,7 @@ pub enum WaveformShape {
     Asymmetric {
         /// Overlap q: the non-contact part lasts qT, the contact part (1 − q)T.
         #[serde(default = "d_q")]
+        #[param(range(> 0, < 1), hint = "the relative overlap, e.g. 0.3333 (thesis)")]
         overlap_q: f64,
     },
     /// The 4th-order Fourier fit (2.9) of the asymmetric waveform, computed from the
@@ -210,6 +211,7 @@ pub enum WaveformShape {
     AsymmetricFourier {
         /// Overlap q ∈ (0, 1).
         #[serde(default = "d_q")]
+        #[param(range(> 0, < 1), hint = "the relative overlap, e.g. 0.3333 (thesis)")]
         overlap_q: f64,
     },
     /// Triangle waves in the phase pattern of (2.2): a rhombic orbit in (u1, u2).
@@ -242,7 +244,7 @@ pub struct DriverParams {
     /// {kind: sinusoidal | asymmetric | asymmetric_fourier | rhombic | free}; overlap_q ∈
     /// (0, 1) for the asymmetric ones; points_v: 4×8 V for free.
     #[serde(default)]
-    #[param(default_doc = "{kind: asymmetric, overlap_q: 1/3}")]
+    #[param(nested, default_doc = "{kind: asymmetric, overlap_q: 1/3}")]
     pub shape: WaveformShape,
     /// Amplitude A (V) when no `amplitude` input is used; in [0, V_max]. Ā = 46 V.
     #[serde(default = "d_a")]
@@ -291,18 +293,8 @@ impl DriverParams {
         self.check_params()?;
         // the upper bound is another field: checked here, after it
         check::in_range("amplitude_v", self.amplitude_v, 0.0, self.voltage_max_v)?;
+        // `shape.overlap_q` ∈ (0, 1) is declared on the variants (`nested`)
         match &self.shape {
-            WaveformShape::Asymmetric { overlap_q }
-            | WaveformShape::AsymmetricFourier { overlap_q } => {
-                check::finite("shape.overlap_q", *overlap_q)?;
-                if !(*overlap_q > 0.0 && *overlap_q < 1.0) {
-                    return Err(ParamError::new(
-                        "shape.overlap_q",
-                        format!("is {overlap_q}, must be in the open interval (0, 1)"),
-                        "give the relative overlap, e.g. 0.3333 (thesis)",
-                    ));
-                }
-            }
             WaveformShape::Free { points_v } => {
                 for (i, ch) in points_v.iter().enumerate() {
                     for (j, &v) in ch.iter().enumerate() {
@@ -316,7 +308,10 @@ impl DriverParams {
                     }
                 }
             }
-            WaveformShape::Sinusoidal | WaveformShape::Rhombic => {}
+            WaveformShape::Sinusoidal
+            | WaveformShape::Rhombic
+            | WaveformShape::Asymmetric { .. }
+            | WaveformShape::AsymmetricFourier { .. } => {}
         }
         Ok(())
     }

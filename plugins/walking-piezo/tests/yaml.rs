@@ -90,3 +90,44 @@ fn example_graph_runs_and_walks() {
     assert!(travel > 4e-6 && travel < 20e-6, "travel {travel}");
     assert_eq!(*nonconv.last().unwrap(), 0.0);
 }
+
+/// `shape.overlap_q` ∈ (0, 1) is declared on the waveform's variants and
+/// reached through `#[param(nested)]` (#26): the same field is refused, the
+/// schema states the open interval.
+#[test]
+fn overlap_q_is_a_declared_open_interval() {
+    use nanomotion_core::doc::Params;
+    use walking_piezo::driver::{DriverParams, WaveformShape};
+    for q in [0.0, 1.0, f64::NAN] {
+        for shape in [
+            WaveformShape::Asymmetric { overlap_q: q },
+            WaveformShape::AsymmetricFourier { overlap_q: q },
+        ] {
+            let e = DriverParams {
+                shape,
+                ..Default::default()
+            }
+            .validate()
+            .unwrap_err();
+            assert_eq!(e.field, "shape.overlap_q");
+            if q.is_finite() {
+                assert_eq!(e.problem, format!("is {q}, not in (0, 1)"));
+                assert_eq!(
+                    e.fix,
+                    "give a value in (0, 1), the relative overlap, e.g. 0.3333 (thesis)"
+                );
+            }
+        }
+    }
+    assert!(DriverParams::default().validate().is_ok());
+    let docs = DriverParams::param_docs();
+    let shape = &docs.iter().find(|p| p.name == "shape").unwrap().schema;
+    let asym = shape["anyOf"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|b| b["properties"]["kind"]["const"] == "asymmetric")
+        .unwrap();
+    assert_eq!(asym["properties"]["overlap_q"]["exclusiveMinimum"], 0);
+    assert_eq!(asym["properties"]["overlap_q"]["exclusiveMaximum"], 1);
+}
