@@ -25,7 +25,9 @@
 //! Multi-rate: a block at rate f runs on every (f_base / f)-th base tick; its
 //! outputs hold in between. Connections between different rates go through
 //! explicit [`RateTransition`] blocks that the loader inserts and reports (or
-//! rejects with `strict_rates: true`).
+//! rejects with `strict_rates: true`). [`Scheduler::tick`] folds a transition
+//! that only its consumer reads into the consumer's input (the consumer reads
+//! the source, the same value); [`Scheduler::tick_probed`] runs it as a block.
 
 use crate::block::{Block, BuildContext, Port, Role, Tick};
 use crate::error::{GraphError, ParamError};
@@ -41,27 +43,103 @@ pub(crate) struct Node {
     /// Index of its [`Rate`] (set by [`Scheduler::new_internal`]).
     pub rate: usize,
     pub dt: f64,
-    pub k_local: u64,
     pub inputs: Range<usize>,
     pub outputs: Range<usize>,
     pub gathers: Range<usize>,
     pub feedthrough: bool,
     /// An inserted [`RateTransition`]: the tick copies its one gathered input
-    /// straight to its output (the block is not called; same values).
+    /// straight to its output (the block is not called; same values), or
+    /// folds it into its consumer's input (see [`Scheduler::tick`]).
     pub transition: bool,
 }
 
-/// The countdown of every block of one period: due blocks are found per rate,
-/// not per block, and a tick on which only the base rate is due runs just
-/// the base-rate blocks.
+/// The blocks of one period (and sample time): when they are due, and the
+/// [`Tick`] they get. Due blocks are found per rate, not per block, and a tick
+/// on which only the base rate is due runs just the base-rate blocks.
 #[derive(Debug, Clone)]
 struct Rate {
     /// Period in base ticks.
     period: u64,
-    /// Base ticks until due again (0: due on this tick).
-    countdown: u64,
+    /// Period in seconds (the blocks' `Tick::dt`).
+    dt: f64,
+    /// Base tick on which its blocks are next due.
+    next: u64,
+    /// Samples of this rate begun so far.
+    done: u64,
     /// Whether its blocks are due on the current tick.
     due: bool,
+    /// The current sample of its blocks (when due).
+    tick: Tick,
+}
+
+impl Rate {
+    /// Begin the next sample: its `Tick` (`k·dt` with `k` converted through
+    /// `i64`, one instruction instead of `u64`'s several; the same value below
+    /// 2⁶³ ticks), and when it is due next.
+    #[inline(always)]
+    fn begin_sample(&mut self) {
+        self.tick = Tick {
+            k: self.done,
+            t: self.done as i64 as f64 * self.dt,
+            dt: self.dt,
+        };
+        self.done += 1;
+        self.next += self.period;
+    }
+
+    fn restart(&mut self) {
+        self.next = 0;
+        self.done = 0;
+        self.due = false;
+        self.tick = Tick::new(0, self.dt);
+    }
+}
+
+/// What one [`Step`] of a tick does.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum StepKind {
+    /// An inserted rate transition: copy its source's `len` values (its one
+    /// gather) to its output; the block is not called.
+    Hold,
+    /// Output phase of a block with feed-through: gather its inputs, compute.
+    Output,
+    /// Output phase of a block with feed-through whose inputs are one
+    /// contiguous run of the signal buffer (one gather): the block reads them
+    /// there, nothing is copied.
+    OutputDirect,
+    /// Output phase of a block without feed-through: no gathering (its input
+    /// buffer holds what its last update gathered, as always).
+    OutputHeld,
+    /// Update phase (no feed-through): gather, advance.
+    Update,
+}
+
+/// One block's phase in a tick, with all it needs inline (compiled at build
+/// from its [`Node`]).
+#[derive(Debug, Clone, Copy)]
+struct Step {
+    kind: StepKind,
+    /// Execution index of the block.
+    block: usize,
+    /// Index of its [`Rate`].
+    rate: usize,
+    /// Its gathers in the program's gather list.
+    gathers: (usize, usize),
+    /// Its input range in the input buffer.
+    inputs: (usize, usize),
+    /// Its output range in the signal buffer.
+    outputs: (usize, usize),
+}
+
+/// The steps of the ticks on which only the base rate is due (`fast`, no
+/// rate checked) and of the others (`full`, each step run if its rate is
+/// due): output phase in execution order, then the update phase; with the
+/// gather list the steps index.
+#[derive(Debug, Clone, Default)]
+struct Program {
+    fast: Vec<Step>,
+    full: Vec<Step>,
+    gathers: Vec<Gather>,
 }
 
 /// Copy `len` values from the signal buffer at `src` to the input buffer at `dst`.
@@ -298,14 +376,19 @@ pub struct Scheduler {
     scores: Vec<ScoreChannel>,
     compares: Vec<(String, String, usize)>,
     rate_transitions: Vec<String>,
-    /// One countdown per distinct period.
+    /// One entry per distinct period (and sample time), those of period 1
+    /// (the base rate) first.
     rates: Vec<Rate>,
-    /// Indices (execution order) of blocks without feed-through.
-    updaters: Vec<usize>,
-    /// Indices (execution order) of the blocks at the base rate, and of those
-    /// without feed-through: all a tick runs when no slower rate is due.
-    base_rate_blocks: Vec<usize>,
-    base_rate_updaters: Vec<usize>,
+    /// How many of `rates` have period 1.
+    n_base: usize,
+    /// The base tick on which a slower rate is next due (`u64::MAX`: none).
+    next_slow: u64,
+    /// What [`Scheduler::tick`] runs: inserted rate transitions folded into
+    /// their consumers' inputs where they can be.
+    folded: Program,
+    /// What [`Scheduler::tick_probed`] runs: every block as written in the
+    /// execution order, transitions included.
+    plain: Program,
     /// The first non-finite output, once located: (execution index, output
     /// offset, base tick, value).
     non_finite: Option<(usize, usize, u64, f64)>,
@@ -328,25 +411,38 @@ impl std::fmt::Debug for Scheduler {
 
 impl Scheduler {
     pub(crate) fn new_internal(mut p: Parts) -> Self {
+        // One rate per (period, dt), the base-rate ones first.
         let mut rates: Vec<Rate> = Vec::new();
-        let mut rate_of_period = std::collections::HashMap::new();
-        for node in &mut p.nodes {
-            node.rate = *rate_of_period.entry(node.period).or_insert_with(|| {
-                rates.push(Rate {
-                    period: node.period,
-                    countdown: 0,
-                    due: false,
+        let mut rate_of = std::collections::HashMap::new();
+        let base_first = p
+            .nodes
+            .iter()
+            .filter(|n| n.period == 1)
+            .chain(p.nodes.iter().filter(|n| n.period != 1));
+        for node in base_first {
+            rate_of
+                .entry((node.period, node.dt.to_bits()))
+                .or_insert_with(|| {
+                    rates.push(Rate {
+                        period: node.period,
+                        dt: node.dt,
+                        next: 0,
+                        done: 0,
+                        due: false,
+                        tick: Tick::new(0, node.dt),
+                    });
+                    rates.len() - 1
                 });
-                rates.len() - 1
-            });
         }
-        let blocks_where = |keep: &dyn Fn(&Node) -> bool| -> Vec<usize> {
-            (0..p.nodes.len()).filter(|&i| keep(&p.nodes[i])).collect()
-        };
-        let updaters = blocks_where(&|n| !n.feedthrough);
-        let base_rate_blocks = blocks_where(&|n| n.period == 1);
-        let base_rate_updaters = blocks_where(&|n| n.period == 1 && !n.feedthrough);
-        Self {
+        for node in &mut p.nodes {
+            node.rate = rate_of[&(node.period, node.dt.to_bits())];
+        }
+        let n_base = rates.iter().filter(|r| r.period == 1).count();
+        let producer = producers(&p.nodes, p.signal_len);
+        let plain = Program::compile(&p.nodes, &p.gathers, &[], &producer);
+        let fold = foldable_transitions(&p.nodes, &p.gathers, &p.logs, &producer);
+        let folded = Program::compile(&p.nodes, &p.gathers, &fold, &producer);
+        let mut s = Self {
             title: p.title,
             base_rate_hz: p.base_rate_hz,
             n_ticks: p.n_ticks,
@@ -365,82 +461,109 @@ impl Scheduler {
             compares: p.compares,
             rate_transitions: p.rate_transitions,
             rates,
-            updaters,
-            base_rate_blocks,
-            base_rate_updaters,
+            n_base,
+            next_slow: u64::MAX,
+            folded,
+            plain,
             non_finite: None,
             seen_non_finite: None,
             chunk_ticks: p.chunk_ticks,
-        }
+        };
+        s.restart_rates();
+        s
+    }
+
+    /// Every rate due on base tick 0, none begun.
+    fn restart_rates(&mut self) {
+        self.rates.iter_mut().for_each(Rate::restart);
+        self.next_slow = if self.rates.len() > self.n_base {
+            0
+        } else {
+            u64::MAX
+        };
     }
 
     /// One base tick: output phase, update phase, logging. Allocation-free.
     ///
-    /// Due blocks are found with one countdown per rate (no division per tick);
-    /// inputs are gathered by copies whose indices were resolved at build time.
+    /// Due blocks are found per rate (one comparison per tick when only the
+    /// base rate is due); inputs are gathered by copies whose indices were
+    /// resolved at build time, or read in place when they are one contiguous
+    /// run of the signal buffer. An inserted rate transition whose output only
+    /// its consumer reads (not logged) is folded into the consumer: the
+    /// consumer reads the transition's source directly — the same value, as
+    /// the transition runs at its consumer's rate and would have copied the
+    /// source on this very tick before the consumer read it — so the
+    /// transition's own output signal is not written by `tick` (it is by
+    /// [`Scheduler::tick_probed`], which runs every block as built).
     #[inline]
     pub fn tick(&mut self) {
-        self.tick_probed(&mut ());
+        self.tick_with(&mut (), true);
     }
 
     /// [`Scheduler::tick`] with `probe` told when each due block starts and
     /// ends its output phase and its update phase (input gathering included),
-    /// e.g. to time every block. `tick` is this with the empty probe `()`,
-    /// which compiles to nothing.
+    /// e.g. to time every block. Every block runs as built: inserted rate
+    /// transitions are not folded (each is timed as its own block, and writes
+    /// its output signal); the values are the same as `tick`'s.
     #[inline]
     pub fn tick_probed<P: TickProbe>(&mut self, probe: &mut P) {
-        let mut slower_rate_due = false;
-        for rate in self.rates.iter_mut() {
-            rate.due = rate.countdown == 0;
-            if rate.due {
-                rate.countdown = rate.period - 1;
-                slower_rate_due |= rate.period > 1;
-            } else {
-                rate.countdown -= 1;
+        self.tick_with(probe, false);
+    }
+
+    #[inline(always)]
+    fn tick_with<P: TickProbe>(&mut self, probe: &mut P, folded: bool) {
+        let k = self.k;
+        let only_base = k != self.next_slow;
+        if only_base {
+            // Only the base rate is due: begin its sample.
+            for rate in self.rates[..self.n_base].iter_mut() {
+                rate.begin_sample();
             }
+        } else {
+            let mut next_slow = u64::MAX;
+            for rate in self.rates.iter_mut() {
+                rate.due = rate.next == k;
+                if rate.due {
+                    rate.begin_sample();
+                }
+                if rate.period > 1 {
+                    next_slow = next_slow.min(rate.next);
+                }
+            }
+            self.next_slow = next_slow;
         }
         let Self {
             blocks,
-            nodes,
             rates,
-            gathers,
             signals,
             inputs,
-            updaters,
-            base_rate_blocks,
-            base_rate_updaters,
             logs,
+            folded: folded_program,
+            plain,
             ..
         } = self;
+        let program = if folded { folded_program } else { plain };
         let mut run = Run {
             blocks,
-            nodes,
-            gathers,
+            rates,
+            gathers: &program.gathers,
             signals,
             inputs,
             probe,
         };
-        if slower_rate_due {
-            // Phase 1: outputs of the due blocks in topological order; phase 2:
-            // state updates of due blocks without feed-through, with this
-            // sample's inputs (all outputs of this sample exist now).
-            for i in 0..run.nodes.len() {
-                if rates[run.nodes[i].rate].due {
-                    run.output(i);
-                }
-            }
-            for &i in updaters.iter() {
-                if rates[run.nodes[i].rate].due {
-                    run.update(i);
-                }
+        // Phase 1: outputs of the due blocks in topological order; phase 2:
+        // state updates of due blocks without feed-through, with this
+        // sample's inputs (all outputs of this sample exist now). On a tick
+        // with only the base rate due, the fast program holds just its blocks.
+        if only_base {
+            for step in &program.fast {
+                run.step(step);
             }
         } else {
-            // The same two phases, over the base-rate blocks (all that is due).
-            for &i in base_rate_blocks.iter() {
-                run.output(i);
-            }
-            for &i in base_rate_updaters.iter() {
-                run.update(i);
+            for step in &program.full {
+                if run.rates[step.rate].due {
+                    run.step(step);
+                }
             }
         }
         // Phase 3: logging into preallocated buffers (capacity reserved at build).
@@ -814,13 +937,7 @@ impl Scheduler {
                     source,
                 })?;
         }
-        for n in &mut self.nodes {
-            n.k_local = 0;
-        }
-        for r in &mut self.rates {
-            r.countdown = 0;
-            r.due = false;
-        }
+        self.restart_rates();
         self.signals.iter_mut().for_each(|v| *v = 0.0);
         self.inputs.iter_mut().for_each(|v| *v = 0.0);
         for l in &mut self.logs {
@@ -1045,10 +1162,10 @@ pub struct BlockWiring {
     pub feedthrough: bool,
 }
 
-/// What one tick works on: the phases of a due block.
+/// What one tick works on.
 struct Run<'a, P> {
     blocks: &'a mut [Box<dyn Block>],
-    nodes: &'a mut [Node],
+    rates: &'a [Rate],
     gathers: &'a [Gather],
     signals: &'a mut [f64],
     inputs: &'a mut [f64],
@@ -1056,63 +1173,166 @@ struct Run<'a, P> {
 }
 
 impl<P: TickProbe> Run<'_, P> {
-    /// Output phase of due block `i`: a rate transition copies its input to its
-    /// output; a block with feed-through gathers its inputs first.
+    /// One due block's phase.
     #[inline(always)]
-    fn output(&mut self, i: usize) {
-        let node = &mut self.nodes[i];
-        self.probe.enter(i);
-        if node.transition {
-            let g = self.gathers[node.gathers.start];
-            hold(self.signals, g.src, node.outputs.start, g.len);
-        } else {
-            if node.feedthrough {
-                gather(
-                    &self.gathers[node.gathers.clone()],
-                    self.signals,
-                    self.inputs,
-                );
+    fn step(&mut self, s: &Step) {
+        let tick = self.rates[s.rate].tick;
+        let (g0, g1) = s.gathers;
+        let (i0, i1) = s.inputs;
+        let (o0, o1) = s.outputs;
+        self.probe.enter(s.block);
+        match s.kind {
+            StepKind::Hold => {
+                let g = self.gathers[g0];
+                hold(self.signals, g.src, o0, g.len);
             }
-            self.blocks[i].output(
-                node.tick(),
-                &self.inputs[node.inputs.clone()],
-                &mut self.signals[node.outputs.clone()],
-            );
-            if node.feedthrough {
-                node.k_local += 1;
+            StepKind::Output => {
+                gather(&self.gathers[g0..g1], self.signals, self.inputs);
+                self.blocks[s.block].output(tick, &self.inputs[i0..i1], &mut self.signals[o0..o1]);
+            }
+            StepKind::OutputDirect => {
+                let g = self.gathers[g0];
+                let (u, y) = disjoint(self.signals, g.src..g.src + g.len, o0..o1);
+                self.blocks[s.block].output(tick, u, y);
+            }
+            StepKind::OutputHeld => {
+                self.blocks[s.block].output(tick, &self.inputs[i0..i1], &mut self.signals[o0..o1]);
+            }
+            StepKind::Update => {
+                gather(&self.gathers[g0..g1], self.signals, self.inputs);
+                self.blocks[s.block].update(tick, &self.inputs[i0..i1]);
             }
         }
-        self.probe.leave(i);
-    }
-
-    /// Update phase of due block `i` (no feed-through): gather, advance.
-    #[inline(always)]
-    fn update(&mut self, i: usize) {
-        let node = &mut self.nodes[i];
-        self.probe.enter(i);
-        gather(
-            &self.gathers[node.gathers.clone()],
-            self.signals,
-            self.inputs,
-        );
-        self.blocks[i].update(node.tick(), &self.inputs[node.inputs.clone()]);
-        node.k_local += 1;
-        self.probe.leave(i);
+        self.probe.leave(s.block);
     }
 }
 
-impl Node {
-    /// This block's current sample: `Tick::new(k_local, dt)`, with the count
-    /// converted through `i64` (one instruction instead of `u64`'s several;
-    /// the same value below 2⁶³ ticks).
-    #[inline(always)]
-    fn tick(&self) -> Tick {
-        Tick {
-            k: self.k_local,
-            t: self.k_local as i64 as f64 * self.dt,
-            dt: self.dt,
+/// `signals[input]` to read and `signals[output]` to write, two disjoint
+/// ranges (a block's input is another block's output: a block feeding itself
+/// through feed-through is an algebraic loop, rejected at build).
+#[inline(always)]
+fn disjoint(
+    signals: &mut [f64],
+    input: Range<usize>,
+    output: Range<usize>,
+) -> (&[f64], &mut [f64]) {
+    if input.end <= output.start {
+        let (a, b) = signals.split_at_mut(output.start);
+        (&a[input], &mut b[..output.end - output.start])
+    } else {
+        let (a, b) = signals.split_at_mut(input.start);
+        (&b[..input.end - input.start], &mut a[output])
+    }
+}
+
+impl Program {
+    /// The steps of `nodes`, with the transitions marked in `fold` folded into
+    /// their consumers: the consumers' gathers read the transition's source.
+    fn compile(nodes: &[Node], gathers: &[Gather], fold: &[bool], producer: &[usize]) -> Self {
+        let mut program = Program {
+            gathers: gathers.to_vec(),
+            ..Program::default()
+        };
+        for g in program.gathers.iter_mut() {
+            if let Some(&t) = producer.get(g.src)
+                && fold.get(t) == Some(&true)
+            {
+                let node = &nodes[t];
+                g.src = gathers[node.gathers.start].src + (g.src - node.outputs.start);
+            }
+        }
+        let step = |i: usize, kind: StepKind| {
+            let n = &nodes[i];
+            Step {
+                kind,
+                block: i,
+                rate: n.rate,
+                gathers: (n.gathers.start, n.gathers.end),
+                inputs: (n.inputs.start, n.inputs.end),
+                outputs: (n.outputs.start, n.outputs.end),
+            }
+        };
+        let mut outputs = Vec::new();
+        let mut updates = Vec::new();
+        for (i, n) in nodes.iter().enumerate() {
+            if fold.get(i) == Some(&true) {
+                continue;
+            }
+            let kind = if n.transition {
+                StepKind::Hold
+            } else if !n.feedthrough {
+                StepKind::OutputHeld
+            } else if n.gathers.len() == 1 && program.gathers[n.gathers.start].len == n.inputs.len()
+            {
+                StepKind::OutputDirect
+            } else {
+                StepKind::Output
+            };
+            outputs.push(step(i, kind));
+            if !n.feedthrough {
+                updates.push(step(i, StepKind::Update));
+            }
+        }
+        program.full = outputs.into_iter().chain(updates).collect();
+        program.fast = program
+            .full
+            .iter()
+            .filter(|s| nodes[s.block].period == 1)
+            .copied()
+            .collect();
+        program
+    }
+}
+
+/// For each offset of the signal buffer, the execution index of the block
+/// whose output it is.
+fn producers(nodes: &[Node], signal_len: usize) -> Vec<usize> {
+    let mut producer = vec![usize::MAX; signal_len];
+    for (i, n) in nodes.iter().enumerate() {
+        producer[n.outputs.clone()].iter_mut().for_each(|p| *p = i);
+    }
+    producer
+}
+
+/// Which inserted rate transitions a tick can skip: those whose output is
+/// read only by blocks at the transition's own rate (its consumer) and is not
+/// logged, and whose source is not itself a transition. Such a consumer can
+/// read the source directly: the transition, due on the same ticks, would
+/// have copied the source's current value before the consumer reads it (a
+/// consumer with feed-through comes after it in execution order; one without
+/// reads in the update phase, after every output). Linear in the graph.
+fn foldable_transitions(
+    nodes: &[Node],
+    gathers: &[Gather],
+    logs: &[LogChannel],
+    producer: &[usize],
+) -> Vec<bool> {
+    let of = |offset: usize| producer.get(offset).copied().filter(|&p| p < nodes.len());
+    let mut fold: Vec<bool> = nodes
+        .iter()
+        .map(|t| {
+            t.transition
+                && t.gathers.len() == 1
+                && of(gathers[t.gathers.start].src).is_some_and(|s| !nodes[s].transition)
+        })
+        .collect();
+    for l in logs {
+        for offset in l.offset..l.offset + l.width {
+            if let Some(p) = of(offset) {
+                fold[p] = false;
+            }
         }
     }
+    for (reader, n) in nodes.iter().enumerate() {
+        for g in &gathers[n.gathers.clone()] {
+            if let Some(p) = of(g.src)
+                && nodes[p].period != nodes[reader].period
+            {
+                fold[p] = false;
+            }
+        }
+    }
+    fold
 }
 
 /// A rate transition's work: its source's `len` values copied to its output.

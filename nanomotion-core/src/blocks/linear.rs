@@ -66,8 +66,24 @@ impl LinearCore {
 
     /// Phase 1. With feed-through the state is also advanced here (the scheduler
     /// calls `update` only for blocks without feed-through).
-    #[inline]
+    #[inline(always)]
     fn output(&mut self, u: &[f64], y: &mut [f64]) {
+        if let [s] = self.steppers.as_mut_slice() {
+            // One channel: its input and output are the whole `u` and `y`.
+            if self.feedthrough {
+                s.step(u, y);
+            } else {
+                s.output(&[], y);
+            }
+            return;
+        }
+        self.output_channels(u, y);
+    }
+
+    /// [`LinearCore::output`] of several channels (out of line: the
+    /// one-channel case is what the blocks inline).
+    #[inline(never)]
+    fn output_channels(&mut self, u: &[f64], y: &mut [f64]) {
         let (m, p) = (self.m, self.p);
         for (i, s) in self.steppers.iter_mut().enumerate() {
             let yi = &mut y[i * p..(i + 1) * p];
@@ -80,11 +96,21 @@ impl LinearCore {
     }
 
     /// Phase 2 (no feed-through only).
-    #[inline]
+    #[inline(always)]
     fn update(&mut self, u: &[f64]) {
         if self.feedthrough {
             return;
         }
+        if let [s] = self.steppers.as_mut_slice() {
+            s.update(u);
+            return;
+        }
+        self.update_channels(u);
+    }
+
+    /// [`LinearCore::update`] of several channels.
+    #[inline(never)]
+    fn update_channels(&mut self, u: &[f64]) {
         let m = self.m;
         for (i, s) in self.steppers.iter_mut().enumerate() {
             s.update(&u[i * m..(i + 1) * m]);

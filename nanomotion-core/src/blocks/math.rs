@@ -199,10 +199,25 @@ impl Sum {
         Ok(())
     }
     /// y = Σᵢ sᵢ·inᵢ; `u` holds the inputs concatenated (width n each).
+    #[inline]
     pub fn apply(&self, u: &[f64], y: &mut [f64]) {
+        if self.width == 1
+            && let ([g0, g1], [u0, u1], [y0]) = (self.gains.as_slice(), u, &mut *y)
+        {
+            // The common `r − y`, unrolled: the same products summed by the
+            // same `sum` as below.
+            *y0 = [g0 * u0, g1 * u1].into_iter().sum();
+            return;
+        }
+        self.apply_any(u, y);
+    }
+
+    /// [`Sum::apply`] for any number of inputs and width.
+    #[inline(never)]
+    fn apply_any(&self, u: &[f64], y: &mut [f64]) {
         let n = self.width;
         if n == 1 {
-            // Scalar fast path (the common `r − y`).
+            // Scalar fast path.
             y[0] = u.iter().zip(&self.gains).map(|(ui, g)| g * ui).sum();
             return;
         }

@@ -752,7 +752,6 @@ fn lay_out(mut pending: Vec<Pending>, order: &[usize], report: &mut BuildReport)
             period: p.period,
             rate: 0,
             dt: p.ctx.dt,
-            k_local: 0,
             inputs: in_start..l.input_len,
             outputs: out_start..out_start + out_len,
             gathers: g_start..l.gathers.len(),

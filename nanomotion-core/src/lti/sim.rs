@@ -36,7 +36,7 @@ pub struct SsStepper {
 /// single-output model of one to four states (a transfer-function block, a
 /// filter section) with the same products and sums in the same order on
 /// fixed-size arrays, which the compiler unrolls — the same bits at a third
-/// of the instructions.
+/// of the instructions. The fixed-size kernels hold their own state.
 #[derive(Debug, Clone, PartialEq)]
 enum Kernel {
     General,
@@ -59,7 +59,7 @@ macro_rules! on_kernel {
     };
 }
 
-/// A single-input single-output model of `N` states.
+/// A single-input single-output model of `N` states, and its state.
 #[derive(Debug, Clone, PartialEq)]
 struct Siso<const N: usize> {
     /// A, row by row.
@@ -68,6 +68,8 @@ struct Siso<const N: usize> {
     c: [f64; N],
     /// D, if the model has feed-through (else it is not added at all).
     d: Option<f64>,
+    /// The state x\[k\].
+    x: [f64; N],
 }
 
 impl<const N: usize> Siso<N> {
@@ -77,16 +79,18 @@ impl<const N: usize> Siso<N> {
             b: std::array::from_fn(|i| sys.b[(i, 0)]),
             c: std::array::from_fn(|j| sys.c[(0, j)]),
             d: sys.has_feedthrough().then(|| sys.d[(0, 0)]),
+            x: [0.0; N],
         }
     }
 
     /// y = C x (+ D u), as `gemv` sums it: `c₀x₀`, then `+ cⱼxⱼ`, then `+ d u`.
-    #[inline]
-    fn output(&self, x: &[f64], u: &[f64]) -> f64 {
-        let x: &[f64; N] = x.try_into().expect("N states");
+    #[inline(always)]
+    #[allow(clippy::needless_range_loop)] // indices unroll; the sum's order is the point
+    fn output(&self, u: &[f64]) -> f64 {
+        let x = &self.x;
         let mut y = self.c[0] * x[0];
-        for (cj, xj) in self.c.iter().zip(x).skip(1) {
-            y += cj * xj;
+        for j in 1..N {
+            y += self.c[j] * x[j];
         }
         match self.d {
             Some(d) => y + d * u[0],
@@ -96,17 +100,18 @@ impl<const N: usize> Siso<N> {
 
     /// A x + B u, each row as `gemv` sums it: `aᵢ₀x₀`, then `+ aᵢⱼxⱼ`, then `+ bᵢu`
     /// (`gemv` writes `aᵢⱼxⱼ + ·`: the same sum, IEEE addition commutes).
-    #[inline]
-    fn update(&self, x: &[f64], u: f64) -> [f64; N] {
-        let x: &[f64; N] = x.try_into().expect("N states");
-        std::array::from_fn(|i| {
+    #[inline(always)]
+    #[allow(clippy::needless_range_loop)] // indices unroll; the sum's order is the point
+    fn update(&mut self, u: f64) {
+        let x = &self.x;
+        self.x = std::array::from_fn(|i| {
             let row = &self.a[i];
             let mut acc = row[0] * x[0];
-            for (aij, xj) in row.iter().zip(x).skip(1) {
-                acc += aij * xj;
+            for j in 1..N {
+                acc += row[j] * x[j];
             }
             acc + self.b[i] * u
-        })
+        });
     }
 }
 
@@ -127,6 +132,7 @@ impl SsStepper {
             (4, 1, 1) => Kernel::Siso4(Siso::new(sys)),
             _ => Kernel::General,
         };
+        let kernel_general = kernel == Kernel::General;
         Ok(Self {
             kernel,
             a: sys.a.clone(),
@@ -134,14 +140,15 @@ impl SsStepper {
             c: sys.c.clone(),
             d: sys.d.clone(),
             feedthrough: sys.has_feedthrough(),
-            x: DVector::zeros(n),
-            x_next: DVector::zeros(n),
+            // The general kernel's state (the fixed-size ones hold their own).
+            x: DVector::zeros(if kernel_general { n } else { 0 }),
+            x_next: DVector::zeros(if kernel_general { n } else { 0 }),
         })
     }
 
     /// Number of states.
     pub fn nstates(&self) -> usize {
-        self.x.len()
+        self.a.nrows()
     }
     /// Number of inputs.
     pub fn ninputs(&self) -> usize {
@@ -161,39 +168,48 @@ impl SsStepper {
     ///
     /// # Panics
     /// If `y` is not `noutputs()` long, or `u` has the wrong length while D ≠ 0.
+    #[inline(always)]
     pub fn output(&self, u: &[f64], y: &mut [f64]) {
-        on_kernel!(&self.kernel, k => y[0] = k.output(self.x.as_slice(), u), general => {
-            let p = self.noutputs();
-            let mut yv = DVectorViewMut::from_slice(y, p);
-            if self.x.is_empty() {
-                yv.fill(0.0);
-            } else {
-                yv.gemv(1.0, &self.c, &self.x, 0.0);
-            }
-            if self.feedthrough {
-                let uv = DVectorView::from_slice(u, self.ninputs());
-                yv.gemv(1.0, &self.d, &uv, 1.0);
-            }
-        })
+        on_kernel!(&self.kernel, k => y[0] = k.output(u), general => self.output_general(u, y))
+    }
+
+    /// [`SsStepper::output`] by `gemv` (kept out of line: the fixed-size
+    /// kernels are what callers inline).
+    #[inline(never)]
+    fn output_general(&self, u: &[f64], y: &mut [f64]) {
+        let p = self.noutputs();
+        let mut yv = DVectorViewMut::from_slice(y, p);
+        if self.x.is_empty() {
+            yv.fill(0.0);
+        } else {
+            yv.gemv(1.0, &self.c, &self.x, 0.0);
+        }
+        if self.feedthrough {
+            let uv = DVectorView::from_slice(u, self.ninputs());
+            yv.gemv(1.0, &self.d, &uv, 1.0);
+        }
     }
 
     /// Advance the state: x ← A x + B u. Does not allocate.
+    #[inline(always)]
     pub fn update(&mut self, u: &[f64]) {
-        on_kernel!(&self.kernel, k => {
-            let x = k.update(self.x.as_slice(), u[0]);
-            self.x.as_mut_slice().copy_from_slice(&x);
-        }, general => {
-            if self.x.is_empty() {
-                return;
-            }
-            let uv = DVectorView::from_slice(u, self.ninputs());
-            self.x_next.gemv(1.0, &self.a, &self.x, 0.0);
-            self.x_next.gemv(1.0, &self.b, &uv, 1.0);
-            std::mem::swap(&mut self.x, &mut self.x_next);
-        })
+        on_kernel!(&mut self.kernel, k => k.update(u[0]), general => self.update_general(u))
+    }
+
+    /// [`SsStepper::update`] by `gemv`.
+    #[inline(never)]
+    fn update_general(&mut self, u: &[f64]) {
+        if self.x.is_empty() {
+            return;
+        }
+        let uv = DVectorView::from_slice(u, self.ninputs());
+        self.x_next.gemv(1.0, &self.a, &self.x, 0.0);
+        self.x_next.gemv(1.0, &self.b, &uv, 1.0);
+        std::mem::swap(&mut self.x, &mut self.x_next);
     }
 
     /// One full sample: [`output`](Self::output) then [`update`](Self::update).
+    #[inline]
     pub fn step(&mut self, u: &[f64], y: &mut [f64]) {
         self.output(u, y);
         self.update(u);
@@ -208,12 +224,17 @@ impl SsStepper {
 
     /// Set the state to zero.
     pub fn reset(&mut self) {
-        self.x.fill(0.0);
+        self.x_mut().fill(0.0);
     }
 
     /// The current state x\[k\].
     pub fn state(&self) -> &[f64] {
-        self.x.as_slice()
+        on_kernel!(&self.kernel, k => &k.x, general => self.x.as_slice())
+    }
+
+    /// The current state, to overwrite.
+    fn x_mut(&mut self) -> &mut [f64] {
+        on_kernel!(&mut self.kernel, k => &mut k.x, general => self.x.as_mut_slice())
     }
 
     /// Overwrite the state.
@@ -221,7 +242,7 @@ impl SsStepper {
     /// # Panics
     /// If `x` is not `nstates()` long.
     pub fn set_state(&mut self, x: &[f64]) {
-        self.x.copy_from_slice(x);
+        self.x_mut().copy_from_slice(x);
     }
 
     /// Set the state to the steady state for a constant input `u`:
@@ -235,7 +256,7 @@ impl SsStepper {
             .lu()
             .solve(&rhs)
             .ok_or_else(|| LtiError::Singular("I − A is singular (pole at z = 1)".into()))?;
-        self.x.copy_from(&x);
+        self.x_mut().copy_from_slice(x.as_slice());
         Ok(())
     }
 }
