@@ -516,15 +516,9 @@ pub mod check {
             ))
         }
     }
-    /// One end of an interval: the value itself allowed (`Inclusive`: ≥ or ≤)
-    /// or not (`Exclusive`: > or <).
-    #[derive(Debug, Clone, Copy, PartialEq)]
-    pub enum Limit<T> {
-        /// The end belongs to the interval.
-        Inclusive(T),
-        /// The end does not belong to the interval.
-        Exclusive(T),
-    }
+    // One end of an interval: declared in `doc` (the derive's schema reads it;
+    // `doc` is below `block`), used here by the checks.
+    pub use crate::doc::Limit;
 
     /// The interval in words: `> 0`, `≤ 1`, `(0, 1]`; the bracket or operator
     /// says whether an end is included.

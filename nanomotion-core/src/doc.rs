@@ -374,11 +374,23 @@ pub fn block_docs() -> Vec<&'static BlockDoc> {
     v
 }
 
+/// One end of an interval: the value itself allowed (`Inclusive`: ≥ or ≤)
+/// or not (`Exclusive`: > or <). Here, below `block`, so that the checks
+/// (`block::check`, which re-exports it) and the schema share it without an
+/// import cycle.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Limit<T> {
+    /// The end belongs to the interval.
+    Inclusive(T),
+    /// The end does not belong to the interval.
+    Exclusive(T),
+}
+
 /// Helpers the derive's generated code calls; not a stable API.
 #[doc(hidden)]
 pub mod __derive {
+    pub use super::Limit;
     use super::{ParamDoc, ParamSchema, add_properties};
-    pub use crate::block::check::Limit;
     use crate::error::ParamError;
     use serde::Serialize;
     pub use serde_json::Value;
