@@ -231,7 +231,9 @@ enum Command {
         /// Write the JSON report here too (default: <out>/report.json).
         #[arg(long)]
         json: Option<PathBuf>,
-        /// Name at most this many effects.
+        /// Name at most this many effects (0: only calibrate the nominal's own
+        /// parameters — gains, time scales, damping — and say whether that is
+        /// significant).
         #[arg(long, default_value_t = 3)]
         max_effects: usize,
         /// Fraction of the record, at its end, held out for scoring (one record only).

@@ -13,7 +13,11 @@ previous run's `--csv` output) the same first N seeds of that run are
 summarised beside it. With `--visibility VIS.csv` (the output of `scenarios
 -- N --visibility-only`: what each record's hidden effects change over its
 noise) recall and the rate named correctly are also given on the records
-whose effects stand out of the noise (visibility ≥ 1), and on the others.
+whose effects stand out of the noise (visibility ≥ 1), and on the others;
+then the same split by the visibility in the held-out part alone (the only
+part that decides a name) and by what is left there once the nominal
+calibration has taken what it can (`calibrated_visibility`: an effect below 1
+there cannot be told from a nominal that is off), for the columns VIS.csv has.
 """
 import collections
 import csv
@@ -88,16 +92,16 @@ def summary(rows):
     return out
 
 
-def visible_split(rows, vis):
+def visible_split(rows, vis, label):
     """Named correctly and per-effect recall on records with effects above the
-    noise (visibility ≥ 1) and below it."""
+    noise (visibility ≥ 1, by `label`) and below it."""
     pct = lambda a, b: "—" if b == 0 else f"{100 * a / b:.0f} %"
     ok = lambda r: len(r["found"]) == len(r["hidden"]) and all(h in r["found"] for h in r["hidden"])
     eff = [r for r in rows if r["hidden"]]
     above = [r for r in eff if vis[r["seed"]] >= 1.0]
     below = [r for r in eff if vis[r["seed"]] < 1.0]
-    print(f"\nrecords with an effect: {len(above)} with visibility ≥ 1, {len(below)} below\n")
-    print("| measure | visibility ≥ 1 | below 1 |\n|---|---|---|")
+    print(f"\nrecords with an effect: {len(above)} with {label} ≥ 1, {len(below)} below\n")
+    print(f"| measure | {label} ≥ 1 | below 1 |\n|---|---|---|")
     print(f"| named correctly | {pct(sum(map(ok, above)), len(above))} ({sum(map(ok, above))} of {len(above)}) "
           f"| {pct(sum(map(ok, below)), len(below))} ({sum(map(ok, below))} of {len(below)}) |")
     effects = sorted({h for r in eff for h in r["hidden"]})
@@ -140,11 +144,15 @@ def main():
     for k in new:
         print(f"| {k} | " + " | ".join(c.get(k, "—") for c in cols) + " |")
     if vis_path:
-        vis = {int(r["seed"]): float(r["visibility"]) for r in csv.DictReader(open(vis_path))}
-        missing = [r["seed"] for r in rows if r["seed"] not in vis]
-        if missing:
-            sys.exit(f"{vis_path} lacks seeds {missing[:5]}…: run --visibility-only over the same records")
-        visible_split(rows, vis)
+        table = list(csv.DictReader(open(vis_path)))
+        for column in ("visibility", "held_out_visibility", "calibrated_visibility"):
+            if not table or column not in table[0]:
+                continue
+            vis = {int(r["seed"]): float(r[column]) for r in table}
+            missing = [r["seed"] for r in rows if r["seed"] not in vis]
+            if missing:
+                sys.exit(f"{vis_path} lacks seeds {missing[:5]}…: run --visibility-only over the same records")
+            visible_split(rows, vis, column.replace("_", " "))
 
 
 if __name__ == "__main__":

@@ -12,8 +12,10 @@
 //! ones have been scored and studied); `--tune` takes the
 //! tuning split instead (the only records the workflow may be tuned on).
 //! `--csv` writes one row per record. `--visibility-only` runs no diagnosis:
-//! it prints `seed,visibility` of the same records ([`scenario::visibility`]:
-//! what the hidden effects change over the noise), for
+//! it prints `seed,visibility,held_out_visibility,calibrated_visibility` of the
+//! same records ([`scenario::visibility`]: what the hidden effects change over
+//! the noise, over the whole record, over the part `diagnose` holds out, and
+//! there beyond what the nominal calibration takes), for
 //! `tools/scenario_table.py --visibility`. `--hidden EFFECT` keeps only records
 //! hiding that effect (`none`: the effect-free ones); `--labels-only` prints
 //! `seed,hidden,family` of the records and diagnoses nothing.
@@ -40,7 +42,7 @@ const USAGE: &str = "usage: scenarios [COUNT] [--from SEED] [--tune] [--hidden E
   --hidden E    only records hiding effect E (`none`: the effect-free ones)
   --csv FILE    one row per record
   --reports DIR each record's labels and diagnosis report as DIR/seed_SEED.json
-  --visibility-only, --labels-only   diagnose nothing: print seed,visibility or seed,hidden,family";
+  --visibility-only, --labels-only   diagnose nothing: print the visibilities (see the doc) or seed,hidden,family";
 
 #[derive(Default)]
 struct Tally {
@@ -143,9 +145,15 @@ fn main() {
             match scenario::visibility(seed - 1) {
                 Ok(v) => {
                     if records == 0 {
-                        println!("seed,visibility");
+                        println!("seed,visibility,held_out_visibility,calibrated_visibility");
                     }
-                    println!("{},{v:.3}", seed - 1);
+                    println!(
+                        "{},{:.3},{:.3},{:.3}",
+                        seed - 1,
+                        v.whole,
+                        v.held_out,
+                        v.calibrated
+                    );
                     records += 1;
                 }
                 Err(e) => eprintln!("seed {}: {e}", seed - 1),

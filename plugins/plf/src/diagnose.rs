@@ -50,7 +50,8 @@ pub fn vocabulary() -> Vec<&'static str> {
 /// Options of [`diagnose`].
 #[derive(Debug, Clone, PartialEq)]
 pub struct Options {
-    /// At most this many effects (default 3).
+    /// At most this many effects (default 3). With 0 (and `calibrate`), the
+    /// nominal calibration alone is fitted and kept when significant.
     pub max_effects: usize,
     /// Fraction of the record, at its end, held out for scoring (default 0.3).
     pub holdout: f64,
@@ -540,6 +541,26 @@ pub fn diagnose_records(
     // excitation (see below): why the step had stopped, its table, and the
     // number of candidates its level was set by.
     let mut locked_retry: Option<(String, Vec<Candidate>, usize)> = None;
+    // No effect asked for: the nominal calibration alone, judged as an
+    // effect is (significant at α, at least `min_excess_cut` of the excess).
+    if opts.max_effects == 0 && opts.calibrate {
+        let excess = excess_ms(&ctx, &cur);
+        let at_floor = excess.iter().all(|&(ms, floor)| ms <= 1.2 * floor * floor);
+        if let Some((mut cal, calibrated, (before_ms, cal_ms))) = calibrate(&ctx, &cur, &mut runs)?
+        {
+            let cut = excess_cut(&ctx, &excess, at_floor, before_ms, cal_ms);
+            cal.accepted = !at_floor && cal.p_value < opts.alpha && cut >= opts.min_excess_cut;
+            cal.excess_cut_percent = 100.0 * cut;
+            if cal.accepted {
+                cur = calibrated;
+            }
+            stopped = format!(
+                "--max-effects 0: the nominal calibration only ({})",
+                if cal.accepted { "kept" } else { "not kept" }
+            );
+            calibration = Some(cal);
+        }
+    }
     while steps.len() < opts.max_effects {
         let step_no = steps.len();
         // At the noise floor already? The floor is estimated from the residual's
@@ -691,6 +712,7 @@ pub fn diagnose_records(
                 &cands[i],
                 f,
                 (level, &excess, at_floor, opts.min_excess_cut),
+                None,
             ) {
                 format!("refused: {why}")
             } else {
@@ -769,6 +791,22 @@ pub fn diagnose_records(
                 && not_physical(&ctx, &cands[i], &j).is_none()
             {
                 f = j;
+            }
+            // Once effects are named, what makes the effect must also show
+            // on the joint refit (see `degenerate_explains`), against the
+            // degenerate form refitted jointly too.
+            if !cur.free.is_empty()
+                && let Some(why) = degenerate_explains(
+                    &ctx,
+                    &cur,
+                    &cands[i],
+                    &f,
+                    (level, &excess, at_floor, opts.min_excess_cut),
+                    Some(&mut runs),
+                )
+            {
+                annotate(&mut table, &cands[i], f.score, format!("refused: {why}"));
+                continue;
             }
             let sc = score_of(&f, weighted_holdout_ms(&ctx, &f.residual));
             if best.as_ref().is_none_or(|b| sc < b.2) {
@@ -2507,16 +2545,36 @@ fn degenerate_twin(c: &Cand, f: &Fitted) -> Option<Cand> {
 /// Not a share of the fit's whole cut: a true hysteresis that also changes
 /// the gain by a third owes 2 % of its mean-square cut to its loop — the
 /// loop is what takes the residual from twice the noise to the noise
-/// (generator seed 1).
+/// (generator seed 1). Once effects are named, it is taken twice: with the
+/// named effects held, and on the joint refits of both (the candidate's and
+/// its twin's); it must pass both — held alone, a hysteresis after friction
+/// passed on friction's leftover (tuning 40, 642, 796); refitted jointly
+/// alone, a loop the joint refit made of a resonance's leftover passed
+/// (tuning 374). A twin that cannot run the record stands in for nothing.
 fn degenerate_explains(
     ctx: &Ctx<'_>,
     cur: &Current,
     c: &Cand,
     f: &Fitted,
     (level, excess, at_floor, min_cut): (f64, &[(f64, f64)], bool, f64),
+    joint: Option<&mut usize>,
 ) -> Option<String> {
     let twin = degenerate_twin(c, f)?;
-    let t = fit_candidate(ctx, cur, &twin).ok()?;
+    let mut t = fit_candidate(ctx, cur, &twin).ok()?;
+    // `f` refitted jointly with the named effects (`joint`: the runs counted
+    // there): the twin is too — like against like.
+    if let Some(runs) = joint
+        && let Ok(j) = joint_refit(ctx, &t, runs)
+        && weighted_holdout_ms(ctx, &j.residual) < weighted_holdout_ms(ctx, &t.residual)
+    {
+        t = j;
+    }
+    // A degenerate form that cannot even run the record (its residual not
+    // finite: the linear part alone diverges, or no start converged) stands
+    // in for nothing: what is left is the loop's (the variation's) doing.
+    if !holdout_rms(ctx, &t.residual).is_finite() {
+        return None;
+    }
     let (test, cut) = held_out_gain(ctx, (excess, at_floor), &t.residual, &f.residual);
     (test.p_value >= level || cut < min_cut).then(|| {
         format!(

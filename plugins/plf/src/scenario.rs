@@ -633,16 +633,53 @@ pub fn draw(seed: u64) -> Result<Scenario, DataError> {
     draw_with(seed, false).map(|(s, _)| s)
 }
 
-/// How visible the hidden effects of scenario `seed` are: the rms of what they
+/// How visible the hidden effects of a scenario are: the rms of what they
 /// change in the compared signals (the position; in a closed loop also the
 /// drive, whichever shows more) over the rms of the noise in the same signal,
 /// from the same record simulated without the effects, with and without its
-/// noise. Below about 1 an effect hides in the noise (`None`-free records: 0).
-pub fn visibility(seed: u64) -> Result<f64, DataError> {
-    draw_with(seed, true).map(|(_, v)| v.unwrap_or(0.0))
+/// noise. Below about 1 an effect hides in the noise (effect-free records: 0).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Visibility {
+    /// Over the whole record.
+    pub whole: f64,
+    /// Over the part `diagnose` holds out by default (its last
+    /// [`Options::holdout`](crate::diagnose::Options::holdout) share), the only
+    /// part that decides a name: an effect that acts only in the start-up
+    /// transient (a drive that saturates on the first step) is whole-record
+    /// visible and held-out invisible.
+    pub held_out: f64,
+    /// Over the held-out part, of what the nominal's own parameters cannot
+    /// take: the nominal calibration alone (`diagnose` with
+    /// `max_effects = 0`) fitted to the record with its effects and to the
+    /// record without them, both with the noise scaled by 10⁻³; the mean
+    /// square the effects leave over what the calibration leaves without
+    /// them, over the noise's. A linear effect at one frequency (a mode under
+    /// a single tone is a gain and a phase there) or an attached mass below
+    /// its resonance (a heavier stage) is whole-record visible and taken by
+    /// the calibration: no record can tell it from a nominal that is off.
+    pub calibrated: f64,
 }
 
-fn draw_with(seed: u64, with_visibility: bool) -> Result<(Scenario, Option<f64>), DataError> {
+/// The [`Visibility`] of scenario `seed`'s hidden effects.
+pub fn visibility(seed: u64) -> Result<Visibility, DataError> {
+    draw_with(seed, true).map(|(_, v)| {
+        v.unwrap_or(Visibility {
+            whole: 0.0,
+            held_out: 0.0,
+            calibrated: 0.0,
+        })
+    })
+}
+
+/// The noise of the quiet records [`Visibility::calibrated`] is measured on,
+/// relative to the record's: small enough to leave the model error alone,
+/// not zero so that every noise floor `diagnose` estimates is finite.
+const QUIET_NOISE: f64 = 1e-3;
+
+fn draw_with(
+    seed: u64,
+    with_visibility: bool,
+) -> Result<(Scenario, Option<Visibility>), DataError> {
     let mut rng = scenario_rng(seed);
     let (hidden, family) = labels_from(&mut rng);
     let (plant_kind, loop_kind, excitation_kind) =
@@ -995,18 +1032,46 @@ fn draw_with(seed: u64, with_visibility: bool) -> Result<(Scenario, Option<f64>)
             .collect();
         let (u0, y0) = simulate(&effect_free, 1.0)?;
         let (uq, yq) = simulate(&effect_free, 0.0)?;
-        let ratio = |with: &[f64], without: &[f64], quiet: &[f64]| {
+        // From sample `from` on.
+        let ratio = |from: usize, with: &[f64], without: &[f64], quiet: &[f64]| {
             let rms = |a: &[f64], b: &[f64]| {
+                let (a, b) = (&a[from..], &b[from..]);
                 (a.iter().zip(b).map(|(x, y)| (x - y) * (x - y)).sum::<f64>() / a.len() as f64)
                     .sqrt()
             };
             rms(with, without) / rms(without, quiet).max(f64::MIN_POSITIVE)
         };
-        let mut v = ratio(&y_data, &y0, &yq);
-        if closed {
-            v = v.max(ratio(&u_data, &u0, &uq));
-        }
-        Some(v)
+        let of_part = |from: usize| {
+            let v = ratio(from, &y_data, &y0, &yq);
+            if closed {
+                v.max(ratio(from, &u_data, &u0, &uq))
+            } else {
+                v
+            }
+        };
+        let holdout = crate::diagnose::Options::default().holdout;
+        let held_out_from =
+            (((1.0 - holdout) * y_data.len() as f64).round() as usize).min(n.saturating_sub(1));
+        let noise_rms = |a: &[f64], b: &[f64]| {
+            let (a, b) = (&a[held_out_from..], &b[held_out_from..]);
+            (a.iter().zip(b).map(|(x, y)| (x - y) * (x - y)).sum::<f64>() / a.len() as f64)
+                .sqrt()
+                .max(f64::MIN_POSITIVE)
+        };
+        Some((
+            Visibility {
+                whole: of_part(0),
+                held_out: of_part(held_out_from),
+                calibrated: 0.0,
+            },
+            // The quiet records (with and without the effects) and the
+            // held-out noise rms per compared output (y; u in a closed loop).
+            (
+                simulate(&forms, QUIET_NOISE)?,
+                simulate(&effect_free, QUIET_NOISE)?,
+                [noise_rms(&y0, &yq), noise_rms(&u0, &uq)],
+            ),
+        ))
     } else {
         None
     };
@@ -1036,7 +1101,19 @@ fn draw_with(seed: u64, with_visibility: bool) -> Result<(Scenario, Option<f64>)
         yaml_matrix(&nb),
         yaml_matrix(&nc)
     );
-    let columns = if closed {
+    let columns_of = |u: Vec<f64>, y: Vec<f64>| {
+        let mut c = Vec::new();
+        if closed {
+            c.push((
+                "r".to_string(),
+                r.iter().map(|v| v * y_scale).collect::<Vec<f64>>(),
+            ));
+        }
+        c.push(("u".to_string(), u));
+        c.push(("y".to_string(), y));
+        c
+    };
+    if closed {
         blocks += "  - { name: reference, type: data_column, column: r }\n  - { name: error, type: sum, signs: \"+-\" }\n";
         blocks += &format!(
             "  - {{ name: controller, type: transfer_function, discrete: true, num: [{}], den: [{}] }}\n",
@@ -1052,19 +1129,11 @@ fn draw_with(seed: u64, with_visibility: bool) -> Result<(Scenario, Option<f64>)
         conns += &format!(
             "  - {{ from: reference.y, to: error.in0 }}\n  - {{ from: {plant_out}, to: error.in1 }}\n  - {{ from: error.y, to: controller.u }}\n  - {{ from: controller.y, to: plant.u }}\n"
         );
-        vec![
-            (
-                "r".to_string(),
-                r.iter().map(|v| v * y_scale).collect::<Vec<f64>>(),
-            ),
-            ("u".to_string(), u_data),
-            ("y".to_string(), y_data),
-        ]
     } else {
         blocks += "  - { name: drive, type: data_column, column: u }\n";
         conns += "  - { from: drive.y, to: plant.u }\n";
-        vec![("u".to_string(), u_data), ("y".to_string(), y_data)]
-    };
+    }
+    let columns = columns_of(u_data, y_data);
     let mut compare = format!("  - {{ signal: {plant_out}, column: y }}\n");
     if closed {
         compare += "  - { signal: controller.y, column: u }\n";
@@ -1073,6 +1142,57 @@ fn draw_with(seed: u64, with_visibility: bool) -> Result<(Scenario, Option<f64>)
         "title: scenario {seed} ({plant_kind}, {loop_kind}, {excitation_kind}, {noise_kind} noise, nominal {nominal_kind})\nbase_rate_hz: {fs:?}\nduration_s: {t_len:?}\nblocks:\n{blocks}connections:\n{conns}compare:\n{compare}"
     );
     let data = Dataset::from_columns(format!("scenario {seed}"), fs, 0.0, columns)?;
+    let visibility = match visibility {
+        None => None,
+        Some((mut v, ((uw, yw), (ue, ye), noise))) => {
+            // Held-out mean square per output after the calibration alone.
+            let calibrated_ms = |u: Vec<f64>, y: Vec<f64>| -> Result<Vec<f64>, DataError> {
+                let quiet = Dataset::from_columns(
+                    format!("scenario {seed}, quiet"),
+                    fs,
+                    0.0,
+                    columns_of(u, y),
+                )?;
+                let spec =
+                    nanomotion_core::graph::GraphSpec::from_yaml(&nominal_yaml, "scenario.yaml")
+                        .map_err(|e| {
+                            DataError::new(
+                                "scenario",
+                                e.to_string(),
+                                "a bug: the nominal graph must load",
+                            )
+                        })?;
+                let opts = crate::diagnose::Options {
+                    max_effects: 0,
+                    threads: 1,
+                    ..Default::default()
+                };
+                let report = crate::diagnose::diagnose(&spec, &quiet, &opts).map_err(|e| {
+                    DataError::new(
+                        "scenario",
+                        e.to_string(),
+                        "a bug: calibration of a scenario must run",
+                    )
+                })?;
+                Ok(report
+                    .final_scores
+                    .per_output
+                    .iter()
+                    .map(|o| o.holdout_rms * o.holdout_rms)
+                    .collect())
+            };
+            if !forms.is_empty() {
+                let (with, without) = (calibrated_ms(uw, yw)?, calibrated_ms(ue, ye)?);
+                v.calibrated = with
+                    .iter()
+                    .zip(&without)
+                    .zip(noise)
+                    .map(|((w, wo), sigma)| (w - wo).max(0.0).sqrt() / sigma)
+                    .fold(0.0, f64::max);
+            }
+            Some(v)
+        }
+    };
     let truth = if forms.is_empty() {
         "no hidden effect".to_string()
     } else {
@@ -1130,14 +1250,21 @@ mod tests {
         // Effect-free: the record without its effects is the record itself,
         // so what the effects change is exactly zero.
         for seed in (0..40).filter(|&s| labels(s).0.is_empty()).take(3) {
-            assert_eq!(visibility(seed).unwrap(), 0.0, "seed {seed}");
+            let v = visibility(seed).unwrap();
+            assert_eq!((v.whole, v.held_out), (0.0, 0.0), "seed {seed}");
         }
         // With effects: computing the visibility draws the same record.
         let seed = (0..40).find(|&s| !labels(s).0.is_empty()).unwrap();
         let (with, v) = draw_with(seed, true).unwrap();
         let plain = draw(seed).unwrap();
         assert_eq!(with.record.data.column("y"), plain.record.data.column("y"));
-        assert!(v.is_some_and(|v| v.is_finite() && v > 0.0), "{v:?}");
+        assert!(
+            v.is_some_and(|v| v.whole.is_finite()
+                && v.whole > 0.0
+                && v.held_out.is_finite()
+                && v.held_out >= 0.0),
+            "{v:?}"
+        );
     }
 
     #[test]

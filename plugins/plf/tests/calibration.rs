@@ -294,3 +294,36 @@ fn a_linear_error_is_not_named_hysteresis_a_position_dependent_gain_or_a_resonan
         );
     }
 }
+
+#[test]
+fn with_no_effect_asked_for_the_calibration_alone_is_fitted_and_judged() {
+    // `max_effects: 0`: the nominal calibration alone. A gain 5 % off is
+    // calibrated (× 1.05 found) and kept; an exact nominal's calibration
+    // explains nothing significant and is not kept; nothing is ever named.
+    let n = 8000;
+    let opts = Options {
+        max_effects: 0,
+        ..Options::default()
+    };
+    let nominal = GraphSpec::from_yaml(&lag_stage_graph(50.0, 1.0, n), "nominal.yaml").unwrap();
+    let off = measured(&lag_stage_graph(50.0, 1.05, n), n, 11);
+    let rep = diagnose(&nominal, &off, &opts).unwrap();
+    let cal = rep.calibration.as_ref().expect("a calibration was fitted");
+    eprintln!("gain off: {cal:?}; {}", rep.stopped_because);
+    assert!(cal.accepted, "{cal:?}");
+    assert!((cal.params["stage.gain"] - 1.05).abs() < 0.005, "{cal:?}");
+    assert!(rep.found.is_empty() && rep.steps.is_empty());
+    assert!(
+        rep.final_scores.holdout_rms < 0.2 * rep.nominal.holdout_rms,
+        "{:.3e} -> {:.3e}",
+        rep.nominal.holdout_rms,
+        rep.final_scores.holdout_rms
+    );
+    let exact = measured(&lag_stage_graph(50.0, 1.0, n), n, 12);
+    let rep = diagnose(&nominal, &exact, &opts).unwrap();
+    let cal = rep.calibration.as_ref().expect("a calibration was fitted");
+    eprintln!("exact: {cal:?}; {}", rep.stopped_because);
+    assert!(!cal.accepted, "{cal:?}");
+    assert_eq!(rep.final_scores, rep.nominal);
+    assert!(rep.found.is_empty() && rep.steps.is_empty());
+}
