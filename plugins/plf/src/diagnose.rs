@@ -309,7 +309,9 @@ pub struct Report {
     /// Why the workflow stopped.
     pub stopped_because: String,
     /// What the record's excitation cannot show (a single tone: linear
-    /// effects indistinguishable from the nominal's gain and phase there).
+    /// effects indistinguishable from the nominal's gain and phase there; a
+    /// misfit that acts before the held-out part only, which that part cannot
+    /// confirm).
     pub excitation_notes: Vec<String>,
     /// The candidates of the step that named nothing (best first), if it came to one.
     pub rejected_candidates: Vec<Candidate>,
@@ -1079,7 +1081,10 @@ pub fn diagnose_records(
         holdout_cut_percent,
         final_tests,
         stopped_because: stopped,
-        excitation_notes: single_tone_notes(&ctx, spec),
+        excitation_notes: single_tone_notes(&ctx, spec)
+            .into_iter()
+            .chain(early_residual_notes(&ctx, &cur))
+            .collect(),
         rejected_candidates,
         records: records
             .parts
@@ -2169,6 +2174,46 @@ const SINGLE_TONE_SHARE: f64 = 0.95;
 /// nominal calibration's — so in steady state creep, a delay or a resonance
 /// cannot be told from the nominal's error there (the start-up transient
 /// still can: tuning 717 names its creep under a sine), whatever is named.
+/// How many times its held-out rms an output's final residual must be over
+/// the estimation part (and how many noise floors there) for
+/// [`early_residual_notes`]. Over a few hundred samples or more, the rms of
+/// the same noise in two parts differs by per cents, of coloured noise by
+/// tens of per cent: a factor 3 (9 in mean square) is a difference in the
+/// record, not in the noise.
+const EARLY_RESIDUAL_RATIO: f64 = 3.0;
+
+/// Outputs whose final residual is mostly before the held-out part: there the
+/// model still misses something (a limit reached only on the first strokes,
+/// a start-up transient) that the held-out part never shows, so no name can
+/// be confirmed for it — the user is told where it is and what would show
+/// it, rather than nothing (blind 3056, 3186: a drive saturating on the
+/// first steps only, residual 15–65 noise floors before the held-out part
+/// and below one floor in it).
+fn early_residual_notes(ctx: &Ctx<'_>, cur: &Current) -> Vec<String> {
+    cur.residual
+        .iter()
+        .enumerate()
+        .filter_map(|(i, r)| {
+            let (est, held) = (ctx.part(r, Part::Estimation), ctx.part(r, Part::HeldOut));
+            let (e, h) = (
+                stats::mean_square(est).sqrt(),
+                stats::mean_square(held).sqrt(),
+            );
+            let floor = floor_sigma(ctx, i, r, Part::Estimation);
+            (e > EARLY_RESIDUAL_RATIO * h && e > EARLY_RESIDUAL_RATIO * floor).then(|| {
+                format!(
+                    "the residual of `{}` is {:.1}× as large before the held-out part as in it ({:.3e} against {:.3e}; noise floor {:.3e}): the model still misses something that acts early (a limit reached only on the first strokes, a start-up transient) and that the held-out part never shows, so no name can be confirmed for it; a validation record with such events (diagnose MODEL EST.csv VAL.csv), or a holdout that includes them, would",
+                    ctx.channels[i].signal,
+                    e / h.max(f64::MIN_POSITIVE),
+                    e,
+                    h,
+                    floor
+                )
+            })
+        })
+        .collect()
+}
+
 fn single_tone_notes(ctx: &Ctx<'_>, spec: &GraphSpec) -> Vec<String> {
     excitations(ctx, spec)
         .into_iter()

@@ -327,3 +327,64 @@ fn with_no_effect_asked_for_the_calibration_alone_is_fitted_and_judged() {
     assert_eq!(rep.final_scores, rep.nominal);
     assert!(rep.found.is_empty() && rep.steps.is_empty());
 }
+
+#[test]
+fn a_limit_reached_only_before_the_held_out_part_is_pointed_out_not_named() {
+    // The drive is large over the first 40 % of the record and reaches the
+    // amplifier's limit there (±1); afterwards it stays well inside. The
+    // held-out part (the last 30 %) never shows the limit, so no name can be
+    // confirmed for it: nothing is named, and a note says where the misfit is.
+    let n = 8000;
+    let nominal_yaml = lag_stage_graph(50.0, 1.0, n);
+    let truth = nominal_yaml
+        .replace(
+            "  - { name: stage,",
+            "  - { name: amp, type: saturation, lower: -1.0, upper: 1.0 }\n  - { name: stage,",
+        )
+        .replace(
+            "{ from: drive.y, to: stage.u }",
+            "{ from: drive.y, to: amp.u }\n  - { from: amp.y, to: stage.u }",
+        );
+    let mut rng = Rng::new(21);
+    let u: Vec<f64> = multisine(&mut rng, n)
+        .iter()
+        .enumerate()
+        .map(|(k, v)| if k < 2 * n / 5 { 3.0 * v } else { 0.4 * v })
+        .collect();
+    let y_true = simulate(&truth, &u);
+    let rms = (y_true.iter().map(|v| v * v).sum::<f64>() / n as f64).sqrt();
+    let y: Vec<f64> = y_true
+        .iter()
+        .map(|v| v + 2e-3 * rms * rng.normal())
+        .collect();
+    let data =
+        Dataset::from_columns("truth", RATE, 0.0, vec![("u".into(), u), ("y".into(), y)]).unwrap();
+    let nominal = GraphSpec::from_yaml(&nominal_yaml, "nominal.yaml").unwrap();
+    let rep = diagnose(&nominal, &data, &Options::default()).unwrap();
+    eprintln!(
+        "early limit: found {:?}; {}; notes {:?}",
+        rep.found, rep.stopped_because, rep.excitation_notes
+    );
+    assert!(rep.found.is_empty(), "named {:?}", rep.found);
+    assert!(
+        rep.excitation_notes
+            .iter()
+            .any(|n| n.contains("`stage.y`") && n.contains("before the held-out part")),
+        "{:?}",
+        rep.excitation_notes
+    );
+    // The control: the same stage without the limit, the nominal exact — no note.
+    let rep = diagnose(
+        &nominal,
+        &measured(&nominal_yaml, n, 22),
+        &Options::default(),
+    )
+    .unwrap();
+    assert!(
+        !rep.excitation_notes
+            .iter()
+            .any(|n| n.contains("before the held-out part")),
+        "{:?}",
+        rep.excitation_notes
+    );
+}
