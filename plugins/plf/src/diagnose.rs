@@ -547,7 +547,7 @@ pub fn diagnose_records(
     // effect is (significant at α, at least `min_excess_cut` of the excess).
     if opts.max_effects == 0 && opts.calibrate {
         let excess = excess_ms(&ctx, &cur);
-        let at_floor = excess.iter().all(|&(ms, floor)| ms <= 1.2 * floor * floor);
+        let at_floor = at_noise_floor(&excess);
         if let Some((mut cal, calibrated, (before_ms, cal_ms))) = calibrate(&ctx, &cur, &mut runs)?
         {
             let cut = excess_cut(&ctx, &excess, at_floor, before_ms, cal_ms);
@@ -573,7 +573,7 @@ pub fn diagnose_records(
         // they are tried, and they must then cut the whole mean square (not an
         // excess the floor cannot separate from the noise).
         let excess = excess_ms(&ctx, &cur);
-        let at_floor = excess.iter().all(|&(ms, floor)| ms <= 1.2 * floor * floor);
+        let at_floor = at_noise_floor(&excess);
         let floor_stop = "the held-out residual is at its noise floor (mean square within 20 % of the white-noise estimate)";
         // An effect named before on an axis is never a new effect there (the
         // joint refit adjusts the first; a second copy at another place of the
@@ -2003,6 +2003,12 @@ fn holdout_weighted_vectors(ctx: &Ctx<'_>, a: &[Vec<f64>], b: &[Vec<f64>]) -> (V
         }
     }
     (va, vb)
+}
+
+/// Whether every output's held-out mean square is within 20 % of its noise
+/// floor's (`excess`: from [`excess_ms`]): nothing above the noise to explain.
+fn at_noise_floor(excess: &[(f64, f64)]) -> bool {
+    excess.iter().all(|&(ms, floor)| ms <= 1.2 * floor * floor)
 }
 
 /// (held-out mean square, its noise floor σ) per output.
