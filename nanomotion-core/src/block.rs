@@ -62,6 +62,15 @@ pub struct Port {
     /// For outputs in the unit of an input (sums, limiters, delays, rate
     /// transitions): the index of that input. Resolved when the graph is built.
     pub unit_from_input: Option<usize>,
+    /// For inputs: a **scheduling input** — the variable the block's behaviour is
+    /// scheduled on (the signal a repetitive disturbance is periodic in, e.g. a
+    /// DVRC's leg angle α, thesis Sec. 5.3), not a signal path. The stability
+    /// gate ([`crate::gate`]) does not linearise through it: it cuts the
+    /// connection into it when it finds and assembles a feedback loop, so the
+    /// loop is judged with the scheduling variable frozen, and the block's own
+    /// criterion must cover its variation (for a DVRC, (5.9) over the delay
+    /// range \[m, M\] that α's variation sweeps N_k through).
+    pub scheduling: bool,
 }
 
 impl Port {
@@ -72,6 +81,7 @@ impl Port {
             width,
             unit: None,
             unit_from_input: None,
+            scheduling: false,
         }
     }
     /// This output carries values in `unit` (SI, e.g. `m`).
@@ -82,6 +92,12 @@ impl Port {
     /// This output carries values in the unit of input `index`.
     pub fn unit_of_input(mut self, index: usize) -> Self {
         self.unit_from_input = Some(index);
+        self
+    }
+    /// This input is a scheduling input ([`Port::scheduling`]): the gate judges
+    /// loops through the block with it frozen.
+    pub fn scheduling_input(mut self) -> Self {
+        self.scheduling = true;
         self
     }
 }
@@ -634,6 +650,77 @@ pub mod check {
             ))
         }
     }
+    // How many entries a list may hold, in words: declared in `doc` beside
+    // `Limit` (the schema says it too), used here by the checks.
+    use crate::doc::{entries_of, entries_words};
+
+    /// A list of `n` entries whose count must be within `lo` and `hi` (each end
+    /// inclusive or exclusive, either left out): `#[param(len(…))]`.
+    pub fn entries(
+        field: &str,
+        n: usize,
+        lo: Option<Limit<i128>>,
+        hi: Option<Limit<i128>>,
+    ) -> Result<(), ParamError> {
+        let count = n as i128;
+        let above = match lo {
+            None => true,
+            Some(Limit::Inclusive(l)) => count >= l,
+            Some(Limit::Exclusive(l)) => count > l,
+        };
+        let below = match hi {
+            None => true,
+            Some(Limit::Inclusive(h)) => count <= h,
+            Some(Limit::Exclusive(h)) => count < h,
+        };
+        if above && below {
+            return Ok(());
+        }
+        let words = entries_words(lo, hi).unwrap_or_default();
+        let problem = if n == 0 {
+            "is empty".to_string()
+        } else {
+            format!("has {}, must have {words}", entries_of(count))
+        };
+        Err(ParamError::new(field, problem, format!("give {words}")))
+    }
+
+    /// A list of numbers, each above the one before (breakpoints, sample
+    /// times): `#[param(increasing)]`. The error names the first entry that
+    /// is not (`x[2]`).
+    pub fn increasing(field: &str, values: &[f64]) -> Result<(), ParamError> {
+        match (1..values.len()).find(|&j| !(values[j] > values[j - 1])) {
+            None => Ok(()),
+            Some(j) => Err(ParamError::new(
+                format!("{field}[{j}]"),
+                format!(
+                    "is {}, not above the entry before it, {}",
+                    values[j],
+                    values[j - 1]
+                ),
+                "sort the entries strictly increasing",
+            )),
+        }
+    }
+
+    /// Two lists that pair entry by entry (breakpoints and their values) hold
+    /// as many entries: `#[param(same_len = other)]`.
+    pub fn same_len(field: &str, n: usize, other: &str, m: usize) -> Result<(), ParamError> {
+        if n == m {
+            Ok(())
+        } else {
+            Err(ParamError::new(
+                field,
+                format!(
+                    "has {}, {other} has {}",
+                    entries_of(n as i128),
+                    entries_of(m as i128)
+                ),
+                format!("give as many entries in {field} as in {other}, one per pair"),
+            ))
+        }
+    }
+
     /// `value` must be ≥ 1.
     pub fn at_least_one(field: &str, value: usize) -> Result<(), ParamError> {
         if value >= 1 {

@@ -824,15 +824,26 @@ pub fn analyse(sched: &Scheduler, require: &Require) -> GateReport {
         report.errors.push(e);
     }
     let n = wiring.len();
+    // Block graphs with and without the connections into scheduling inputs
+    // (`Port::scheduling`): loops are found without them; a connection whose
+    // two ends only share a loop through it is named in the report.
     let mut succ = vec![Vec::new(); n];
+    let mut succ_all = vec![Vec::new(); n];
     for (d, w) in wiring.iter().enumerate() {
-        for &(s, _) in &w.sources {
-            if s < n && !succ[s].contains(&d) {
+        for (k, &(s, _)) in w.sources.iter().enumerate() {
+            if s >= n {
+                continue;
+            }
+            if !succ_all[s].contains(&d) {
+                succ_all[s].push(d);
+            }
+            if !is_scheduling(w, k) && !succ[s].contains(&d) {
                 succ[s].push(d);
             }
         }
     }
     let comps = loops::cyclic_components(&succ);
+    let comps_all = loops::cyclic_components(&succ_all);
     let roles: Vec<Role> = (0..n)
         .map(|i| sched.block_at(i).map_or(Role::Math, |b| b.role()))
         .collect();
@@ -866,6 +877,8 @@ pub fn analyse(sched: &Scheduler, require: &Require) -> GateReport {
         });
         let bounds = require.bounds_for(key.as_deref());
         let mut lr = analyse_loop(sched, &wiring, &roles, members, name, blocks);
+        lr.linearised
+            .extend(scheduling_cuts(&wiring, members, &comps_all));
         if !lr.unproven.is_empty() {
             lr.allowed = bounds.allow_unproven.clone();
         }
@@ -887,6 +900,39 @@ pub fn analyse(sched: &Scheduler, require: &Require) -> GateReport {
         }
     }
     report
+}
+
+/// Whether input `k` of a block is a scheduling input
+/// ([`Port::scheduling`](crate::block::Port::scheduling)).
+fn is_scheduling(w: &BlockWiring, k: usize) -> bool {
+    w.inputs.get(k).is_some_and(|p| p.scheduling)
+}
+
+/// The connections into scheduling inputs of the loop `members` that were cut:
+/// those whose two ends would otherwise share a loop (`comps_all`, the cyclic
+/// components with every connection), one note each.
+fn scheduling_cuts(
+    wiring: &[BlockWiring],
+    members: &[usize],
+    comps_all: &[Vec<usize>],
+) -> Vec<String> {
+    let mut notes = Vec::new();
+    for &d in members {
+        let Some(whole) = comps_all.iter().find(|c| c.binary_search(&d).is_ok()) else {
+            continue;
+        };
+        for (k, &(s, sp)) in wiring[d].sources.iter().enumerate() {
+            if is_scheduling(&wiring[d], k) && whole.binary_search(&s).is_ok() {
+                notes.push(format!(
+                    "`{}`: `{}` is a scheduling input, not a signal path: the connection {} is cut and the loop is judged with it frozen (the block's own criterion covers its variation)",
+                    wiring[d].name,
+                    wiring[d].inputs[k].name,
+                    edge_text(wiring, ((s, sp), (d, k)))
+                ));
+            }
+        }
+    }
+    notes
 }
 
 fn check_bounds(lr: &LoopReport, b: &Bounds) -> Vec<String> {
@@ -1081,12 +1127,13 @@ fn analyse_loop(
     if !lr.unproven.is_empty() {
         return lr;
     }
-    // Connections inside the loop.
+    // Connections inside the loop (not those into scheduling inputs: the loop
+    // is judged with its scheduling variables frozen).
     let idx = |i: usize| members.binary_search(&i).ok();
     let mut edges: Vec<Edge> = Vec::new();
     for &d in members {
         for (k, &(s, sp)) in wiring[d].sources.iter().enumerate() {
-            if idx(s).is_some() {
+            if idx(s).is_some() && !is_scheduling(&wiring[d], k) {
                 edges.push(((s, sp), (d, k)));
             }
         }

@@ -678,7 +678,10 @@ impl Controller for Dvrc {
 #[typetag::serde(name = "dvrc")]
 impl Block for Dvrc {
     fn inputs(&self) -> Vec<Port> {
-        vec![Port::new("e", 1), Port::new("alpha", 1)]
+        // α is the variable the disturbance is periodic in (Sec. 5.3): it
+        // only sets the delay N_k, which (5.9) covers over [m, M]; the gate
+        // judges the loop with it frozen.
+        vec![Port::new("e", 1), Port::new("alpha", 1).scheduling_input()]
     }
     fn outputs(&self) -> Vec<Port> {
         vec![Port::new("w", 1), Port::new("n", 1)]
