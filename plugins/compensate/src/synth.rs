@@ -330,6 +330,7 @@ pub(crate) fn synthesise(
     params: &Value,
     placement: &Placement,
     controller: &GraphSpec,
+    diagnosed: &GraphSpec,
     info: &LoopInfo,
     opts: &Options,
 ) -> Result<Outcome, CompError> {
@@ -459,7 +460,7 @@ pub(crate) fn synthesise(
             if params.get("variable").and_then(Value::as_str) == Some("signal") {
                 match placement.s.first() {
                     Some(alpha) => {
-                        delay_varying(e, params, alpha, controller, info, opts, &name)?
+                        delay_varying(e, params, alpha, controller, diagnosed, info, opts, &name)?
                     }
                     None => none(
                         &e.effect,
@@ -1204,16 +1205,79 @@ fn repetitive(
     }))
 }
 
+/// The shortest and longest number of samples of `log` (at its rate) that
+/// the signal `x` takes to advance one `period`, over `x`: for each sample k,
+/// k − j with j the last sample at or below x_k − period. Errors when the signal
+/// does not advance two periods or moves backwards.
+fn advance_range(x: &[f64], period: f64, alpha: &str, which: &str) -> Result<(f64, f64), String> {
+    if period.is_nan() || period <= 0.0 || x.len() < 2 || x[x.len() - 1] - x[0] < 2.0 * period {
+        return Err(format!(
+            "`{alpha}` advances {:.3e} over the scored window of {which}, less than two periods ({:.3e}): delay-varying RC needs the signal to move forward through the period",
+            x.last().zip(x.first()).map_or(0.0, |(b, a)| b - a),
+            2.0 * period
+        ));
+    }
+    if x.windows(2).any(|w| w[1] < w[0]) {
+        return Err(format!(
+            "`{alpha}` moves backwards in the scored window of {which}: the delay-varying memory follows a signal that only advances (DVRC, (5.7))"
+        ));
+    }
+    let (mut lo, mut hi) = (f64::INFINITY, 0.0f64);
+    let mut j = 0usize;
+    for k in 0..x.len() {
+        while j + 1 < k && x[j + 1] <= x[k] - period {
+            j += 1;
+        }
+        if x[j] <= x[k] - period {
+            lo = lo.min((k - j) as f64);
+            hi = hi.max((k - j) as f64);
+        }
+    }
+    Ok((lo, hi))
+}
+
+/// The delay range (controller samples at `rate`) that `alpha` takes to
+/// advance one `period` over the scored window of `graph` run as it is.
+fn loop_delay_range(
+    graph: &GraphSpec,
+    alpha: &str,
+    period: f64,
+    info: &LoopInfo,
+    rate: f64,
+    which: &str,
+) -> Result<(f64, f64), String> {
+    let mut g = crate::clone(graph, which).map_err(|e| e.to_string())?;
+    g.log = vec![alpha.to_string()];
+    g.score.clear();
+    let (mut sched, _) = g.build().map_err(|e| format!("{which}: {e}"))?;
+    let run = sched.run(|_| {});
+    let log = run.logs.first().ok_or_else(|| format!("{which}: no log"))?;
+    let from = (info.from_s * log.rate_hz).ceil() as usize;
+    let x = log.data.get(from..).unwrap_or(&[]);
+    let (lo, hi) = advance_range(x, period, alpha, which)?;
+    let scale = rate / log.rate_hz;
+    Ok((lo * scale, hi * scale))
+}
+
 /// Delay-varying RC (5.7)–(5.8) on a disturbance periodic in a signal (the
-/// position): α = that signal, P_α the fitted period, the delay range [m, M]
-/// from the user's loop simulated on the nominal plant (how many controller
-/// samples the signal takes to advance one period over the scored window), L and
-/// Q from [`design_learning`] with (5.9) for that range.
+/// position, or the drive's phase α = 2π∫f_α computed in the loop): α = that
+/// signal, P_α the fitted period, the delay range [m, M] from the loops'
+/// motion — the user's loop on the nominal plant and on the plant as
+/// diagnosed (how many controller samples the signal takes to advance one
+/// period over the scored window), their union widened by
+/// [`Options::delay_margin`] for the variation of N_k that neither model
+/// shows (a walking stage's irregular steps) — and L and Q from
+/// [`design_learning`] with (5.9) for that range. The `dvrc` block's `alpha`
+/// is a scheduling input, so a phase integrated from the controller's output
+/// inside the loop does not put the integrator's pole into the loop the gate
+/// judges.
+#[allow(clippy::too_many_arguments)]
 fn delay_varying(
     e: &crate::NamedEffect,
     params: &Value,
     alpha: &str,
     controller: &GraphSpec,
+    diagnosed: &GraphSpec,
     info: &LoopInfo,
     opts: &Options,
     name: &str,
@@ -1230,51 +1294,41 @@ fn delay_varying(
                 "has no block `{}` for the signal `{alpha}` the disturbance is periodic in",
                 split(alpha).0
             ),
-            fix: "name the plant's position as in the model you diagnosed".into(),
+            fix: "name the signal (the plant's position, or the block computing the drive's phase) as in the model you diagnosed".into(),
+        });
+    }
+    let margin = opts.delay_margin;
+    if !(margin.is_finite() && (0.0..0.5).contains(&margin)) {
+        return Err(CompError::Input {
+            place: "Options::delay_margin".into(),
+            problem: format!("is {margin}, not a fraction in [0, 0.5)"),
+            fix: "give the relative widening of the delay range, e.g. 0.02 for ±2 %".into(),
         });
     }
     let ctrl_in = controller_input(e, controller, info, opts)?;
     let rate = surgery::rate_of(controller, split(&ctrl_in).0).unwrap_or(controller.base_rate_hz);
     let period = num(params, "period");
-    // The signal over the scored window of the user's loop.
-    let mut g = crate::clone(controller, &opts.controller_name)?;
-    g.log = vec![alpha.to_string()];
-    g.score.clear();
-    let (mut sched, _) = g.build().map_err(|e| design_err(e.to_string()))?;
-    let run = sched.run(|_| {});
-    let log = run
-        .logs
-        .first()
-        .ok_or_else(|| design_err("no log".into()))?;
-    let from = (info.from_s * log.rate_hz).ceil() as usize;
-    let x = log.data.get(from..).unwrap_or(&[]);
-    if period.is_nan() || period <= 0.0 || x.len() < 2 || x[x.len() - 1] - x[0] < 2.0 * period {
-        return Err(design_err(format!(
-            "`{alpha}` advances {:.3e} over the scored window, less than two periods ({:.3e}): delay-varying RC needs the signal to move forward through the period",
-            x.last().zip(x.first()).map_or(0.0, |(b, a)| b - a),
-            2.0 * period
-        )));
-    }
-    // Delay (in samples of the log) back to where the signal was one period lower.
-    let (mut lo, mut hi) = (f64::INFINITY, 0.0f64);
-    let mut j = 0usize;
-    for k in 0..x.len() {
-        while j + 1 < k && x[j + 1] <= x[k] - period {
-            j += 1;
-        }
-        if x[j] <= x[k] - period {
-            lo = lo.min((k - j) as f64);
-            hi = hi.max((k - j) as f64);
-        }
-    }
-    if x.windows(2).any(|w| w[1] < w[0]) {
-        return Err(design_err(format!(
-            "`{alpha}` moves backwards in the scored window: the delay-varying memory follows a signal that only advances (DVRC, (5.7))"
-        )));
-    }
-    let scale = rate / log.rate_hz;
-    let n_min = ((lo * scale).floor() as usize).saturating_sub(1);
-    let n_max = (hi * scale).ceil() as usize + 1;
+    let (lo0, hi0) = loop_delay_range(
+        controller,
+        alpha,
+        period,
+        info,
+        rate,
+        "your loop on the nominal plant",
+    )
+    .map_err(design_err)?;
+    let (lo1, hi1) = loop_delay_range(
+        diagnosed,
+        alpha,
+        period,
+        info,
+        rate,
+        "your loop on the plant as diagnosed",
+    )
+    .map_err(design_err)?;
+    let (lo, hi) = (lo0.min(lo1), hi0.max(hi1));
+    let n_min = ((lo * (1.0 - margin)).floor() as usize).saturating_sub(1);
+    let n_max = (hi * (1.0 + margin)).ceil() as usize + 1;
     if n_min < 8 || n_max > 10_000_000 {
         return Err(design_err(format!(
             "the delay ranges over [{n_min}, {n_max}] samples: delay-varying RC needs 8 to 10⁷"
@@ -1304,6 +1358,11 @@ fn delay_varying(
         ("period".to_string(), period),
         ("n_min".to_string(), n_min as f64),
         ("n_max".to_string(), n_max as f64),
+        ("delay_nominal_min".to_string(), lo0),
+        ("delay_nominal_max".to_string(), hi0),
+        ("delay_diagnosed_min".to_string(), lo1),
+        ("delay_diagnosed_max".to_string(), hi1),
+        ("delay_margin".to_string(), margin),
     ]
     .into_iter()
     .collect();
@@ -1313,7 +1372,8 @@ fn delay_varying(
         name: name.to_string(),
         block,
         why: format!(
-            "delay-varying repetitive control (5.7)–(5.8) on {alpha}: the memory delay N_k follows the signal over one period, L = ZPETC of the loop's T, Q the FIR low-pass with the largest cut-off keeping (5.9)"
+            "delay-varying repetitive control (5.7)–(5.8) on {alpha}: the memory delay N_k follows the signal over one period, N_k ∈ [{n_min}, {n_max}] (your loop's range on the nominal plant and on the plant as diagnosed, ±{:.1} %), L = ZPETC of the loop's T, Q the FIR low-pass with the largest cut-off keeping (5.9)",
+            100.0 * margin
         ),
         place: format!(
             "on the error {} before {} (Fig. 5.1), α = {alpha}",
