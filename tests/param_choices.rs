@@ -2,8 +2,9 @@
 //! schema`) is derived from the enum serde reads it with: each listed name is
 //! accepted by the block's own deserialiser, and a name outside the list is
 //! refused by serde with names that are all in the list. Covers plain choices
-//! (`discretisation: zoh | tustin`, an `enum` list) and tagged ones
-//! (`shape: {kind: sinusoidal | asymmetric | …}`).
+//! (`discretisation: zoh | tustin`, an `enum` list), tagged ones
+//! (`shape: {kind: sinusoidal | asymmetric | …}`), externally tagged ones
+//! (`topography: flat | {grating: {…}}`) and lists of them (`schedule`).
 
 use nanomotion::core::Block;
 use nanomotion::core::block::block_docs;
@@ -35,9 +36,11 @@ fn read(t: &str, name: &str, value: Value) -> Result<(), String> {
         .map_err(|e| e.to_string())
 }
 
-/// The choices of a parameter's schema: `(None, names)` for an `enum` list,
-/// `(Some(tag), names)` for variants told apart by a constant `tag` field.
-fn choices(schema: &Value) -> Option<(Option<String>, Vec<String>)> {
+/// The choices of a parameter's schema: `(None, names)` for an `enum` list or
+/// an externally tagged enum (a name, or a map from the name to the data),
+/// `(Some(tag), names)` for variants told apart by a constant `tag` field; and
+/// whether the parameter is a list of them.
+fn choices(schema: &Value) -> Option<(Option<String>, Vec<String>, bool)> {
     let mut s = schema;
     // an optional value: its non-null branch
     if let Some(a) = s.get("anyOf").and_then(Value::as_array)
@@ -46,27 +49,43 @@ fn choices(schema: &Value) -> Option<(Option<String>, Vec<String>)> {
     {
         s = &a[0];
     }
-    if let Some(list) = s.get("enum").and_then(Value::as_array) {
-        let names = list
+    let list = s.get("type") == Some(&json!("array"));
+    if list {
+        s = s.get("items")?;
+    }
+    if let Some(names) = s.get("enum").and_then(Value::as_array) {
+        let names = names
             .iter()
             .map(|v| v.as_str().expect("string choices").to_string())
             .collect();
-        return Some((None, names));
+        return Some((None, names, list));
     }
     let branches = s.get("anyOf")?.as_array()?;
     let mut tag = None;
     let mut names = Vec::new();
     for b in branches {
-        let props = b.get("properties")?.as_object()?;
-        let (k, c) = props
-            .iter()
-            .find_map(|(k, v)| Some((k.clone(), v.get("const")?.as_str()?.to_string())))?;
-        if tag.get_or_insert_with(|| k.clone()) != &k {
-            return None;
+        if let Some(name) = b.get("const").and_then(Value::as_str) {
+            // externally tagged: a variant without data is its name
+            names.push(name.to_string());
+            continue;
         }
-        names.push(c);
+        let props = b.get("properties")?.as_object()?;
+        match props
+            .iter()
+            .find_map(|(k, v)| Some((k.clone(), v.get("const")?.as_str()?.to_string())))
+        {
+            Some((k, c)) => {
+                if tag.get_or_insert_with(|| k.clone()) != &k {
+                    return None;
+                }
+                names.push(c);
+            }
+            // externally tagged: a variant with data is a map from its name
+            None if props.len() == 1 => names.extend(props.keys().cloned()),
+            None => return None,
+        }
     }
-    Some((tag, names))
+    Some((tag, names, list))
 }
 
 const NOT_A_CHOICE: &str = "not_a_choice_of_any_block";
@@ -77,12 +96,15 @@ fn every_listed_choice_is_what_serde_accepts() {
     let mut checked = Vec::new();
     for doc in block_docs() {
         for p in doc.param_docs().iter().filter(|p| !p.flatten) {
-            let Some((tag, names)) = choices(&p.schema) else {
+            let Some((tag, names, list)) = choices(&p.schema) else {
                 continue;
             };
-            let wrap = |n: &str| match &tag {
-                None => json!(n),
-                Some(t) => json!({ t.as_str(): n }),
+            let wrap = |n: &str| {
+                let v = match &tag {
+                    None => json!(n),
+                    Some(t) => json!({ t.as_str(): n }),
+                };
+                if list { json!([v]) } else { v }
             };
             let place = format!("{}.{}", doc.type_name, p.name);
             for n in &names {
@@ -132,6 +154,13 @@ fn every_listed_choice_is_what_serde_accepts() {
             "rhombic",
             "free"
         ]
+    );
+    // an externally tagged enum (a name, or a map from the name to its data)
+    assert_eq!(find("afm_stage.topography"), ["flat", "grating"]);
+    // a list of internally tagged laws
+    assert_eq!(
+        find("gain_scheduled.schedule"),
+        ["constant", "table", "table_db", "power_db"]
     );
     assert!(
         checked.len() >= 10,

@@ -650,6 +650,79 @@ pub mod check {
             ))
         }
     }
+    // How many entries a list may hold, in words: declared in `doc` beside
+    // `Limit` (the schema says it too), used here by the checks.
+    use crate::doc::{entries_of, entries_words};
+
+    /// A list of `n` entries whose count must be within `lo` and `hi` (each end
+    /// inclusive or exclusive, either left out): `#[param(len(…))]`.
+    pub fn entries(
+        field: &str,
+        n: usize,
+        lo: Option<Limit<i128>>,
+        hi: Option<Limit<i128>>,
+    ) -> Result<(), ParamError> {
+        let count = n as i128;
+        let above = match lo {
+            None => true,
+            Some(Limit::Inclusive(l)) => count >= l,
+            Some(Limit::Exclusive(l)) => count > l,
+        };
+        let below = match hi {
+            None => true,
+            Some(Limit::Inclusive(h)) => count <= h,
+            Some(Limit::Exclusive(h)) => count < h,
+        };
+        if above && below {
+            return Ok(());
+        }
+        let words = entries_words(lo, hi).unwrap_or_default();
+        let problem = if n == 0 {
+            "is empty".to_string()
+        } else {
+            format!("has {}, must have {words}", entries_of(count))
+        };
+        Err(ParamError::new(field, problem, format!("give {words}")))
+    }
+
+    /// A list of numbers, each above the one before (breakpoints, sample
+    /// times): `#[param(increasing)]`. The error names the first entry that
+    /// is not (`x[2]`).
+    pub fn increasing(field: &str, values: &[f64]) -> Result<(), ParamError> {
+        match (1..values.len())
+            .find(|&j| values[j].partial_cmp(&values[j - 1]) != Some(std::cmp::Ordering::Greater))
+        {
+            None => Ok(()),
+            Some(j) => Err(ParamError::new(
+                format!("{field}[{j}]"),
+                format!(
+                    "is {}, not above the entry before it, {}",
+                    values[j],
+                    values[j - 1]
+                ),
+                "sort the entries strictly increasing",
+            )),
+        }
+    }
+
+    /// Two lists that pair entry by entry (breakpoints and their values) hold
+    /// as many entries: `#[param(same_len = other)]`.
+    pub fn same_len(field: &str, n: usize, other: &str, m: usize) -> Result<(), ParamError> {
+        if n == m {
+            Ok(())
+        } else {
+            Err(ParamError::new(
+                field,
+                format!(
+                    "has {}, {other} has {}",
+                    entries_of(n as i128),
+                    entries_of(m as i128)
+                ),
+                format!("give as many entries in {field} as in {other}, one per pair"),
+            ))
+        }
+    }
+
     /// `value` must be ≥ 1.
     pub fn at_least_one(field: &str, value: usize) -> Result<(), ParamError> {
         if value >= 1 {

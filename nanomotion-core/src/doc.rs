@@ -25,7 +25,10 @@
 //! | `width` | [`check::width`](crate::block::check::width) | 1 to [`MAX_WIDTH`](crate::block::MAX_WIDTH) |
 //! | `size(lo, hi)` | [`check::size`](crate::block::check::size) | `minimum`, `maximum` |
 //! | `at_least_one` | [`check::at_least_one`](crate::block::check::at_least_one) | `minimum: 1` |
+//! | `len(lo, hi)`, `len(>= lo)`, `len(<= hi)`, … (`range`'s forms) | [`check::entries`](crate::block::check::entries): how many entries a list holds (`is empty`, `has 6 entries, must have 1 to 5 entries`), before its entries' bounds if declared first | `minItems`, `maxItems` |
+//! | `increasing` | [`check::increasing`](crate::block::check::increasing): each entry of a list of numbers above the one before | — (words: strictly increasing) |
 //! | `at_most = other` | [`check::ordered`](crate::block::check::ordered) (this ≤ `other`), after every field's own bounds | — |
+//! | `same_len = other` | [`check::same_len`](crate::block::check::same_len): as many entries as the list `other` (breakpoints and their values), after every field's own bounds | — (words: as many entries as `other`) |
 //! | `nested` | the field's own [`Params::check_params`], field names prefixed `field.` | the field type's schema |
 //! | `hint = "…"` | adds its words to the fix of the field's bound errors (`give a whole number in [1, 1000], or raise the block's rate_hz`) | — |
 //!
@@ -47,7 +50,17 @@
 //! `nested` calls it (`shape.overlap_q`).
 //!
 //! A bound on an `Option<T>` applies when the value is present, on a `Vec<T>` to
-//! every element (named `field[i]`). `default_doc = "…"` says in words what a
+//! every element (named `field[i]`) — except `len` and `increasing`, which bound
+//! the list itself; `nested` on a `Vec<T>` checks each entry (`field[i].x`).
+//!
+//! **A `#[serde(transparent)]` wrapper of a list** (or of another plain value:
+//! `struct Schedule { #[param(len(>= 1), nested)] laws: Vec<Law> }`) is that
+//! value in the schema, its field's bounds included, and its `check_params()`
+//! names errors from where it stands (`[1].x`, or nothing for its length); a
+//! field holding it marked `nested` names them `schedule[1].x` and `schedule`,
+//! and says the list's length in the listing. [`within`] does the same for a
+//! caller outside a block. A transparent wrapper of a parameter struct is that
+//! struct's parameters (a block written as another's). `default_doc = "…"` says in words what a
 //! default means when its value alone does not (`none` = computed from other
 //! fields); `schema = "path"` gives a field's schema by a function. Checks run in
 //! field order; cross-field rules that bounds cannot say stay in `build()`.
@@ -270,37 +283,80 @@ impl BlockDoc {
     }
 }
 
-/// The values of an enumerated parameter (`a | b | c`), or the `kind`s of a tagged
-/// one (`{kind: a, …} | {kind: b, …}`).
+/// The choices of an enumerated parameter, as a reader writes them: plain
+/// names (`a | b | c`); an internally tagged enum's forms with their fields
+/// (`{kind: table, x, gain} | {kind: power_db, a, b, c}`); an externally
+/// tagged one's names and forms (`flat | {grating: {pitch_m, duty}}`). An
+/// optional value lists its present form's choices, a list its items'.
 fn choices(schema: &Value) -> Option<String> {
     let mut s = schema;
-    while let Some(a) = s.get("anyOf").and_then(Value::as_array) {
-        // an optional value: its non-null branch; a tagged enum: its variants
-        if a.len() == 2 && a[1].get("type") == Some(&json!("null")) {
-            s = &a[0];
-        } else {
-            let tags: Vec<String> = a
-                .iter()
-                .filter_map(|b| {
-                    let props = b.get("properties")?.as_object()?;
-                    props.iter().find_map(|(k, v)| {
-                        let c = v.get("const")?.as_str()?;
-                        let more = if props.len() > 1 { ", …" } else { "" };
-                        Some(format!("{{{k}: {c}{more}}}"))
-                    })
-                })
-                .collect();
-            return (tags.len() == a.len()).then(|| tags.join(" | "));
+    loop {
+        match s.get("anyOf").and_then(Value::as_array) {
+            // an optional value: its non-null branch
+            Some(a) if a.len() == 2 && a[1].get("type") == Some(&json!("null")) => s = &a[0],
+            Some(_) => break,
+            None if s.get("type") == Some(&json!("array")) => s = s.get("items")?,
+            None => break,
         }
     }
-    let values = s.get("enum")?.as_array()?;
-    Some(
-        values
+    if let Some(values) = s.get("enum").and_then(Value::as_array) {
+        let names: Vec<&str> = values.iter().filter_map(Value::as_str).collect();
+        return Some(names.join(" | "));
+    }
+    let forms: Vec<String> = s
+        .get("anyOf")?
+        .as_array()?
+        .iter()
+        .map(form)
+        .collect::<Option<_>>()?;
+    Some(forms.join(" | "))
+}
+
+/// One branch of an enumeration's schema as a reader writes it (see
+/// [`choices`]); `None` for a branch that is not a variant (a plain value).
+fn form(branch: &Value) -> Option<String> {
+    if let Some(name) = branch.get("const").and_then(Value::as_str) {
+        return Some(name.to_string());
+    }
+    let props = branch.get("properties")?.as_object()?;
+    // the fields in declaration order (the required ones, as `required`
+    // lists them), then those with a default
+    let fields = |b: &Value, o: &Map<String, Value>, skip: &str| -> Vec<String> {
+        let required: Vec<&str> = b
+            .get("required")
+            .and_then(Value::as_array)
+            .map(|r| r.iter().filter_map(Value::as_str).collect())
+            .unwrap_or_default();
+        let optional = o
+            .keys()
+            .map(String::as_str)
+            .filter(|k| !required.contains(k));
+        required
             .iter()
-            .filter_map(Value::as_str)
-            .collect::<Vec<_>>()
-            .join(" | "),
-    )
+            .copied()
+            .chain(optional)
+            .filter(|k| *k != skip)
+            .map(String::from)
+            .collect()
+    };
+    // internally tagged: the tag is the property with a constant value
+    if let Some((tag, name)) = props
+        .iter()
+        .find_map(|(k, v)| Some((k.as_str(), v.get("const")?.as_str()?)))
+    {
+        let mut parts = vec![format!("{tag}: {name}")];
+        parts.extend(fields(branch, props, tag));
+        return Some(format!("{{{}}}", parts.join(", ")));
+    }
+    // externally tagged: one property, the variant's name, holding its data
+    let [(name, content)] = props.iter().collect::<Vec<_>>()[..] else {
+        return None;
+    };
+    let inner = match content.get("properties").and_then(Value::as_object) {
+        Some(o) => format!("{{{}}}", fields(content, o, "").join(", ")),
+        None => "…".to_string(),
+    };
+    Some(format!("{{{name}: {inner}}}"))
 }
 
 fn add_properties(props: &mut Map<String, Value>, required: &mut Vec<Value>, params: &[ParamDoc]) {
@@ -374,6 +430,23 @@ pub fn block_docs() -> Vec<&'static BlockDoc> {
     v
 }
 
+/// A check's error placed within `field`: its own field after a dot
+/// (`topography` + `duty` → `topography.duty`), an entry's index directly
+/// (`schedule` + `[1].x` → `schedule[1].x`), an unnamed value (a list's
+/// length, checked by a wrapper of the list) as `field` itself.
+pub fn within(field: &str, r: Result<(), ParamError>) -> Result<(), ParamError> {
+    r.map_err(|mut e| {
+        e.field = if e.field.is_empty() {
+            field.to_string()
+        } else if e.field.starts_with('[') {
+            format!("{field}{}", e.field)
+        } else {
+            format!("{field}.{}", e.field)
+        };
+        e
+    })
+}
+
 /// One end of an interval: the value itself allowed (`Inclusive`: ≥ or ≤)
 /// or not (`Exclusive`: > or <). Here, below `block`, so that the checks
 /// (`block::check`, which re-exports it) and the schema share it without an
@@ -384,6 +457,36 @@ pub enum Limit<T> {
     Inclusive(T),
     /// The end does not belong to the interval.
     Exclusive(T),
+}
+
+/// `n` entries, with the noun in its number: `1 entry`, `3 entries`.
+pub(crate) fn entries_of(n: i128) -> String {
+    if n == 1 {
+        "1 entry".into()
+    } else {
+        format!("{n} entries")
+    }
+}
+
+/// How many entries a list may hold, in words (`at least 1 entry`, `2 to
+/// 65 entries`, `exactly 3 entries`), from its declared ends (a strict end
+/// is said as the whole number next to it). `None` when nothing bounds it.
+pub fn entries_words(lo: Option<Limit<i128>>, hi: Option<Limit<i128>>) -> Option<String> {
+    let lo = lo.map(|l| match l {
+        Limit::Inclusive(x) => x,
+        Limit::Exclusive(x) => x.saturating_add(1),
+    });
+    let hi = hi.map(|h| match h {
+        Limit::Inclusive(x) => x,
+        Limit::Exclusive(x) => x.saturating_sub(1),
+    });
+    Some(match (lo, hi) {
+        (Some(l), Some(h)) if l == h => format!("exactly {}", entries_of(l)),
+        (Some(l), Some(h)) => format!("{l} to {h} entries"),
+        (Some(l), None) => format!("at least {}", entries_of(l)),
+        (None, Some(h)) => format!("at most {}", entries_of(h)),
+        (None, None) => return None,
+    })
 }
 
 /// Helpers the derive's generated code calls; not a stable API.
@@ -594,6 +697,25 @@ pub mod __derive {
         }
     }
 
+    /// The words of how many entries a nested type's list holds (a
+    /// `#[serde(transparent)]` wrapper with `len(…)`), read back from its
+    /// schema's `minItems`/`maxItems`, so that the field holding it says them.
+    pub fn nested_entries(s: &Value, words: &mut Vec<String>) {
+        let mut target = s;
+        while let Some(a) = target.get("anyOf").and_then(Value::as_array) {
+            target = &a[0];
+        }
+        let end = |k: &str| {
+            target
+                .get(k)
+                .and_then(Value::as_i64)
+                .map(|x| Limit::Inclusive(x as i128))
+        };
+        if target.get("type") == Some(&json!("array")) {
+            words.extend(super::entries_words(end("minItems"), end("maxItems")));
+        }
+    }
+
     /// A parameter's documentation, from what the derive read.
     #[allow(clippy::too_many_arguments)]
     pub fn param(
@@ -638,12 +760,37 @@ pub mod __derive {
         e
     }
 
-    /// A nested parameter struct's error, its field prefixed with `field.`.
+    /// A nested parameter struct's error, its field placed within `field`
+    /// (see [`within`](super::within)).
     pub fn nested(field: &str, r: Result<(), ParamError>) -> Result<(), ParamError> {
-        r.map_err(|mut e| {
-            e.field = format!("{field}.{}", e.field);
-            e
-        })
+        super::within(field, r)
+    }
+
+    /// Add to `s` how many entries a list holds (`minItems`, `maxItems`, into
+    /// the non-null branch of an optional list), and its words to `words`.
+    pub fn entries(
+        s: &mut Value,
+        words: &mut Vec<String>,
+        lo: Option<Limit<i128>>,
+        hi: Option<Limit<i128>>,
+    ) {
+        let inclusive = |l: Limit<i128>, step: i128| match l {
+            Limit::Inclusive(x) => x,
+            Limit::Exclusive(x) => x + step,
+        };
+        let mut target = &mut *s;
+        while target.get("anyOf").is_some() {
+            target = &mut target["anyOf"][0];
+        }
+        if let Some(o) = target.as_object_mut() {
+            if let Some(l) = lo {
+                o.insert("minItems".into(), json!(inclusive(l, 1).max(0)));
+            }
+            if let Some(h) = hi {
+                o.insert("maxItems".into(), json!(inclusive(h, -1).max(0)));
+            }
+        }
+        words.extend(super::entries_words(lo, hi));
     }
 
     /// The schema of a parameter struct.

@@ -463,5 +463,5 @@ fn model_orders_are_bounded() {
         den.join(",")
     ));
     let e = build(&yaml).unwrap_err().to_string();
-    assert!(e.contains("den (coefficients)") && e.contains("65"), "{e}");
+    assert!(e.contains("field `den`") && e.contains("65"), "{e}");
 }

@@ -238,6 +238,10 @@ enum Bound {
     Width,
     Size(Expr, Expr),
     AtLeastOne,
+    /// `len(…)`: how many entries a list holds, in `range(…)`'s forms.
+    Len(Option<End>, Option<End>),
+    /// `increasing`: a list of numbers each above the one before.
+    Increasing,
 }
 
 #[derive(Default)]
@@ -247,6 +251,8 @@ struct ParamAttr {
     nested: bool,
     schema: Option<syn::ExprPath>,
     at_most: Option<Ident>,
+    /// `same_len = other`: this list has as many entries as `other`.
+    same_len: Option<Ident>,
     /// Words added to the fix of every bound error of the field.
     hint: Option<String>,
 }
@@ -334,6 +340,35 @@ fn param_attr(attrs: &[Attribute]) -> syn::Result<ParamAttr> {
                 "width" => p.bounds.push(Bound::Width),
                 "at_least_one" => p.bounds.push(Bound::AtLeastOne),
                 "range" => p.bounds.push(range_items(&meta)?),
+                "len" => {
+                    let (lo, hi) = match range_items(&meta)? {
+                        Bound::Range(lo, hi) => (
+                            Some(End {
+                                value: lo,
+                                exclusive: false,
+                            }),
+                            Some(End {
+                                value: hi,
+                                exclusive: false,
+                            }),
+                        ),
+                        Bound::Between(lo, hi) => (lo, hi),
+                        _ => unreachable!("range_items gives a range"),
+                    };
+                    for e in lo.iter().chain(hi.iter()) {
+                        if is_float_literal(&e.value) {
+                            return Err(
+                                meta.error("a fractional number of entries: give a whole number")
+                            );
+                        }
+                    }
+                    p.bounds.push(Bound::Len(lo, hi));
+                }
+                "increasing" => p.bounds.push(Bound::Increasing),
+                "same_len" => {
+                    let id: Ident = meta.value()?.parse()?;
+                    p.same_len = Some(id);
+                }
                 "size" => {
                     let (lo, hi) = two_exprs(&meta)?;
                     p.bounds.push(Bound::Size(lo, hi));
@@ -359,7 +394,8 @@ fn param_attr(attrs: &[Attribute]) -> syn::Result<ParamAttr> {
                     return Err(meta.error(format!(
                         "unknown #[param] item `{other}`: expected finite, positive, \
                          non_negative, range(lo, hi), range(> lo), range(>= lo, < hi), …, \
-                         width, size(lo, hi), at_least_one, at_most = field, nested, \
+                         width, size(lo, hi), at_least_one, len(lo, hi), len(>= lo), …, \
+                         increasing, at_most = field, same_len = field, nested, \
                          default_doc = \"…\", hint = \"…\" or schema = \"path\""
                     )));
                 }
@@ -485,6 +521,20 @@ fn schema_of(ty: &Type) -> TokenStream2 {
     }
 }
 
+/// Whether a type is a value serde reads itself (a list, a map, an optional,
+/// a number, a string) rather than a parameter struct of its own.
+fn is_value_type(ty: &Type) -> bool {
+    matches!(ty, Type::Array(_))
+        || ["Vec", "VecDeque", "Option", "BTreeMap", "HashMap"]
+            .iter()
+            .any(|o| generic_of(ty, o).is_some())
+        || is_integer(ty)
+        || matches!(
+            last_ident(ty).as_deref(),
+            Some("f64" | "f32" | "bool" | "String" | "PathBuf")
+        )
+}
+
 /// Whether a (leaf) type is one of Rust's integer types.
 fn is_integer(ty: &Type) -> bool {
     matches!(
@@ -546,6 +596,7 @@ fn ends(b: &Bound) -> Option<(Option<End>, Option<End>)> {
             ),
         ),
         Bound::AtLeastOne => (end(syn::parse_quote!(1), false), None),
+        Bound::Len(..) | Bound::Increasing => return None,
     })
 }
 
@@ -567,6 +618,30 @@ fn check_of(
         Type::Array(a) => Some(&*a.elem),
         _ => None,
     });
+    // bounds on the list itself rather than on each entry
+    match (b, elem) {
+        (Bound::Len(lo, hi), Some(_)) => {
+            let lo = limit(lo.as_ref(), quote!(i128));
+            let hi = limit(hi.as_ref(), quote!(i128));
+            return Ok(quote!(#c::entries(#name, (#access).len(), #lo, #hi)?;));
+        }
+        (Bound::Increasing, Some(inner)) if last_ident(inner).as_deref() == Some("f64") => {
+            return Ok(quote!(#c::increasing(#name, &(#access)[..])?;));
+        }
+        (Bound::Increasing, _) => {
+            return Err(syn::Error::new_spanned(
+                ty,
+                "`increasing` is for a list of numbers (Vec<f64>, [f64; N])",
+            ));
+        }
+        (Bound::Len(..), None) => {
+            return Err(syn::Error::new_spanned(
+                ty,
+                "`len(…)` bounds how many entries a list holds: declare it on a Vec or an array",
+            ));
+        }
+        _ => {}
+    }
     if let Some(inner) = elem {
         if matches!(b, Bound::Finite) && last_ident(inner).as_deref() == Some("f64") {
             return Ok(quote!(#c::all_finite(#name, #access)?;));
@@ -625,6 +700,7 @@ fn check_of(
         Bound::Width => quote!(#c::width(#name, *#access)?;),
         Bound::Size(lo, hi) => quote!(#c::size(#name, *#access, #lo, #hi)?;),
         Bound::AtLeastOne => quote!(#c::at_least_one(#name, *#access)?;),
+        Bound::Len(..) | Bound::Increasing => unreachable!("list bounds are taken above"),
     })
 }
 
@@ -656,6 +732,12 @@ fn schema_bound(b: &Bound) -> TokenStream2 {
         Bound::AtLeastOne => {
             quote!(#d::bound(&mut __s, &mut __b, ::core::option::Option::Some(1.0), false, ::core::option::Option::None);)
         }
+        Bound::Len(lo, hi) => {
+            let lo = limit(lo.as_ref(), quote!(i128));
+            let hi = limit(hi.as_ref(), quote!(i128));
+            quote!(#d::entries(&mut __s, &mut __b, #lo, #hi);)
+        }
+        Bound::Increasing => quote!(__b.push(::std::string::String::from("strictly increasing"));),
     }
 }
 
@@ -708,6 +790,9 @@ enum Access {
     SelfField,
     /// A field of an enum variant, bound by reference in a `match self` arm.
     Binding,
+    /// The one field of a `#[serde(transparent)]` wrapper of a value: read as
+    /// `self.field`, named in errors from the wrapper (empty name).
+    Wrapped,
 }
 
 impl Access {
@@ -774,7 +859,14 @@ fn field_code(
         // nested parameter structs describe themselves
         schema = schema_of(ty);
     }
-    let bounds: Vec<TokenStream2> = pa.bounds.iter().map(schema_bound).collect();
+    let mut bounds: Vec<TokenStream2> = pa.bounds.iter().map(schema_bound).collect();
+    if pa.nested {
+        bounds.push(quote!(#d::nested_entries(&__s, &mut __b);));
+    }
+    if let Some(other) = &pa.same_len {
+        let words = format!("as many entries as {other}");
+        bounds.push(quote!(__b.push(::std::string::String::from(#words));));
+    }
     let aliases = &sf.aliases;
     let flatten = sf.flatten;
     let doc_code = quote!({
@@ -785,6 +877,12 @@ fn field_code(
     });
     let mut check = TokenStream2::new();
     let mut ordering = TokenStream2::new();
+    // the name errors give: a wrapper's value is named by whoever holds it
+    let name = if access == Access::Wrapped {
+        String::new()
+    } else {
+        name
+    };
     if with_checks {
         let mut own = TokenStream2::new();
         for b in &pa.bounds {
@@ -809,11 +907,20 @@ fn field_code(
         if let Some(other) = &pa.at_most {
             let other_name = other.to_string();
             let (this, that) = (access.value(ident), access.value(other));
-            ordering = quote!(::nanomotion_core::block::check::ordered(#name, (#this) as f64, #other_name, (#that) as f64)?;);
+            ordering.extend(quote!(::nanomotion_core::block::check::ordered(#name, (#this) as f64, #other_name, (#that) as f64)?;));
+        }
+        if let Some(other) = &pa.same_len {
+            let other_name = other.to_string();
+            let (this, that) = (access.value(ident), access.value(other));
+            ordering.extend(quote!(::nanomotion_core::block::check::same_len(#name, (#this).len(), #other_name, (#that).len())?;));
         }
         if pa.nested {
             let place = access.place(ident);
-            if generic_of(ty, "Option").is_some() {
+            if generic_of(ty, "Vec").is_some() {
+                check.extend(quote!(for (__i, __v) in (#place).iter().enumerate() {
+                    #d::nested(&::std::format!("{}[{}]", #name, __i), ::nanomotion_core::doc::Params::check_params(__v))?;
+                }));
+            } else if generic_of(ty, "Option").is_some() {
                 check.extend(quote!(if let ::core::option::Option::Some(__v) = #place {
                     #d::nested(#name, ::nanomotion_core::doc::Params::check_params(__v))?;
                 }));
@@ -884,6 +991,45 @@ fn expand(input: &DeriveInput) -> syn::Result<TokenStream2> {
                 let ident = &inner.ident;
                 let ty = &inner.ty;
                 let p = quote!(::nanomotion_core::doc::Params);
+                if is_value_type(ty) {
+                    // a wrapper of a list, a map or a plain value: its schema is the
+                    // field's (with the field's bounds), its checks the field's,
+                    // named from the wrapper (`[1].x`, not `laws[1].x`)
+                    let Some(fc) = field_code(inner, &container, Access::Wrapped)? else {
+                        return Err(syn::Error::new_spanned(name, "transparent without a field"));
+                    };
+                    let (doc, check, ordering) = (fc.doc, fc.check, fc.ordering);
+                    let describe = if description.is_empty() {
+                        quote!()
+                    } else {
+                        quote!(__o.insert("description".into(), #d::Value::from(#description));)
+                    };
+                    let out = quote!(
+                        impl #impl_g #p for #name #ty_g #where_g {
+                            const CLOSED: bool = false;
+                            fn param_docs() -> ::std::vec::Vec<::nanomotion_core::ParamDoc> {
+                                ::std::vec::Vec::new()
+                            }
+                            #[allow(unused_variables, clippy::needless_borrow, clippy::unnecessary_cast)]
+                            fn check_params(&self) -> ::core::result::Result<(), ::nanomotion_core::ParamError> {
+                                #check
+                                #ordering
+                                ::core::result::Result::Ok(())
+                            }
+                        }
+                        impl #impl_g ::nanomotion_core::doc::ParamSchema for #name #ty_g #where_g {
+                            fn param_schema() -> #d::Value {
+                                let mut __s = #doc.schema;
+                                if let ::core::option::Option::Some(__o) = __s.as_object_mut() {
+                                    __o.remove("description");
+                                    #describe
+                                }
+                                __s
+                            }
+                        }
+                    );
+                    return Ok(quote!(#out #registration_placeholder));
+                }
                 let out = quote!(
                     impl #impl_g #p for #name #ty_g #where_g {
                         const CLOSED: bool = <#ty as #p>::CLOSED;
@@ -1126,6 +1272,21 @@ mod tests {
             .unwrap()
             .to_string();
         assert!(code.contains("check :: in_range"), "{code}");
+    }
+
+    #[test]
+    fn list_bounds_need_a_list() {
+        let b = bounds(parse_quote!(#[param(len(>= 1), increasing)])).unwrap();
+        let f: Type = parse_quote!(f64);
+        assert!(check_of(&f, quote!(&self.x), quote!("x"), &b[0], 0).is_err());
+        let counts: Type = parse_quote!(Vec<u32>);
+        assert!(check_of(&counts, quote!(&self.x), quote!("x"), &b[1], 0).is_err());
+        let list: Type = parse_quote!(Option<Vec<f64>>);
+        let code = check_of(&list, quote!(&self.x), quote!("x"), &b[0], 0)
+            .unwrap()
+            .to_string();
+        assert!(code.contains("check :: entries"), "{code}");
+        assert!(bounds(parse_quote!(#[param(len(0.5, 2))])).is_err());
     }
 
     #[test]

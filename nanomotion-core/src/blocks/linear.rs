@@ -304,11 +304,11 @@ macro_rules! controller_impl {
 #[serde(deny_unknown_fields)]
 #[block(type_name = "transfer_function", role = Math, ports = "u[width] -> y[width]")]
 pub struct TransferFunctionBlock {
-    /// Numerator coefficients, highest power of s (or z) first; at most 65.
-    #[param(finite)]
+    /// Numerator coefficients, highest power of s (or z) first.
+    #[param(len(1, MAX_TF_ORDER + 1), finite, hint = "highest power first")]
     pub num: Vec<f64>,
-    /// Denominator coefficients, highest power of s (or z) first; at most 65.
-    #[param(finite)]
+    /// Denominator coefficients, highest power of s (or z) first.
+    #[param(len(1, MAX_TF_ORDER + 1), finite, hint = "highest power first")]
     pub den: Vec<f64>,
     /// `true` if `num`/`den` are in z at the block's rate (else in s).
     #[serde(default)]
@@ -384,21 +384,12 @@ impl Block for TransferFunctionBlock {
     }
 
     fn build(&mut self, ctx: &BuildContext) -> Result<(), ParamError> {
-        check::size("num (coefficients)", self.num.len(), 0, MAX_TF_ORDER + 1)?;
-        check::size("den (coefficients)", self.den.len(), 0, MAX_TF_ORDER + 1)?;
         self.check_params()?;
         if self.den.iter().all(|&v| v == 0.0) {
             return Err(ParamError::new(
                 "den",
-                "is zero (or empty)",
+                "is zero",
                 "give the denominator coefficients, highest power first",
-            ));
-        }
-        if self.num.is_empty() {
-            return Err(ParamError::new(
-                "num",
-                "is empty",
-                "give the numerator coefficients, highest power first",
             ));
         }
         let method = c2d_method(self.discrete, self.discretisation, self.prewarp_hz, ctx.dt)?;

@@ -549,29 +549,10 @@ impl Block for Deadzone {
 /// Most input ports of `sum`, `product`, `mux` and output ports of `demux`: 256.
 pub const MAX_PORTS: usize = 256;
 
-/// The schema of `widths`: 1 to [`MAX_PORTS`] widths, each 1 to [`MAX_WIDTH`](crate::block::MAX_WIDTH)
-/// (what [`check_widths`] checks).
-fn widths_schema() -> serde_json::Value {
-    serde_json::json!({
-        "type": "array",
-        "minItems": 1,
-        "maxItems": MAX_PORTS,
-        "items": { "type": "integer", "minimum": 1, "maximum": crate::block::MAX_WIDTH },
-    })
-}
-
-fn check_widths(widths: &[usize]) -> Result<(), ParamError> {
-    if widths.is_empty() {
-        return Err(ParamError::new(
-            "widths",
-            "is empty",
-            "give one width per port, e.g. [1, 1]",
-        ));
-    }
-    check::size("widths", widths.len(), 1, MAX_PORTS)?;
-    for (i, &w) in widths.iter().enumerate() {
-        check::width(&format!("widths[{i}]"), w)?;
-    }
+/// The concatenated width of `widths` (each declared 1 to
+/// [`MAX_WIDTH`](crate::block::MAX_WIDTH), at most [`MAX_PORTS`] of them, checked
+/// before) is a port's width too.
+fn check_total_width(widths: &[usize]) -> Result<(), ParamError> {
     let total: usize = widths.iter().sum();
     check::width("widths (sum)", total)
 }
@@ -590,7 +571,7 @@ fn identity_ss(widths: &[usize], dt: f64) -> StateSpace {
 #[block(type_name = "mux", role = Math, ports = "in0[w0], in1[w1], ... -> y[Σw]")]
 pub struct Mux {
     /// Width of each input, in port order, e.g. [1, 1, 1].
-    #[param(schema = "widths_schema")]
+    #[param(len(1, MAX_PORTS), width, hint = "one width per port, e.g. [1, 1]")]
     pub widths: Vec<usize>,
     #[serde(skip)]
     dt: f64,
@@ -612,7 +593,8 @@ impl Block for Mux {
         vec![Port::new("y", self.widths.iter().sum())]
     }
     fn build(&mut self, ctx: &BuildContext) -> Result<(), ParamError> {
-        check_widths(&self.widths)?;
+        self.check_params()?;
+        check_total_width(&self.widths)?;
         self.dt = ctx.dt;
         Ok(())
     }
@@ -630,7 +612,7 @@ impl Block for Mux {
 #[block(type_name = "demux", role = Math, ports = "u[Σw] -> y0[w0], y1[w1], ...")]
 pub struct Demux {
     /// Width of each output, in port order, e.g. [1, 1, 1].
-    #[param(schema = "widths_schema")]
+    #[param(len(1, MAX_PORTS), width, hint = "one width per port, e.g. [1, 1]")]
     pub widths: Vec<usize>,
     #[serde(skip)]
     dt: f64,
@@ -652,7 +634,8 @@ impl Block for Demux {
         numbered_ports("y", self.widths.iter().copied())
     }
     fn build(&mut self, ctx: &BuildContext) -> Result<(), ParamError> {
-        check_widths(&self.widths)?;
+        self.check_params()?;
+        check_total_width(&self.widths)?;
         self.dt = ctx.dt;
         Ok(())
     }

@@ -56,15 +56,20 @@ pub enum Topography {
     /// frac((x cos θ + y sin θ − offset_m)/pitch_m) < duty, else 0.
     Grating {
         /// Pitch (m).
+        #[param(positive)]
         pitch_m: f64,
         /// Step height (m).
+        #[param(finite)]
         height_m: f64,
-        /// Fraction of a pitch that is raised, in (0, 1).
+        /// Fraction of a pitch that is raised.
+        #[param(range(0.0, 1.0))]
         duty: f64,
         /// Rotation θ of the grating lines' normal from the x-axis (rad).
+        #[param(finite)]
         angle_rad: f64,
         /// Shift of the pattern along its normal (m).
         #[serde(default)]
+        #[param(finite)]
         offset_m: f64,
     },
 }
@@ -85,24 +90,6 @@ impl Topography {
                 if s - s.floor() < duty { height_m } else { 0.0 }
             }
         }
-    }
-
-    fn validate(&self) -> Result<(), ParamError> {
-        if let Topography::Grating {
-            pitch_m,
-            height_m,
-            duty,
-            angle_rad,
-            offset_m,
-        } = *self
-        {
-            check::positive("topography.pitch_m", pitch_m)?;
-            check::finite("topography.height_m", height_m)?;
-            check::in_range("topography.duty", duty, 0.0, 1.0)?;
-            check::finite("topography.angle_rad", angle_rad)?;
-            check::finite("topography.offset_m", offset_m)?;
-        }
-        Ok(())
     }
 }
 
@@ -223,16 +210,16 @@ pub struct AfmStage {
     pub resonance_hz: [f64; 3],
     /// Relative damping ζ of each diagonal mode (-).
     #[serde(default = "default_damping")]
-    #[param(default_doc = "[0.05, 0.05, 0.05]")]
+    #[param(positive, default_doc = "[0.05, 0.05, 0.05]")]
     pub damping: [f64; 3],
     /// Static coupling S (row = output j, column = input i; diagonal ignored), (-).
     /// 3×3, row-major.
     #[serde(default = "default_static_coupling")]
-    #[param(default_doc = "≈0.005")]
+    #[param(finite, default_doc = "≈0.005")]
     pub static_coupling: [[f64; 3]; 3],
     /// Dynamic coupling D through the parasitic mode (row = output, column = input), (-).
     #[serde(default = "default_dynamic_coupling")]
-    #[param(default_doc = "≈0.005 (static + dynamic ≈ −40 dB at DC)")]
+    #[param(finite, default_doc = "≈0.005 (static + dynamic ≈ −40 dB at DC)")]
     pub dynamic_coupling: [[f64; 3]; 3],
     /// Parasitic mode frequency (Hz).
     #[serde(default = "default_parasitic_hz")]
@@ -244,10 +231,12 @@ pub struct AfmStage {
     pub parasitic_damping: f64,
     /// Interferometer resolution per axis (m), Table 6.1: 0.15 nm.
     #[serde(default = "default_resolution")]
+    #[param(non_negative)]
     pub resolution_m: [f64; 3],
     /// Interferometer noise bound per axis (m), Table 6.1: ±5, ±4, ±2 nm. The noise is
     /// Gaussian with σ = bound/3, truncated at the bound.
     #[serde(default = "default_noise_bound")]
+    #[param(non_negative)]
     pub noise_bound_m: [f64; 3],
     /// Cantilever deflection resolution (m).
     #[serde(default = "default_defl_resolution")]
@@ -258,9 +247,8 @@ pub struct AfmStage {
     #[param(non_negative)]
     pub deflection_noise_bound_m: f64,
     /// Sample topography.
-    /// `flat`, or {grating: {pitch_m, height_m, duty, angle_rad, offset_m}}.
     #[serde(default = "default_topography")]
-    #[param(default_doc = "grating 10 µm pitch, 20 nm steps")]
+    #[param(nested, default_doc = "grating 10 µm pitch, 20 nm steps")]
     pub topography: Topography,
     /// Stage z position at which the tip touches a zero-height sample (m).
     #[serde(default = "default_contact_z")]
@@ -409,19 +397,14 @@ impl AfmStage {
                 &format!("resonance_hz[{i}] ({})", AX[i]),
                 self.resonance_hz[i],
             )?;
-            check::positive(&format!("damping[{i}]"), self.damping[i])?;
-            check::non_negative(&format!("resolution_m[{i}]"), self.resolution_m[i])?;
-            check::non_negative(&format!("noise_bound_m[{i}]"), self.noise_bound_m[i])?;
             check::in_range(
                 &format!("initial_v[{i}]"),
                 self.initial_v[i],
                 self.v_min_v,
                 self.v_max_v,
             )?;
-            check::all_finite(&format!("static_coupling[{i}]"), &self.static_coupling[i])?;
-            check::all_finite(&format!("dynamic_coupling[{i}]"), &self.dynamic_coupling[i])?;
         }
-        self.topography.validate()
+        Ok(())
     }
 
     /// Build for sample period `dt` (s) and seed: the same as [`Block::build`].
@@ -562,6 +545,53 @@ mod tests {
         let mut s = s;
         s.build(&BuildContext::new("stage", DT, seed)).unwrap();
         s
+    }
+
+    #[test]
+    fn declared_bounds_name_the_topography_and_per_axis_fields() {
+        let err = |s: AfmStage| {
+            let e = s
+                .clone()
+                .build(&BuildContext::new("stage", DT, 0))
+                .unwrap_err();
+            (e.field, e.problem)
+        };
+        let mut s = AfmStage {
+            topography: Topography::Grating {
+                pitch_m: 10e-6,
+                height_m: 20e-9,
+                duty: 1.5,
+                angle_rad: 0.0,
+                offset_m: 0.0,
+            },
+            ..AfmStage::default()
+        };
+        assert_eq!(
+            err(s.clone()),
+            ("topography.duty".into(), "is 1.5, outside [0, 1]".into())
+        );
+        s.topography = Topography::Grating {
+            pitch_m: 0.0,
+            height_m: 20e-9,
+            duty: 0.5,
+            angle_rad: 0.0,
+            offset_m: f64::NAN,
+        };
+        assert_eq!(err(s.clone()).0, "topography.pitch_m");
+        s.topography = Topography::Flat;
+        s.damping[2] = -0.1;
+        assert_eq!(
+            err(s.clone()),
+            ("damping[2]".into(), "is -0.1, must be > 0".into())
+        );
+        s.damping[2] = 0.05;
+        s.dynamic_coupling[1][2] = f64::INFINITY;
+        assert_eq!(err(s.clone()).0, "dynamic_coupling[1][2]");
+        s.dynamic_coupling[1][2] = 0.0;
+        s.noise_bound_m[0] = -1e-9;
+        assert_eq!(err(s.clone()).0, "noise_bound_m[0]");
+        s.noise_bound_m[0] = 1e-9;
+        assert!(s.build(&BuildContext::new("stage", DT, 0)).is_ok());
     }
 
     #[test]

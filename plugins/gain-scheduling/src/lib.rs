@@ -45,7 +45,6 @@
 //! ```
 
 use nanomotion_core::Params;
-use nanomotion_core::block::check;
 use nanomotion_core::{Block, BuildContext, Controller, ParamError, Port, Role, Tick};
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
@@ -55,36 +54,44 @@ use thiserror::Error;
 // ---------------------------------------------------------------------------
 
 /// One factor K_i(σ_i) of the schedule (YAML: `{kind: power_db, a: …, b: …, c: …}`).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Params)]
 #[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
 pub enum GainLaw {
     /// A fixed factor.
     Constant {
         /// K (dimensionless).
+        #[param(positive)]
         gain: f64,
     },
     /// Linear interpolation of K through (x_j, K_j), constant beyond the ends.
     Table {
-        /// Breakpoints σ_j, strictly increasing (unit of the scheduling variable).
+        /// Breakpoints σ_j (unit of the scheduling variable).
+        #[param(len(>= 1), finite, increasing, same_len = gain)]
         x: Vec<f64>,
-        /// Gains K_j > 0 at the breakpoints.
+        /// Gains K_j at the breakpoints.
+        #[param(positive, hint = "or use table_db")]
         gain: Vec<f64>,
     },
     /// Linear interpolation on a dB scale through (x_j, 20 log10 K_j).
     TableDb {
-        /// Breakpoints σ_j, strictly increasing.
+        /// Breakpoints σ_j.
+        #[param(len(>= 1), finite, increasing, same_len = gain_db)]
         x: Vec<f64>,
         /// Gains in dB at the breakpoints.
+        #[param(finite)]
         gain_db: Vec<f64>,
     },
     /// First-order power series on a dB scale: K(σ) = 10^((a σ^b + c)/20), σ > 0
     /// (smaller σ are clamped to 1e-12). Thesis Sec. 2.5.1.
     PowerDb {
         /// a (dB per unit^b).
+        #[param(finite)]
         a: f64,
         /// Exponent b.
+        #[param(finite)]
         b: f64,
         /// Offset c (dB).
+        #[param(finite)]
         c: f64,
     },
 }
@@ -126,60 +133,19 @@ impl GainLaw {
         }
     }
 
-    /// Check the law; `field` names it in errors (e.g. `schedule[1]`).
+    /// Check the law (its declared bounds); `field` names it in errors (e.g.
+    /// `schedule[1]`).
     pub fn validate(&self, field: &str) -> Result<(), ParamError> {
-        let table = |x: &[f64], y: &[f64], yname: &str, positive: bool| {
-            if x.is_empty() || x.len() != y.len() {
-                return Err(ParamError::new(
-                    format!("{field}.x"),
-                    format!(
-                        "has {} breakpoints for {} values of {yname}",
-                        x.len(),
-                        y.len()
-                    ),
-                    "give as many breakpoints as gains, at least one",
-                ));
-            }
-            check::all_finite(&format!("{field}.x"), x)?;
-            check::all_finite(&format!("{field}.{yname}"), y)?;
-            if let Some(j) = (1..x.len()).find(|&j| x[j] <= x[j - 1]) {
-                return Err(ParamError::new(
-                    format!("{field}.x[{j}]"),
-                    format!(
-                        "is {}, not above the previous breakpoint {}",
-                        x[j],
-                        x[j - 1]
-                    ),
-                    "sort the breakpoints strictly increasing",
-                ));
-            }
-            if positive && let Some(j) = y.iter().position(|&v| v <= 0.0) {
-                return Err(ParamError::new(
-                    format!("{field}.{yname}[{j}]"),
-                    format!("is {}, must be > 0", y[j]),
-                    "give positive gains (or use table_db)",
-                ));
-            }
-            Ok(())
-        };
-        match self {
-            GainLaw::Constant { gain } => check::positive(&format!("{field}.gain"), *gain),
-            GainLaw::Table { x, gain } => table(x, gain, "gain", true),
-            GainLaw::TableDb { x, gain_db } => table(x, gain_db, "gain_db", false),
-            GainLaw::PowerDb { a, b, c } => {
-                check::finite(&format!("{field}.a"), *a)?;
-                check::finite(&format!("{field}.b"), *b)?;
-                check::finite(&format!("{field}.c"), *c)
-            }
-        }
+        nanomotion_core::doc::within(field, self.check_params())
     }
 }
 
 /// The product K(σ) = Π K_i(σ_i) (2.13), one factor per scheduling variable.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Params)]
 #[serde(transparent)]
 pub struct GainSchedule {
     /// The factors.
+    #[param(len(>= 1), nested)]
     pub laws: Vec<GainLaw>,
 }
 
@@ -190,13 +156,10 @@ impl GainSchedule {
         s.validate()?;
         Ok(s)
     }
-    /// Check every factor.
+    /// Check the declared bounds: at least one factor, each factor's own
+    /// (errors named as the block's field: `schedule[1].x[2]`).
     pub fn validate(&self) -> Result<(), ParamError> {
-        check::at_least_one("schedule", self.laws.len())?;
-        for (i, l) in self.laws.iter().enumerate() {
-            l.validate(&format!("schedule[{i}]"))?;
-        }
-        Ok(())
+        nanomotion_core::doc::within("schedule", self.check_params())
     }
     /// Number of scheduling variables.
     pub fn len(&self) -> usize {
@@ -433,9 +396,9 @@ pub fn fit_power_db(sigma: &[f64], gain_db: &[f64]) -> Result<(GainLaw, f64), Fi
 pub struct GainScheduledBlock {
     /// The inner block (any registered type), e.g. `{type: pi, kp: 1, zero_hz: 2}`.
     pub controller: Box<dyn Block>,
-    /// One factor K_i(σ_i) per scheduling variable; K = Π K_i (2.13).
-    /// Each: {kind: constant, gain} | {kind: table, x, gain} | {kind: table_db, x, gain_db}
-    /// | {kind: power_db, a, b, c} (K = 10^((aσ^b + c)/20)).
+    /// One factor K_i(σ_i) per scheduling variable; K = Π K_i (2.13);
+    /// `power_db`: K = 10^((aσ^b + c)/20).
+    #[param(nested)]
     pub schedule: GainSchedule,
     /// `input` (default, bumpless) or `output`.
     /// `input`: u = C(K·e); `output`: u = K·C(e).
@@ -500,7 +463,7 @@ impl Block for GainScheduledBlock {
         true
     }
     fn build(&mut self, ctx: &BuildContext) -> Result<(), ParamError> {
-        self.schedule.validate()?;
+        self.check_params()?;
         self.controller.build(ctx).map_err(|e| ParamError {
             field: format!("controller.{}", e.field),
             ..e
