@@ -76,6 +76,8 @@ fn a_bouc_wen_loop_on_the_drive_is_cancelled_by_its_inverse() {
     assert_eq!(c.effect, "hysteresis");
     assert_eq!(c.type_name, "bouc_wen_inverse");
     assert!(c.kept && r.gate.passes, "{r:?}");
+    // The written graph on the wall clock, bit for bit as offline.
+    support::runs_on_the_wall_clock_as_offline(&out.compensated, &[]);
     // Slope bounds of the loop: linear + [0, max(a, 2aβ/(β + γ))] = [0.6, 1.4].
     assert_eq!(c.design["slope_min"], 0.6);
     assert!((c.design["slope_max"] - (0.6 + 2.0 * 0.5 * 4.0 / 5.0)).abs() < 1e-15);

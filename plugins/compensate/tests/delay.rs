@@ -410,6 +410,8 @@ fn a_delay_that_destabilises_the_pid_loop_is_met_by_lowering_its_crossover() {
     // (a) the written graph: the user's four blocks, only the pid changed, and
     // the stability gate passes it (here and in the report).
     assert!(c.kept && r.gate.passes, "{c:?}");
+    // The re-tuned graph on the wall clock, bit for bit as offline.
+    support::runs_on_the_wall_clock_as_offline(&out.compensated, &[]);
     let g = &out.compensated;
     assert_eq!(g.blocks.len(), 4);
     assert_eq!(g.connections.len(), loop_.connections.len());
@@ -614,6 +616,8 @@ fn a_delay_on_the_measurement_with_a_required_margin_is_re_tuned_to_it() {
     // with its `require:`.
     assert!(c.kept && out.report.gate.passes);
     check_scaling(&block_params(&loop_, "pid"), &c.design);
+    // The re-tuned graph on the wall clock, bit for bit as offline.
+    support::runs_on_the_wall_clock_as_offline(&out.compensated, &[]);
 }
 
 /// A controller that is not a core `pid`/`pi` (the same PID written as a
@@ -729,6 +733,8 @@ fn a_pi_is_re_tuned_and_a_small_delay_needs_none() {
         "{pm1} {target}"
     );
     assert!(out.report.gate.passes);
+    // The re-tuned graph on the wall clock, bit for bit as offline.
+    support::runs_on_the_wall_clock_as_offline(&out.compensated, &[]);
 
     let out = compensate(
         &aug(0.0001),

@@ -105,6 +105,14 @@ fn a_ripple_periodic_in_position_is_cut_by_delay_varying_rc() {
             < 1e-12
     );
     assert!(r.gate.passes && c.kept);
+    // The written graph on the wall clock, bit for bit as offline.
+    support::runs_on_the_wall_clock_as_offline(
+        &out.compensated,
+        &[
+            "comp_repetitive_disturbance.w",
+            "comp_repetitive_disturbance.n",
+        ],
+    );
     assert!(r.cut_percent > 80.0, "{}", r.cut_percent);
     // Most of the P loop's error is its ramp-following error v/(K c) =
     // 10 µm/s / (2e8 · 4 µm) = 12.5 nm (constant), which the memory learns too;

@@ -44,6 +44,9 @@ fn case_with(
     let stage = nominal.blocks.iter().find(|b| b.name == "stage").unwrap();
     let loop_ = controller(&surgery::block_to_json(stage.block.as_ref()), reference);
     let out = support::compensate_named(&rep, &loop_, keep, &format!("{hidden}: {}", rec.truth));
+    // Every written graph on the wall clock, bit for bit as offline.
+    assert!(out.report.gate.passes, "{:?}", out.report.gate);
+    support::runs_on_the_wall_clock_as_offline(&out.compensated, &[]);
     (rep, out)
 }
 
@@ -258,6 +261,8 @@ fn a_coupling_on_the_measurement_is_decoupled() {
         rec.truth,
         serde_json::to_string_pretty(&out.report).unwrap()
     );
+    assert!(out.report.gate.passes, "{:?}", out.report.gate);
+    support::runs_on_the_wall_clock_as_offline(&out.compensated, &[]);
     let c = &out.report.compensators[0];
     assert_eq!(c.type_name, "axis_coupling");
     // The decoupling is minus the fitted coupling, read from the other axis.

@@ -3,6 +3,8 @@
 //! the reference, subtracted at the plant input. The augmented model is written
 //! here as `diagnose` writes it (the force block and its sum).
 
+mod support;
+
 use nanomotion_compensate::{Options, compensate, named};
 use nanomotion_core::graph::GraphSpec;
 
@@ -39,4 +41,7 @@ fn a_hysteretic_force_in_the_loop_gets_a_feed_forward_at_the_reference() {
     // Most of the error the force adds is gone, and the total with it.
     assert!(c.effect_error_cut_percent > 50.0, "{c:?}");
     assert!(c.kept && r.after.rms < r.before.rms, "{r:?}");
+    // The written graph on the wall clock, bit for bit as offline.
+    assert!(r.gate.passes);
+    support::runs_on_the_wall_clock_as_offline(&out.compensated, &["comp_hysteresis.y"]);
 }

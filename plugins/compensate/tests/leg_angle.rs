@@ -18,6 +18,8 @@
 //! (variable: signal, s = α) would give: its Fourier coefficients are computed
 //! below by quadrature.
 
+mod support;
+
 use nanomotion_compensate::{Options, compensate, named};
 use nanomotion_core::graph::{BlockSpec, Connection, GraphSpec};
 use nanomotion_plf::surgery;
@@ -208,6 +210,7 @@ fn delay_back(alpha: &[f64], from: usize) -> (f64, f64) {
 /// stage the rms before and after, the α period (per sample, last quarter)
 /// with the DVRC, and the N_k it used.
 struct Case {
+    compensated: GraphSpec,
     design: std::collections::BTreeMap<String, f64>,
     before: f64,
     after: f64,
@@ -279,6 +282,7 @@ fn case(margin: f64) -> Case {
         d["n_max"],
     );
     Case {
+        compensated: surgery::clone_spec(&out.compensated).unwrap(),
         design: d.clone(),
         before,
         after,
@@ -302,6 +306,16 @@ fn a_disturbance_periodic_in_the_leg_angle_is_compensated_by_dvrc_on_alpha() {
     );
     assert!(d["n_min"] < c.n_seen.0 && c.n_seen.1 < d["n_max"]);
     assert!(c.after < c.before, "{:e} -> {:e}", c.before, c.after);
+    // The written graph (on the identified stage, as written) on the wall
+    // clock, its first 2 s bit for bit as offline.
+    support::first_seconds_run_on_the_wall_clock_as_offline(
+        &c.compensated,
+        &[
+            "comp_repetitive_disturbance.w",
+            "comp_repetitive_disturbance.n",
+        ],
+        2.0,
+    );
 }
 
 /// The default ±2 % is too narrow for the walking stage's α period: it leaves

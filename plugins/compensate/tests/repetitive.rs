@@ -107,6 +107,11 @@ fn a_disturbance_periodic_in_time_is_cut_by_repetitive_control() {
     let check = dvrc::check::rc_check_graph_with(&out.compensated, Ok(&ts));
     assert!(check.all_hold(), "{check:?}");
     assert!(r.gate.passes);
+    // The written graph on the wall clock, bit for bit as offline.
+    support::runs_on_the_wall_clock_as_offline(
+        &out.compensated,
+        &["comp_repetitive_disturbance.w"],
+    );
     // On the augmented model: the error is cut by more than 80 %.
     assert!(r.cut_percent > 80.0, "{}", r.cut_percent);
 

@@ -139,6 +139,8 @@ fn a_pid_winding_up_against_the_saturation_gets_the_limits_and_clamping() {
     );
     assert_eq!((c.design["output_min"], c.design["output_max"]), (-U, U));
     assert!(c.kept && r.gate.passes, "{r:?}");
+    // The written graph on the wall clock, bit for bit as offline.
+    support::runs_on_the_wall_clock_as_offline(&out.compensated, &[]);
     // The written graph: the user's pid with the fitted limits and clamping,
     // nothing inserted.
     let g = &out.compensated;
@@ -238,6 +240,8 @@ fn through_a_gain_the_pid_gets_the_limits_divided_by_it() {
         (U / K, -U / K)
     );
     assert!(c.kept && r.gate.passes, "{r:?}");
+    // The written graph on the wall clock, bit for bit as offline.
+    support::runs_on_the_wall_clock_as_offline(&out.compensated, &[]);
     let before = window(&closed_loop_through(&ctl(false), true, Some(K)));
     let after = window(&closed_loop_through(&ctl(true), true, Some(K)));
     windup_invariants(r, &before, &after);

@@ -139,6 +139,25 @@ pub fn compensate_augmented(aug: &GraphSpec, loop_: &GraphSpec) -> nanomotion_co
     out
 }
 
+/// [`runs_on_the_wall_clock_as_offline`] on the first `seconds` of `spec` (its
+/// duration cut to `seconds` if longer, each score's window starting no later
+/// than half of it): a long validation run checked on the wall clock in
+/// seconds.
+pub fn first_seconds_run_on_the_wall_clock_as_offline(
+    spec: &GraphSpec,
+    log: &[&str],
+    seconds: f64,
+) {
+    let mut g = nanomotion_plf::surgery::clone_spec(spec).unwrap();
+    if g.duration_s > seconds {
+        g.duration_s = seconds;
+        for s in &mut g.score {
+            s.from_s = s.from_s.min(0.5 * seconds);
+        }
+    }
+    runs_on_the_wall_clock_as_offline(&g, log);
+}
+
 /// Run `spec` (a compensated graph) offline, as `nanomotion run` does, and on
 /// the wall clock by `RealtimeRunner` without a device, as `nanomotion rt
 /// --allow-soft` does (SCHED_FIFO 80 where permitted, late ticks caught up so
