@@ -114,6 +114,51 @@ pub enum Scale {
     Linear(f64),
     /// θ = θ₀·e^z: a strictly positive parameter.
     Log,
+    /// θ = lo·(hi/lo)^σ(z + z₀), σ the logistic function, z₀ such that θ(0) = θ₀
+    /// (clamped a little inside the range): a positive parameter kept inside
+    /// the range [lo, hi] where it means what its name says, so a fit finds
+    /// the best value there instead of a better one outside that would be
+    /// refused (a creep's time constant longer than the record is a ramp).
+    LogWithin { lo: f64, hi: f64 },
+}
+
+impl Scale {
+    /// θ(z) for start value `v0`.
+    fn theta(self, v0: f64, z: f64) -> f64 {
+        match self {
+            Scale::Linear(s) => v0 + s * z,
+            Scale::Log => v0 * z.exp(),
+            Scale::LogWithin { lo, hi } => {
+                let span = (hi / lo).ln();
+                // Clamped: at σ = 1, lo·e^span can exceed hi by round-off.
+                (lo * (span * logistic(z + within_offset(v0, lo, hi))).exp()).clamp(lo, hi)
+            }
+        }
+    }
+
+    /// dθ/dz for start value `v0`.
+    fn dtheta(self, v0: f64, z: f64) -> f64 {
+        match self {
+            Scale::Linear(s) => s,
+            Scale::Log => v0 * z.exp(),
+            Scale::LogWithin { lo, hi } => {
+                let span = (hi / lo).ln();
+                let s = logistic(z + within_offset(v0, lo, hi));
+                self.theta(v0, z) * span * s * (1.0 - s)
+            }
+        }
+    }
+}
+
+fn logistic(x: f64) -> f64 {
+    1.0 / (1.0 + (-x).exp())
+}
+
+/// z₀ of [`Scale::LogWithin`]: where `v0` sits between `lo` and `hi` on a log
+/// axis, as a logit, its fraction kept within 1–99 %.
+fn within_offset(v0: f64, lo: f64, hi: f64) -> f64 {
+    let f = ((v0 / lo).ln() / (hi / lo).ln()).clamp(0.01, 0.99);
+    (f / (1.0 - f)).ln()
 }
 
 /// One free parameter: parameter `index` of the tunable block `block`.
@@ -142,20 +187,14 @@ pub trait Problem {
 fn theta_of(free: &[(Scale, f64)], z: &[f64]) -> Vec<f64> {
     free.iter()
         .zip(z)
-        .map(|(&(scale, v0), &zi)| match scale {
-            Scale::Linear(s) => v0 + s * zi,
-            Scale::Log => v0 * zi.exp(),
-        })
+        .map(|(&(scale, v0), &zi)| scale.theta(v0, zi))
         .collect()
 }
 
 fn dtheta_of(free: &[(Scale, f64)], z: &[f64]) -> Vec<f64> {
     free.iter()
         .zip(z)
-        .map(|(&(scale, v0), &zi)| match scale {
-            Scale::Linear(s) => s,
-            Scale::Log => v0 * zi.exp(),
-        })
+        .map(|(&(scale, v0), &zi)| scale.dtheta(v0, zi))
         .collect()
 }
 
@@ -798,5 +837,39 @@ fn finish<P: Problem>(
         cost,
         n,
         runs,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_bounded_log_scale_starts_at_its_value_stays_in_range_and_has_the_right_slope() {
+        let (lo, hi) = (1e-3, 5.0);
+        let s = Scale::LogWithin { lo, hi };
+        // θ(0) is the start value wherever it lies inside (clamped to 1–99 %
+        // of the log range at the ends).
+        for v0 in [2e-3, 0.1, 1.0, 4.0] {
+            assert!((s.theta(v0, 0.0) / v0 - 1.0).abs() < 1e-12, "{v0}");
+        }
+        let f = |v: f64| ((v / lo).ln() / (hi / lo).ln()).clamp(0.01, 0.99);
+        let at_end = lo * (f(100.0) * (hi / lo).ln()).exp();
+        assert!((s.theta(100.0, 0.0) / at_end - 1.0).abs() < 1e-12);
+        // Any coordinate maps inside [lo, hi].
+        for z in [-1e3, -30.0, -1.0, 0.0, 1.0, 30.0, 1e3] {
+            let t = s.theta(0.1, z);
+            assert!((lo..=hi).contains(&t), "z = {z}: {t}");
+        }
+        // dθ/dz against a central difference.
+        for z in [-3.0, -0.5, 0.0, 0.7, 2.5] {
+            let h = 1e-6;
+            let fd = (s.theta(0.1, z + h) - s.theta(0.1, z - h)) / (2.0 * h);
+            let an = s.dtheta(0.1, z);
+            assert!(
+                (an - fd).abs() <= 1e-7 * an.abs().max(1e-12),
+                "z = {z}: {an} vs {fd}"
+            );
+        }
     }
 }

@@ -83,10 +83,11 @@ impl Creep {
     /// - a step response that never falls over the record:
     ///   Σ kᵢ/τᵢ·e^{−t/τᵢ} ≥ 0.
     pub fn implausible(&self, t_len_s: f64, dt_s: f64) -> Option<String> {
+        let (lo, hi) = Self::time_constants(t_len_s, dt_s);
         for (i, t) in self.terms.iter().enumerate() {
-            if !(t.tau_s >= dt_s && t.tau_s <= t_len_s) {
+            if !(t.tau_s >= lo && t.tau_s <= hi) {
                 return Some(format!(
-                    "terms[{i}].tau_s = {:.3e} s lies outside one sample to the record's length ({dt_s:.3e}–{t_len_s:.3e} s)",
+                    "terms[{i}].tau_s = {:.3e} s lies outside one sample to the record's length ({lo:.3e}–{hi:.3e} s)",
                     t.tau_s
                 ));
             }
@@ -113,6 +114,13 @@ impl Creep {
             .map(|k| dt_s * (t_len_s / dt_s).powf(k as f64 / grid as f64))
             .find(|&t| rate(t) < -1e-9 * scale)
             .map(|t| format!("the step response falls at t = {t:.3e} s: a relaxation, not creep"))
+    }
+
+    /// The time constants a creep can be told by in a record `t_len_s` long
+    /// sampled every `dt_s`: one sample to the record's length (see
+    /// [`Creep::implausible`]).
+    pub fn time_constants(t_len_s: f64, dt_s: f64) -> (f64, f64) {
+        (dt_s, t_len_s)
     }
 
     fn check_terms(terms: &[CreepTerm]) -> Result<(), ParamError> {
