@@ -114,6 +114,19 @@ pub enum CompError {
     Gate(String),
 }
 
+/// A signal recorded from your loop on the real stage (without the
+/// compensators), sampled at `rate_hz`: for delay-varying RC, the variable the
+/// disturbance is periodic in (the thesis measures N(α) so, Fig. 5.7).
+#[derive(Debug, Clone, PartialEq)]
+pub struct MeasuredSignal {
+    /// The signal's name in your graph, `block.port` (e.g. `alpha.y`).
+    pub signal: String,
+    /// Sample rate (Hz).
+    pub rate_hz: f64,
+    /// The samples.
+    pub values: Vec<f64>,
+}
+
 /// Options of [`compensate`].
 #[derive(Debug, Clone)]
 pub struct Options {
@@ -137,6 +150,11 @@ pub struct Options {
     /// thesis-style design of docs/repetitive-control.md: the measured range
     /// ± 2 %).
     pub delay_margin: f64,
+    /// Signals recorded from your loop on the real stage: a record of the
+    /// signal a disturbance is periodic in adds the delays it shows to the
+    /// range [m, M] of delay-varying RC (before the widening by
+    /// [`Options::delay_margin`]). Default none.
+    pub measured: Vec<MeasuredSignal>,
 }
 
 impl Default for Options {
@@ -148,6 +166,7 @@ impl Default for Options {
             controller_name: "the controller graph".into(),
             min_cut: 0.01,
             delay_margin: 0.02,
+            measured: Vec::new(),
         }
     }
 }

@@ -1236,6 +1236,34 @@ fn advance_range(x: &[f64], period: f64, alpha: &str, which: &str) -> Result<(f6
     Ok((lo, hi))
 }
 
+/// The shortest and longest delay k − j over a record `x` of the signal, j the
+/// latest sample before k at or below x_k − `period` (the sample the DVRC's
+/// memory reads back to): unlike [`advance_range`], a record from a real
+/// stage may step back a little (a walking stage's legs slip); it must
+/// advance at least two periods overall.
+fn measured_range(x: &[f64], period: f64, alpha: &str) -> Result<(f64, f64), String> {
+    let advance = x.last().zip(x.first()).map_or(0.0, |(b, a)| b - a);
+    if period.is_nan() || period <= 0.0 || !(advance >= 2.0 * period) {
+        return Err(format!(
+            "`{alpha}` advances {advance:.3e} over the measured record, less than two periods ({:.3e}): record your loop where the signal moves forward through the period",
+            2.0 * period
+        ));
+    }
+    let (mut lo, mut hi) = (f64::INFINITY, 0.0f64);
+    let mut low = f64::INFINITY;
+    for k in 0..x.len() {
+        let target = x[k] - period;
+        if low <= target
+            && let Some(j) = (0..k).rev().find(|&j| x[j] <= target)
+        {
+            lo = lo.min((k - j) as f64);
+            hi = hi.max((k - j) as f64);
+        }
+        low = low.min(x[k]);
+    }
+    Ok((lo, hi))
+}
+
 /// The delay range (controller samples at `rate`) that `alpha` takes to
 /// advance one `period` over the scored window of `graph` run as it is.
 fn loop_delay_range(
@@ -1326,7 +1354,32 @@ fn delay_varying(
         "your loop on the plant as diagnosed",
     )
     .map_err(design_err)?;
-    let (lo, hi) = (lo0.min(lo1), hi0.max(hi1));
+    let (mut lo, mut hi) = (lo0.min(lo1), hi0.max(hi1));
+    // A record of the signal from your loop on the real stage (Fig. 5.7).
+    let mut measured = None;
+    if let Some(m) = opts.measured.iter().find(|m| m.signal == alpha) {
+        let place = format!("Options::measured (`{alpha}`)");
+        if !(m.rate_hz.is_finite() && m.rate_hz > 0.0) {
+            return Err(CompError::Input {
+                place,
+                problem: format!("its rate is {} Hz", m.rate_hz),
+                fix: "give the record's sample rate in Hz, > 0".into(),
+            });
+        }
+        if let Some(i) = m.values.iter().position(|v| !v.is_finite()) {
+            return Err(CompError::Input {
+                place,
+                problem: format!("sample {i} is {}", m.values[i]),
+                fix: "give a record of finite samples".into(),
+            });
+        }
+        let (a, b) = measured_range(&m.values, period, alpha).map_err(design_err)?;
+        let scale = rate / m.rate_hz;
+        let (a, b) = (a * scale, b * scale);
+        lo = lo.min(a);
+        hi = hi.max(b);
+        measured = Some((a, b));
+    }
     let n_min = ((lo * (1.0 - margin)).floor() as usize).saturating_sub(1);
     let n_max = (hi * (1.0 + margin)).ceil() as usize + 1;
     if n_min < 8 || n_max > 10_000_000 {
@@ -1366,13 +1419,22 @@ fn delay_varying(
     ]
     .into_iter()
     .collect();
+    if let Some((a, b)) = measured {
+        design.insert("delay_measured_min".into(), a);
+        design.insert("delay_measured_max".into(), b);
+    }
     design.extend(learning_figures(&d, "5_9"));
     Ok(Outcome::Compensator(Compensator {
         effect: e.effect.clone(),
         name: name.to_string(),
         block,
         why: format!(
-            "delay-varying repetitive control (5.7)–(5.8) on {alpha}: the memory delay N_k follows the signal over one period, N_k ∈ [{n_min}, {n_max}] (your loop's range on the nominal plant and on the plant as diagnosed, ±{:.1} %), L = ZPETC of the loop's T, Q the FIR low-pass with the largest cut-off keeping (5.9)",
+            "delay-varying repetitive control (5.7)–(5.8) on {alpha}: the memory delay N_k follows the signal over one period, N_k ∈ [{n_min}, {n_max}] (your loop's range on the nominal plant{} and on the plant as diagnosed, ±{:.1} %), L = ZPETC of the loop's T, Q the FIR low-pass with the largest cut-off keeping (5.9)",
+            if measured.is_some() {
+                ", in the measured record"
+            } else {
+                ""
+            },
             100.0 * margin
         ),
         place: format!(

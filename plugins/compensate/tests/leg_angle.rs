@@ -20,7 +20,7 @@
 
 mod support;
 
-use nanomotion_compensate::{Options, compensate, named};
+use nanomotion_compensate::{MeasuredSignal, Options, compensate, named};
 use nanomotion_core::graph::{BlockSpec, Connection, GraphSpec};
 use nanomotion_plf::surgery;
 use std::f64::consts::{PI, TAU};
@@ -175,30 +175,22 @@ fn run(spec: &GraphSpec, signals: &[&str]) -> (f64, Vec<Vec<f64>>) {
 }
 
 /// For every sample k of `alpha` from `from`, the fractional number of samples
-/// back to where α was α_k − 2π (linear interpolation, found by bisection):
-/// (smallest, largest).
+/// back to the latest time α was α_k − 2π (the latest j with α_j ≤ α_k − 2π,
+/// then linear interpolation between j and j + 1): (smallest, largest).
 fn delay_back(alpha: &[f64], from: usize) -> (f64, f64) {
     let (mut lo, mut hi) = (f64::INFINITY, 0.0f64);
     for k in from..alpha.len() {
         let target = alpha[k] - TAU;
-        if alpha[0] > target {
+        let mut j = k;
+        while j > 0 && alpha[j - 1] > target {
+            j -= 1;
+        }
+        if j == 0 {
             continue;
         }
-        // Last j with α_j ≤ target (α does not decrease).
-        let (mut a, mut b) = (0usize, k);
-        while b - a > 1 {
-            let m = (a + b) / 2;
-            if alpha[m] <= target {
-                a = m;
-            } else {
-                b = m;
-            }
-        }
-        let frac = if alpha[a + 1] > alpha[a] {
-            (target - alpha[a]) / (alpha[a + 1] - alpha[a])
-        } else {
-            0.0
-        };
+        // α_{j−1} ≤ target < α_j.
+        let a = j - 1;
+        let frac = (target - alpha[a]) / (alpha[a + 1] - alpha[a]);
         let d = k as f64 - (a as f64 + frac);
         lo = lo.min(d);
         hi = hi.max(d);
@@ -220,7 +212,7 @@ struct Case {
 
 /// Compensate the leg-angle disturbance with `delay_margin` = `margin`, check
 /// the design against its closed forms, and run both loops on the walking stage.
-fn case(margin: f64) -> Case {
+fn case(margin: f64, measured: Vec<MeasuredSignal>) -> Case {
     // Link the walking-piezo blocks (registered by name).
     let _ = walking_piezo::driver::DriverParams::default();
     let aug = augmented();
@@ -228,6 +220,7 @@ fn case(margin: f64) -> Case {
     assert_eq!(effects.len(), 1, "{effects:?}");
     let opts = Options {
         delay_margin: margin,
+        measured,
         ..Options::default()
     };
     let out = compensate(&aug, &controller(), &effects, &opts).unwrap();
@@ -245,8 +238,13 @@ fn case(margin: f64) -> Case {
         "{d:?}"
     );
     // The range: both loops' ranges, widened by the margin.
-    let lo = d["delay_nominal_min"].min(d["delay_diagnosed_min"]);
-    let hi = d["delay_nominal_max"].max(d["delay_diagnosed_max"]);
+    let get = |k: &str| d.get(k).copied();
+    let lo = d["delay_nominal_min"]
+        .min(d["delay_diagnosed_min"])
+        .min(get("delay_measured_min").unwrap_or(f64::INFINITY));
+    let hi = d["delay_nominal_max"]
+        .max(d["delay_diagnosed_max"])
+        .max(get("delay_measured_max").unwrap_or(0.0));
     assert_eq!(d["n_min"], ((lo * (1.0 - margin)).floor() - 1.0).max(0.0));
     assert_eq!(d["n_max"], (hi * (1.0 + margin)).ceil() + 1.0);
     // (5.9) for that range, with its bound 1/√(M − m + 1).
@@ -297,7 +295,7 @@ fn case(margin: f64) -> Case {
 /// shrinks.
 #[test]
 fn a_disturbance_periodic_in_the_leg_angle_is_compensated_by_dvrc_on_alpha() {
-    let c = case(0.09);
+    let c = case(0.09, Vec::new());
     let d = &c.design;
     assert!(
         d["n_min"] <= c.period.0.floor() && c.period.1.ceil() <= d["n_max"],
@@ -322,7 +320,7 @@ fn a_disturbance_periodic_in_the_leg_angle_is_compensated_by_dvrc_on_alpha() {
 /// the range, N_k is pinned at the range's ends, and the error grows.
 #[test]
 fn the_default_range_is_too_narrow_for_the_walking_stage() {
-    let c = case(Options::default().delay_margin);
+    let c = case(Options::default().delay_margin, Vec::new());
     let d = &c.design;
     assert!(
         c.period.0 < d["n_min"] || d["n_max"] < c.period.1,
@@ -331,4 +329,42 @@ fn the_default_range_is_too_narrow_for_the_walking_stage() {
     );
     assert!(c.n_seen.0 == d["n_min"] || c.n_seen.1 == d["n_max"]);
     assert!(c.after > c.before, "{:e} -> {:e}", c.before, c.after);
+}
+
+/// The thesis's way (Fig. 5.7): α recorded from your loop on the stage without
+/// RC, its delays added to the range, then the default ±2 %. The design's
+/// measured delays agree with an independent (interpolated) reading of the
+/// record, the α period with the DVRC stays inside [m, M] and the error
+/// shrinks.
+#[test]
+fn the_range_from_a_measured_alpha_record_covers_the_walking_stage() {
+    let _ = walking_piezo::driver::DriverParams::default();
+    // The record: your loop (PI only) on the walking stage, from 10 s on.
+    let (_, logs) = run(&on_walking_stage(&controller()), &["alpha.y"]);
+    let record: Vec<f64> = logs[0][(10.0 * RATE) as usize..].to_vec();
+    let (d_lo, d_hi) = delay_back(&record, 0);
+    let c = case(
+        Options::default().delay_margin,
+        vec![MeasuredSignal {
+            signal: "alpha.y".into(),
+            rate_hz: RATE,
+            values: record,
+        }],
+    );
+    let d = &c.design;
+    eprintln!(
+        "measured record: delays {:.1} .. {:.1} (interpolated {d_lo:.2} .. {d_hi:.2})",
+        d["delay_measured_min"], d["delay_measured_max"]
+    );
+    // The design's integer delay k − j (j the last sample at or below
+    // α_k − 2π) is the interpolated delay rounded up.
+    assert!(d_lo <= d["delay_measured_min"] && d["delay_measured_min"] < d_lo + 1.0);
+    assert!(d_hi <= d["delay_measured_max"] && d["delay_measured_max"] < d_hi + 1.0);
+    assert!(
+        d["n_min"] <= c.period.0.floor() && c.period.1.ceil() <= d["n_max"],
+        "{:?}",
+        c.period
+    );
+    assert!(d["n_min"] < c.n_seen.0 && c.n_seen.1 < d["n_max"]);
+    assert!(c.after < c.before, "{:e} -> {:e}", c.before, c.after);
 }
