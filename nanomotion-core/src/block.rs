@@ -723,6 +723,23 @@ pub mod check {
         }
     }
 
+    /// A frequency `f_hz` (Hz, its own bounds checked before) below the Nyquist
+    /// frequency of the block's period `dt`: `#[param(below_nyquist)]`.
+    pub fn below_nyquist(field: &str, f_hz: f64, dt: f64) -> Result<(), ParamError> {
+        let nyq = 0.5 / dt;
+        if f_hz < nyq {
+            Ok(())
+        } else {
+            Err(ParamError::new(
+                field,
+                format!(
+                    "{f_hz} Hz is not below the Nyquist frequency {nyq} Hz of the block's rate"
+                ),
+                "lower the frequency or raise the block's rate",
+            ))
+        }
+    }
+
     /// `value` must be ≥ 1.
     pub fn at_least_one(field: &str, value: usize) -> Result<(), ParamError> {
         if value >= 1 {

@@ -28,6 +28,7 @@
 //! | `len(lo, hi)`, `len(>= lo)`, `len(<= hi)`, … (`range`'s forms) | [`check::entries`](crate::block::check::entries): how many entries a list holds (`is empty`, `has 6 entries, must have 1 to 5 entries`), before its entries' bounds if declared first | `minItems`, `maxItems` |
 //! | `increasing` | [`check::increasing`](crate::block::check::increasing): each entry of a list of numbers above the one before | — (words: strictly increasing) |
 //! | `at_most = other` | [`check::ordered`](crate::block::check::ordered) (this ≤ `other`), after every field's own bounds | — |
+//! | `below_nyquist` | [`check::below_nyquist`](crate::block::check::below_nyquist) against the block's rate, by [`Params::check_at_rate`] (`build()` calls it with `ctx.dt`); an `f64` or `Option<f64>` field of a block | — (words: below Nyquist) |
 //! | `same_len = other` | [`check::same_len`](crate::block::check::same_len): as many entries as the list `other` (breakpoints and their values), after every field's own bounds | — (words: as many entries as `other`) |
 //! | `nested` | the field's own [`Params::check_params`], field names prefixed `field.` | the field type's schema |
 //! | `hint = "…"` | adds its words to the fix of the field's bound errors (`give a whole number in [1, 1000], or raise the block's rate_hz`) | — |
@@ -148,6 +149,13 @@ pub trait Params {
     /// Check the declared `#[param(…)]` bounds; the error names the field and the
     /// fix. `build()` calls it before anything else.
     fn check_params(&self) -> Result<(), ParamError>;
+    /// Check the bounds that depend on the block's sample period `dt` (s):
+    /// the fields declared `below_nyquist`. `build()` calls it after
+    /// [`check_params`](Params::check_params), with its context's `dt`.
+    fn check_at_rate(&self, dt: f64) -> Result<(), ParamError> {
+        let _ = dt;
+        Ok(())
+    }
 }
 
 /// A type that can describe its YAML form as a JSON Schema (derived by

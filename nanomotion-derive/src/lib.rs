@@ -253,6 +253,9 @@ struct ParamAttr {
     at_most: Option<Ident>,
     /// `same_len = other`: this list has as many entries as `other`.
     same_len: Option<Ident>,
+    /// `below_nyquist`: a frequency (Hz) below half the block's rate, checked
+    /// by `check_at_rate(dt)`.
+    below_nyquist: bool,
     /// Words added to the fix of every bound error of the field.
     hint: Option<String>,
 }
@@ -365,6 +368,7 @@ fn param_attr(attrs: &[Attribute]) -> syn::Result<ParamAttr> {
                     p.bounds.push(Bound::Len(lo, hi));
                 }
                 "increasing" => p.bounds.push(Bound::Increasing),
+                "below_nyquist" => p.below_nyquist = true,
                 "same_len" => {
                     let id: Ident = meta.value()?.parse()?;
                     p.same_len = Some(id);
@@ -395,7 +399,7 @@ fn param_attr(attrs: &[Attribute]) -> syn::Result<ParamAttr> {
                         "unknown #[param] item `{other}`: expected finite, positive, \
                          non_negative, range(lo, hi), range(> lo), range(>= lo, < hi), …, \
                          width, size(lo, hi), at_least_one, len(lo, hi), len(>= lo), …, \
-                         increasing, at_most = field, same_len = field, nested, \
+                         increasing, below_nyquist, at_most = field, same_len = field, nested, \
                          default_doc = \"…\", hint = \"…\" or schema = \"path\""
                     )));
                 }
@@ -779,6 +783,8 @@ struct FieldCode {
     check: TokenStream2,
     /// `at_most` checks, run after every field's own bounds.
     ordering: TokenStream2,
+    /// `below_nyquist` checks, run by `check_at_rate(dt)`.
+    rate: TokenStream2,
 }
 
 /// Where a field's value is read by its checks.
@@ -863,6 +869,9 @@ fn field_code(
     if pa.nested {
         bounds.push(quote!(#d::nested_entries(&__s, &mut __b);));
     }
+    if pa.below_nyquist {
+        bounds.push(quote!(__b.push(::std::string::String::from("below Nyquist"));));
+    }
     if let Some(other) = &pa.same_len {
         let words = format!("as many entries as {other}");
         bounds.push(quote!(__b.push(::std::string::String::from(#words));));
@@ -877,6 +886,7 @@ fn field_code(
     });
     let mut check = TokenStream2::new();
     let mut ordering = TokenStream2::new();
+    let mut rate = TokenStream2::new();
     // the name errors give: a wrapper's value is named by whoever holds it
     let name = if access == Access::Wrapped {
         String::new()
@@ -914,6 +924,30 @@ fn field_code(
             let (this, that) = (access.value(ident), access.value(other));
             ordering.extend(quote!(::nanomotion_core::block::check::same_len(#name, (#this).len(), #other_name, (#that).len())?;));
         }
+        if pa.below_nyquist {
+            if access != Access::SelfField {
+                return Err(syn::Error::new_spanned(
+                    ident,
+                    "`below_nyquist` is checked against a block's rate: declare it on a block's own field",
+                ));
+            }
+            let c = quote!(::nanomotion_core::block::check);
+            rate = match (
+                last_ident(ty).as_deref(),
+                generic_of(ty, "Option").and_then(last_ident).as_deref(),
+            ) {
+                (Some("f64"), _) => quote!(#c::below_nyquist(#name, self.#ident, dt)?;),
+                (_, Some("f64")) => quote!(if let ::core::option::Option::Some(__f) = self.#ident {
+                    #c::below_nyquist(#name, __f, dt)?;
+                }),
+                _ => {
+                    return Err(syn::Error::new_spanned(
+                        ty,
+                        "`below_nyquist` is for a frequency in Hz: an f64 or Option<f64>",
+                    ));
+                }
+            };
+        }
         if pa.nested {
             let place = access.place(ident);
             if generic_of(ty, "Vec").is_some() {
@@ -933,6 +967,7 @@ fn field_code(
         doc: doc_code,
         check,
         ordering,
+        rate,
     }))
 }
 
@@ -971,6 +1006,8 @@ fn expand(input: &DeriveInput) -> syn::Result<TokenStream2> {
     };
 
     let registration_placeholder = &registration;
+    // `check_at_rate(dt)`, when a field is declared `below_nyquist`
+    let mut rate_checks = TokenStream2::new();
     let (param_docs, checks, schema) = match &input.data {
         Data::Struct(s) => {
             let Fields::Named(named) = &s.fields else {
@@ -1051,14 +1088,24 @@ fn expand(input: &DeriveInput) -> syn::Result<TokenStream2> {
             let mut docs = Vec::new();
             let mut checks = Vec::new();
             let mut orderings = Vec::new();
+            let mut rates = TokenStream2::new();
             for f in &named.named {
                 if let Some(fc) = field_code(f, &container, Access::SelfField)? {
                     docs.push(fc.doc);
                     checks.push(fc.check);
                     orderings.push(fc.ordering);
+                    rates.extend(fc.rate);
                 }
             }
             checks.extend(orderings);
+            if !rates.is_empty() {
+                rate_checks = quote!(
+                    fn check_at_rate(&self, dt: f64) -> ::core::result::Result<(), ::nanomotion_core::ParamError> {
+                        #rates
+                        ::core::result::Result::Ok(())
+                    }
+                );
+            }
             let closed = container.deny_unknown_fields;
             (
                 quote!(::std::vec![#(#docs),*]),
@@ -1161,6 +1208,7 @@ fn expand(input: &DeriveInput) -> syn::Result<TokenStream2> {
                 #checks
                 ::core::result::Result::Ok(())
             }
+            #rate_checks
         }
         impl #impl_g ::nanomotion_core::doc::ParamSchema for #name #ty_g #where_g {
             fn param_schema() -> #d::Value {

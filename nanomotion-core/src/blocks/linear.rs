@@ -196,14 +196,10 @@ fn c2d_method(
         ));
     };
     if let Some(f) = prewarp_hz {
-        // > 0 is declared on the field (`#[param(positive)]`)
-        if f >= 0.5 / dt {
-            return Err(ParamError::new(
-                "prewarp_hz",
-                format!("{f} Hz is not below the Nyquist frequency {} Hz", 0.5 / dt),
-                "give a frequency below half the block's rate",
-            ));
-        }
+        // > 0 is declared on the field (`#[param(positive)]`); below Nyquist is
+        // checked here rather than by `below_nyquist` because it applies only
+        // once the model is known to be continuous (the errors above come first)
+        check::below_nyquist("prewarp_hz", f, dt)?;
     }
     match method {
         Discretisation::Zoh => {
@@ -217,21 +213,6 @@ fn c2d_method(
             Ok(Some(C2dMethod::Zoh))
         }
         Discretisation::Tustin => Ok(Some(C2dMethod::Tustin { prewarp_hz })),
-    }
-}
-
-/// `f_hz` (declared `#[param(positive)]`, checked before) below the Nyquist
-/// frequency of period `dt`.
-fn check_below_nyquist(field: &str, f_hz: f64, dt: f64) -> Result<(), ParamError> {
-    let nyq = 0.5 / dt;
-    if f_hz < nyq {
-        Ok(())
-    } else {
-        Err(ParamError::new(
-            field,
-            format!("{f_hz} Hz is not below the Nyquist frequency {nyq} Hz of the block's rate"),
-            "lower the frequency or raise the block's rate",
-        ))
     }
 }
 
@@ -768,8 +749,8 @@ fn default_order() -> usize {
 #[serde(deny_unknown_fields)]
 #[block(type_name = "low_pass", role = Math, ports = "u[width] -> y[width]")]
 pub struct LowPass {
-    /// −3 dB frequency f_c in Hz (below Nyquist).
-    #[param(positive)]
+    /// −3 dB frequency f_c in Hz.
+    #[param(positive, below_nyquist)]
     pub cutoff_hz: f64,
     /// Filter order n.
     #[serde(default = "default_order")]
@@ -806,7 +787,7 @@ impl Block for LowPass {
 
     fn build(&mut self, ctx: &BuildContext) -> Result<(), ParamError> {
         self.check_params()?;
-        check_below_nyquist("cutoff_hz", self.cutoff_hz, ctx.dt)?;
+        self.check_at_rate(ctx.dt)?;
         let sos = lti::butter_lowpass(self.order, self.cutoff_hz, ctx.dt)
             .map_err(|e| lti_to_param("cutoff_hz", e))?;
         let model = lti::sos2ss(&sos, ctx.dt).map_err(|e| lti_to_param("order", e))?;
@@ -831,8 +812,8 @@ fn default_notch_damping() -> f64 {
 #[serde(deny_unknown_fields)]
 #[block(type_name = "notch", role = Math, ports = "u[width] -> y[width]")]
 pub struct Notch {
-    /// Centre frequency f₀ in Hz (below Nyquist).
-    #[param(positive)]
+    /// Centre frequency f₀ in Hz.
+    #[param(positive, below_nyquist)]
     pub centre_hz: f64,
     /// Damping ζ of the poles: the −3 dB width of a deep notch is about
     /// 2ζ·f₀ Hz.
@@ -883,7 +864,7 @@ impl Block for Notch {
 
     fn build(&mut self, ctx: &BuildContext) -> Result<(), ParamError> {
         self.check_params()?;
-        check_below_nyquist("centre_hz", self.centre_hz, ctx.dt)?;
+        self.check_at_rate(ctx.dt)?;
         let model = self
             .continuous_model()
             .c2d(
@@ -930,6 +911,7 @@ pub struct LeadLag {
     #[serde(default)]
     #[param(
         positive,
+        below_nyquist,
         default_doc = "√(zero_hz·pole_hz) if below Nyquist, else plain Tustin"
     )]
     pub prewarp_hz: Option<f64>,
@@ -986,9 +968,7 @@ impl Block for LeadLag {
 
     fn build(&mut self, ctx: &BuildContext) -> Result<(), ParamError> {
         self.check_params()?;
-        if let Some(f) = self.prewarp_hz {
-            check_below_nyquist("prewarp_hz", f, ctx.dt)?;
-        }
+        self.check_at_rate(ctx.dt)?;
         let method = C2dMethod::Tustin {
             prewarp_hz: self.effective_prewarp_hz(ctx.dt),
         };

@@ -9,7 +9,6 @@
 use crate::error::{AfmError, finite};
 use crate::hysteresis::{Branch, Direction, ExtendedCh};
 use nanomotion_core::Params;
-use nanomotion_core::block::check;
 use nanomotion_core::{Block, BuildContext, Controller, ParamError, Port, Role, Tick};
 use serde::{Deserialize, Serialize};
 
@@ -231,6 +230,7 @@ pub enum FfRange {
     /// Both branches on [v_min_v, v_max_v] (V).
     Voltage {
         /// V_m (V).
+        #[param(at_most = v_max_v)]
         v_min_v: f64,
         /// V_M (V).
         v_max_v: f64,
@@ -238,6 +238,7 @@ pub enum FfRange {
     /// Each branch on the voltage range that covers [x_min_m, x_max_m] (m).
     Position {
         /// Lowest reference position (m).
+        #[param(at_most = x_max_m)]
         x_min_m: f64,
         /// Highest reference position (m).
         x_max_m: f64,
@@ -259,7 +260,7 @@ pub struct HysteresisFeedForwardBlock {
     /// e_um_per_v, f_um}.
     pub model: ExtendedCh,
     /// Voltage range, given directly or through the position range it must cover.
-    /// {voltage: {v_min_v, v_max_v}} or {position: {x_min_m, x_max_m}}.
+    #[param(nested)]
     pub range: FfRange,
     /// Reference steps of at most this size (m per sample) count as standstill.
     #[serde(default = "default_standstill")]
@@ -308,12 +309,11 @@ impl Block for HysteresisFeedForwardBlock {
         self.model.trace.validate("model.trace.")?;
         self.model.retrace.validate("model.retrace.")?;
         let ff = match self.range {
+            // v_min_v ≤ v_max_v, x_min_m ≤ x_max_m: declared (`at_most`), checked above
             FfRange::Voltage { v_min_v, v_max_v } => {
-                check::ordered("range.v_min_v", v_min_v, "range.v_max_v", v_max_v)?;
                 HysteresisFeedForward::for_voltage_range(self.model, v_min_v, v_max_v)
             }
             FfRange::Position { x_min_m, x_max_m } => {
-                check::ordered("range.x_min_m", x_min_m, "range.x_max_m", x_max_m)?;
                 HysteresisFeedForward::for_position_range(self.model, x_min_m * 1e6, x_max_m * 1e6)
             }
         }
