@@ -4,8 +4,8 @@
 //!
 //! 1. [`run_length`]: the settings — base rate, title, duration (the data's
 //!    length when left out) — give the number of base ticks;
-//! 2. [`check_planned_memory`]: the blocks' buffers from their parameters,
-//!    before anything is allocated;
+//! 2. [`check_planned_memory`]: at least one block, and the blocks' buffers
+//!    from their parameters, before anything is allocated;
 //! 3. [`build_blocks`]: names, rates, [`Block::build`], port widths, the memory
 //!    the built blocks hold;
 //! 4. [`connect`]: every connection resolved and its widths matched, a rate
@@ -16,14 +16,16 @@
 //!    units passed on from inputs;
 //! 7. [`lay_out`]: outputs in one flat buffer in execution order, each block's
 //!    inputs as a list of copies;
-//! 8. [`Recorder`]: logs, scores and compares, with the memory estimate checked
-//!    before each log is reserved; then the [`Scheduler`] is assembled.
+//! 8. [`Recorder::record`]: logs, scores and compares, with the memory estimate
+//!    checked before each log is reserved; then the [`Scheduler`] is assembled.
+//!
+//! [`compile`] itself only passes each phase's result to the next.
 
 use super::load::nearest;
 use super::spec::{
-    BlockSpec, BuildReport, Connection, GraphSpec, LOG_CHUNK_TICKS, MAX_BLOCK_NAME_CHARS,
-    MAX_GRAPH_BYTES, MAX_RATE_HZ, MAX_TICKS, MAX_TITLE_CHARS, MAX_UNIT_CHARS, MIN_RATE_HZ,
-    ScoreSpec, valid_block_name,
+    BlockSpec, BuildReport, CompareSpec, Connection, GraphSpec, LOG_CHUNK_TICKS,
+    MAX_BLOCK_NAME_CHARS, MAX_GRAPH_BYTES, MAX_RATE_HZ, MAX_TICKS, MAX_TITLE_CHARS, MAX_UNIT_CHARS,
+    MIN_RATE_HZ, ScoreSpec, valid_block_name,
 };
 use crate::block::{Block, BuildContext, MeasuredData, Port};
 use crate::error::GraphError;
@@ -138,6 +140,7 @@ fn compile(
         connection_lines,
         base_dir,
     } = spec;
+    // 1. settings
     let n_ticks = run_length(
         base_rate_hz,
         title.as_deref(),
@@ -145,10 +148,9 @@ fn compile(
         data.as_deref(),
         placeholder_data,
     )?;
-    if blocks.is_empty() {
-        return Err(setting("blocks", "is empty", "add at least one block"));
-    }
+    // 2. the blocks' planned memory
     check_planned_memory(&blocks, base_rate_hz)?;
+    // 3. names, rates, build
     let (mut pending, mut index, block_bytes) = build_blocks(
         blocks,
         base_rate_hz,
@@ -158,6 +160,7 @@ fn compile(
         placeholder_data,
     )?;
     let mut report = BuildReport::default();
+    // 4. connections and rate transitions
     connect(
         &mut pending,
         &mut index,
@@ -166,29 +169,21 @@ fn compile(
         connection_lines.as_ref(),
         &mut report,
     )?;
+    // 5. execution order
     let order = execution_order(&pending)?;
+    // 6. units
     assign_units(&mut pending, &index, &units)?;
+    // 7. buffers
     let layout = lay_out(pending, &order, &mut report);
-
-    let mut rec = Recorder::new(&layout, base_rate_hz, n_ticks, chunk_ticks, block_bytes);
-    for l in &log {
-        rec.channel(l, "log")?;
-    }
-    let mut scores = Vec::new();
-    for s in &score {
-        scores.push(rec.score(s)?);
-    }
-    let mut compares = Vec::new();
-    for c in &compare {
-        let channel = rec.channel(&c.signal, "compare")?;
-        compares.push((c.signal.clone(), c.column.clone(), channel));
-    }
-    let Recorder {
+    // 8. recorded signals
+    let rec = Recorder::new(&layout, base_rate_hz, n_ticks, chunk_ticks, block_bytes);
+    let Recorded {
         logs,
+        scores,
+        compares,
         graph_bytes,
         log_bytes,
-        ..
-    } = rec;
+    } = rec.record(&log, &score, &compare)?;
 
     tracing::debug!(
         target: "nanomotion_core::graph",
@@ -302,9 +297,13 @@ fn run_length(
     Ok(n_ticks_f as u64)
 }
 
-/// Phase 2: the blocks' buffers, from their parameters, before any is allocated
-/// (a block whose own size is out of range is left to its build's message).
+/// Phase 2: at least one block, and the blocks' buffers, from their
+/// parameters, before any is allocated (a block whose own size is out of range
+/// is left to its build's message).
 fn check_planned_memory(blocks: &[BlockSpec], base_rate_hz: f64) -> Result<(), GraphError> {
+    if blocks.is_empty() {
+        return Err(setting("blocks", "is empty", "add at least one block"));
+    }
     let mut planned = 0usize;
     for b in blocks {
         let (field, bytes) = b
@@ -788,6 +787,18 @@ struct Recorder<'a> {
     log_bytes: usize,
 }
 
+/// What phase 8 gives the scheduler: the recorded channels, the scores and
+/// compares reading them, and the memory estimate.
+struct Recorded {
+    logs: Vec<LogChannel>,
+    scores: Vec<ScoreChannel>,
+    /// (signal, data column, log channel).
+    compares: Vec<(String, String, usize)>,
+    /// Memory estimate of the whole graph: signals, inputs, blocks, logs (bytes).
+    graph_bytes: usize,
+    log_bytes: usize,
+}
+
 impl<'a> Recorder<'a> {
     fn new(
         layout: &'a Layout,
@@ -892,6 +903,35 @@ impl<'a> Recorder<'a> {
             dropped: 0,
         });
         Ok(self.logs.len() - 1)
+    }
+
+    /// Record the graph's `log:`, `score:` and `compare:` signals, in that
+    /// order (a signal named twice is recorded once).
+    fn record(
+        mut self,
+        log: &[String],
+        score: &[ScoreSpec],
+        compare: &[CompareSpec],
+    ) -> Result<Recorded, GraphError> {
+        for l in log {
+            self.channel(l, "log")?;
+        }
+        let mut scores = Vec::new();
+        for s in score {
+            scores.push(self.score(s)?);
+        }
+        let mut compares = Vec::new();
+        for c in compare {
+            let channel = self.channel(&c.signal, "compare")?;
+            compares.push((c.signal.clone(), c.column.clone(), channel));
+        }
+        Ok(Recorded {
+            logs: self.logs,
+            scores,
+            compares,
+            graph_bytes: self.graph_bytes,
+            log_bytes: self.log_bytes,
+        })
     }
 
     /// The score of `s`: its log, and the first sample at or after `from_s`.
