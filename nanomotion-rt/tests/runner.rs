@@ -58,18 +58,33 @@ fn graph(rate_hz: f64, ticks: u64) -> nanomotion_core::Scheduler {
     s
 }
 
-fn config(policy: OverrunPolicy) -> RtConfig {
-    RtConfig {
-        privileges: Privileges {
-            priority: Some(50),
-            cpu: None,
-            lock_memory: false,
-            hold_cpu_latency: false,
-        },
-        allow_soft: true,
-        overrun: policy,
-        ..RtConfig::default()
+/// What the loop thread asks for: SCHED_FIFO `priority` (or normal priority),
+/// no pinning, memory unlocked, the CPUs' idle states left alone.
+fn privileges(priority: Option<u8>) -> Privileges {
+    Privileges {
+        priority,
+        cpu: None,
+        lock_memory: false,
+        hold_cpu_latency: false,
     }
+}
+
+/// The loop as `nanomotion rt` builds it ([`RtConfig::new`]): SCHED_FIFO 50
+/// where permitted, soft where not, overruns handled by `policy`.
+fn config(policy: OverrunPolicy) -> RtConfig {
+    RtConfig::new(
+        privileges(Some(50)),
+        true,
+        RealtimeSpec {
+            overrun: Some(policy),
+            max_overruns: None,
+        },
+    )
+}
+
+/// A loop at normal priority (nothing asked of the kernel), skipping overruns.
+fn unprivileged() -> RtConfig {
+    RtConfig::new(privileges(None), false, RealtimeSpec::default())
 }
 
 /// A device that records when each tick read it, and can sleep 1.5 periods in
@@ -384,15 +399,7 @@ fn drop_sys_nice() {
 fn without_the_privilege_the_run_is_refused_unless_soft_running_is_allowed() {
     std::thread::spawn(|| {
         drop_sys_nice();
-        let hard = RtConfig {
-            privileges: Privileges {
-                priority: Some(80),
-                cpu: None,
-                lock_memory: false,
-                hold_cpu_latency: false,
-            },
-            ..RtConfig::default()
-        };
+        let hard = RtConfig::new(privileges(Some(80)), false, RealtimeSpec::default());
         let mut r =
             RealtimeRunner::new(graph(1000.0, 20), TestDevice::new(32, &[], 0), hard.clone())
                 .unwrap();
@@ -408,10 +415,7 @@ fn without_the_privilege_the_run_is_refused_unless_soft_running_is_allowed() {
             other => panic!("expected a refusal, got {other:?}"),
         }
         assert_eq!(r.scheduler().ticks_done(), 0, "nothing ran");
-        let soft = RtConfig {
-            allow_soft: true,
-            ..hard
-        };
+        let soft = RtConfig::new(hard.privileges, true, RealtimeSpec::default());
         let mut r =
             RealtimeRunner::new(graph(1000.0, 20), TestDevice::new(32, &[], 0), soft).unwrap();
         let rep = r.run(|_| {}).unwrap();
@@ -451,15 +455,9 @@ fn ticks_do_not_allocate() {
             graph(20_000.0, n),
             TestDevice::new(n as usize, &[], 0),
             RtConfig {
-                privileges: Privileges {
-                    priority: None,
-                    cpu: None,
-                    lock_memory: false,
-                    hold_cpu_latency: false,
-                },
                 block_timing,
                 record: updates > 0,
-                ..RtConfig::default()
+                ..unprivileged()
             },
         )
         .unwrap();
@@ -861,20 +859,9 @@ fn the_loop_thread_sleeps_without_timer_slack() {
         // SAFETY: prctl queries on the calling thread.
         let before = unsafe { libc::prctl(libc::PR_GET_TIMERSLACK) };
         assert_eq!(before, 50_000, "the default slack of a normal thread");
-        let mut r = RealtimeRunner::new(
-            graph(1000.0, 5),
-            TestDevice::new(8, &[], 0),
-            RtConfig {
-                privileges: Privileges {
-                    priority: None,
-                    cpu: None,
-                    lock_memory: false,
-                    hold_cpu_latency: false,
-                },
-                ..RtConfig::default()
-            },
-        )
-        .unwrap();
+        let mut r =
+            RealtimeRunner::new(graph(1000.0, 5), TestDevice::new(8, &[], 0), unprivileged())
+                .unwrap();
         r.run_here().unwrap();
         let after = unsafe { libc::prctl(libc::PR_GET_TIMERSLACK) };
         assert_eq!(after, 1);
