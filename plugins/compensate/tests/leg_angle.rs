@@ -257,6 +257,26 @@ fn case(margin: f64, measured: Vec<MeasuredSignal>) -> Case {
     // DVRC removes the disturbance's error.
     assert!(r.gate.passes, "{:?}", r.gate);
     assert!(c.kept, "{c:?}");
+    // What `nanomotion check` prints for the written graph: one loop without
+    // the α integrator (the cut named), judged by (5.9) with the figure the
+    // design reported.
+    let spec = surgery::clone_spec(&out.compensated).unwrap();
+    let require = spec.require.clone().unwrap_or_default();
+    let (sched, _) = spec.build().unwrap();
+    let gate = nanomotion_core::gate::analyse(&sched, &require);
+    eprintln!("{gate}");
+    assert!(gate.passes() && gate.loops.len() == 1, "{gate}");
+    assert!(!gate.loops[0].blocks.iter().any(|b| b == "alpha"));
+    assert!(gate.to_string().contains(&format!(
+        "the connection alpha.y -> {}.alpha is cut",
+        c.block
+    )));
+    let lc = &gate.loops[0].points[0].learning[0];
+    assert!(
+        (lc.hinf - d["criterion_5_9_hinf"]).abs() < 1e-9 * lc.hinf,
+        "{lc}"
+    );
+    assert_eq!((lc.n_min as f64, lc.n_max as f64), (d["n_min"], d["n_max"]));
     assert!(r.cut_percent > 99.0, "{}", r.cut_percent);
 
     // On the nonlinear walking stage (the truth this design is for).
