@@ -572,17 +572,7 @@ pub mod check {
             return in_range(field, value, l, h);
         }
         finite(field, value)?;
-        let above = match lo {
-            None => true,
-            Some(Limit::Inclusive(l)) => value >= l,
-            Some(Limit::Exclusive(l)) => value > l,
-        };
-        let below = match hi {
-            None => true,
-            Some(Limit::Inclusive(h)) => value <= h,
-            Some(Limit::Exclusive(h)) => value < h,
-        };
-        if above && below {
+        if admits(value, lo, hi) {
             return Ok(());
         }
         let words = interval(lo, hi);
@@ -607,14 +597,7 @@ pub mod check {
         lo: Option<Limit<i128>>,
         hi: Option<Limit<i128>>,
     ) -> Result<(), ParamError> {
-        let lo = lo.map(|l| match l {
-            Limit::Inclusive(x) => x,
-            Limit::Exclusive(x) => x.saturating_add(1),
-        });
-        let hi = hi.map(|h| match h {
-            Limit::Inclusive(x) => x,
-            Limit::Exclusive(x) => x.saturating_sub(1),
-        });
+        let (lo, hi) = whole_ends(lo, hi);
         if lo.is_none_or(|l| value >= l) && hi.is_none_or(|h| value <= h) {
             return Ok(());
         }
@@ -650,9 +633,10 @@ pub mod check {
             ))
         }
     }
-    // How many entries a list may hold, in words: declared in `doc` beside
-    // `Limit` (the schema says it too), used here by the checks.
-    use crate::doc::{entries_of, entries_words};
+    // Intervals (whether a value lies in one, its whole-number ends) and a
+    // list's length in words: declared in `doc` beside `Limit` (the schema
+    // uses them too), used here by the checks.
+    use crate::doc::{admits, entries_of, entries_words, whole_ends};
 
     /// A list of `n` entries whose count must be within `lo` and `hi` (each end
     /// inclusive or exclusive, either left out): `#[param(len(…))]`.
@@ -663,17 +647,7 @@ pub mod check {
         hi: Option<Limit<i128>>,
     ) -> Result<(), ParamError> {
         let count = n as i128;
-        let above = match lo {
-            None => true,
-            Some(Limit::Inclusive(l)) => count >= l,
-            Some(Limit::Exclusive(l)) => count > l,
-        };
-        let below = match hi {
-            None => true,
-            Some(Limit::Inclusive(h)) => count <= h,
-            Some(Limit::Exclusive(h)) => count < h,
-        };
-        if above && below {
+        if admits(count, lo, hi) {
             return Ok(());
         }
         let words = entries_words(lo, hi).unwrap_or_default();

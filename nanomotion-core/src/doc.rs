@@ -480,6 +480,22 @@ pub(crate) fn entries_of(n: i128) -> String {
 /// 65 entries`, `exactly 3 entries`), from its declared ends (a strict end
 /// is said as the whole number next to it). `None` when nothing bounds it.
 pub fn entries_words(lo: Option<Limit<i128>>, hi: Option<Limit<i128>>) -> Option<String> {
+    let (lo, hi) = whole_ends(lo, hi);
+    Some(match (lo, hi) {
+        (Some(l), Some(h)) if l == h => format!("exactly {}", entries_of(l)),
+        (Some(l), Some(h)) => format!("{l} to {h} entries"),
+        (Some(l), None) => format!("at least {}", entries_of(l)),
+        (None, Some(h)) => format!("at most {}", entries_of(h)),
+        (None, None) => return None,
+    })
+}
+
+/// The ends of an interval of whole numbers, both inclusive (`> 0` is `≥ 1`,
+/// `< 4` is `≤ 3`).
+pub(crate) fn whole_ends(
+    lo: Option<Limit<i128>>,
+    hi: Option<Limit<i128>>,
+) -> (Option<i128>, Option<i128>) {
     let lo = lo.map(|l| match l {
         Limit::Inclusive(x) => x,
         Limit::Exclusive(x) => x.saturating_add(1),
@@ -488,13 +504,23 @@ pub fn entries_words(lo: Option<Limit<i128>>, hi: Option<Limit<i128>>) -> Option
         Limit::Inclusive(x) => x,
         Limit::Exclusive(x) => x.saturating_sub(1),
     });
-    Some(match (lo, hi) {
-        (Some(l), Some(h)) if l == h => format!("exactly {}", entries_of(l)),
-        (Some(l), Some(h)) => format!("{l} to {h} entries"),
-        (Some(l), None) => format!("at least {}", entries_of(l)),
-        (None, Some(h)) => format!("at most {}", entries_of(h)),
-        (None, None) => return None,
-    })
+    (lo, hi)
+}
+
+/// Whether `value` lies within `lo` and `hi` (each end inclusive or
+/// exclusive, either left out: no bound on that side).
+pub(crate) fn admits<T: PartialOrd>(value: T, lo: Option<Limit<T>>, hi: Option<Limit<T>>) -> bool {
+    let above = match lo {
+        None => true,
+        Some(Limit::Inclusive(l)) => value >= l,
+        Some(Limit::Exclusive(l)) => value > l,
+    };
+    let below = match hi {
+        None => true,
+        Some(Limit::Inclusive(h)) => value <= h,
+        Some(Limit::Exclusive(h)) => value < h,
+    };
+    above && below
 }
 
 /// Helpers the derive's generated code calls; not a stable API.
@@ -782,20 +808,17 @@ pub mod __derive {
         lo: Option<Limit<i128>>,
         hi: Option<Limit<i128>>,
     ) {
-        let inclusive = |l: Limit<i128>, step: i128| match l {
-            Limit::Inclusive(x) => x,
-            Limit::Exclusive(x) => x + step,
-        };
+        let (min, max) = super::whole_ends(lo, hi);
         let mut target = &mut *s;
         while target.get("anyOf").is_some() {
             target = &mut target["anyOf"][0];
         }
         if let Some(o) = target.as_object_mut() {
-            if let Some(l) = lo {
-                o.insert("minItems".into(), json!(inclusive(l, 1).max(0)));
+            if let Some(l) = min {
+                o.insert("minItems".into(), json!(l.max(0)));
             }
-            if let Some(h) = hi {
-                o.insert("maxItems".into(), json!(inclusive(h, -1).max(0)));
+            if let Some(h) = max {
+                o.insert("maxItems".into(), json!(h.max(0)));
             }
         }
         words.extend(super::entries_words(lo, hi));

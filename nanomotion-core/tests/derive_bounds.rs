@@ -3,9 +3,11 @@
 //! and exclusive ranges (`range(> 0)`, `range(<= 1)`, `range(> 0.25, < 1)`),
 //! `hint = "…"`, and enum fields whose choices come from the enum itself.
 
+mod common;
+
 use nanomotion_core::block::check::{self, Limit};
 use nanomotion_core::doc::{ParamSchema, Params};
-use nanomotion_core::{Block, GraphError, GraphSpec, Port, Tick};
+use nanomotion_core::{GraphError, GraphSpec};
 use proptest::prelude::*;
 use serde::{Deserialize, Serialize};
 use serde_json::json;
@@ -103,24 +105,7 @@ impl Default for Counts {
     }
 }
 
-#[typetag::serde(name = "test_counts")]
-impl Block for Counts {
-    fn inputs(&self) -> Vec<Port> {
-        vec![Port::new("u", 1)]
-    }
-    fn outputs(&self) -> Vec<Port> {
-        vec![Port::new("y", 1)]
-    }
-    fn build(
-        &mut self,
-        _ctx: &nanomotion_core::BuildContext,
-    ) -> Result<(), nanomotion_core::ParamError> {
-        self.check_params()
-    }
-    fn output(&mut self, _t: Tick, u: &[f64], y: &mut [f64]) {
-        y[0] = u[0];
-    }
-}
+pass_through_block!(Counts, "test_counts");
 
 /// Open-ended and exclusive float ranges.
 #[derive(Debug, Clone, Serialize, Deserialize, Params)]

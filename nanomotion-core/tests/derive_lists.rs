@@ -4,9 +4,11 @@
 //! of parameter enums, and a `#[serde(transparent)]` wrapper of a list whose
 //! errors are named by the field that holds it.
 
+mod common;
+
+use nanomotion_core::GraphSpec;
 use nanomotion_core::block::check::{self, Limit};
 use nanomotion_core::doc::{ParamSchema, Params, within};
-use nanomotion_core::{Block, GraphSpec, Port, Tick};
 use proptest::prelude::*;
 use serde::{Deserialize, Serialize};
 use serde_json::json;
@@ -66,24 +68,7 @@ struct Lists {
     curve: Segments,
 }
 
-#[typetag::serde(name = "test_lists")]
-impl Block for Lists {
-    fn inputs(&self) -> Vec<Port> {
-        vec![Port::new("u", 1)]
-    }
-    fn outputs(&self) -> Vec<Port> {
-        vec![Port::new("y", 1)]
-    }
-    fn build(
-        &mut self,
-        _ctx: &nanomotion_core::BuildContext,
-    ) -> Result<(), nanomotion_core::ParamError> {
-        self.check_params()
-    }
-    fn output(&mut self, _t: Tick, u: &[f64], y: &mut [f64]) {
-        y[0] = u[0];
-    }
-}
+pass_through_block!(Lists, "test_lists");
 
 fn level() -> Segments {
     Segments {
