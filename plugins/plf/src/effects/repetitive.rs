@@ -1,8 +1,7 @@
 //! `repetitive_disturbance`: a Fourier series periodic in time or in a signal.
 
-use super::{MAX_MAGNITUDE, check_bounded, check_count, check_len};
+use super::{MAX_MAGNITUDE, check_bounded, check_len};
 use nanomotion_core::Params;
-use nanomotion_core::block::check;
 use nanomotion_core::{Block, BuildContext, ParamError, Port, Role, Tick, Tunable};
 use serde::{Deserialize, Serialize};
 use std::f64::consts::TAU;
@@ -40,7 +39,8 @@ pub enum PhaseVariable {
 #[serde(deny_unknown_fields)]
 #[block(type_name = "repetitive_disturbance", role = Source, ports = "u (, s) -> y")]
 pub struct RepetitiveDisturbance {
-    /// Period (s for `time`, unit of s for `signal`), > 0.
+    /// Period (s for `time`, unit of s for `signal`).
+    #[param(positive)]
     pub period: f64,
     /// `time` (default) or `signal`.
     #[serde(default)]
@@ -50,9 +50,10 @@ pub struct RepetitiveDisturbance {
     #[serde(default)]
     pub origin: f64,
     /// Cosine amplitudes of harmonics 1..H (\[u\]).
-    /// 1 ≤ H ≤ 64.
+    #[param(len(1, MAX_HARMONICS))]
     pub cos: Vec<f64>,
-    /// Sine amplitudes of harmonics 1..H (\[u\]), as many as `cos`.
+    /// Sine amplitudes of harmonics 1..H (\[u\]).
+    #[param(same_len = cos)]
     pub sin: Vec<f64>,
 }
 
@@ -91,20 +92,9 @@ impl RepetitiveDisturbance {
     }
 
     fn check_all(&self) -> Result<(), ParamError> {
-        check::positive("period", self.period)?;
+        // period > 0, 1 to 64 cosine terms and as many sine terms: declared
+        self.check_params()?;
         check_bounded("origin", self.origin, MAX_MAGNITUDE)?;
-        check_count("cos", self.cos.len(), 1, MAX_HARMONICS)?;
-        if self.sin.len() != self.cos.len() {
-            return Err(ParamError::new(
-                "sin",
-                format!(
-                    "has {} entries but cos has {}",
-                    self.sin.len(),
-                    self.cos.len()
-                ),
-                "give as many sine as cosine amplitudes",
-            ));
-        }
         for (name, v) in [("cos", &self.cos), ("sin", &self.sin)] {
             for (i, x) in v.iter().enumerate() {
                 check_bounded(&format!("{name}[{i}]"), *x, MAX_MAGNITUDE)?;
@@ -169,5 +159,48 @@ impl Tunable for RepetitiveDisturbance {
         next.check_all()?;
         *self = next;
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn err(d: &mut RepetitiveDisturbance) -> (String, String) {
+        let e = d.build(&BuildContext::new("rep", 1e-3, 0)).unwrap_err();
+        (e.field, e.problem)
+    }
+
+    #[test]
+    fn declared_bounds_refuse_bad_harmonics_and_periods_by_name() {
+        let mut d = RepetitiveDisturbance::in_time(0.01, vec![1.0, 0.5], vec![0.0]);
+        assert_eq!(
+            err(&mut d),
+            ("sin".into(), "has 1 entry, cos has 2 entries".into())
+        );
+        let mut d = RepetitiveDisturbance::in_time(0.01, vec![], vec![]);
+        assert_eq!(err(&mut d), ("cos".into(), "is empty".into()));
+        let n = MAX_HARMONICS + 1;
+        let mut d = RepetitiveDisturbance::in_time(0.01, vec![0.0; n], vec![0.0; n]);
+        assert_eq!(
+            err(&mut d),
+            (
+                "cos".into(),
+                format!("has {n} entries, must have 1 to {MAX_HARMONICS} entries")
+            )
+        );
+        let mut d = RepetitiveDisturbance::in_time(0.01, vec![1.0], vec![0.0]);
+        assert!(d.build(&BuildContext::new("rep", 1e-3, 0)).is_ok());
+        // a fitter's step to a period ≤ 0 is refused, the block unchanged
+        let e = d.set_params(&[-0.01, 1.0, 0.0]).unwrap_err();
+        assert_eq!(e.field, "period");
+        assert_eq!(d.params(), [0.01, 1.0, 0.0]);
+        d.set_params(&[0.02, 2.0, 1.0]).unwrap();
+        assert_eq!(d.params(), [0.02, 2.0, 1.0]);
+        // the listing says the bounds
+        let docs = RepetitiveDisturbance::param_docs();
+        let bounds = |n: &str| docs.iter().find(|p| p.name == n).unwrap().bounds.clone();
+        assert_eq!(bounds("cos"), ["1 to 64 entries"]);
+        assert_eq!(bounds("sin"), ["as many entries as cos"]);
     }
 }
