@@ -1,6 +1,6 @@
 //! `axis_coupling`: static cross-talk from other axes.
 
-use super::{MAX_MAGNITUDE, check_bounded, check_count, check_len};
+use super::{MAX_MAGNITUDE, check_bounded, check_len};
 use nalgebra::DMatrix;
 use nanomotion_core::Params;
 use nanomotion_core::lti::StateSpace;
@@ -23,8 +23,8 @@ pub const MAX_COUPLED: usize = 8;
 #[serde(deny_unknown_fields)]
 #[block(type_name = "axis_coupling", role = Plant, ports = "u, s[n] -> y")]
 pub struct AxisCoupling {
-    /// c_1..c_n (\[u\]/\[s\]).
-    /// 1 ≤ n ≤ 8 = the width of port `s`.
+    /// c_1..c_n (\[u\]/\[s\]); n is the width of port `s`.
+    #[param(len(1, MAX_COUPLED))]
     pub coupling: Vec<f64>,
     #[serde(skip)]
     dt: Option<f64>,
@@ -36,8 +36,8 @@ impl AxisCoupling {
         Self { coupling, dt: None }
     }
 
+    /// The gains' magnitudes (their count is declared).
     fn check(c: &[f64]) -> Result<(), ParamError> {
-        check_count("coupling", c.len(), 1, MAX_COUPLED)?;
         for (i, v) in c.iter().enumerate() {
             check_bounded(&format!("coupling[{i}]"), *v, MAX_MAGNITUDE)?;
         }
@@ -54,6 +54,7 @@ impl Block for AxisCoupling {
         vec![Port::new("y", 1)]
     }
     fn build(&mut self, ctx: &BuildContext) -> Result<(), ParamError> {
+        self.check_params()?;
         Self::check(&self.coupling)?;
         nanomotion_core::block::check::positive("dt", ctx.dt)?;
         self.dt = Some(ctx.dt);

@@ -1,6 +1,6 @@
 //! `creep`: piezo creep as a sum of first-order lags.
 
-use super::{MAX_MAGNITUDE, check_bounded, check_count, check_len};
+use super::{MAX_MAGNITUDE, check_bounded, check_len};
 use nanomotion_core::Params;
 use nanomotion_core::block::check;
 use nanomotion_core::lti::StateSpace;
@@ -49,7 +49,8 @@ pub struct CreepTerm {
 #[block(type_name = "creep", role = Actuator, ports = "u -> y")]
 pub struct Creep {
     /// The terms {gain, tau_s}.
-    /// [{gain: k_i (unit of y per unit of u), tau_s: τ_i (s) > 0}], 1 to 4 terms.
+    /// [{gain: k_i (unit of y per unit of u), tau_s: τ_i (s) > 0}].
+    #[param(len(1, MAX_TERMS))]
     pub terms: Vec<CreepTerm>,
     #[serde(skip)]
     a: [f64; MAX_TERMS],
@@ -123,8 +124,8 @@ impl Creep {
         (dt_s, t_len_s)
     }
 
+    /// Each term's gain and time constant (their count is declared).
     fn check_terms(terms: &[CreepTerm]) -> Result<(), ParamError> {
-        check_count("terms", terms.len(), 1, MAX_TERMS)?;
         for (i, t) in terms.iter().enumerate() {
             check_bounded(&format!("terms[{i}].gain"), t.gain, MAX_MAGNITUDE)?;
             check::positive(&format!("terms[{i}].tau_s"), t.tau_s)?;
@@ -142,6 +143,7 @@ impl Block for Creep {
         vec![Port::new("y", 1)]
     }
     fn build(&mut self, ctx: &BuildContext) -> Result<(), ParamError> {
+        self.check_params()?;
         Self::check_terms(&self.terms)?;
         check::positive("dt", ctx.dt)?;
         self.a = [0.0; MAX_TERMS];

@@ -1,9 +1,8 @@
 //! `position_dependent_gain`: a gain that varies polynomially with a scheduling
 //! signal.
 
-use super::{MAX_MAGNITUDE, check_bounded, check_count, check_len};
+use super::{MAX_MAGNITUDE, check_bounded, check_len};
 use nanomotion_core::Params;
-use nanomotion_core::block::check;
 use nanomotion_core::{Block, BuildContext, ParamError, Port, Role, Tick, Tunable};
 use serde::{Deserialize, Serialize};
 
@@ -50,11 +49,12 @@ pub struct PositionDependentGain {
     /// Centre of the polynomial (unit of s), default 0.
     #[serde(default)]
     pub center: f64,
-    /// Scale > 0 (unit of s), default 1: the polynomial is in (s − center)/scale.
+    /// Scale (unit of s), default 1: the polynomial is in (s − center)/scale.
     #[serde(default = "one")]
+    #[param(positive)]
     pub scale: f64,
     /// g_1..g_n (dimensionless).
-    /// 1 ≤ n ≤ 8.
+    #[param(len(1, MAX_ORDER))]
     pub coeffs: Vec<f64>,
     /// g_0: constant relative gain error (dimensionless), default 0.
     #[serde(default)]
@@ -83,8 +83,8 @@ impl PositionDependentGain {
         1.0 + self.g0 + acc
     }
 
+    /// The coefficients' magnitudes (their count is declared).
     fn check_coeffs(c: &[f64]) -> Result<(), ParamError> {
-        check_count("coeffs", c.len(), 1, MAX_ORDER)?;
         for (i, g) in c.iter().enumerate() {
             check_bounded(&format!("coeffs[{i}]"), *g, MAX_MAGNITUDE)?;
         }
@@ -104,8 +104,9 @@ impl Block for PositionDependentGain {
         vec![Port::new("y", 1)]
     }
     fn build(&mut self, _ctx: &BuildContext) -> Result<(), ParamError> {
+        // scale > 0 and 1 to 8 coefficients: declared
+        self.check_params()?;
         check_bounded("center", self.center, MAX_MAGNITUDE)?;
-        check::positive("scale", self.scale)?;
         check_bounded("g0", self.g0, MAX_MAGNITUDE)?;
         Self::check_coeffs(&self.coeffs)
     }

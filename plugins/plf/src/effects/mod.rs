@@ -181,19 +181,6 @@ pub(crate) fn check_len(p: &[f64], n: usize, order: &str) -> Result<(), ParamErr
     }
 }
 
-/// A list length `n` of field `field` must lie in `[lo, hi]`.
-pub(crate) fn check_count(field: &str, n: usize, lo: usize, hi: usize) -> Result<(), ParamError> {
-    if (lo..=hi).contains(&n) {
-        Ok(())
-    } else {
-        Err(ParamError::new(
-            field,
-            format!("has {n} entries, must have {lo} to {hi}"),
-            format!("give between {lo} and {hi} values"),
-        ))
-    }
-}
-
 /// `value` finite with |value| ≤ `limit` (keeps products and powers finite).
 pub(crate) fn check_bounded(field: &str, value: f64, limit: f64) -> Result<(), ParamError> {
     nanomotion_core::block::check::finite(field, value)?;
@@ -211,3 +198,68 @@ pub(crate) fn check_bounded(field: &str, value: f64, limit: f64) -> Result<(), P
 /// The magnitude bound of every gain/coefficient parameter: generous for any unit,
 /// small enough that sums and products of a few of them stay finite.
 pub(crate) const MAX_MAGNITUDE: f64 = 1e100;
+
+#[cfg(test)]
+mod declared_lengths {
+    use super::*;
+    use nanomotion_core::doc::Params;
+    use nanomotion_core::{Block, BuildContext};
+
+    fn refused(mut b: impl Block) -> (String, String) {
+        let e = b.build(&BuildContext::new("effect", 1e-3, 0)).unwrap_err();
+        (e.field, e.problem)
+    }
+
+    /// The effects' list lengths are declared (`len`): each refuses an empty
+    /// list and one too long by name, and says its bound in the listing.
+    #[test]
+    fn each_list_length_is_refused_by_name_and_listed() {
+        let gain = |c: Vec<f64>| PositionDependentGain::new(0.0, 1.0, c);
+        let slit = |e: Vec<f64>| EncoderSlitError::new(1e-3, 0.0, e);
+        let term = CreepTerm {
+            gain: 0.1,
+            tau_s: 1.0,
+        };
+        let creep = |n: usize| Creep::new(vec![term; n]);
+        assert_eq!(refused(gain(vec![])), ("coeffs".into(), "is empty".into()));
+        assert_eq!(
+            refused(gain(vec![0.1; gain::MAX_ORDER + 1])).1,
+            "has 9 entries, must have 1 to 8 entries"
+        );
+        assert_eq!(refused(slit(vec![])).0, "errors");
+        assert_eq!(
+            refused(slit(vec![0.0; slit::MAX_SLITS + 1])).1,
+            "has 4097 entries, must have 1 to 4096 entries"
+        );
+        assert_eq!(refused(AxisCoupling::new(vec![])).0, "coupling");
+        assert_eq!(
+            refused(AxisCoupling::new(vec![0.1; coupling::MAX_COUPLED + 1])).1,
+            "has 9 entries, must have 1 to 8 entries"
+        );
+        assert_eq!(refused(creep(0)), ("terms".into(), "is empty".into()));
+        assert_eq!(refused(creep(creep::MAX_TERMS + 1)).0, "terms");
+        // what passes builds; the other bounds are still checked
+        assert!(
+            gain(vec![0.1])
+                .build(&BuildContext::new("g", 1e-3, 0))
+                .is_ok()
+        );
+        assert!(creep(4).build(&BuildContext::new("c", 1e-3, 0)).is_ok());
+        assert_eq!(
+            refused(PositionDependentGain::new(0.0, 0.0, vec![0.1])).0,
+            "scale"
+        );
+        assert_eq!(
+            refused(EncoderSlitError::new(-1.0, 0.0, vec![0.0])).0,
+            "pitch"
+        );
+        let words = |docs: Vec<nanomotion_core::ParamDoc>, n: &str| {
+            docs.into_iter().find(|p| p.name == n).unwrap().bounds
+        };
+        assert_eq!(words(Creep::param_docs(), "terms"), ["1 to 4 entries"]);
+        assert_eq!(
+            words(EncoderSlitError::param_docs(), "errors"),
+            ["1 to 4096 entries"]
+        );
+    }
+}

@@ -1,8 +1,7 @@
 //! `encoder_slit_error`: per-slit line-position errors of an optical encoder.
 
-use super::{MAX_MAGNITUDE, check_bounded, check_count, check_len};
+use super::{MAX_MAGNITUDE, check_bounded, check_len};
 use nanomotion_core::Params;
-use nanomotion_core::block::check;
 use nanomotion_core::{Block, BuildContext, ParamError, Port, Role, Tick, Tunable};
 use serde::{Deserialize, Serialize};
 
@@ -25,13 +24,14 @@ pub const MAX_SLITS: usize = 4096;
 #[serde(deny_unknown_fields)]
 #[block(type_name = "encoder_slit_error", role = Sensor, ports = "u -> y")]
 pub struct EncoderSlitError {
-    /// Slit pitch (unit of u, e.g. m or rad) > 0.
+    /// Slit pitch (unit of u, e.g. m or rad).
+    #[param(positive)]
     pub pitch: f64,
     /// Position of slit 0 (unit of u), default 0.
     #[serde(default)]
     pub origin: f64,
-    /// e_0..e_{N−1} (unit of u).
-    /// Line-position errors, 1 ≤ N ≤ 4096.
+    /// e_0..e_{N−1} (unit of u): line-position errors.
+    #[param(len(1, MAX_SLITS))]
     pub errors: Vec<f64>,
 }
 
@@ -55,8 +55,8 @@ impl EncoderSlitError {
         (i.rem_euclid(n as f64) as usize).min(n - 1)
     }
 
+    /// The errors' magnitudes (their count is declared).
     fn check_errors(e: &[f64]) -> Result<(), ParamError> {
-        check_count("errors", e.len(), 1, MAX_SLITS)?;
         for (i, v) in e.iter().enumerate() {
             check_bounded(&format!("errors[{i}]"), *v, MAX_MAGNITUDE)?;
         }
@@ -73,7 +73,8 @@ impl Block for EncoderSlitError {
         vec![Port::new("y", 1)]
     }
     fn build(&mut self, _ctx: &BuildContext) -> Result<(), ParamError> {
-        check::positive("pitch", self.pitch)?;
+        // pitch > 0 and 1 to 4096 errors: declared
+        self.check_params()?;
         check_bounded("origin", self.origin, MAX_MAGNITUDE)?;
         Self::check_errors(&self.errors)
     }
