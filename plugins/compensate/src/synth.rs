@@ -1243,7 +1243,7 @@ fn advance_range(x: &[f64], period: f64, alpha: &str, which: &str) -> Result<(f6
 /// advance at least two periods overall.
 fn measured_range(x: &[f64], period: f64, alpha: &str) -> Result<(f64, f64), String> {
     let advance = x.last().zip(x.first()).map_or(0.0, |(b, a)| b - a);
-    if period.is_nan() || period <= 0.0 || !(advance >= 2.0 * period) {
+    if period.is_nan() || period <= 0.0 || advance.is_nan() || advance < 2.0 * period {
         return Err(format!(
             "`{alpha}` advances {advance:.3e} over the measured record, less than two periods ({:.3e}): record your loop where the signal moves forward through the period",
             2.0 * period
