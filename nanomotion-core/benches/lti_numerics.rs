@@ -6,7 +6,7 @@
 //! the eigenvalue-only QR iteration (`eigvals_fast`) against nalgebra's Schur
 //! form (`eigvals`) at n = 100 … 400, so their ratios come from one run:
 //! `cargo bench -p nanomotion-core --bench lti_numerics -- 'hinf_ratio|eig/'`.
-//! The `hinf_ratio` systems come from `support/hinf_systems.rs`, shared with
+//! The `hinf_ratio` systems come from `nanomotion_core::lti::random_systems`, shared with
 //! the `hinf_systems` example that `tools/hinfnorm_vs_ab13dd.py` runs to time
 //! SLICOT's `ab13dd` on the same matrices.
 
@@ -21,9 +21,7 @@ use nanomotion_core::rng::Rng;
 use std::hint::black_box;
 use std::time::Duration;
 
-#[path = "support/hinf_systems.rs"]
-mod hinf_systems;
-use hinf_systems::{hinf_ratio_systems, hurwitz, random};
+use nanomotion_core::lti::random_systems::{hinf_ratio_systems, hurwitz, random};
 
 /// A group of 10 samples, 0.3 s warm-up and 1 s of measurement: every
 /// group of this bench is timed alike.

@@ -1,5 +1,5 @@
 //! Issue 29's `hinfnorm` timing systems (the `lti_numerics` bench's
-//! `hinf_ratio` group, drawn by `benches/support/hinf_systems.rs`) as JSON,
+//! `hinf_ratio` group, drawn by `nanomotion_core::lti::random_systems`) as JSON,
 //! with our norm, peak frequency and time per call for each, for
 //! `tools/hinfnorm_vs_ab13dd.py`, which times SLICOT's `ab13dd` on the same
 //! matrices:
@@ -9,9 +9,6 @@
 //! Each system is timed for about SECONDS (default 0.5) after a warm-up: the
 //! median over 7 batches of the time per call, for `hinfnorm` and for the
 //! pre-issue-29 `hinfnorm_schur_eigensolver`.
-
-#[path = "../benches/support/hinf_systems.rs"]
-mod hinf_systems;
 
 use nanomotion_core::lti::hinf::{HinfNorm, hinfnorm_schur_eigensolver};
 use nanomotion_core::lti::{LtiError, StateSpace, hinfnorm};
@@ -74,7 +71,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         .next()
         .ok_or("usage: hinf_systems OUT.json [SECONDS]")?;
     let budget: f64 = args.next().map(|s| s.parse()).transpose()?.unwrap_or(0.5);
-    let systems = hinf_systems::hinf_ratio_systems()
+    let systems = nanomotion_core::lti::random_systems::hinf_ratio_systems()
         .iter()
         .map(|(name, sys)| record(name, sys, budget))
         .collect::<Result<Vec<_>, _>>()?;

@@ -81,6 +81,7 @@ pub mod hinfsyn;
 pub mod linalg;
 pub mod lmi;
 pub mod margins;
+pub mod random_systems;
 pub mod riccati;
 mod schur;
 pub mod sim;

@@ -1,12 +1,13 @@
-//! The seeded random stable systems of issue 29's `hinfnorm` timings, shared by
-//! the `lti_numerics` bench (`hinf_ratio`) and the `hinf_systems` example (which
-//! writes them as JSON for `tools/hinfnorm_vs_ab13dd.py`), so that both time the
-//! same matrices. Included with `#[path]`; not a target of its own.
+//! Seeded random stable systems: the matrices of the `hinfnorm` timings
+//! (docs/performance.md), which the `lti_numerics` bench (`hinf_ratio`) times
+//! and the `hinf_systems` example writes as JSON for
+//! `tools/hinfnorm_vs_ab13dd.py` to time SLICOT's `ab13dd` on — one function
+//! for both, so both time the same matrices.
 
+use crate::lti::StateSpace;
+use crate::lti::linalg::eigvals;
+use crate::rng::Rng;
 use nalgebra::DMatrix;
-use nanomotion_core::lti::StateSpace;
-use nanomotion_core::lti::linalg::eigvals;
-use nanomotion_core::rng::Rng;
 
 /// An r × c matrix of standard normal entries.
 pub fn random(rng: &mut Rng, r: usize, c: usize) -> DMatrix<f64> {
@@ -37,15 +38,10 @@ pub fn hinf_ratio_systems() -> Vec<(String, StateSpace)> {
             ("c", ah.clone(), None),
             ("d", &ah * (0.95 / rho), Some(0.01)),
         ] {
-            let sys = StateSpace::new(
-                a,
-                random(&mut rng, n, 2),
-                random(&mut rng, 2, n),
-                DMatrix::zeros(2, 2),
-                dt,
-            )
-            .unwrap();
-            if sys.is_stable() {
+            let (b, c) = (random(&mut rng, n, 2), random(&mut rng, 2, n));
+            if let Ok(sys) = StateSpace::new(a, b, c, DMatrix::zeros(2, 2), dt)
+                && sys.is_stable()
+            {
                 out.push((format!("{kind}{n}"), sys));
             }
         }
