@@ -241,8 +241,7 @@ impl Default for WaveformShape {
 #[serde(deny_unknown_fields)]
 pub struct DriverParams {
     /// The waveform shape; default the asymmetric waveform with q = 1/3.
-    /// {kind: sinusoidal | asymmetric | asymmetric_fourier | rhombic | free}; overlap_q ∈
-    /// (0, 1) for the asymmetric ones; points_v: 4×8 V for free.
+    /// overlap_q ∈ (0, 1) for the asymmetric ones; points_v: 4×8 V for free.
     #[serde(default)]
     #[param(nested, default_doc = "{kind: asymmetric, overlap_q: 1/3}")]
     pub shape: WaveformShape,
