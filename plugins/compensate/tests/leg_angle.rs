@@ -132,11 +132,6 @@ impl Reference {
     }
 }
 
-/// The user's loop on the nominal (identified) stage at constant velocity.
-fn controller() -> GraphSpec {
-    controller_for(Reference::Constant)
-}
-
 /// The user's loop on the nominal (identified) stage tracking `r`.
 fn controller_for(r: Reference) -> GraphSpec {
     GraphSpec::from_yaml(
@@ -289,6 +284,26 @@ impl Case {
     }
 }
 
+/// α recorded from your loop (PI only) on the walking stage tracking `r`,
+/// from 10 s on.
+fn measured_alpha(r: Reference) -> Vec<f64> {
+    let (_, logs) = run(&on_walking_stage(&controller_for(r)), &["alpha.y"]);
+    logs[0][(10.0 * RATE) as usize..].to_vec()
+}
+
+/// [`case`] with the default margin and `record` as the measured α.
+fn case_with_record(record: Vec<f64>, r: Reference) -> Case {
+    case(
+        Options::default().delay_margin,
+        vec![MeasuredSignal {
+            signal: "alpha.y".into(),
+            rate_hz: RATE,
+            values: record,
+        }],
+        r,
+    )
+}
+
 /// Compensate the leg-angle disturbance with `delay_margin` = `margin`, check
 /// the design against its closed forms, and run both loops on the walking stage.
 fn case(margin: f64, measured: Vec<MeasuredSignal>, reference: Reference) -> Case {
@@ -437,18 +452,9 @@ fn the_default_range_is_too_narrow_for_the_walking_stage() {
 fn the_range_from_a_measured_alpha_record_covers_the_walking_stage() {
     let _ = walking_piezo::driver::DriverParams::default();
     // The record: your loop (PI only) on the walking stage, from 10 s on.
-    let (_, logs) = run(&on_walking_stage(&controller()), &["alpha.y"]);
-    let record: Vec<f64> = logs[0][(10.0 * RATE) as usize..].to_vec();
+    let record = measured_alpha(Reference::Constant);
     let (d_lo, d_hi) = delay_back(&record, 0);
-    let c = case(
-        Options::default().delay_margin,
-        vec![MeasuredSignal {
-            signal: "alpha.y".into(),
-            rate_hz: RATE,
-            values: record,
-        }],
-        Reference::Constant,
-    );
+    let c = case_with_record(record, Reference::Constant);
     let d = &c.design;
     eprintln!(
         "measured record: delays {:.1} .. {:.1} (interpolated {d_lo:.2} .. {d_hi:.2})",
@@ -470,16 +476,6 @@ fn the_range_from_a_measured_alpha_record_covers_the_walking_stage() {
 fn at_the_sinusoidal_velocity_the_dvrc_follows_the_alpha_period() {
     let _ = walking_piezo::driver::DriverParams::default();
     let r = Reference::Sinusoidal;
-    let (_, logs) = run(&on_walking_stage(&controller_for(r)), &["alpha.y"]);
-    let record: Vec<f64> = logs[0][(10.0 * RATE) as usize..].to_vec();
-    let c = case(
-        Options::default().delay_margin,
-        vec![MeasuredSignal {
-            signal: "alpha.y".into(),
-            rate_hz: RATE,
-            values: record,
-        }],
-        r,
-    );
+    let c = case_with_record(measured_alpha(r), r);
     c.assert_inside_and_better(false);
 }
