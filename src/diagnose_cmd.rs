@@ -294,6 +294,17 @@ fn print_report(r: &Report) {
             }
         );
     }
+    for d in &r.dropped {
+        say!(
+            "dropped at the end: {} ({}) — the effects named after it explain the held-out data without it: held-out rms {:.4e} with it, {:.4e} without (p = {:.1e}, {:.0} % of the excess over the noise floor)",
+            d.effect,
+            d.site,
+            d.holdout_rms_with,
+            d.holdout_rms_without,
+            d.p_value,
+            d.excess_cut_percent
+        );
+    }
     say!(
         "\nfound: [{}]",
         r.found

@@ -25,6 +25,7 @@
 
 use crate::PlfError;
 use crate::effects::creep::{Creep, CreepTerm};
+use crate::effects::delay::{MIN_RESOLVED_DELAY_SAMPLES, TimeDelay};
 use crate::effects::resonance::{MAX_RESONANT_DAMPING, UnmodeledResonance};
 use crate::effects::slit::MAX_SLITS;
 use crate::fit::{
@@ -227,6 +228,27 @@ pub struct Alternative {
     pub experiment: String,
 }
 
+/// An effect named during the search and taken out at its end: refitted
+/// without it, the effects named with it predict the held-out data as well —
+/// it no longer passes the tests a name must pass (docs/plf.md, Method,
+/// "Backward elimination").
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Dropped {
+    /// Vocabulary name.
+    pub effect: String,
+    /// Where it had entered.
+    pub site: String,
+    /// Held-out rms with it (the model before it was taken out).
+    pub holdout_rms_with: f64,
+    /// Held-out rms without it, the rest refitted.
+    pub holdout_rms_without: f64,
+    /// p-value of "the model with it predicts the held-out data better"
+    /// (it had to be below the level it was named at).
+    pub p_value: f64,
+    /// Share of the excess over the noise floor it still removes (%).
+    pub excess_cut_percent: f64,
+}
+
 /// The nominal calibration: the nominal model's own parameters — the gain g,
 /// the time scale λ (every mode's frequency × λ), the damping scale d (every
 /// complex pair's decay rate × d), the lag scale ℓ (every real pole × ℓ) and
@@ -315,6 +337,10 @@ pub struct Report {
     pub excitation_notes: Vec<String>,
     /// The candidates of the step that named nothing (best first), if it came to one.
     pub rejected_candidates: Vec<Candidate>,
+    /// Effects named in the search that the effects named after them made
+    /// unnecessary (see [`Dropped`]): not in `found`, `steps` or the
+    /// augmented model.
+    pub dropped: Vec<Dropped>,
     /// The records: the estimation record first, then the held-out ones (one
     /// name when a single record is split in time).
     pub records: Vec<String>,
@@ -473,6 +499,7 @@ pub fn diagnose_records(
             break;
         }
     }
+    search.prune()?;
     search.rounding_from_grid()?;
     search.report(spec)
 }
@@ -589,6 +616,10 @@ struct Search<'c, 'a> {
     named: Vec<(&'static str, Vec<usize>)>,
     /// Per step: (force signal, position) of an effect fed by the stage's own motion.
     own_forces: Vec<Option<(String, String)>>,
+    /// Per step: the level it was significant at (α over the step's candidates).
+    levels: Vec<f64>,
+    /// Steps taken out at the end (see `prune`).
+    dropped: Vec<Dropped>,
     /// A step being tried again with the candidates refused as locked to the
     /// excitation (see `step`): why the step had stopped, its table, and the
     /// number of candidates its level was set by.
@@ -639,6 +670,8 @@ impl<'c, 'a> Search<'c, 'a> {
             rejected_candidates: Vec::new(),
             named: Vec::new(),
             own_forces: Vec::new(),
+            levels: Vec::new(),
+            dropped: Vec::new(),
             locked_retry: None,
             runs,
         })
@@ -1277,6 +1310,7 @@ impl<'c, 'a> Search<'c, 'a> {
         let sc = scores(ctx, &new);
         self.named.push((effect_name, outputs_of(ctx, &cand.site)));
         self.own_forces.push(own_force);
+        self.levels.push(level);
         self.steps.push(Step {
             effect: effect_name.to_string(),
             block: BlockRef {
@@ -1301,6 +1335,92 @@ impl<'c, 'a> Search<'c, 'a> {
         Ok(())
     }
 
+    /// Backward elimination: an effect named early can be made unnecessary
+    /// by those named after it (a delay that took a hysteresis's phase
+    /// before the hysteresis was named). Once two or more are named, each is
+    /// taken out in turn and the rest refitted without it; one that no
+    /// longer passes the tests a name must pass — against that model, at
+    /// the level it was named at — is dropped, the weakest (largest p)
+    /// first, and the rest judged again.
+    fn prune(&mut self) -> Result<(), PlfError> {
+        let (ctx, opts) = (self.ctx, self.opts);
+        if self.steps.len() < 2 {
+            return Ok(());
+        }
+        while !self.steps.is_empty() {
+            let mut weakest: Option<(usize, Current, stats::Test, f64)> = None;
+            for i in 0..self.steps.len() {
+                let Some(without) = self.without(i)? else {
+                    continue;
+                };
+                let excess = excess_ms(ctx, &without);
+                let at_floor = at_noise_floor(&excess);
+                let (test, cut) = held_out_gain(
+                    ctx,
+                    (&excess, at_floor),
+                    &without.residual,
+                    &self.cur.residual,
+                );
+                // At the floor only what can look white is looked for (see `step`).
+                let white = matches!(
+                    self.steps[i].effect.as_str(),
+                    "quantization" | "encoder_slit_error"
+                );
+                let needed = test.p_value < self.levels[i]
+                    && cut >= opts.min_excess_cut
+                    && (white || !at_floor);
+                if !needed && weakest.as_ref().is_none_or(|w| test.p_value > w.2.p_value) {
+                    weakest = Some((i, without, test, cut));
+                }
+            }
+            let Some((i, without, test, cut)) = weakest else {
+                break;
+            };
+            let step = self.steps.remove(i);
+            self.named.remove(i);
+            self.own_forces.remove(i);
+            self.levels.remove(i);
+            if i < self.plots.len() {
+                self.plots.remove(i);
+            }
+            self.dropped.push(Dropped {
+                effect: step.effect,
+                site: step.site,
+                holdout_rms_with: holdout_rms(ctx, &self.cur.residual),
+                holdout_rms_without: holdout_rms(ctx, &without.residual),
+                p_value: test.p_value,
+                excess_cut_percent: 100.0 * cut,
+            });
+            self.cur = without;
+        }
+        Ok(())
+    }
+
+    /// The model without step `i`'s effect, the rest (and the calibration)
+    /// refitted; `None` when that refit does not run.
+    fn without(&mut self, i: usize) -> Result<Option<Current>, PlfError> {
+        let name = self.steps[i].block.name.clone();
+        let mut spec = self.cur.spec()?;
+        surgery::remove(&mut spec, &name)?;
+        let free: Vec<FreeParam> = self
+            .cur
+            .free
+            .iter()
+            .filter(|p| p.block != name)
+            .cloned()
+            .collect();
+        if !free.is_empty() {
+            match refit(self.ctx, &spec, &free) {
+                Ok((fitted, _, _, n)) => {
+                    self.runs += n;
+                    spec = fitted;
+                }
+                Err(_) => return Ok(None),
+            }
+        }
+        evaluate_current(self.ctx, spec, free, &mut self.runs).map(Some)
+    }
+
     /// Rounding read off the record: simulation cannot show it where the
     /// model is off by more than a step, but the measured values sit on its
     /// grid.
@@ -1311,6 +1431,7 @@ impl<'c, 'a> Search<'c, 'a> {
         {
             self.named.push(("quantization", vec![i]));
             self.own_forces.push(None);
+            self.levels.push(self.opts.alpha);
             self.steps.push(step);
             self.cur = new;
         }
@@ -1333,6 +1454,7 @@ impl<'c, 'a> Search<'c, 'a> {
             stopped,
             rejected_candidates,
             own_forces,
+            dropped,
             runs,
             ..
         } = self;
@@ -1392,6 +1514,7 @@ impl<'c, 'a> Search<'c, 'a> {
                 .chain(early_residual_notes(ctx, &cur))
                 .collect(),
             rejected_candidates,
+            dropped,
             records: ctx
                 .records
                 .parts
@@ -1952,6 +2075,9 @@ fn implausible<'n>(
                     .collect(),
             )
             .implausible(ctx.n as f64 / ctx.fs, 1.0 / ctx.fs),
+            ("time_delay", &[delay_s]) => {
+                TimeDelay::new(delay_s, delay_s).implausible(1.0 / ctx.fs)
+            }
             _ => None,
         };
         if let Some(why) = why {
@@ -3555,16 +3681,31 @@ fn repetitive(
 }
 
 /// A fractional delay, started at 0.5 to 20 samples (buffer up to 200 samples).
+/// A delay on `site`, started at 0.5–20 samples and fitted within what a
+/// record sampled at `fs` shows as a delay: from
+/// [`MIN_RESOLVED_DELAY_SAMPLES`] (what `TimeDelay::implausible` refuses
+/// below) to 200 samples. Fitted freely, a delay took the phase a nominal a
+/// few per cent off leaves (0.04–0.4 samples after the calibration: tuning
+/// 52, 80, 768) and was named; refused after the fit, a real delay of one
+/// sample fitted at 0.46 on the nominal before its calibration was lost
+/// (tuning 738).
 fn time_delay(fs: f64, site: Site, output: Option<usize>, rate_hz: Option<f64>) -> Cand {
+    let longest = 200.0 / fs;
     Cand {
         effect: "time_delay",
         site,
         output,
         starts: [0.5, 2.0, 6.0, 20.0]
             .iter()
-            .map(|d| json!({"type": "time_delay", "max_delay_s": 200.0 / fs, "delay_s": d / fs}))
+            .map(|d| json!({"type": "time_delay", "max_delay_s": longest, "delay_s": d / fs}))
             .collect(),
-        free: vec![(0, Scale::Linear(1.0 / fs))],
+        free: vec![(
+            0,
+            Scale::LogWithin {
+                lo: MIN_RESOLVED_DELAY_SAMPLES / fs,
+                hi: longest,
+            },
+        )],
         s: vec![],
         rate_hz,
     }
@@ -4295,6 +4436,103 @@ mod tests {
             .collect();
         let y = x.iter().map(|&u| h.step(u)).collect();
         (x, y)
+    }
+
+    /// Backward elimination (`Search::prune`): with the record's drift in
+    /// the model twice (two output-side drift blocks, fitted jointly), either
+    /// one alone explains what both do — one is dropped, with a p-value the
+    /// level a name needs refuses, and the other is kept, since without it
+    /// the drift is back; the model left predicts the held-out part as the
+    /// two did.
+    #[test]
+    fn an_effect_the_others_make_unnecessary_is_dropped_and_one_the_data_need_kept() {
+        let _ = std::any::type_name::<crate::effects::Effect>();
+        let rec = crate::generate::second_order("drift", 3, 4000, false).unwrap();
+        let spec = GraphSpec::from_yaml(&rec.nominal_yaml, "nominal.yaml").unwrap();
+        let records = Records::concat(std::slice::from_ref(&rec.data)).unwrap();
+        let data = records.all.clone();
+        let opts = Options::default();
+        let (ctx, nominal, scores, runs) = context(&spec, &records, &data, &opts).unwrap();
+        let mut search = Search::new(&ctx, &opts, nominal, scores, runs).unwrap();
+        let site = Site::Output {
+            compare: 0,
+            signal: ctx.channels[0].signal.clone(),
+        };
+        let scale = std_of(&search.cur.residual[0]);
+        let t_len = ctx.n as f64 / ctx.fs;
+        let mut twice = search.cur.spec().unwrap();
+        let mut free = Vec::new();
+        for _ in 0..2 {
+            let drift = surgery::block_from_json(
+                json!({"type": "drift", "offset": 0.0, "rate": 0.0, "curvature": 0.0}),
+            )
+            .unwrap();
+            let name = surgery::insert(&mut twice, "plf_drift", drift, &site, &[], None).unwrap();
+            for (index, s) in [scale, scale / t_len, scale / (t_len * t_len)]
+                .into_iter()
+                .enumerate()
+            {
+                free.push(FreeParam {
+                    block: name.clone(),
+                    index,
+                    scale: Scale::Linear(s),
+                });
+            }
+            search.steps.push(Step {
+                effect: "drift".into(),
+                block: BlockRef {
+                    name,
+                    type_name: "drift".into(),
+                },
+                site: site.describe(),
+                params: BTreeMap::new(),
+                final_params: BTreeMap::new(),
+                derived: BTreeMap::new(),
+                uncertainty: BTreeMap::new(),
+                evidence: String::new(),
+                holdout_rms_before: f64::NAN,
+                holdout_rms_after: f64::NAN,
+                cut_percent: f64::NAN,
+                p_value: f64::NAN,
+                per_output: Vec::new(),
+                candidates: Vec::new(),
+                ambiguous_with: Vec::new(),
+            });
+            search.named.push(("drift", vec![0]));
+            search.own_forces.push(None);
+            search.levels.push(opts.alpha);
+        }
+        let (fitted, _, _, _) = refit(&ctx, &twice, &free).unwrap();
+        search.cur = evaluate_current(&ctx, fitted, free, &mut search.runs).unwrap();
+        let both = weighted_holdout_ms(&ctx, &search.cur.residual);
+        let nominal_ms = weighted_holdout_ms(&ctx, &search.first_residuals);
+        assert!(both < 0.5 * nominal_ms, "{both} vs {nominal_ms}");
+        search.prune().unwrap();
+        assert_eq!(search.steps.len(), 1, "{:?}", search.dropped);
+        assert_eq!(search.dropped.len(), 1);
+        let d = &search.dropped[0];
+        assert_eq!(d.effect, "drift");
+        assert!(d.p_value >= opts.alpha, "{d:?}");
+        let one = weighted_holdout_ms(&ctx, &search.cur.residual);
+        assert!((one / both - 1.0).abs() < 0.01, "{one} vs {both}");
+        // The drift left is the one the data need.
+        let name = &search.steps[0].block.name;
+        assert!(
+            search
+                .cur
+                .spec()
+                .unwrap()
+                .blocks
+                .iter()
+                .any(|b| &b.name == name)
+        );
+        assert!(
+            search
+                .cur
+                .free
+                .iter()
+                .all(|p| &p.block == name || !p.block.starts_with("plf_drift"))
+        );
     }
 
     #[test]

@@ -506,6 +506,77 @@ pub fn insert(
     Ok(name)
 }
 
+/// Take out effect block `name` that [`insert`] put in, with the `sum` and
+/// `mux` it brought: what it read goes where its output went (a map in
+/// series or on a comparison), or the force balance it was added into is
+/// left as it was before (a force inside the loop). The reverse of
+/// [`insert`]: the effects inserted before and after it stay in their order.
+pub fn remove(spec: &mut GraphSpec, name: &str) -> Result<(), PlfError> {
+    let missing = || PlfError::Model(format!("no effect block {name} to take out"));
+    if !spec.blocks.iter().any(|b| b.name == name) {
+        return Err(missing());
+    }
+    let (u, y, s) = (
+        format!("{name}.u"),
+        format!("{name}.y"),
+        format!("{name}.s"),
+    );
+    let read = spec
+        .connections
+        .iter()
+        .find(|c| c.to == u)
+        .map(|c| c.from.clone())
+        .ok_or_else(missing)?;
+    // Helpers it brought: the sum it is added through, the mux of its `s`.
+    let sum_prefix = format!("{name}_sum");
+    let sum = spec
+        .connections
+        .iter()
+        .filter(|c| c.from == y)
+        .map(|c| split(&c.to).0)
+        .find(|b| b.starts_with(&sum_prefix))
+        .map(str::to_string);
+    let mux_prefix = format!("{name}_mux");
+    let mux = spec
+        .connections
+        .iter()
+        .filter(|c| c.to == s)
+        .map(|c| split(&c.from).0)
+        .find(|b| b.starts_with(&mux_prefix))
+        .map(str::to_string);
+    let (source, output) = match &sum {
+        // A force inside the loop: the sum's other input goes on alone.
+        Some(sum) => {
+            let in0 = format!("{sum}.in0");
+            let other = spec
+                .connections
+                .iter()
+                .find(|c| c.to == in0)
+                .map(|c| c.from.clone())
+                .ok_or_else(missing)?;
+            (other, format!("{sum}.y"))
+        }
+        // A map: what it read goes where its output went.
+        None => (read, y),
+    };
+    for c in spec.connections.iter_mut().filter(|c| c.from == output) {
+        c.from = source.clone();
+    }
+    for c in spec.compare.iter_mut().filter(|c| c.signal == output) {
+        c.signal = source.clone();
+    }
+    let gone: Vec<String> = std::iter::once(name.to_string())
+        .chain(sum)
+        .chain(mux)
+        .collect();
+    let touches = |r: &str| gone.iter().any(|g| split(r).0 == g);
+    spec.connections
+        .retain(|c| !touches(&c.from) && !touches(&c.to));
+    spec.log.retain(|l| !touches(l));
+    spec.blocks.retain(|b| !gone.contains(&b.name));
+    Ok(())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -644,6 +715,110 @@ mod tests {
         .unwrap();
         spec.build_with_data(Arc::new(data))
             .expect("the augmented graph builds");
+    }
+
+    /// `remove` undoes `insert`: of four effects (two maps on the drive, a
+    /// force inside the loop, a coupling on the comparison that reads two
+    /// signals through a mux), taking any one out leaves a graph that runs
+    /// bit for bit like the one the other three were inserted into, with
+    /// none of the removed blocks' helpers left; a name that is not there is
+    /// a typed error.
+    #[test]
+    fn removing_an_effect_leaves_the_graph_the_others_make() {
+        let input = Site::Input {
+            from: "drive.y".into(),
+            to: "stage.u".into(),
+        };
+        let feedback = Site::Feedback {
+            from: "drive.y".into(),
+            to: "stage.u".into(),
+            position: "stage.y".into(),
+        };
+        let output = Site::Output {
+            compare: 0,
+            signal: "stage.y".into(),
+        };
+        let effects = [
+            (
+                "plf_hysteresis",
+                serde_json::json!({"type": "hysteresis", "alpha": 1.0, "b": 1.0, "c": 0.8}),
+                &input,
+                vec![],
+            ),
+            (
+                "plf_friction",
+                serde_json::json!({"type": "friction", "coulomb": 0.1, "stribeck": 0.0, "v_stribeck": 1.0, "viscous": 0.0, "v_eps": 0.01}),
+                &feedback,
+                vec![],
+            ),
+            (
+                "plf_time_delay",
+                serde_json::json!({"type": "time_delay", "max_delay_s": 0.01, "delay_s": 0.0025}),
+                &input,
+                vec![],
+            ),
+            (
+                "plf_axis_coupling",
+                serde_json::json!({"type": "axis_coupling", "coupling": [0.1, -0.2]}),
+                &output,
+                vec!["drive.y".to_string(), "stage.y".to_string()],
+            ),
+        ];
+        let with = |skip: Option<usize>| {
+            let mut spec = stage();
+            let names: Vec<String> = effects
+                .iter()
+                .enumerate()
+                .filter(|(i, _)| Some(*i) != skip)
+                .map(|(_, (stem, json, site, s))| {
+                    let b = block_from_json(json.clone()).unwrap();
+                    insert(&mut spec, stem, b, site, s, None).unwrap()
+                })
+                .collect();
+            (spec, names)
+        };
+        let n = 400;
+        let u: Vec<f64> = (0..n).map(|k| (k as f64 * 0.03).sin()).collect();
+        let data = Arc::new(
+            Dataset::from_columns(
+                "test",
+                1000.0,
+                0.0,
+                vec![("u".into(), u), ("y".into(), vec![0.0; n])],
+            )
+            .unwrap(),
+        );
+        let compared = |mut spec: GraphSpec| -> Vec<f64> {
+            let signal = spec.compare[0].signal.clone();
+            spec.log.push(signal.clone());
+            let (mut s, _) = spec.build_with_data(data.clone()).expect("builds");
+            let run = s.run(|_| {});
+            run.logs
+                .iter()
+                .find(|l| l.name == signal)
+                .expect("logged")
+                .data
+                .clone()
+        };
+        let (all, names) = with(None);
+        for (i, name) in names.iter().enumerate() {
+            let mut reduced = clone_spec(&all).unwrap();
+            remove(&mut reduced, name).unwrap();
+            assert!(
+                !reduced
+                    .blocks
+                    .iter()
+                    .any(|b| b.name.starts_with(name.as_str())),
+                "{name}: {:?}",
+                reduced.blocks.iter().map(|b| &b.name).collect::<Vec<_>>()
+            );
+            let expected = compared(with(Some(i)).0);
+            assert!(expected.iter().any(|v| *v != 0.0));
+            assert_eq!(compared(reduced), expected, "without {name}");
+        }
+        let mut spec = stage();
+        let e = remove(&mut spec, "plf_nothing").unwrap_err();
+        assert!(e.to_string().contains("no effect block plf_nothing"), "{e}");
     }
 
     #[test]

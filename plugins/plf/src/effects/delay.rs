@@ -12,6 +12,14 @@ use serde::{Deserialize, Serialize};
 /// Largest delay buffer (samples) a `time_delay` may allocate.
 pub const MAX_DELAY_SAMPLES: f64 = 1e6;
 
+/// The shortest delay a sampled record shows as a delay, in periods of the
+/// record: half a sample. That much is the phase lag ωT/2 of the
+/// zero-order hold itself, and how a model reads and holds its samples
+/// (when within the period a value is taken, how the drive is held) moves
+/// its response by as much; a shorter fitted delay is a phase correction of
+/// the model's form or sampling, not evidence of a transport delay.
+pub const MIN_RESOLVED_DELAY_SAMPLES: f64 = 0.5;
+
 /// `time_delay`: PLF effect: y(t) = u(t − delay_s), fractional delays by linear
 /// interpolation, samples before the start = first input; tunable `delay_s`.
 ///
@@ -96,6 +104,17 @@ impl TimeDelay {
             let n = x.floor();
             (n as usize, x - n)
         }
+    }
+
+    /// Why this delay is not a transport delay a record sampled every `dt_s`
+    /// shows, or `None`: shorter than [`MIN_RESOLVED_DELAY_SAMPLES`] periods.
+    pub fn implausible(&self, dt_s: f64) -> Option<String> {
+        let samples = self.delay_s / dt_s;
+        (samples < MIN_RESOLVED_DELAY_SAMPLES).then(|| {
+            format!(
+                "a delay of {samples:.2} samples is less than the {MIN_RESOLVED_DELAY_SAMPLES} sample by which the model's sampling and hold alone move its response: a phase correction, not a transport delay"
+            )
+        })
     }
 }
 
@@ -201,5 +220,23 @@ impl Tunable for TimeDelay {
         Self::check_delay(p[0], self.max_delay_s)?;
         self.delay_s = p[0];
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Refused below half a period of the record, kept from there on, at
+    /// any sample rate.
+    #[test]
+    fn a_delay_is_resolved_from_half_a_sample() {
+        for dt in [1e-4, 2e-3] {
+            let delay = |samples: f64| TimeDelay::new(samples * dt, 10.0 * dt);
+            let short = delay(0.49).implausible(dt).expect("0.49 samples refused");
+            assert!(short.contains("0.49 samples"), "{short}");
+            assert_eq!(delay(MIN_RESOLVED_DELAY_SAMPLES).implausible(dt), None);
+            assert_eq!(delay(0.71).implausible(dt), None);
+        }
     }
 }
