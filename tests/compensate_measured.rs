@@ -5,34 +5,18 @@
 //! margin follows what was measured, and bad records and margins are refused
 //! naming the file, the column and the fix, with nothing written.
 
+mod common;
+
+use common::{cli, scratch};
 use nanomotion::compensate::{DELAY_MARGIN_MEASURED, DELAY_SPREAD_UNMEASURED};
 use nanomotion::core::data::Dataset;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 const RATE: f64 = 4000.0;
 /// The ripple's pitch in the example's augmented model (m).
 const PITCH: f64 = 5e-7;
 const MODEL: &str = "examples/compensate/position_ripple/model_augmented.yaml";
 const CONTROLLER: &str = "examples/compensate/position_ripple/controller.yaml";
-
-fn cli(args: &[&str]) -> (bool, String, String) {
-    let out = std::process::Command::new(env!("CARGO_BIN_EXE_nanomotion"))
-        .args(args)
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
-        .output()
-        .unwrap();
-    (
-        out.status.success(),
-        String::from_utf8_lossy(&out.stdout).into_owned(),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    )
-}
-
-fn scratch(name: &str) -> PathBuf {
-    let d = Path::new(env!("CARGO_TARGET_TMPDIR")).join(name);
-    let _ = std::fs::remove_dir_all(&d);
-    d
-}
 
 /// A record of the position moving at `v` (m/s) for 0.2 s, as a run writes
 /// it (column `stage.y`), with a second column `u`.
