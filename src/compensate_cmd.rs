@@ -1,7 +1,7 @@
 //! `nanomotion compensate`: from the effects `diagnose` named to compensators in
 //! the user's controller graph, validated in closed loop on the augmented model.
 
-use nanomotion::compensate::{Options, Outcome, compensate, named};
+use nanomotion::compensate::{MeasuredSignal, Options, Outcome, compensate, named};
 use nanomotion::core::graph::GraphSpec;
 use nanomotion::output::{Manifest, OutputFolder};
 use nanomotion::plot::{Figure, Scale, Series, draw_svg};
@@ -34,9 +34,29 @@ pub struct Args {
     /// Keep compensators that do not cut the tracking error.
     #[arg(long)]
     pub keep: bool,
+    /// Delay-varying RC: a record of the signal the disturbance is periodic in
+    /// (e.g. the leg angle α), from your loop on the stage without RC — a CSV
+    /// with `t_s` first, as `nanomotion run` writes signals_*.csv, or a .mat.
+    /// COLUMN (default: the file's only data column) is the signal's name in
+    /// your graph, e.g. `signals_4000hz.csv:alpha.y`. The delays it shows
+    /// join the range [m, M] of N_k (thesis Fig. 5.7). Repeat for several
+    /// signals.
+    #[arg(long, value_name = "FILE[:COLUMN]")]
+    pub measured_alpha: Vec<String>,
+    #[arg(long, value_name = "FRACTION", help = delay_margin_help())]
+    pub delay_margin: Option<f64>,
     /// Replace a non-empty output folder that does not hold a previous output.
     #[arg(long)]
     pub force: bool,
+}
+
+/// `--delay-margin`'s help, with the library's defaults.
+fn delay_margin_help() -> String {
+    format!(
+        "Delay-varying RC: widen the range [m, M] of N_k by this fraction on each side, in [0, 0.5) (default: {:.3} beyond a --measured-alpha record, else {:.3}, the spread of N(α) the thesis measured, Fig. 5.7, which no model shows; the report's `delay_margin` is the one used)",
+        nanomotion::compensate::DELAY_MARGIN_MEASURED,
+        nanomotion::compensate::DELAY_SPREAD_UNMEASURED
+    )
 }
 
 fn read(path: &Path) -> Result<String, String> {
@@ -90,9 +110,16 @@ pub fn run(a: Args) -> Result<(), String> {
                 .unwrap_or_default()
         ))
     });
+    let measured = a
+        .measured_alpha
+        .iter()
+        .map(|m| MeasuredSignal::from_file_column(m).map_err(|e| e.to_string()))
+        .collect::<Result<Vec<_>, _>>()?;
     let folder = OutputFolder::prepare(&out, a.force).map_err(|e| e.to_string())?;
     let opts = Options {
         keep: a.keep,
+        delay_margin: a.delay_margin,
+        measured,
         reference,
         augmented_name: a.augmented.display().to_string(),
         controller_name: a.controller.display().to_string(),

@@ -7,6 +7,9 @@
 //! augmented model it writes, saved as YAML and run again with the data,
 //! reproduces the reported rms to 1e-9 relative.
 
+mod common;
+
+use common::cli;
 use nanomotion::core::data::{Dataset, compare};
 use nanomotion::core::graph::GraphSpec;
 use nanomotion::plf::diagnose::{Options, diagnose};
@@ -81,19 +84,6 @@ fn example_is_generated_named_and_the_augmented_model_reproduces_the_report() {
         cmp[0].rms,
         report.final_scores.rms
     );
-}
-
-fn cli(args: &[&str]) -> (bool, String, String) {
-    let out = std::process::Command::new(env!("CARGO_BIN_EXE_nanomotion"))
-        .args(args)
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
-        .output()
-        .unwrap();
-    (
-        out.status.success(),
-        String::from_utf8_lossy(&out.stdout).into_owned(),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    )
 }
 
 #[test]

@@ -18,6 +18,62 @@
 //! `build`; `output`/`update` are the real-time path and must not allocate, lock, do
 //! I/O or look up strings.
 //!
+//! # Writing a block
+//!
+//! **Declared (every block of this workspace).** The parameter struct derives
+//! [`Params`](crate::doc::Params) and says, once, in `#[block(type_name = "…", role
+//! = …, ports = "…")]` what the block is called in a graph file, the role it plays
+//! and its ports; `#[param(…)]` bounds on its fields are its validation (see
+//! [`crate::doc`]). `#[declared_block]` on the `impl Block` then registers the type
+//! with `typetag` under that name and writes what the impl leaves out:
+//! `inputs`/`outputs` from `ports` when that string is a declaration
+//! ([`DeclaredPorts`]: `name[width] (unit) [scheduling]`, widths a number or a
+//! `usize` field, units SI symbols), `role` from `role` ([`DeclaredBlock`]), and
+//! `build` as the declared checks (`check_params()`, then `check_at_rate(ctx.dt)`).
+//! A block writes itself only what the declaration cannot say: its `output`, and
+//! ports whose number or units depend on parameters, a `build` that prepares more
+//! than checks.
+//!
+//! ```
+//! use nanomotion_core::{Block, BuildContext, Params, Role, Tick, declared_block};
+//! use serde::{Deserialize, Serialize};
+//!
+//! /// `doc_scaler`: y = k·u.
+//! #[derive(Debug, Clone, Serialize, Deserialize, Params)]
+//! #[serde(deny_unknown_fields)]
+//! #[block(type_name = "doc_scaler", role = Math, ports = "u (m), phase [scheduling] -> y (m)")]
+//! struct Scaler {
+//!     /// Gain k.
+//!     #[param(finite)]
+//!     k: f64,
+//! }
+//!
+//! #[declared_block]
+//! impl Block for Scaler {
+//!     fn output(&mut self, _t: Tick, u: &[f64], y: &mut [f64]) { y[0] = self.k * u[0]; }
+//! }
+//!
+//! let mut b = Scaler { k: f64::NAN };
+//! let e = b.build(&BuildContext::new("s", 1e-3, 0)).unwrap_err();
+//! assert_eq!(e.field, "k");
+//! let mut b: Box<dyn Block> = nanomotion_core::yaml::from_str("type: doc_scaler\nk: 2\n", "doc").unwrap();
+//! b.build(&BuildContext::new("s", 1e-3, 0)).unwrap();
+//! let ins = b.inputs();
+//! assert_eq!((ins[0].unit.as_deref(), ins[1].scheduling), (Some("m"), true));
+//! assert_eq!(b.role(), Role::Math);
+//! let mut y = [0.0];
+//! b.output(Tick::new(0, 1e-3), &[3.0, 0.5], &mut y);
+//! assert_eq!(y[0], 6.0);
+//! ```
+//!
+//! **By hand (a third-party block that wants no declaration).** `Block` is an
+//! ordinary trait object registered with `typetag`: implement it directly under
+//! `#[typetag::serde(name = "…")]`, writing the ports, the validation and (if not
+//! [`Role::Math`]) the role yourself. Such a block runs and is checked like any
+//! other; `nanomotion blocks` and `nanomotion schema` list it only if it also
+//! registers a [`BlockDoc`] (the derive does that, or
+//! [`submit_block_doc!`](crate::submit_block_doc)).
+//!
 //! ```
 //! use nanomotion_core::{Block, BuildContext, ParamError, Port, Tick};
 //! use serde::{Deserialize, Serialize};
@@ -432,6 +488,35 @@ impl Sector {
 }
 
 pub use crate::doc::{BlockDoc, ParamDoc, Role, block_docs};
+
+/// Completes an `impl Block for T` from `T`'s `#[block(…)]` (module
+/// documentation): the typetag registration under the declared `type_name`, and
+/// `inputs`/`outputs`, `role` and `build` where the impl leaves them out.
+pub use nanomotion_derive::declared_block;
+
+/// What a block's `#[block(type_name = "…", role = …, ports = "…")]` declares,
+/// implemented by `#[derive(Params)]`; [`declared_block`] reads it.
+pub trait DeclaredBlock {
+    /// The block's `type:` in a graph file (its typetag name).
+    const TYPE_NAME: &'static str;
+    /// The role the block plays ([`Block::role`]).
+    const ROLE: Role;
+}
+
+/// The ports a block's `#[block(ports = "…")]` declares, implemented by
+/// `#[derive(Params)]` when the string is a declaration (`name[width] (unit)
+/// [scheduling]`, see [`crate::doc`]) rather than a description; [`declared_block`]
+/// makes them [`Block::inputs`] and [`Block::outputs`].
+#[diagnostic::on_unimplemented(
+    message = "the `ports` of `{Self}`'s #[block(…)] describe its ports but do not declare them",
+    note = "write `fn inputs` and `fn outputs` in its `impl Block`, or make `ports` a declaration: `name[width] (unit) [scheduling], … -> …` (widths: numbers or usize fields; units: SI symbols)"
+)]
+pub trait DeclaredPorts: DeclaredBlock {
+    /// The declared inputs, in order.
+    fn declared_inputs(&self) -> Vec<Port>;
+    /// The declared outputs, in order.
+    fn declared_outputs(&self) -> Vec<Port>;
+}
 
 /// All block types registered with `typetag` (every linked crate), sorted.
 ///

@@ -13,7 +13,15 @@
 //!   and [`Params::check_params`], the validation `build()` calls — with exactly the
 //!   messages of [`check`](crate::block::check) (field, problem, fix),
 //! - `#[block(type_name = "…", role = …, ports = "…")]`: registers the block's
-//!   [`BlockDoc`] for `nanomotion blocks` and `nanomotion schema`.
+//!   [`BlockDoc`] for `nanomotion blocks` and `nanomotion schema`, and implements
+//!   [`DeclaredBlock`](crate::block::DeclaredBlock) (the type name and role) and,
+//!   when `ports` is a declaration rather than prose,
+//!   [`DeclaredPorts`](crate::block::DeclaredPorts): `inputs -> outputs`, each a
+//!   comma-separated list of `name[width] (unit) [scheduling]` — `[width]` a whole
+//!   number or a `usize` field (default 1), `(unit)` an SI symbol the port
+//!   carries (`m`, `m/s²`, `V`, `count`), `[scheduling]` a scheduling input (not
+//!   shown in the listing). `#[declared_block]` on the `impl Block` turns these
+//!   into the block's methods (see [`crate::block`]).
 //!
 //! | `#[param(…)]` | check | schema |
 //! |---|---|---|

@@ -65,7 +65,10 @@ pub use block::MeasuredData;
 // The derive (`nanomotion-derive`) names `::nanomotion_core` paths, in this crate too.
 extern crate self as nanomotion_core;
 
-pub use block::{Block, BuildContext, Linearisation, Port, Sector, Tick, Tunable};
+pub use block::{
+    Block, BuildContext, DeclaredBlock, DeclaredPorts, Linearisation, Port, Sector, Tick, Tunable,
+    declared_block,
+};
 pub use doc::Params;
 pub use doc::{BlockDoc, ParamDoc, Role};
 pub use error::{GraphError, ParamError};

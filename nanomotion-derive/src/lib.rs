@@ -15,6 +15,9 @@
 //! re-exports this macro. See `nanomotion_core::doc` for the attribute reference and
 //! an example.
 
+mod declared;
+mod ports;
+
 use proc_macro::TokenStream;
 use proc_macro2::TokenStream as TokenStream2;
 use quote::{format_ident, quote};
@@ -32,6 +35,29 @@ use syn::{
 pub fn derive_params(input: TokenStream) -> TokenStream {
     let input = parse_macro_input!(input as DeriveInput);
     match expand(&input) {
+        Ok(ts) => ts.into(),
+        Err(e) => e.to_compile_error().into(),
+    }
+}
+
+/// Complete an `impl Block for T` from `T`'s `#[block(…)]` declaration (`T`
+/// derives `Params`): register it with typetag under the declared `type_name`,
+/// and write the methods the impl leaves out —
+///
+/// - `inputs` and `outputs` (when the impl writes neither) from the declared
+///   `ports` (`nanomotion_core::block::DeclaredPorts`; a `ports` string that is
+///   prose, not a declaration, does not compile here: write both by hand; a
+///   macro invoked in the impl is taken to write them),
+/// - `role` from the declared role,
+/// - `build` as the declared checks: `check_params()`, then
+///   `check_at_rate(ctx.dt)`.
+///
+/// What the impl writes itself is kept. See `nanomotion_core::block`.
+#[proc_macro_attribute]
+pub fn declared_block(args: TokenStream, item: TokenStream) -> TokenStream {
+    let args = TokenStream2::from(args);
+    let item = parse_macro_input!(item as syn::ItemImpl);
+    match declared::expand(args, item) {
         Ok(ts) => ts.into(),
         Err(e) => e.to_compile_error().into(),
     }
@@ -991,16 +1017,53 @@ fn expand(input: &DeriveInput) -> syn::Result<TokenStream2> {
             let role = b.role.expect("checked");
             let ports = b.ports.unwrap_or_default();
             let summary = summary_of(&input.attrs, &tag);
-            quote!(::nanomotion_core::__private::inventory::submit! {
-                ::nanomotion_core::BlockDoc {
-                    type_name: #tag,
-                    role: ::nanomotion_core::Role::#role,
-                    summary: #summary,
-                    ports: #ports,
-                    params: <#name as ::nanomotion_core::doc::Params>::param_docs,
-                    closed: <#name as ::nanomotion_core::doc::Params>::CLOSED,
+            let shown = ports::shown(&ports);
+            let fields: Vec<String> = match &input.data {
+                Data::Struct(s) => s
+                    .fields
+                    .iter()
+                    .filter_map(|f| f.ident.as_ref().map(|i| i.to_string()))
+                    .collect(),
+                _ => Vec::new(),
+            };
+            let blk = quote!(::nanomotion_core::block);
+            let declared_ports = match ports::declared(&ports, &fields) {
+                Ok(Some((ins, outs))) => {
+                    let (ins, outs) = (ports::port_list(&ins), ports::port_list(&outs));
+                    quote!(impl #blk::DeclaredPorts for #name {
+                        fn declared_inputs(&self) -> ::std::vec::Vec<::nanomotion_core::Port> {
+                            #ins
+                        }
+                        fn declared_outputs(&self) -> ::std::vec::Vec<::nanomotion_core::Port> {
+                            #outs
+                        }
+                    })
                 }
-            })
+                Ok(None) => quote!(),
+                Err(e) => {
+                    return Err(syn::Error::new_spanned(
+                        name,
+                        format!("#[block] ports: {e}"),
+                    ));
+                }
+            };
+            quote!(
+                impl #blk::DeclaredBlock for #name {
+                    const TYPE_NAME: &'static str = #tag;
+                    const ROLE: ::nanomotion_core::Role = ::nanomotion_core::Role::#role;
+                }
+                #declared_ports
+                ::nanomotion_core::__private::inventory::submit! {
+                    ::nanomotion_core::BlockDoc {
+                        type_name: #tag,
+                        role: ::nanomotion_core::Role::#role,
+                        summary: #summary,
+                        ports: #shown,
+                        params: <#name as ::nanomotion_core::doc::Params>::param_docs,
+                        closed: <#name as ::nanomotion_core::doc::Params>::CLOSED,
+                    }
+                }
+            )
         }
         None => quote!(),
     };

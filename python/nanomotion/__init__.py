@@ -342,14 +342,25 @@ def diagnose(model: PathLike, data: PathLike, *, max_effects: int = 3, holdout: 
 
 
 def compensate(augmented: PathLike, controller: PathLike, *, report: PathLike | None = None,
-               reference: PathLike | None = None, keep: bool = False) -> CompensateResult:
+               reference: PathLike | None = None, keep: bool = False,
+               measured_alpha: PathLike | Sequence[PathLike] = (),
+               delay_margin: float | None = None) -> CompensateResult:
     """Compensate the effects a diagnosis named (``model_augmented.yaml`` and its
     ``report.json``) in a controller graph, validated on the augmented model
-    (``nanomotion compensate``; docs/compensate.md)."""
+    (``nanomotion compensate``; docs/compensate.md).
+
+    For delay-varying RC, ``measured_alpha`` is a record (or several) of the
+    signal the disturbance is periodic in, from your loop on the stage without
+    RC, as ``"FILE[:COLUMN]"`` — the same as the CLI's ``--measured-alpha``;
+    ``delay_margin`` widens the delay range [m, M] on each side (default: as
+    ``--delay-margin``; the report's ``delay_margin`` is the one used)."""
+    if isinstance(measured_alpha, (str, os.PathLike)):
+        measured_alpha = [measured_alpha]
     js, yaml = _nm.compensate_graph(
         os.fspath(augmented), os.fspath(controller),
         report=None if report is None else os.fspath(report),
-        reference=None if reference is None else os.fspath(reference), keep=keep)
+        reference=None if reference is None else os.fspath(reference), keep=keep,
+        measured_alpha=[os.fspath(m) for m in measured_alpha], delay_margin=delay_margin)
     return CompensateResult(report=json.loads(js), compensated_yaml=yaml)
 
 

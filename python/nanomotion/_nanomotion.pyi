@@ -67,6 +67,8 @@ def compensate_graph(
     report: _Path | None = None,
     reference: _Path | None = None,
     keep: bool = False,
+    measured_alpha: list[str] = ...,
+    delay_margin: float | None = None,
 ) -> tuple[str, str]: ...
 def psd_welch(
     x: _F64, fs_hz: float, segment_len: int = 1024, overlap: float = 0.5, window: str = "hann", detrend: str = "mean"

@@ -337,7 +337,8 @@ fn diagnose_graph(
 /// `nanomotion compensate` without files: the report as JSON text (the CLI's
 /// `report.json`) and the compensated graph as YAML (`compensated.yaml`).
 #[pyfunction]
-#[pyo3(signature = (augmented, controller, report=None, reference=None, keep=false))]
+#[pyo3(signature = (augmented, controller, report=None, reference=None, keep=false, measured_alpha=Vec::new(), delay_margin=None))]
+#[allow(clippy::too_many_arguments)]
 fn compensate_graph(
     py: Python<'_>,
     augmented: PathBuf,
@@ -345,8 +346,10 @@ fn compensate_graph(
     report: Option<PathBuf>,
     reference: Option<PathBuf>,
     keep: bool,
+    measured_alpha: Vec<String>,
+    delay_margin: Option<f64>,
 ) -> PyResult<(String, String)> {
-    use nanomotion::compensate::{Options, compensate, named};
+    use nanomotion::compensate::{MeasuredSignal, Options, compensate, named};
     let aug = GraphSpec::from_file(&augmented).map_err(graph_err)?;
     let ctl = GraphSpec::from_file(&controller).map_err(graph_err)?;
     let read = |p: &PathBuf| {
@@ -373,9 +376,15 @@ fn compensate_graph(
         ),
         None => None,
     };
+    let measured = measured_alpha
+        .iter()
+        .map(|m| MeasuredSignal::from_file_column(m).map_err(diagnose_err))
+        .collect::<PyResult<Vec<_>>>()?;
     let opts = Options {
         keep,
         reference,
+        delay_margin,
+        measured,
         augmented_name: augmented.display().to_string(),
         controller_name: controller.display().to_string(),
         ..Options::default()

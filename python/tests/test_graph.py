@@ -193,3 +193,32 @@ def test_compensate_inverts_the_named_hysteresis(root, tmp_path):
     assert r["cut_percent"] > 80
     with pytest.raises(nm.DiagnoseError, match="mux.in0"):
         nm.compensate(aug, root / "examples/quickstart.yaml")
+
+
+def test_compensate_takes_a_measured_alpha_record_and_a_delay_margin(root, cli, tmp_path):
+    # The position-ripple example: delay-varying RC on stage.y (pitch 0.5 µm,
+    # 4 kHz). A record of the position at 15 µm/s for 0.2 s: every sample's
+    # delay back one pitch is ceil(0.5e-6 * 4000 / 1.5e-5) = ceil(133.3) = 134.
+    model = root / "examples/compensate/position_ripple/model_augmented.yaml"
+    controller = root / "examples/compensate/position_ripple/controller.yaml"
+    k = np.arange(800)
+    rec = tmp_path / "alpha.csv"
+    np.savetxt(rec, np.column_stack([k / 4000.0, 1.5e-5 * k / 4000.0, np.zeros(800)]),
+               delimiter=",", header="t_s,stage.y,u", comments="", fmt="%.17g")
+    c = nm.compensate(model, controller, measured_alpha=f"{rec}:stage.y", delay_margin=0.05)
+    d = c.report["compensators"][0]["design"]
+    n = np.ceil(0.5e-6 * 4000 / 1.5e-5)
+    assert (d["delay_measured_min"], d["delay_measured_max"]) == (n, n)
+    assert d["delay_margin"] == 0.05
+    assert d["n_min"] == np.floor(n * 0.95) - 1
+    # The same design as the command line's.
+    out = tmp_path / "cli"
+    p = run_cli(cli, "compensate", str(model), str(controller), "--out", str(out),
+                "--measured-alpha", f"{rec}:stage.y", "--delay-margin", "0.05")
+    assert p.returncode == 0, p.stderr
+    assert json.loads((out / "report.json").read_text())["compensators"][0]["design"] == d
+    # A column no delay-varying RC follows, and one the file does not have.
+    with pytest.raises(nm.DiagnoseError, match="no delay-varying RC follows `u`"):
+        nm.compensate(model, controller, measured_alpha=f"{rec}:u")
+    with pytest.raises(nm.DiagnoseError, match="has no column `alpha.y`"):
+        nm.compensate(model, controller, measured_alpha=f"{rec}:alpha.y")

@@ -49,8 +49,9 @@
 //! ```
 
 use crate::block::check;
+use crate::declared_block;
 use crate::lti::StateSpace;
-use crate::{Block, BuildContext, Controller, ParamError, Params, Port, Role, Tick};
+use crate::{Block, BuildContext, Controller, ParamError, Params, Tick};
 use nalgebra::DMatrix;
 use serde::{Deserialize, Serialize};
 use std::f64::consts::TAU;
@@ -361,14 +362,8 @@ impl Controller for Pid {
     }
 }
 
-#[typetag::serde(name = "pid")]
+#[declared_block]
 impl Block for Pid {
-    fn inputs(&self) -> Vec<Port> {
-        vec![Port::new("e", 1)]
-    }
-    fn outputs(&self) -> Vec<Port> {
-        vec![Port::new("u", 1)]
-    }
     fn build(&mut self, ctx: &BuildContext) -> Result<(), ParamError> {
         self.prepare(ctx.dt)
     }
@@ -386,9 +381,6 @@ impl Block for Pid {
     }
     fn linearisation(&self) -> Option<crate::block::Linearisation> {
         limits_linearisation(self.state_space(), self.output_min, self.output_max)
-    }
-    fn role(&self) -> Role {
-        Role::Controller
     }
 }
 
@@ -541,14 +533,8 @@ impl Controller for Pi {
     }
 }
 
-#[typetag::serde(name = "pi")]
+#[declared_block]
 impl Block for Pi {
-    fn inputs(&self) -> Vec<Port> {
-        vec![Port::new("e", 1)]
-    }
-    fn outputs(&self) -> Vec<Port> {
-        vec![Port::new("u", 1)]
-    }
     fn build(&mut self, ctx: &BuildContext) -> Result<(), ParamError> {
         self.prepare(ctx.dt)
     }
@@ -578,9 +564,6 @@ impl Block for Pi {
     }
     fn linearisation(&self) -> Option<crate::block::Linearisation> {
         limits_linearisation(self.pid.state_space(), self.output_min, self.output_max)
-    }
-    fn role(&self) -> Role {
-        Role::Controller
     }
 }
 

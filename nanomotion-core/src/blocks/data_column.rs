@@ -12,7 +12,8 @@
 //!
 //! [`GraphSpec::build_with_data`]: crate::graph::GraphSpec::build_with_data
 
-use crate::{Block, BuildContext, ParamError, Params, Port, Role, Tick};
+use crate::declared_block;
+use crate::{Block, BuildContext, ParamError, Params, Tick};
 use serde::{Deserialize, Serialize};
 
 /// Relative tolerance between the block's rate and the data's rate.
@@ -70,11 +71,8 @@ fn column_name<'de, D: serde::Deserializer<'de>>(d: D) -> Result<String, D::Erro
     d.deserialize_str(V)
 }
 
-#[typetag::serde(name = "data_column")]
+#[declared_block]
 impl Block for DataColumn {
-    fn outputs(&self) -> Vec<Port> {
-        vec![Port::new("y", 1)]
-    }
     fn build(&mut self, ctx: &BuildContext) -> Result<(), ParamError> {
         let Some(data) = &ctx.data else {
             if ctx.placeholder_data {
@@ -126,9 +124,6 @@ impl Block for DataColumn {
         let last = self.values.len().saturating_sub(1);
         let k = usize::try_from(tick.k).unwrap_or(usize::MAX).min(last);
         y[0] = self.values.get(k).copied().unwrap_or(0.0);
-    }
-    fn role(&self) -> Role {
-        Role::Source
     }
 }
 

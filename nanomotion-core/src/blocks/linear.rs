@@ -9,7 +9,8 @@
 //! (default 1). Input port `u`, output port `y`. [`Block::lti`] returns the exact
 //! discrete model that is simulated.
 
-use crate::block::{BuildContext, Port, Role, Tick, check};
+use crate::block::{BuildContext, Port, Tick, check};
+use crate::declared_block;
 use crate::doc::Params;
 use crate::error::ParamError;
 use crate::lti::{self, C2dMethod, LtiError, SsStepper, StateSpace, TransferFunction};
@@ -347,7 +348,7 @@ pub const MAX_TF_ORDER: usize = 64;
 /// matrix–vector product per tick, and discretisation a dense exponential).
 pub const MAX_SS_STATES: usize = 256;
 
-#[typetag::serde(name = "transfer_function")]
+#[declared_block]
 impl Block for TransferFunctionBlock {
     siso_ports!();
     core_steps!();
@@ -650,7 +651,7 @@ impl StateSpaceBlock {
     }
 }
 
-#[typetag::serde(name = "state_space")]
+#[declared_block]
 impl Block for StateSpaceBlock {
     fn inputs(&self) -> Vec<Port> {
         vec![Port::new("u", self.dims().1)]
@@ -780,7 +781,7 @@ impl LowPass {
 /// poor and slow to build, and no loop in the thesis needs more than 4.
 pub const MAX_LOW_PASS_ORDER: usize = 16;
 
-#[typetag::serde(name = "low_pass")]
+#[declared_block]
 impl Block for LowPass {
     siso_ports!(same_unit);
     core_steps!();
@@ -857,7 +858,7 @@ impl Notch {
     }
 }
 
-#[typetag::serde(name = "notch")]
+#[declared_block]
 impl Block for Notch {
     siso_ports!(same_unit);
     core_steps!();
@@ -957,14 +958,10 @@ impl LeadLag {
     }
 }
 
-#[typetag::serde(name = "lead_lag")]
+#[declared_block]
 impl Block for LeadLag {
     siso_ports!();
     core_steps!();
-
-    fn role(&self) -> Role {
-        Role::Controller
-    }
 
     fn build(&mut self, ctx: &BuildContext) -> Result<(), ParamError> {
         self.check_params()?;
@@ -1024,7 +1021,7 @@ impl Delay {
 /// Largest `d · width` for which a `delay` block reports a (dense) LTI model.
 pub const MAX_DENSE_DELAY_STATES: usize = 512;
 
-#[typetag::serde(name = "delay")]
+#[declared_block]
 impl Block for Delay {
     siso_ports!(same_unit);
 

@@ -18,6 +18,7 @@
 //! ```
 
 use crate::block::check;
+use crate::declared_block;
 use crate::doc::Params;
 use crate::lti::StateSpace;
 use crate::{Block, BuildContext, ParamError, Port, Tick};
@@ -95,7 +96,7 @@ impl Gain {
     }
 }
 
-#[typetag::serde(name = "gain")]
+#[declared_block]
 impl Block for Gain {
     fn inputs(&self) -> Vec<Port> {
         vec![Port::new("u", self.width)]
@@ -230,7 +231,7 @@ impl Sum {
     }
 }
 
-#[typetag::serde(name = "sum")]
+#[declared_block]
 impl Block for Sum {
     fn inputs(&self) -> Vec<Port> {
         numbered_ports("in", self.signs.chars().map(|_| self.width))
@@ -293,16 +294,13 @@ impl Product {
     }
 }
 
-#[typetag::serde(name = "product")]
+#[declared_block]
 impl Block for Product {
     fn inputs(&self) -> Vec<Port> {
         numbered_ports("in", (0..self.factors).map(|_| self.width))
     }
     fn outputs(&self) -> Vec<Port> {
         vec![Port::new("y", self.width)]
-    }
-    fn build(&mut self, _ctx: &BuildContext) -> Result<(), ParamError> {
-        self.check_params()
     }
     fn output(&mut self, _tick: Tick, u: &[f64], y: &mut [f64]) {
         self.apply(u, y);
@@ -389,16 +387,13 @@ impl Saturation {
     }
 }
 
-#[typetag::serde(name = "saturation")]
+#[declared_block]
 impl Block for Saturation {
     fn inputs(&self) -> Vec<Port> {
         vec![Port::new("u", self.width)]
     }
     fn outputs(&self) -> Vec<Port> {
         vec![Port::new("y", self.width).unit_of_input(0)]
-    }
-    fn build(&mut self, _ctx: &BuildContext) -> Result<(), ParamError> {
-        self.check_params()
     }
     fn output(&mut self, _tick: Tick, u: &[f64], y: &mut [f64]) {
         self.apply(u, y);
@@ -515,16 +510,13 @@ impl Deadzone {
     }
 }
 
-#[typetag::serde(name = "deadzone")]
+#[declared_block]
 impl Block for Deadzone {
     fn inputs(&self) -> Vec<Port> {
         vec![Port::new("u", self.width)]
     }
     fn outputs(&self) -> Vec<Port> {
         vec![Port::new("y", self.width).unit_of_input(0)]
-    }
-    fn build(&mut self, _ctx: &BuildContext) -> Result<(), ParamError> {
-        self.check_params()
     }
     fn output(&mut self, _tick: Tick, u: &[f64], y: &mut [f64]) {
         for (yi, &ui) in y.iter_mut().zip(u) {
@@ -584,7 +576,7 @@ impl Mux {
     }
 }
 
-#[typetag::serde(name = "mux")]
+#[declared_block]
 impl Block for Mux {
     fn inputs(&self) -> Vec<Port> {
         numbered_ports("in", self.widths.iter().copied())
@@ -625,7 +617,7 @@ impl Demux {
     }
 }
 
-#[typetag::serde(name = "demux")]
+#[declared_block]
 impl Block for Demux {
     fn inputs(&self) -> Vec<Port> {
         vec![Port::new("u", self.widths.iter().sum())]

@@ -16,8 +16,9 @@
 //! ```
 
 use crate::block::check;
+use crate::declared_block;
 use crate::rng::Rng;
-use crate::{Block, BuildContext, ParamError, Params, Port, Role, Sensor, Tick, Tunable};
+use crate::{Block, BuildContext, ParamError, Params, Port, Sensor, Tick, Tunable};
 use serde::{Deserialize, Serialize};
 
 /// Resolution of the metrological AFM's laser interferometers (m), Ch. 6.
@@ -137,16 +138,13 @@ impl Sensor for Quantizer {
     }
 }
 
-#[typetag::serde(name = "quantizer")]
+#[declared_block]
 impl Block for Quantizer {
     fn inputs(&self) -> Vec<Port> {
         vec![Port::new("u", self.width)]
     }
     fn outputs(&self) -> Vec<Port> {
         vec![Port::new("y", self.width).unit_of_input(0)]
-    }
-    fn build(&mut self, _ctx: &BuildContext) -> Result<(), ParamError> {
-        self.check_params()
     }
     fn output(&mut self, tick: Tick, u: &[f64], y: &mut [f64]) {
         self.measure(tick.t, u, y);
@@ -159,9 +157,6 @@ impl Block for Quantizer {
                 self.lsb
             ),
         ))
-    }
-    fn role(&self) -> Role {
-        Role::Sensor
     }
     fn tunable(&self) -> Option<&dyn Tunable> {
         Some(self)
@@ -286,7 +281,7 @@ impl Sensor for MeasurementNoise {
     }
 }
 
-#[typetag::serde(name = "measurement_noise")]
+#[declared_block]
 impl Block for MeasurementNoise {
     fn inputs(&self) -> Vec<Port> {
         vec![Port::new("u", self.width)]
@@ -299,9 +294,6 @@ impl Block for MeasurementNoise {
     }
     fn output(&mut self, tick: Tick, u: &[f64], y: &mut [f64]) {
         self.measure(tick.t, u, y);
-    }
-    fn role(&self) -> Role {
-        Role::Sensor
     }
 }
 

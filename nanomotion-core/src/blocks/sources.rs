@@ -25,9 +25,10 @@
 //! ```
 
 use crate::block::check;
+use crate::declared_block;
 use crate::doc::Params;
 use crate::rng::Rng;
-use crate::{Block, BuildContext, ParamError, Port, Role, Source, Tick};
+use crate::{Block, BuildContext, ParamError, Port, Source, Tick};
 use serde::{Deserialize, Serialize};
 use std::f64::consts::{PI, TAU};
 
@@ -74,19 +75,10 @@ impl Source for Constant {
     }
 }
 
-#[typetag::serde(name = "constant")]
+#[declared_block]
 impl Block for Constant {
-    fn outputs(&self) -> Vec<Port> {
-        vec![Port::new("y", self.width)]
-    }
-    fn build(&mut self, _ctx: &BuildContext) -> Result<(), ParamError> {
-        self.check_params()
-    }
     fn output(&mut self, tick: Tick, _u: &[f64], y: &mut [f64]) {
         self.sample(tick.t, y);
-    }
-    fn role(&self) -> Role {
-        Role::Source
     }
 }
 
@@ -134,19 +126,10 @@ impl Source for Step {
     }
 }
 
-#[typetag::serde(name = "step")]
+#[declared_block]
 impl Block for Step {
-    fn outputs(&self) -> Vec<Port> {
-        vec![Port::new("y", 1)]
-    }
-    fn build(&mut self, _ctx: &BuildContext) -> Result<(), ParamError> {
-        self.check_params()
-    }
     fn output(&mut self, tick: Tick, _u: &[f64], y: &mut [f64]) {
         self.sample(tick.t, y);
-    }
-    fn role(&self) -> Role {
-        Role::Source
     }
 }
 
@@ -204,22 +187,10 @@ impl Source for ConstantVelocity {
     }
 }
 
-#[typetag::serde(name = "constant_velocity")]
+#[declared_block]
 impl Block for ConstantVelocity {
-    fn outputs(&self) -> Vec<Port> {
-        vec![
-            Port::new("y", 1).with_unit("m"),
-            Port::new("v", 1).with_unit("m/s"),
-        ]
-    }
-    fn build(&mut self, _ctx: &BuildContext) -> Result<(), ParamError> {
-        self.check_params()
-    }
     fn output(&mut self, tick: Tick, _u: &[f64], y: &mut [f64]) {
         self.sample(tick.t, y);
-    }
-    fn role(&self) -> Role {
-        Role::Source
     }
 }
 
@@ -266,19 +237,10 @@ impl Source for Sinusoid {
     }
 }
 
-#[typetag::serde(name = "sinusoid")]
+#[declared_block]
 impl Block for Sinusoid {
-    fn outputs(&self) -> Vec<Port> {
-        vec![Port::new("y", 1)]
-    }
-    fn build(&mut self, _ctx: &BuildContext) -> Result<(), ParamError> {
-        self.check_params()
-    }
     fn output(&mut self, tick: Tick, _u: &[f64], y: &mut [f64]) {
         self.sample(tick.t, y);
-    }
-    fn role(&self) -> Role {
-        Role::Source
     }
 }
 
@@ -335,19 +297,13 @@ impl Source for TriangularScan {
     }
 }
 
-#[typetag::serde(name = "triangular_scan")]
+#[declared_block]
 impl Block for TriangularScan {
     fn outputs(&self) -> Vec<Port> {
         vec![Port::new("y", 1)]
     }
-    fn build(&mut self, _ctx: &BuildContext) -> Result<(), ParamError> {
-        self.check_params()
-    }
     fn output(&mut self, tick: Tick, _u: &[f64], y: &mut [f64]) {
         self.sample(tick.t, y);
-    }
-    fn role(&self) -> Role {
-        Role::Source
     }
 }
 
@@ -668,23 +624,13 @@ impl Source for PointToPoint {
     }
 }
 
-#[typetag::serde(name = "point_to_point")]
+#[declared_block]
 impl Block for PointToPoint {
-    fn outputs(&self) -> Vec<Port> {
-        vec![
-            Port::new("y", 1).with_unit("m"),
-            Port::new("v", 1).with_unit("m/s"),
-            Port::new("a", 1).with_unit("m/s²"),
-        ]
-    }
     fn build(&mut self, _ctx: &BuildContext) -> Result<(), ParamError> {
         self.plan()
     }
     fn output(&mut self, tick: Tick, _u: &[f64], y: &mut [f64]) {
         self.sample(tick.t, y);
-    }
-    fn role(&self) -> Role {
-        Role::Source
     }
 }
 
@@ -772,11 +718,8 @@ impl Source for WhiteNoise {
     }
 }
 
-#[typetag::serde(name = "white_noise")]
+#[declared_block]
 impl Block for WhiteNoise {
-    fn outputs(&self) -> Vec<Port> {
-        vec![Port::new("y", self.width)]
-    }
     fn build(&mut self, ctx: &BuildContext) -> Result<(), ParamError> {
         self.check_params()?;
         self.sigma = self.sigma_for(ctx.dt)?;
@@ -785,9 +728,6 @@ impl Block for WhiteNoise {
     }
     fn output(&mut self, tick: Tick, _u: &[f64], y: &mut [f64]) {
         self.sample(tick.t, y);
-    }
-    fn role(&self) -> Role {
-        Role::Source
     }
 }
 

@@ -125,7 +125,92 @@ pub struct MeasuredSignal {
     pub rate_hz: f64,
     /// The samples.
     pub values: Vec<f64>,
+    /// Where the record came from, in messages (a file and its column).
+    pub origin: String,
 }
+
+impl MeasuredSignal {
+    /// A record read from `FILE[:COLUMN]` (the CLI's `--measured-alpha`,
+    /// Python's `measured_alpha`): a data file as `nanomotion run` writes it
+    /// (CSV with a `t_s` column first, or `.mat`:
+    /// [`Dataset::from_file`](nanomotion_core::data::Dataset::from_file)), the
+    /// column `COLUMN` — or the file's only data column — as the signal of
+    /// your graph of that name (e.g. `signals_4000hz.csv:alpha.y`). A whole
+    /// argument that is an existing file is read as the file (a path may hold
+    /// a `:`).
+    pub fn from_file_column(arg: &str) -> Result<Self, CompError> {
+        let (path, column) = match arg.rsplit_once(':') {
+            Some((p, c)) if !c.is_empty() && !std::path::Path::new(arg).is_file() => (p, Some(c)),
+            _ => (arg, None),
+        };
+        let data =
+            nanomotion_core::data::Dataset::from_file(path).map_err(|e| CompError::Input {
+                place: format!(
+                    "{}{}{}",
+                    e.origin,
+                    e.row.map(|r| format!(", row {r}")).unwrap_or_default(),
+                    e.column
+                        .as_ref()
+                        .map(|c| format!(", column `{c}`"))
+                        .unwrap_or_default()
+                ),
+                problem: e.problem,
+                fix: e.fix,
+            })?;
+        let column = match (column, data.names()) {
+            (Some(c), _) => c.to_string(),
+            (None, [one]) => one.clone(),
+            (None, names) => {
+                return Err(CompError::Input {
+                    place: path.to_string(),
+                    problem: format!(
+                        "has {} data columns ({}), so which one is the record is not said",
+                        names.len(),
+                        names.join(", ")
+                    ),
+                    fix: format!(
+                        "name the column of the signal the disturbance is periodic in after the file, `{path}:COLUMN`{}",
+                        names
+                            .first()
+                            .map(|n| format!(", e.g. `{path}:{n}`"))
+                            .unwrap_or_default()
+                    ),
+                });
+            }
+        };
+        let values = data
+            .require(&column)
+            .map_err(|e| CompError::Input {
+                place: format!("{path}, column `{column}`"),
+                problem: e.problem,
+                fix: format!("{} (`{path}:COLUMN`)", e.fix),
+            })?
+            .to_vec();
+        Ok(Self {
+            origin: format!("{path}, column `{column}`"),
+            signal: column,
+            rate_hz: data.rate_hz(),
+            values,
+        })
+    }
+}
+
+/// Delay-varying RC's widening of the delay range [m, M] when no record of
+/// the signal is given: the relative spread of the delay the thesis measured
+/// on its stage at 10 µm/s, N(α) ∈ [2026, 2209] samples (Fig. 5.7), 9.0 %.
+/// Your loop on the nominal plant and on the plant as diagnosed cannot show
+/// that spread: both are periodic in the signal at a constant velocity, so each
+/// takes the same number of samples for every period (docs/compensate.md,
+/// the leg-angle case, against the walking stage's per-sample spread).
+/// The models' delay lies somewhere inside the real stage's range, so the
+/// range is widened by the whole spread on each side.
+pub const DELAY_SPREAD_UNMEASURED: f64 = 2209.0 / 2026.0 - 1.0;
+
+/// Delay-varying RC's widening of the delay range [m, M] when a record of the
+/// signal is given ([`Options::measured`]): the record shows the stage's own
+/// spread, and ±2 % covers what one record does not (the hand design of
+/// docs/repetitive-control.md's Table 5.1: the measured range ± 2 %).
+pub const DELAY_MARGIN_MEASURED: f64 = 0.02;
 
 /// Options of [`compensate`].
 #[derive(Debug, Clone)]
@@ -142,18 +227,19 @@ pub struct Options {
     /// Least relative rms cut (of the loop without it) a compensator must give
     /// to be kept (default 0.01).
     pub min_cut: f64,
-    /// Delay-varying RC: relative widening of the delay range [m, M] found
-    /// from your loop's motion (on the nominal plant and on the plant as
-    /// diagnosed), for the variation of N_k neither model shows — a walking
-    /// stage's irregular steps move its α period ±0.8 % at 10 µm/s on the
-    /// rough strip (docs/repetitive-control.md). Default 0.02 (±2 %, the
-    /// thesis-style design of docs/repetitive-control.md: the measured range
-    /// ± 2 %).
-    pub delay_margin: f64,
+    /// Delay-varying RC: relative widening, on each side, of the delay range
+    /// [m, M] found from your loop's motion (on the nominal plant, on the
+    /// plant as diagnosed, and in [`Options::measured`]), for the variation
+    /// of N_k they do not show; a fraction in [0, 0.5). Default `None`: from
+    /// what was measured — [`DELAY_MARGIN_MEASURED`] with a record of the
+    /// signal, else [`DELAY_SPREAD_UNMEASURED`]. The design figure
+    /// `delay_margin` is the one used.
+    pub delay_margin: Option<f64>,
     /// Signals recorded from your loop on the real stage: a record of the
     /// signal a disturbance is periodic in adds the delays it shows to the
     /// range [m, M] of delay-varying RC (before the widening by
-    /// [`Options::delay_margin`]). Default none.
+    /// [`Options::delay_margin`]); a record no delay-varying RC follows is
+    /// refused. Default none.
     pub measured: Vec<MeasuredSignal>,
 }
 
@@ -165,7 +251,7 @@ impl Default for Options {
             augmented_name: "the augmented model".into(),
             controller_name: "the controller graph".into(),
             min_cut: 0.01,
-            delay_margin: 0.02,
+            delay_margin: None,
             measured: Vec::new(),
         }
     }
@@ -322,6 +408,16 @@ pub fn compensate(
             ),
         });
     }
+    if let Some(m) = opts.delay_margin
+        && !(m.is_finite() && (0.0..0.5).contains(&m))
+    {
+        return Err(CompError::Input {
+            place: "the delay margin of delay-varying RC".into(),
+            problem: format!("is {m}, not a fraction in [0, 0.5)"),
+            fix: "give the relative widening of the delay range on each side, e.g. 0.09 for ±9 %"
+                .into(),
+        });
+    }
     let info = LoopInfo {
         error: score.signal.clone(),
         from_s: score.from_s,
@@ -348,6 +444,35 @@ pub fn compensate(
             synth::Outcome::Compensator(c) => comps.push(c),
             synth::Outcome::None(n) => not_compensated.push(n),
         }
+    }
+    // A record no delay-varying RC follows was given for nothing (a column
+    // named otherwise than the signal, or no disturbance periodic in it).
+    let followed: Vec<&str> = comps.iter().filter_map(|c| c.alpha()).collect();
+    if let Some(m) = opts
+        .measured
+        .iter()
+        .find(|m| !followed.contains(&m.signal.as_str()))
+    {
+        return Err(CompError::Input {
+            place: m.origin.clone(),
+            problem: format!(
+                "no delay-varying RC follows `{}`: {}",
+                m.signal,
+                if followed.is_empty() {
+                    "no disturbance periodic in a signal of your loop was compensated".to_string()
+                } else {
+                    format!("the signals followed are {}", followed.join(", "))
+                }
+            ),
+            fix: if followed.is_empty() {
+                "give a record only with a disturbance periodic in a signal (a `repetitive_disturbance` with `variable: signal`)".into()
+            } else {
+                format!(
+                    "name the record's column after the signal it records, `{}`, or leave the record out",
+                    followed[0]
+                )
+            },
+        });
     }
     let before = simulate(&validation, &info, "the loop on the augmented model")?;
     let nominal = simulate(&base, &info, "the loop on the nominal plant")?;

@@ -116,6 +116,14 @@ impl Compensator {
         }
     }
 
+    /// The signal a delay-varying RC follows (its `alpha`), if it is one.
+    pub fn alpha(&self) -> Option<&str> {
+        match &self.edit {
+            Edit::Learning { alpha, .. } => alpha.as_deref(),
+            _ => None,
+        }
+    }
+
     /// Its `type:`.
     pub fn type_name(&self) -> String {
         self.block
@@ -1245,7 +1253,7 @@ fn measured_range(x: &[f64], period: f64, alpha: &str) -> Result<(f64, f64), Str
     let advance = x.last().zip(x.first()).map_or(0.0, |(b, a)| b - a);
     if period.is_nan() || period <= 0.0 || advance.is_nan() || advance < 2.0 * period {
         return Err(format!(
-            "`{alpha}` advances {advance:.3e} over the measured record, less than two periods ({:.3e}): record your loop where the signal moves forward through the period",
+            "`{alpha}` advances {advance:.3e} over the record, less than two periods ({:.3e})",
             2.0 * period
         ));
     }
@@ -1325,14 +1333,6 @@ fn delay_varying(
             fix: "name the signal (the plant's position, or the block computing the drive's phase) as in the model you diagnosed".into(),
         });
     }
-    let margin = opts.delay_margin;
-    if !(margin.is_finite() && (0.0..0.5).contains(&margin)) {
-        return Err(CompError::Input {
-            place: "Options::delay_margin".into(),
-            problem: format!("is {margin}, not a fraction in [0, 0.5)"),
-            fix: "give the relative widening of the delay range, e.g. 0.02 for ±2 %".into(),
-        });
-    }
     let ctrl_in = controller_input(e, controller, info, opts)?;
     let rate = surgery::rate_of(controller, split(&ctrl_in).0).unwrap_or(controller.base_rate_hz);
     let period = num(params, "period");
@@ -1358,7 +1358,7 @@ fn delay_varying(
     // A record of the signal from your loop on the real stage (Fig. 5.7).
     let mut measured = None;
     if let Some(m) = opts.measured.iter().find(|m| m.signal == alpha) {
-        let place = format!("Options::measured (`{alpha}`)");
+        let place = m.origin.clone();
         if !(m.rate_hz.is_finite() && m.rate_hz > 0.0) {
             return Err(CompError::Input {
                 place,
@@ -1373,13 +1373,24 @@ fn delay_varying(
                 fix: "give a record of finite samples".into(),
             });
         }
-        let (a, b) = measured_range(&m.values, period, alpha).map_err(design_err)?;
+        let (a, b) =
+            measured_range(&m.values, period, alpha).map_err(|problem| CompError::Input {
+                place: m.origin.clone(),
+                problem,
+                fix: "record your loop where the signal moves forward through at least two periods"
+                    .into(),
+            })?;
         let scale = rate / m.rate_hz;
         let (a, b) = (a * scale, b * scale);
         lo = lo.min(a);
         hi = hi.max(b);
         measured = Some((a, b));
     }
+    let margin = opts.delay_margin.unwrap_or(if measured.is_some() {
+        crate::DELAY_MARGIN_MEASURED
+    } else {
+        crate::DELAY_SPREAD_UNMEASURED
+    });
     let n_min = ((lo * (1.0 - margin)).floor() as usize).saturating_sub(1);
     let n_max = (hi * (1.0 + margin)).ceil() as usize + 1;
     if n_min < 8 || n_max > 10_000_000 {
@@ -1429,20 +1440,41 @@ fn delay_varying(
         name: name.to_string(),
         block,
         why: format!(
-            "delay-varying repetitive control (5.7)–(5.8) on {alpha}: the memory delay N_k follows the signal over one period, N_k ∈ [{n_min}, {n_max}] (your loop's range on the nominal plant{} and on the plant as diagnosed, ±{:.1} %), L = ZPETC of the loop's T, Q the FIR low-pass with the largest cut-off keeping (5.9)",
+            "delay-varying repetitive control (5.7)–(5.8) on {alpha}: the memory delay N_k follows the signal over one period, N_k ∈ [{n_min}, {n_max}] (your loop's range on the nominal plant{} and on the plant as diagnosed, ±{:.1} %{}), L = ZPETC of the loop's T, Q the FIR low-pass with the largest cut-off keeping (5.9)",
             if measured.is_some() {
                 ", in the measured record"
             } else {
                 ""
             },
-            100.0 * margin
+            100.0 * margin,
+            match (opts.delay_margin, measured) {
+                (Some(_), _) => " as given",
+                (None, Some(_)) => " beyond the record",
+                (None, None) =>
+                    ": the spread of the delay the thesis measured on its stage, Fig. 5.7, which no model shows",
+            }
         ),
         place: format!(
             "on the error {} before {} (Fig. 5.1), α = {alpha}",
             info.error, ctrl_in
         ),
         design,
-        note: None,
+        note: match measured {
+            // The validation runs on the augmented model, which is periodic in
+            // the signal like the nominal: it cannot show a range too narrow.
+            None => Some(format!(
+                "the validation on the augmented model cannot tell whether [{n_min}, {n_max}] covers how far the real stage's period in {alpha} moves (no model shows it): a record of {alpha} from your loop on the stage without RC sizes the range (Fig. 5.7); a range too narrow pins N_k at its ends and can make the error worse"
+            )),
+            // The stage moves the signal at another speed than the models: a
+            // gain of the nominal is off, and L = ZPETC(T) is designed on it.
+            Some((a, b)) if b < lo0.min(lo1) || a > hi0.max(hi1) => Some(format!(
+                "the record's delays {a} … {b} do not overlap your loops' {} … {}: the stage takes {:.2}× as many samples per period as your nominal plant and the plant as diagnosed, so a gain of the nominal is off (a walking stage's step per cycle?) — L = ZPETC of the loop's T is designed on it; correct the nominal plant and run `nanomotion diagnose` again",
+                lo0.min(lo1),
+                hi0.max(hi1),
+                (a + b) / (lo0.min(lo1) + hi0.max(hi1))
+            )),
+            Some(_) => None,
+        },
         edit,
     }))
 }
