@@ -506,6 +506,30 @@ pub fn insert(
     Ok(name)
 }
 
+/// The signal wired into the input port `to` (`block.port`).
+fn source_of(spec: &GraphSpec, to: &str) -> Option<String> {
+    spec.connections
+        .iter()
+        .find(|c| c.to == to)
+        .map(|c| c.from.clone())
+}
+
+/// The block named from `stem` (see [`fresh_name`]) at the other end of a
+/// connection of `port` (`block.port`).
+fn helper_on(spec: &GraphSpec, port: &str, stem: &str) -> Option<String> {
+    spec.connections.iter().find_map(|c| {
+        let other = if c.from == port {
+            &c.to
+        } else if c.to == port {
+            &c.from
+        } else {
+            return None;
+        };
+        let block = split(other).0;
+        block.starts_with(stem).then(|| block.to_string())
+    })
+}
+
 /// Take out effect block `name` that [`insert`] put in, with the `sum` and
 /// `mux` it brought: what it read goes where its output went (a map in
 /// series or on a comparison), or the force balance it was added into is
@@ -521,41 +545,16 @@ pub fn remove(spec: &mut GraphSpec, name: &str) -> Result<(), PlfError> {
         format!("{name}.y"),
         format!("{name}.s"),
     );
-    let read = spec
-        .connections
-        .iter()
-        .find(|c| c.to == u)
-        .map(|c| c.from.clone())
-        .ok_or_else(missing)?;
+    let read = source_of(spec, &u).ok_or_else(missing)?;
     // Helpers it brought: the sum it is added through, the mux of its `s`.
-    let sum_prefix = format!("{name}_sum");
-    let sum = spec
-        .connections
-        .iter()
-        .filter(|c| c.from == y)
-        .map(|c| split(&c.to).0)
-        .find(|b| b.starts_with(&sum_prefix))
-        .map(str::to_string);
-    let mux_prefix = format!("{name}_mux");
-    let mux = spec
-        .connections
-        .iter()
-        .filter(|c| c.to == s)
-        .map(|c| split(&c.from).0)
-        .find(|b| b.starts_with(&mux_prefix))
-        .map(str::to_string);
+    let sum = helper_on(spec, &y, &format!("{name}_sum"));
+    let mux = helper_on(spec, &s, &format!("{name}_mux"));
     let (source, output) = match &sum {
         // A force inside the loop: the sum's other input goes on alone.
-        Some(sum) => {
-            let in0 = format!("{sum}.in0");
-            let other = spec
-                .connections
-                .iter()
-                .find(|c| c.to == in0)
-                .map(|c| c.from.clone())
-                .ok_or_else(missing)?;
-            (other, format!("{sum}.y"))
-        }
+        Some(sum) => (
+            source_of(spec, &format!("{sum}.in0")).ok_or_else(missing)?,
+            format!("{sum}.y"),
+        ),
         // A map: what it read goes where its output went.
         None => (read, y),
     };
@@ -590,6 +589,20 @@ mod tests {
             "stage.yaml",
         )
         .unwrap()
+    }
+
+    /// On [`stage`]: a map in series on its drive, and a force inside its loop.
+    fn drive_and_force_sites() -> (Site, Site) {
+        let input = Site::Input {
+            from: "drive.y".into(),
+            to: "stage.u".into(),
+        };
+        let feedback = Site::Feedback {
+            from: "drive.y".into(),
+            to: "stage.u".into(),
+            position: "stage.y".into(),
+        };
+        (input, feedback)
     }
 
     fn conn(spec: &GraphSpec, from: &str, to: &str) -> bool {
@@ -650,15 +663,7 @@ mod tests {
     #[test]
     fn several_effects_enter_on_the_drive_and_inside_the_loop() {
         let mut spec = stage();
-        let input = Site::Input {
-            from: "drive.y".into(),
-            to: "stage.u".into(),
-        };
-        let feedback = Site::Feedback {
-            from: "drive.y".into(),
-            to: "stage.u".into(),
-            position: "stage.y".into(),
-        };
+        let (input, feedback) = drive_and_force_sites();
         let block = |v| block_from_json(v).unwrap();
         let a = insert(
             &mut spec,
@@ -725,15 +730,7 @@ mod tests {
     /// a typed error.
     #[test]
     fn removing_an_effect_leaves_the_graph_the_others_make() {
-        let input = Site::Input {
-            from: "drive.y".into(),
-            to: "stage.u".into(),
-        };
-        let feedback = Site::Feedback {
-            from: "drive.y".into(),
-            to: "stage.u".into(),
-            position: "stage.y".into(),
-        };
+        let (input, feedback) = drive_and_force_sites();
         let output = Site::Output {
             compare: 0,
             signal: "stage.y".into(),
