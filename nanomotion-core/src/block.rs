@@ -29,7 +29,9 @@
 //! `inputs`/`outputs` from `ports` when that string is a declaration
 //! ([`DeclaredPorts`]: `name[width] (unit) [scheduling]`, widths a number or a
 //! `usize` field, units SI symbols), `role` from `role` ([`DeclaredBlock`]), and
-//! `build` as the declared checks (`check_params()`, then `check_at_rate(ctx.dt)`).
+//! `build` as the declared checks (`check_params()`, then `check_at_rate(ctx.dt)`),
+//! and, for a block that writes no `output`, its [`Source`](crate::Source):
+//! `sample` at the tick's time.
 //! A block writes itself only what the declaration cannot say: its `output`, and
 //! ports whose number or units depend on parameters, a `build` that prepares more
 //! than checks.

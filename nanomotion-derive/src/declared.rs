@@ -55,7 +55,8 @@ pub(crate) fn expand(args: TokenStream2, mut item: ItemImpl) -> syn::Result<Toke
     let blk = quote!(::nanomotion_core::block);
     let has = written(&item);
     let has = |name: &str| has.iter().any(|n| n == name);
-    // A macro invoked in the impl may write the ports: they are then its.
+    // A macro invoked in the impl may write the ports and `output`: they are
+    // then its.
     let macros = item.items.iter().any(|i| matches!(i, ImplItem::Macro(_)));
     if !has("inputs") && !has("outputs") && !macros {
         item.items.push(parse_quote!(
@@ -84,6 +85,14 @@ pub(crate) fn expand(args: TokenStream2, mut item: ItemImpl) -> syn::Result<Toke
             ) -> ::core::result::Result<(), ::nanomotion_core::ParamError> {
                 ::nanomotion_core::doc::Params::check_params(self)?;
                 ::nanomotion_core::doc::Params::check_at_rate(self, ctx.dt)
+            }
+        ));
+    }
+    if !has("output") && !macros {
+        // A block that writes no `output` is a source: it plays its `Source`.
+        item.items.push(parse_quote!(
+            fn output(&mut self, tick: ::nanomotion_core::Tick, _u: &[f64], y: &mut [f64]) {
+                ::nanomotion_core::Source::sample(self, tick.t, y)
             }
         ));
     }
@@ -119,6 +128,16 @@ mod tests {
             assert!(out.contains(m), "{m} in {out}");
         }
         assert!(out.contains("DeclaredBlock > :: TYPE_NAME"), "{out}");
+        assert!(!out.contains("Source :: sample"), "{out}");
+
+        let item: ItemImpl = parse_quote!(
+            impl Block for Sinusoid {}
+        );
+        let out = methods(&expand(TokenStream2::new(), item).unwrap());
+        assert!(
+            out.contains("Source :: sample (self , tick . t , y)"),
+            "{out}"
+        );
 
         let item: ItemImpl = parse_quote!(
             impl Block for Gain {

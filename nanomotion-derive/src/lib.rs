@@ -50,7 +50,10 @@ pub fn derive_params(input: TokenStream) -> TokenStream {
 ///   macro invoked in the impl is taken to write them),
 /// - `role` from the declared role,
 /// - `build` as the declared checks: `check_params()`, then
-///   `check_at_rate(ctx.dt)`.
+///   `check_at_rate(ctx.dt)`,
+/// - `output`, for a source: `Source::sample` at the tick's time (a block
+///   that writes no `output` and invokes no macro must implement
+///   `nanomotion_core::Source`).
 ///
 /// What the impl writes itself is kept. See `nanomotion_core::block`.
 #[proc_macro_attribute]
@@ -1028,8 +1031,8 @@ fn expand(input: &DeriveInput) -> syn::Result<TokenStream2> {
             };
             let blk = quote!(::nanomotion_core::block);
             let declared_ports = match ports::declared(&ports, &fields) {
-                Ok(Some((ins, outs))) => {
-                    let (ins, outs) = (ports::port_list(&ins), ports::port_list(&outs));
+                Ok(Some(d)) => {
+                    let (ins, outs) = (ports::port_list(&d.inputs), ports::port_list(&d.outputs));
                     quote!(impl #blk::DeclaredPorts for #name {
                         fn declared_inputs(&self) -> ::std::vec::Vec<::nanomotion_core::Port> {
                             #ins

@@ -34,6 +34,13 @@ pub(crate) struct PortDecl {
     pub scheduling: bool,
 }
 
+/// The ports a `ports` string declares.
+#[derive(Debug, PartialEq)]
+pub(crate) struct Declaration {
+    pub inputs: Vec<PortDecl>,
+    pub outputs: Vec<PortDecl>,
+}
+
 /// A declared width.
 #[derive(Debug, PartialEq)]
 pub(crate) enum Width {
@@ -57,10 +64,7 @@ pub(crate) fn shown(ports: &str) -> String {
 /// The ports declared by `ports`, if it is a declaration (module doc); `fields`
 /// are the parameter struct's field names. `Err`: a marker where it cannot
 /// stand (a compile error, not prose).
-pub(crate) fn declared(
-    ports: &str,
-    fields: &[String],
-) -> Result<Option<(Vec<PortDecl>, Vec<PortDecl>)>, String> {
+pub(crate) fn declared(ports: &str, fields: &[String]) -> Result<Option<Declaration>, String> {
     let Some((ins, outs)) = ports.split_once("->") else {
         return Ok(None);
     };
@@ -76,7 +80,10 @@ pub(crate) fn declared(
             p.name
         ));
     }
-    Ok(Some((ins, outs)))
+    Ok(Some(Declaration {
+        inputs: ins,
+        outputs: outs,
+    }))
 }
 
 /// One side of `->`: its ports, or `None` if an entry is not a port declaration.
@@ -221,9 +228,10 @@ mod tests {
 
     #[test]
     fn a_declaration_reads_names_widths_units_and_markers() {
-        let (ins, outs) = declared("e, alpha [scheduling] -> w, n", &fields())
+        let d = declared("e, alpha [scheduling] -> w, n", &fields())
             .unwrap()
             .unwrap();
+        let (ins, outs) = (d.inputs, d.outputs);
         assert_eq!(
             ins,
             [
@@ -232,9 +240,10 @@ mod tests {
             ]
         );
         assert_eq!(outs.len(), 2);
-        let (ins, outs) = declared("-> y[width], v (m/s), a[3] (m/s²)", &fields())
+        let d = declared("-> y[width], v (m/s), a[3] (m/s²)", &fields())
             .unwrap()
             .unwrap();
+        let (ins, outs) = (d.inputs, d.outputs);
         assert!(ins.is_empty());
         assert_eq!(
             outs,
@@ -244,8 +253,8 @@ mod tests {
                 port("a", Width::Fixed(3), Some("m/s²"), false)
             ]
         );
-        let (_, outs) = declared("u -> y (count)", &fields()).unwrap().unwrap();
-        assert_eq!(outs[0].unit.as_deref(), Some("count"));
+        let d = declared("u -> y (count)", &fields()).unwrap().unwrap();
+        assert_eq!(d.outputs[0].unit.as_deref(), Some("count"));
     }
 
     #[test]

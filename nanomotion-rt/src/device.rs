@@ -60,7 +60,7 @@
 //! assert_eq!(daq.regs[1], 0.0);
 //! ```
 
-use nanomotion_core::{Block, BuildContext, ParamError, Params, Port, Role, Tick};
+use nanomotion_core::{Block, Params, Port, Tick, declared_block};
 use serde::{Deserialize, Serialize};
 
 /// A named scalar channel of a device, with its unit.
@@ -167,7 +167,7 @@ pub struct HwInput {
     pub unit: Option<String>,
 }
 
-#[typetag::serde(name = "hw_input")]
+#[declared_block]
 impl Block for HwInput {
     fn outputs(&self) -> Vec<Port> {
         let p = Port::new("y", 1);
@@ -176,15 +176,9 @@ impl Block for HwInput {
             None => p,
         }]
     }
-    fn build(&mut self, _ctx: &BuildContext) -> Result<(), ParamError> {
-        self.check_params()
-    }
     /// Writes nothing: the runner puts the device's sample into `y` before each
     /// tick (`Scheduler::write`), and the block holds it.
     fn output(&mut self, _tick: Tick, _u: &[f64], _y: &mut [f64]) {}
-    fn role(&self) -> Role {
-        Role::Sensor
-    }
 }
 
 /// `hw_output`: sends `u` to the device channel named like this block after every
@@ -199,7 +193,7 @@ pub struct HwOutput {
     pub unit: Option<String>,
 }
 
-#[typetag::serde(name = "hw_output")]
+#[declared_block]
 impl Block for HwOutput {
     fn inputs(&self) -> Vec<Port> {
         vec![Port::new("u", 1)]
@@ -213,8 +207,5 @@ impl Block for HwOutput {
     }
     fn output(&mut self, _tick: Tick, u: &[f64], y: &mut [f64]) {
         y[0] = u[0];
-    }
-    fn role(&self) -> Role {
-        Role::Actuator
     }
 }

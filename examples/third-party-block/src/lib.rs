@@ -14,7 +14,7 @@
 //! ```
 
 use nanomotion_core::block::check;
-use nanomotion_core::{Block, BuildContext, ParamError, Params, Port, Role, Tick};
+use nanomotion_core::{Block, BuildContext, ParamError, Params, Tick, declared_block};
 use serde::{Deserialize, Serialize};
 
 /// Moving average over the last `window` samples (example of a third-party
@@ -60,14 +60,8 @@ impl MovingAverage {
     }
 }
 
-#[typetag::serde(name = "moving_average")]
+#[declared_block]
 impl Block for MovingAverage {
-    fn inputs(&self) -> Vec<Port> {
-        vec![Port::new("u", 1)]
-    }
-    fn outputs(&self) -> Vec<Port> {
-        vec![Port::new("y", 1)]
-    }
     fn build(&mut self, _ctx: &BuildContext) -> Result<(), ParamError> {
         // A size that allocates: bounded before the allocation, like every block's.
         check::buffer("window", self.window, 1, 1)?;
@@ -89,8 +83,5 @@ impl Block for MovingAverage {
             "window",
             self.window.saturating_mul(std::mem::size_of::<f64>()),
         )
-    }
-    fn role(&self) -> Role {
-        Role::Math
     }
 }

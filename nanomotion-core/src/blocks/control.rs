@@ -49,9 +49,8 @@
 //! ```
 
 use crate::block::check;
-use crate::declared_block;
 use crate::lti::StateSpace;
-use crate::{Block, BuildContext, Controller, ParamError, Params, Tick};
+use crate::{Block, BuildContext, Controller, ParamError, Params, Tick, declared_block};
 use nalgebra::DMatrix;
 use serde::{Deserialize, Serialize};
 use std::f64::consts::TAU;

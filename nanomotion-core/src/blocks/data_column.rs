@@ -12,8 +12,7 @@
 //!
 //! [`GraphSpec::build_with_data`]: crate::graph::GraphSpec::build_with_data
 
-use crate::declared_block;
-use crate::{Block, BuildContext, ParamError, Params, Tick};
+use crate::{Block, BuildContext, ParamError, Params, Tick, declared_block};
 use serde::{Deserialize, Serialize};
 
 /// Relative tolerance between the block's rate and the data's rate.

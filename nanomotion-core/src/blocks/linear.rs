@@ -10,11 +10,10 @@
 //! discrete model that is simulated.
 
 use crate::block::{BuildContext, Port, Tick, check};
-use crate::declared_block;
 use crate::doc::Params;
 use crate::error::ParamError;
 use crate::lti::{self, C2dMethod, LtiError, SsStepper, StateSpace, TransferFunction};
-use crate::{Block, Controller};
+use crate::{Block, Controller, declared_block};
 use nalgebra::DMatrix;
 use serde::{Deserialize, Serialize};
 use std::f64::consts::PI;

@@ -18,10 +18,9 @@
 //! ```
 
 use crate::block::check;
-use crate::declared_block;
 use crate::doc::Params;
 use crate::lti::StateSpace;
-use crate::{Block, BuildContext, ParamError, Port, Tick};
+use crate::{Block, BuildContext, ParamError, Port, Tick, declared_block};
 use nalgebra::DMatrix;
 use serde::{Deserialize, Serialize};
 

@@ -16,9 +16,8 @@
 //! ```
 
 use crate::block::check;
-use crate::declared_block;
 use crate::rng::Rng;
-use crate::{Block, BuildContext, ParamError, Params, Port, Sensor, Tick, Tunable};
+use crate::{Block, BuildContext, ParamError, Params, Port, Sensor, Tick, Tunable, declared_block};
 use serde::{Deserialize, Serialize};
 
 /// Resolution of the metrological AFM's laser interferometers (m), Ch. 6.

@@ -1,5 +1,6 @@
 //! Signal sources: references, disturbances and noise. All implement
-//! [`Source`] (a function of time, or a seeded random stream) and have no inputs.
+//! [`Source`] (a function of time, or a seeded random stream) and have no inputs;
+//! each block plays its `Source` (`#[declared_block]` writes its `output`).
 //!
 //! | type | outputs | what |
 //! |---|---|---|
@@ -25,10 +26,9 @@
 //! ```
 
 use crate::block::check;
-use crate::declared_block;
 use crate::doc::Params;
 use crate::rng::Rng;
-use crate::{Block, BuildContext, ParamError, Port, Source, Tick};
+use crate::{Block, BuildContext, ParamError, Port, Source, declared_block};
 use serde::{Deserialize, Serialize};
 use std::f64::consts::{PI, TAU};
 
@@ -76,11 +76,7 @@ impl Source for Constant {
 }
 
 #[declared_block]
-impl Block for Constant {
-    fn output(&mut self, tick: Tick, _u: &[f64], y: &mut [f64]) {
-        self.sample(tick.t, y);
-    }
-}
+impl Block for Constant {}
 
 // ---------------------------------------------------------------------------------
 // step
@@ -127,11 +123,7 @@ impl Source for Step {
 }
 
 #[declared_block]
-impl Block for Step {
-    fn output(&mut self, tick: Tick, _u: &[f64], y: &mut [f64]) {
-        self.sample(tick.t, y);
-    }
-}
+impl Block for Step {}
 
 // ---------------------------------------------------------------------------------
 // constant_velocity
@@ -188,11 +180,7 @@ impl Source for ConstantVelocity {
 }
 
 #[declared_block]
-impl Block for ConstantVelocity {
-    fn output(&mut self, tick: Tick, _u: &[f64], y: &mut [f64]) {
-        self.sample(tick.t, y);
-    }
-}
+impl Block for ConstantVelocity {}
 
 // ---------------------------------------------------------------------------------
 // sinusoid
@@ -238,11 +226,7 @@ impl Source for Sinusoid {
 }
 
 #[declared_block]
-impl Block for Sinusoid {
-    fn output(&mut self, tick: Tick, _u: &[f64], y: &mut [f64]) {
-        self.sample(tick.t, y);
-    }
-}
+impl Block for Sinusoid {}
 
 // ---------------------------------------------------------------------------------
 // triangular_scan
@@ -301,9 +285,6 @@ impl Source for TriangularScan {
 impl Block for TriangularScan {
     fn outputs(&self) -> Vec<Port> {
         vec![Port::new("y", 1)]
-    }
-    fn output(&mut self, tick: Tick, _u: &[f64], y: &mut [f64]) {
-        self.sample(tick.t, y);
     }
 }
 
@@ -629,9 +610,6 @@ impl Block for PointToPoint {
     fn build(&mut self, _ctx: &BuildContext) -> Result<(), ParamError> {
         self.plan()
     }
-    fn output(&mut self, tick: Tick, _u: &[f64], y: &mut [f64]) {
-        self.sample(tick.t, y);
-    }
 }
 
 // ---------------------------------------------------------------------------------
@@ -726,14 +704,12 @@ impl Block for WhiteNoise {
         self.rng = Rng::new(ctx.seed);
         Ok(())
     }
-    fn output(&mut self, tick: Tick, _u: &[f64], y: &mut [f64]) {
-        self.sample(tick.t, y);
-    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::Tick;
 
     const DT: f64 = 1e-4;
 

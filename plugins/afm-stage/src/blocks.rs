@@ -5,7 +5,9 @@
 
 use crate::hysteresis::{CH_NAMES_UM_V, ChParams, ColemanHodgdon, Direction, ExtendedCh};
 use nanomotion_core::Params;
-use nanomotion_core::{Actuator, Block, BuildContext, ParamError, Port, Role, Sector, Tick};
+use nanomotion_core::{
+    Actuator, Block, BuildContext, ParamError, Port, Sector, Tick, declared_block,
+};
 use serde::{Deserialize, Serialize};
 
 /// `coleman_hodgdon`: Coleman–Hodgdon piezo hysteresis dx/dt = α|V̇|(bV − x) + uV̇
@@ -58,7 +60,7 @@ impl Actuator for ColemanHodgdonBlock {
     }
 }
 
-#[typetag::serde(name = "coleman_hodgdon")]
+#[declared_block]
 impl Block for ColemanHodgdonBlock {
     fn inputs(&self) -> Vec<Port> {
         vec![Port::new("v", 1)]
@@ -83,9 +85,6 @@ impl Block for ColemanHodgdonBlock {
         // From the built state: x = 0 at 0 V moved to `initial_v` along the
         // virgin curve, inside the model's band.
         self.h.as_ref()?.sector()
-    }
-    fn role(&self) -> Role {
-        Role::Actuator
     }
 }
 
@@ -114,7 +113,7 @@ pub struct ExtendedChBlock {
     state: Option<(Direction, f64)>,
 }
 
-#[typetag::serde(name = "extended_coleman_hodgdon")]
+#[declared_block]
 impl Block for ExtendedChBlock {
     fn inputs(&self) -> Vec<Port> {
         vec![Port::new("v", 1)]
@@ -161,9 +160,6 @@ impl Block for ExtendedChBlock {
         // None: the switch between the two fixed branches at a reversal is a
         // jump of x for an arbitrarily small ΔV (see the type's docs).
         None
-    }
-    fn role(&self) -> Role {
-        Role::Actuator
     }
 }
 

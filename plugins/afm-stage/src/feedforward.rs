@@ -9,7 +9,7 @@
 use crate::error::{AfmError, finite};
 use crate::hysteresis::{Branch, Direction, ExtendedCh};
 use nanomotion_core::Params;
-use nanomotion_core::{Block, BuildContext, Controller, ParamError, Port, Role, Tick};
+use nanomotion_core::{Block, BuildContext, Controller, ParamError, Port, Tick, declared_block};
 use serde::{Deserialize, Serialize};
 
 /// Solve for the voltage range [V_m, V_M] on which branch `dir` of `model` runs from
@@ -296,7 +296,7 @@ impl Controller for HysteresisFeedForwardBlock {
     }
 }
 
-#[typetag::serde(name = "hysteresis_feedforward")]
+#[declared_block]
 impl Block for HysteresisFeedForwardBlock {
     fn inputs(&self) -> Vec<Port> {
         vec![Port::new("r", 1)]
@@ -337,9 +337,6 @@ impl Block for HysteresisFeedForwardBlock {
             y[2] = ff.out_of_range_count() as f64;
         }
     }
-    fn role(&self) -> Role {
-        Role::Controller
-    }
 }
 
 /// `position_feedforward`: position feed-forward (6.7): v = K·r + V0.
@@ -379,7 +376,7 @@ impl Controller for PositionFeedForward {
     fn reset(&mut self) {}
 }
 
-#[typetag::serde(name = "position_feedforward")]
+#[declared_block]
 impl Block for PositionFeedForward {
     fn inputs(&self) -> Vec<Port> {
         vec![Port::new("r", 1)]
@@ -387,14 +384,8 @@ impl Block for PositionFeedForward {
     fn outputs(&self) -> Vec<Port> {
         vec![Port::new("v", 1)]
     }
-    fn build(&mut self, _ctx: &BuildContext) -> Result<(), ParamError> {
-        self.check_params()
-    }
     fn output(&mut self, _tick: Tick, u: &[f64], y: &mut [f64]) {
         self.control(u, y);
-    }
-    fn role(&self) -> Role {
-        Role::Controller
     }
 }
 

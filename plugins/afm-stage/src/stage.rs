@@ -28,7 +28,7 @@ use nanomotion_core::Params;
 use nanomotion_core::block::check;
 use nanomotion_core::lti::{C2dMethod, SsStepper, StateSpace};
 use nanomotion_core::rng::Rng;
-use nanomotion_core::{Block, BuildContext, ParamError, Plant, Port, Role, Tick};
+use nanomotion_core::{Block, BuildContext, ParamError, Plant, Port, Tick, declared_block};
 use serde::{Deserialize, Serialize};
 use std::f64::consts::TAU;
 
@@ -503,7 +503,7 @@ impl Plant for AfmStage {
     }
 }
 
-#[typetag::serde(name = "afm_stage")]
+#[declared_block]
 impl Block for AfmStage {
     fn inputs(&self) -> Vec<Port> {
         vec![Port::new("v", 3)]
@@ -528,9 +528,6 @@ impl Block for AfmStage {
     }
     fn update(&mut self, _tick: Tick, u: &[f64]) {
         self.advance(u);
-    }
-    fn role(&self) -> Role {
-        Role::Plant
     }
 }
 

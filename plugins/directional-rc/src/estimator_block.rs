@@ -46,7 +46,7 @@ use crate::estimate::{
 use crate::plan::MAX_LINES;
 use nanomotion_core::Params;
 use nanomotion_core::block::check;
-use nanomotion_core::{Block, BuildContext, ParamError, Port, Role, Tick};
+use nanomotion_core::{Block, BuildContext, ParamError, Port, Tick, declared_block};
 use serde::{Deserialize, Serialize};
 
 /// What to output for α when the estimate fails.
@@ -271,7 +271,7 @@ impl State {
     }
 }
 
-#[typetag::serde(name = "rotation_estimator")]
+#[declared_block]
 impl Block for RotationEstimator {
     fn inputs(&self) -> Vec<Port> {
         vec![Port::new("z", 1), Port::new("line", 1), Port::new("r", 2)]
@@ -330,8 +330,5 @@ impl Block for RotationEstimator {
     }
     fn update(&mut self, _tick: Tick, u: &[f64]) {
         self.record(u[0], u[1], u[2], u[3]);
-    }
-    fn role(&self) -> Role {
-        Role::Estimator
     }
 }

@@ -35,7 +35,7 @@
 
 use glam::{DMat2, DVec2};
 use nanomotion_core::Params;
-use nanomotion_core::{Block, BuildContext, ParamError, Port, Role, Tick};
+use nanomotion_core::{Block, BuildContext, ParamError, Port, Tick, declared_block};
 use serde::{Deserialize, Serialize};
 
 /// Which way [`FrameRotation`] maps.
@@ -129,7 +129,7 @@ impl FrameRotation {
     }
 }
 
-#[typetag::serde(name = "frame_rotation")]
+#[declared_block]
 impl Block for FrameRotation {
     fn inputs(&self) -> Vec<Port> {
         if self.alpha_input {
@@ -180,9 +180,6 @@ impl Block for FrameRotation {
         if self.width == 3 {
             y[2] = u[2];
         }
-    }
-    fn role(&self) -> Role {
-        Role::Controller
     }
 }
 

@@ -34,7 +34,7 @@
 
 use nanomotion_core::Params;
 use nanomotion_core::block::check;
-use nanomotion_core::{Block, BuildContext, ParamError, Port, Role, Tick};
+use nanomotion_core::{Block, BuildContext, ParamError, Port, Tick, declared_block};
 use serde::{Deserialize, Serialize};
 
 /// Largest number of estimation lines (also the `rotation_estimator`'s cap).
@@ -164,7 +164,7 @@ impl ScanPlan {
     }
 }
 
-#[typetag::serde(name = "drc_scan_plan")]
+#[declared_block]
 impl Block for ScanPlan {
     fn outputs(&self) -> Vec<Port> {
         vec![
@@ -208,9 +208,6 @@ impl Block for ScanPlan {
     }
     fn output(&mut self, tick: Tick, _u: &[f64], y: &mut [f64]) {
         y.copy_from_slice(&self.at(tick.k));
-    }
-    fn role(&self) -> Role {
-        Role::Source
     }
 }
 

@@ -30,9 +30,9 @@
 use crate::delay::{AlphaDelay, VaryingDelay};
 use crate::filters::{Filter, FilterSpec};
 use nanomotion_core::Params;
-use nanomotion_core::block::{BuildContext, Port, Role, Tick, check};
+use nanomotion_core::block::{BuildContext, Tick, check};
 use nanomotion_core::error::ParamError;
-use nanomotion_core::{Block, Controller, LearningFilter};
+use nanomotion_core::{Block, Controller, LearningFilter, declared_block};
 use serde::{Deserialize, Serialize};
 
 /// The memory loop of Fig. 5.1/5.2 with an externally chosen delay N_k per sample.
@@ -287,7 +287,7 @@ fn learning_of(
 /// ([`RepetitiveControl`], [`HighOrderRc`]): both hold `n: usize` and
 /// `core: Option<MemoryLoop>` and differ only in how `prepare` builds the loop.
 macro_rules! fixed_delay_rc_adapters {
-    ($ty:ident, $tag:literal) => {
+    ($ty:ident) => {
         impl $ty {
             /// One sample from plain Rust: returns w_k, then learns from e_k.
             ///
@@ -324,14 +324,8 @@ macro_rules! fixed_delay_rc_adapters {
             }
         }
 
-        #[typetag::serde(name = $tag)]
+        #[declared_block]
         impl Block for $ty {
-            fn inputs(&self) -> Vec<Port> {
-                vec![Port::new("e", 1)]
-            }
-            fn outputs(&self) -> Vec<Port> {
-                vec![Port::new("w", 1)]
-            }
             fn direct_feedthrough(&self) -> bool {
                 false
             }
@@ -353,9 +347,6 @@ macro_rules! fixed_delay_rc_adapters {
                 if let Some(c) = self.core.as_mut() {
                     c.update(u[0]);
                 }
-            }
-            fn role(&self) -> Role {
-                Role::Controller
             }
             fn learning(&self) -> Option<nanomotion_core::gate::LearningModel> {
                 self.learning_model()
@@ -444,7 +435,7 @@ impl RepetitiveControl {
     }
 }
 
-fixed_delay_rc_adapters!(RepetitiveControl, "repetitive_control");
+fixed_delay_rc_adapters!(RepetitiveControl);
 
 // ---------------------------------------------------------------------------------
 // high_order_rc
@@ -527,7 +518,7 @@ impl HighOrderRc {
     }
 }
 
-fixed_delay_rc_adapters!(HighOrderRc, "high_order_rc");
+fixed_delay_rc_adapters!(HighOrderRc);
 
 // ---------------------------------------------------------------------------------
 // dvrc
@@ -546,7 +537,10 @@ fixed_delay_rc_adapters!(HighOrderRc, "high_order_rc");
 /// (P_α = N·T_s, n_init = N) it is bit-for-bit [`RepetitiveControl`].
 #[derive(Debug, Clone, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
-#[block(type_name = "dvrc", role = Controller, ports = "e, alpha -> w, n")]
+// α is the variable the disturbance is periodic in (Sec. 5.3), a scheduling
+// input: it only sets the delay N_k, which (5.9) covers over [m, M]; the gate
+// judges the loop with it frozen.
+#[block(type_name = "dvrc", role = Controller, ports = "e, alpha [scheduling] -> w, n")]
 pub struct Dvrc {
     /// Repetitive period P_α in units of α (default 2π rad).
     #[serde(default = "default_period")]
@@ -675,17 +669,8 @@ impl Controller for Dvrc {
     }
 }
 
-#[typetag::serde(name = "dvrc")]
+#[declared_block]
 impl Block for Dvrc {
-    fn inputs(&self) -> Vec<Port> {
-        // α is the variable the disturbance is periodic in (Sec. 5.3): it
-        // only sets the delay N_k, which (5.9) covers over [m, M]; the gate
-        // judges the loop with it frozen.
-        vec![Port::new("e", 1), Port::new("alpha", 1).scheduling_input()]
-    }
-    fn outputs(&self) -> Vec<Port> {
-        vec![Port::new("w", 1), Port::new("n", 1)]
-    }
     /// α_k is needed for w_k (N_k depends on α_k), so the block has feed-through
     /// from `alpha`; w never depends on e_k. The scheduler treats the block as
     /// having feed-through: α must not depend on w within the same sample (it
@@ -712,9 +697,6 @@ impl Block for Dvrc {
         let (w, n) = self.step(u[0], u[1]);
         y[0] = w;
         y[1] = n as f64;
-    }
-    fn role(&self) -> Role {
-        Role::Controller
     }
     fn learning(&self) -> Option<nanomotion_core::gate::LearningModel> {
         let (m, _) = self.core.as_ref()?;

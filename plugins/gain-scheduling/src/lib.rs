@@ -45,7 +45,7 @@
 //! ```
 
 use nanomotion_core::Params;
-use nanomotion_core::{Block, BuildContext, Controller, ParamError, Port, Role, Tick};
+use nanomotion_core::{Block, BuildContext, Controller, ParamError, Port, Tick, declared_block};
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
@@ -392,7 +392,7 @@ pub fn fit_power_db(sigma: &[f64], gain_db: &[f64]) -> Result<(GainLaw, f64), Fi
 /// ```
 #[derive(Debug, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
-#[block(type_name = "gain_scheduled", role = Controller, ports = "<inner inputs>, sigma[n] -> <inner outputs>, gain")]
+#[block(type_name = "gain_scheduled", role = Controller, ports = "<inner inputs>, sigma[n] [scheduling] -> <inner outputs>, gain")]
 pub struct GainScheduledBlock {
     /// The inner block (any registered type), e.g. `{type: pi, kp: 1, zero_hz: 2}`.
     pub controller: Box<dyn Block>,
@@ -446,11 +446,11 @@ impl GainScheduledBlock {
     }
 }
 
-#[typetag::serde(name = "gain_scheduled")]
+#[declared_block]
 impl Block for GainScheduledBlock {
     fn inputs(&self) -> Vec<Port> {
         let mut v = self.controller.inputs();
-        v.push(Port::new("sigma", self.schedule.len()));
+        v.push(Port::new("sigma", self.schedule.len()).scheduling_input());
         v
     }
     fn outputs(&self) -> Vec<Port> {
@@ -489,9 +489,6 @@ impl Block for GainScheduledBlock {
             y[..n_out].iter_mut().for_each(|v| *v *= self.gain);
         }
         y[n_out] = self.gain;
-    }
-    fn role(&self) -> Role {
-        Role::Controller
     }
     /// For the stability gate: the inner controller's model times K at every
     /// schedule point — the gains at the table breakpoints (piecewise-linear

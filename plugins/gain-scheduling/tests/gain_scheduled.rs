@@ -143,7 +143,10 @@ schedule:
 ";
     let mut b: Box<dyn Block> = nanomotion_core::yaml::from_str(text, "test").unwrap();
     b.build(&BuildContext::new("gs", DT, 0)).unwrap();
-    assert_eq!(b.inputs(), vec![Port::new("e", 1), Port::new("sigma", 2)]);
+    assert_eq!(
+        b.inputs(),
+        vec![Port::new("e", 1), Port::new("sigma", 2).scheduling_input()]
+    );
     assert_eq!(b.outputs(), vec![Port::new("u", 1), Port::new("gain", 1)]);
     let mut reference = Pi::new(2.0, 5.0, DT).unwrap();
     let mut y = [0.0; 2];
@@ -250,4 +253,51 @@ connections:
     let f = bad.failures();
     assert_eq!(f.len(), 1, "{f:?}");
     assert!(f[0].contains("at k: K = 2.5000 is unstable"), "{f:?}");
+}
+
+/// σ is a scheduling input (like a DVRC's α): when it is computed inside the
+/// loop — here σ = ∑ 0.01·u, an integrator of the controller's output — the
+/// connection into it is cut and the loop is judged with σ frozen, at every
+/// schedule point: err = r − y, u = K·err, y⁺ = y + u gives the pole 1 − K.
+/// Without the cut the σ integrator's pole at 1 (which K(σ) frozen leaves
+/// open) would be in the loop.
+#[test]
+fn a_loop_through_sigma_is_cut_and_judged_with_sigma_frozen() {
+    let _ = GainLaw::Constant { gain: 1.0 }; // link this crate's blocks
+    let yaml = r#"base_rate_hz: 1000
+duration_s: 0.1
+blocks:
+  - { name: ref, type: constant, value: 1.0 }
+  - { name: err, type: sum, signs: "+-" }
+  - name: k
+    type: gain_scheduled
+    controller: { type: gain, k: 1.0 }
+    schedule: [ { kind: table, x: [0.0, 1.0], gain: [0.5, 0.25] } ]
+  - { name: plant, type: transfer_function, num: [1.0], den: [1.0, -1.0], discrete: true }
+  - { name: sig, type: transfer_function, num: [0.01], den: [1.0, -1.0], discrete: true }
+connections:
+  - { from: ref.y, to: err.in0 }
+  - { from: plant.y, to: err.in1 }
+  - { from: err.y, to: k.u }
+  - { from: sig.y, to: k.sigma }
+  - { from: k.y, to: plant.u }
+  - { from: k.y, to: sig.u }
+"#;
+    let spec = nanomotion_core::GraphSpec::from_yaml(yaml, "gs").unwrap();
+    let (sched, _) = spec.build().unwrap();
+    let r = nanomotion_core::gate::analyse(&sched, &Default::default());
+    assert!(r.passes(), "{r}");
+    assert_eq!(r.loops.len(), 1, "{r}");
+    let l = &r.loops[0];
+    assert!(!l.blocks.iter().any(|b| b == "sig"), "{:?}", l.blocks);
+    assert!(l.blocks.iter().any(|b| b == "k"), "{:?}", l.blocks);
+    let radii: Vec<f64> = l.points.iter().map(|p| p.spectral_radius).collect();
+    assert_eq!(radii.len(), 2);
+    assert!((radii[0] - 0.5).abs() < 1e-12, "{radii:?}");
+    assert!((radii[1] - 0.75).abs() < 1e-12, "{radii:?}");
+    let text = r.to_string();
+    assert!(
+        text.contains("`sigma` is a scheduling input") && text.contains("sig.y -> k.sigma"),
+        "{text}"
+    );
 }

@@ -19,7 +19,7 @@ use crate::SlitCalibration;
 use nanomotion_core::Params;
 use nanomotion_core::block::Linearisation;
 use nanomotion_core::lti::StateSpace;
-use nanomotion_core::{Block, BuildContext, ParamError, Port, Role, Tick};
+use nanomotion_core::{Block, BuildContext, ParamError, Port, Tick, declared_block};
 use serde::{Deserialize, Serialize};
 
 /// Longest table of a `slit_correction` (a disc of 4096 lines read in
@@ -120,7 +120,7 @@ impl SlitCorrection {
     }
 }
 
-#[typetag::serde(name = "slit_correction")]
+#[declared_block]
 impl Block for SlitCorrection {
     fn inputs(&self) -> Vec<Port> {
         vec![Port::new("u", 1)]
@@ -174,9 +174,6 @@ impl Block for SlitCorrection {
                 largest * self.resolution
             ),
         ))
-    }
-    fn role(&self) -> Role {
-        Role::Estimator
     }
 }
 

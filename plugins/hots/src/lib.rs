@@ -52,7 +52,7 @@ pub use model::{ErrorModel, Grid, MotionSample, Settings, Target};
 
 use nanomotion_core::Params;
 use nanomotion_core::block::check;
-use nanomotion_core::{Block, BuildContext, Estimator, ParamError, Port, Role, Tick};
+use nanomotion_core::{Block, BuildContext, Estimator, ParamError, Port, Tick, declared_block};
 use serde::{Deserialize, Serialize};
 use timestamp_encoder::{Fallback, TimestampEstimator};
 
@@ -214,7 +214,7 @@ impl Estimator for HotsEstimator {
     }
 }
 
-#[typetag::serde(name = "hots_estimator")]
+#[declared_block]
 impl Block for HotsEstimator {
     fn inputs(&self) -> Vec<Port> {
         vec![Port::new("register", 2 + 2 * self.register_len)]
@@ -233,8 +233,5 @@ impl Block for HotsEstimator {
             }
             None => y.iter_mut().for_each(|v| *v = f64::NAN),
         }
-    }
-    fn role(&self) -> Role {
-        Role::Estimator
     }
 }

@@ -19,7 +19,7 @@ use crate::error::MimoError;
 use nalgebra::DMatrix;
 use nanomotion_core::Params;
 use nanomotion_core::lti::{C2dMethod, StateSpace, c2d};
-use nanomotion_core::{Block, BuildContext, ParamError, Port, Role, Tick};
+use nanomotion_core::{Block, BuildContext, ParamError, Port, Tick, declared_block};
 use serde::{Deserialize, Serialize};
 
 /// Largest controller order accepted (states).
@@ -341,7 +341,7 @@ fn dot(a: &[f64], b: &[f64]) -> f64 {
     (acc[0] + acc[1]) + (acc[2] + acc[3]) + tail
 }
 
-#[typetag::serde(name = "mimo_controller")]
+#[declared_block]
 impl Block for MimoController {
     fn inputs(&self) -> Vec<Port> {
         let (_, p, _) = self.model.dims();
@@ -421,9 +421,6 @@ impl Block for MimoController {
             rt.errors(&self.error_scale, &u[..p], &u[p..2 * p]);
             rt.advance();
         }
-    }
-    fn role(&self) -> Role {
-        Role::Controller
     }
     fn memory_bytes(&self) -> usize {
         self.rt.as_ref().map_or(0, |r| {

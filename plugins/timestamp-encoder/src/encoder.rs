@@ -42,7 +42,7 @@ use crate::poly::{MAX_DEG, Poly, roots_in, solve_monotone};
 use crate::skip::{history_len, register_indices};
 use nanomotion_core::Params;
 use nanomotion_core::rng::Rng;
-use nanomotion_core::{Block, BuildContext, ParamError, Port, Role, Sensor, Tick};
+use nanomotion_core::{Block, BuildContext, ParamError, Port, Sensor, Tick, declared_block};
 use serde::{Deserialize, Serialize};
 
 /// Default clock of the event time-stamps: 20 MHz (50 ns), Sec. 8.5.
@@ -456,7 +456,7 @@ impl Sensor for TimestampEncoder {
     }
 }
 
-#[typetag::serde(name = "timestamp_encoder")]
+#[declared_block]
 impl Block for TimestampEncoder {
     fn inputs(&self) -> Vec<Port> {
         vec![Port::new("x", self.input_width())]
@@ -486,8 +486,5 @@ impl Block for TimestampEncoder {
         self.advance(tick.t, u);
         self.read_register(&mut y[..w]);
         y[w] = self.state.count as f64 / self.state.counts_per_unit;
-    }
-    fn role(&self) -> Role {
-        Role::Sensor
     }
 }

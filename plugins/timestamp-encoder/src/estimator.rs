@@ -48,7 +48,7 @@
 
 use crate::fit::{MAX_M, MAX_N, fit_events};
 use nanomotion_core::Params;
-use nanomotion_core::{Block, BuildContext, Estimator, ParamError, Port, Role, Tick};
+use nanomotion_core::{Block, BuildContext, Estimator, ParamError, Port, Tick, declared_block};
 use serde::{Deserialize, Serialize};
 
 fn d_m() -> usize {
@@ -300,7 +300,7 @@ impl Estimator for TimestampEstimator {
     }
 }
 
-#[typetag::serde(name = "timestamp_estimator")]
+#[declared_block]
 impl Block for TimestampEstimator {
     fn inputs(&self) -> Vec<Port> {
         vec![Port::new("register", self.register_width())]
@@ -316,8 +316,5 @@ impl Block for TimestampEstimator {
     fn output(&mut self, tick: Tick, u: &[f64], y: &mut [f64]) {
         let s = self.estimate_from_register(tick.t, u, &mut y[..3]);
         y[3] = s as u8 as f64;
-    }
-    fn role(&self) -> Role {
-        Role::Estimator
     }
 }

@@ -15,7 +15,7 @@ use nanomotion_core::Params;
 use nanomotion_core::block::check;
 use nanomotion_core::blocks::control::Pi;
 use nanomotion_core::lti::{C2dMethod, Margins, StateSpace, c2d, delay, series, stability_margins};
-use nanomotion_core::{Block, BuildContext, Controller, ParamError, Port, Role, Tick};
+use nanomotion_core::{Block, BuildContext, Controller, ParamError, Port, Tick, declared_block};
 use serde::{Deserialize, Serialize};
 use std::f64::consts::{FRAC_PI_2, FRAC_PI_4, TAU};
 
@@ -235,7 +235,7 @@ pub struct StepSizeFeedForwardBlock {
     pub params: StepSizeFeedForward,
 }
 
-#[typetag::serde(name = "walking_piezo_feedforward")]
+#[declared_block]
 impl Block for StepSizeFeedForwardBlock {
     fn inputs(&self) -> Vec<Port> {
         vec![Port::new("r_dot", 1)]
@@ -255,9 +255,6 @@ impl Block for StepSizeFeedForwardBlock {
         y[0] = a;
         y[1] = p;
         y[2] = p + FRAC_PI_2;
-    }
-    fn role(&self) -> Role {
-        Role::Controller
     }
 }
 

@@ -41,7 +41,7 @@
 
 use nanomotion_core::Params;
 use nanomotion_core::block::check;
-use nanomotion_core::{Actuator, Block, BuildContext, ParamError, Port, Role, Tick};
+use nanomotion_core::{Actuator, Block, BuildContext, ParamError, Port, Tick, declared_block};
 use serde::{Deserialize, Serialize};
 use std::f64::consts::{FRAC_PI_2, PI, TAU};
 use thiserror::Error;
@@ -543,7 +543,7 @@ impl WaveformDriverBlock {
     }
 }
 
-#[typetag::serde(name = "walking_piezo_driver")]
+#[declared_block]
 impl Block for WaveformDriverBlock {
     fn inputs(&self) -> Vec<Port> {
         let mut v = vec![Port::new("f_alpha", 1)];
@@ -597,15 +597,13 @@ impl Block for WaveformDriverBlock {
         y[4] = alpha;
         y[5] = self.faults as f64;
     }
-    fn role(&self) -> Role {
-        Role::Actuator
-    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::SinusoidalWaveform;
+    use nanomotion_core::Role;
 
     const DT: f64 = 2.5e-4;
 

@@ -12,7 +12,7 @@ use nalgebra::DMatrix;
 use nanomotion_core::Params;
 use nanomotion_core::block::check;
 use nanomotion_core::lti::StateSpace;
-use nanomotion_core::{Block, BuildContext, ParamError, Port, Role, Tick};
+use nanomotion_core::{Block, BuildContext, ParamError, Port, Tick, declared_block};
 use serde::{Deserialize, Serialize};
 
 /// Bending coefficient c_x of the Ch. 5 motor (m/V).
@@ -124,7 +124,7 @@ pub struct LegKinematicsBlock {
     dt: f64,
 }
 
-#[typetag::serde(name = "walking_piezo_legs")]
+#[declared_block]
 impl Block for LegKinematicsBlock {
     fn inputs(&self) -> Vec<Port> {
         vec![Port::new("u", 4)]
@@ -144,9 +144,6 @@ impl Block for LegKinematicsBlock {
     }
     fn lti(&self) -> Option<StateSpace> {
         Some(StateSpace::gain(self.kinematics.matrix(), Some(self.dt)))
-    }
-    fn role(&self) -> Role {
-        Role::Math
     }
 }
 

@@ -17,7 +17,7 @@ use nalgebra::DMatrix;
 use nanomotion_core::Params;
 use nanomotion_core::block::check;
 use nanomotion_core::lti::{C2dMethod, LtiError, SsStepper, StateSpace, series};
-use nanomotion_core::{Block, BuildContext, ParamError, Plant, Port, Role, Tick};
+use nanomotion_core::{Block, BuildContext, ParamError, Plant, Port, Tick, declared_block};
 use serde::{Deserialize, Serialize};
 use std::f64::consts::PI;
 
@@ -226,7 +226,7 @@ impl LinearStageBlock {
     }
 }
 
-#[typetag::serde(name = "walking_piezo_linear")]
+#[declared_block]
 impl Block for LinearStageBlock {
     fn inputs(&self) -> Vec<Port> {
         vec![Port::new("f_alpha", 1)]
@@ -271,9 +271,6 @@ impl Block for LinearStageBlock {
             d: DMatrix::zeros(3, 1),
             ..d
         })
-    }
-    fn role(&self) -> Role {
-        Role::Plant
     }
 }
 
@@ -447,7 +444,7 @@ pub struct SwitchedStageBlock {
     faults: u64,
 }
 
-#[typetag::serde(name = "walking_piezo_switched")]
+#[declared_block]
 impl Block for SwitchedStageBlock {
     fn inputs(&self) -> Vec<Port> {
         vec![Port::new("u", 4)]
@@ -481,9 +478,6 @@ impl Block for SwitchedStageBlock {
         if let Some(s) = &mut self.sim {
             s.advance(u);
         }
-    }
-    fn role(&self) -> Role {
-        Role::Plant
     }
 }
 
@@ -840,7 +834,7 @@ impl FittedStageBlock {
     }
 }
 
-#[typetag::serde(name = "walking_piezo_fitted")]
+#[declared_block]
 impl Block for FittedStageBlock {
     fn inputs(&self) -> Vec<Port> {
         vec![Port::new("f_alpha", 1)]
@@ -895,9 +889,6 @@ impl Block for FittedStageBlock {
             d: DMatrix::zeros(2, 1),
             ..d
         })
-    }
-    fn role(&self) -> Role {
-        Role::Plant
     }
 }
 

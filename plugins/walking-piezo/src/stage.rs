@@ -27,7 +27,7 @@ use crate::kinematics::{C_X_M_PER_V, C_Y_M_PER_V, LegKinematics};
 use crate::variation::{MuVariation, MuVariationParams, StripProfile, StripProfileParams};
 use nanomotion_core::Params;
 use nanomotion_core::block::check;
-use nanomotion_core::{Block, BuildContext, ParamError, Plant, Port, Role, Tick};
+use nanomotion_core::{Block, BuildContext, ParamError, Plant, Port, Tick, declared_block};
 use serde::{Deserialize, Serialize};
 use std::f64::consts::PI;
 use thiserror::Error;
@@ -822,7 +822,7 @@ impl WalkingPiezoStageBlock {
     }
 }
 
-#[typetag::serde(name = "walking_piezo_stage")]
+#[declared_block]
 impl Block for WalkingPiezoStageBlock {
     fn inputs(&self) -> Vec<Port> {
         let mut v = vec![Port::new("u", 4)];
@@ -869,8 +869,5 @@ impl Block for WalkingPiezoStageBlock {
         if let Some(s) = &mut self.sim {
             s.advance(u);
         }
-    }
-    fn role(&self) -> Role {
-        Role::Plant
     }
 }

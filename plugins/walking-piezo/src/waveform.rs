@@ -9,7 +9,7 @@
 //! with α(t) = α0 + 2π f_α t.
 
 use nanomotion_core::Params;
-use nanomotion_core::{Block, BuildContext, ParamError, Port, Role, Source, Tick};
+use nanomotion_core::{Block, BuildContext, ParamError, Port, Source, Tick, declared_block};
 use serde::{Deserialize, Serialize};
 use std::f64::consts::{FRAC_PI_2, PI, TAU};
 
@@ -108,7 +108,7 @@ pub struct WalkingWaveformBlock {
     pub waveform: SinusoidalWaveform,
 }
 
-#[typetag::serde(name = "walking_waveform")]
+#[declared_block]
 impl Block for WalkingWaveformBlock {
     fn outputs(&self) -> Vec<Port> {
         vec![Port::new("u", 4), Port::new("alpha", 1)]
@@ -118,9 +118,6 @@ impl Block for WalkingWaveformBlock {
     }
     fn output(&mut self, tick: Tick, _u: &[f64], y: &mut [f64]) {
         self.waveform.sample(tick.t, y);
-    }
-    fn role(&self) -> Role {
-        Role::Source
     }
 }
 

@@ -3,7 +3,7 @@
 use super::{MAX_MAGNITUDE, check_bounded, check_len};
 use nanomotion_core::Params;
 use nanomotion_core::block::check;
-use nanomotion_core::{Block, BuildContext, ParamError, Port, Role, Sector, Tick, Tunable};
+use nanomotion_core::{Block, BuildContext, ParamError, Sector, Tick, Tunable, declared_block};
 use serde::{Deserialize, Serialize};
 
 /// `backlash`: PLF effect: play operator of width w: y moves only once u is w/2 past
@@ -47,14 +47,8 @@ impl Backlash {
     }
 }
 
-#[typetag::serde(name = "backlash")]
+#[declared_block]
 impl Block for Backlash {
-    fn inputs(&self) -> Vec<Port> {
-        vec![Port::new("u", 1)]
-    }
-    fn outputs(&self) -> Vec<Port> {
-        vec![Port::new("y", 1)]
-    }
     fn build(&mut self, _ctx: &BuildContext) -> Result<(), ParamError> {
         Self::check(self.width)?;
         self.y = None;
@@ -83,9 +77,6 @@ impl Block for Backlash {
             1.0,
             "backlash: 0 inside the play, 1 when pushed",
         ))
-    }
-    fn role(&self) -> Role {
-        Role::Plant
     }
     fn tunable(&self) -> Option<&dyn Tunable> {
         Some(self)

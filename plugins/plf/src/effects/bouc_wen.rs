@@ -7,7 +7,7 @@
 use super::check_len;
 use nanomotion_core::Params;
 use nanomotion_core::block::check;
-use nanomotion_core::{Block, BuildContext, ParamError, Port, Role, Sector, Tick, Tunable};
+use nanomotion_core::{Block, BuildContext, ParamError, Sector, Tick, Tunable, declared_block};
 use serde::{Deserialize, Serialize};
 
 /// `bouc_wen`: PLF effect (hysteresis): Bouc–Wen y = linear·u + z, ż = a·u̇ − β|u̇|z −
@@ -150,14 +150,8 @@ impl BoucWen {
     }
 }
 
-#[typetag::serde(name = "bouc_wen")]
+#[declared_block]
 impl Block for BoucWen {
-    fn inputs(&self) -> Vec<Port> {
-        vec![Port::new("u", 1)]
-    }
-    fn outputs(&self) -> Vec<Port> {
-        vec![Port::new("y", 1)]
-    }
     fn build(&mut self, _ctx: &BuildContext) -> Result<(), ParamError> {
         Self::validate(self.a, self.beta, self.gamma, self.linear)?;
         self.z = 0.0;
@@ -181,9 +175,6 @@ impl Block for BoucWen {
         let (lower, upper) = (self.linear + lo, self.linear + hi);
         (lower.is_finite() && upper.is_finite())
             .then(|| Sector::new(lower, upper, "Bouc–Wen: linear + dz/du, |z| ≤ a/(β + γ)"))
-    }
-    fn role(&self) -> Role {
-        Role::Actuator
     }
     fn tunable(&self) -> Option<&dyn Tunable> {
         Some(self)

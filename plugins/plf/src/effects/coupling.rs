@@ -4,7 +4,7 @@ use super::{MAX_MAGNITUDE, check_bounded, check_len};
 use nalgebra::DMatrix;
 use nanomotion_core::Params;
 use nanomotion_core::lti::StateSpace;
-use nanomotion_core::{Block, BuildContext, ParamError, Port, Role, Tick, Tunable};
+use nanomotion_core::{Block, BuildContext, ParamError, Port, Tick, Tunable, declared_block};
 use serde::{Deserialize, Serialize};
 
 /// Most coupled signals of an `axis_coupling`.
@@ -45,7 +45,7 @@ impl AxisCoupling {
     }
 }
 
-#[typetag::serde(name = "axis_coupling")]
+#[declared_block]
 impl Block for AxisCoupling {
     fn inputs(&self) -> Vec<Port> {
         vec![Port::new("u", 1), Port::new("s", self.coupling.len())]
@@ -75,9 +75,6 @@ impl Block for AxisCoupling {
             d[(0, j + 1)] = *c;
         }
         Some(StateSpace::gain(d, self.dt))
-    }
-    fn role(&self) -> Role {
-        Role::Plant
     }
     fn tunable(&self) -> Option<&dyn Tunable> {
         Some(self)

@@ -5,7 +5,7 @@ use nanomotion_core::Params;
 use nanomotion_core::block::check;
 use nanomotion_core::lti::StateSpace;
 use nanomotion_core::nalgebra::DMatrix;
-use nanomotion_core::{Block, BuildContext, ParamError, Port, Role, Tick, Tunable};
+use nanomotion_core::{Block, BuildContext, ParamError, Tick, Tunable, declared_block};
 use serde::{Deserialize, Serialize};
 
 /// Most terms a `creep` block may have.
@@ -134,14 +134,8 @@ impl Creep {
     }
 }
 
-#[typetag::serde(name = "creep")]
+#[declared_block]
 impl Block for Creep {
-    fn inputs(&self) -> Vec<Port> {
-        vec![Port::new("u", 1)]
-    }
-    fn outputs(&self) -> Vec<Port> {
-        vec![Port::new("y", 1)]
-    }
     fn build(&mut self, ctx: &BuildContext) -> Result<(), ParamError> {
         self.check_params()?;
         Self::check_terms(&self.terms)?;
@@ -176,9 +170,6 @@ impl Block for Creep {
         let b = DMatrix::from_fn(n, 1, |i, _| 1.0 - self.a[i]);
         let c = DMatrix::from_fn(1, n, |_, j| self.terms[j].gain);
         StateSpace::new(a, b, c, DMatrix::from_element(1, 1, 1.0), Some(self.dt)).ok()
-    }
-    fn role(&self) -> Role {
-        Role::Actuator
     }
     fn tunable(&self) -> Option<&dyn Tunable> {
         Some(self)

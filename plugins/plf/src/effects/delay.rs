@@ -6,7 +6,7 @@ use nanomotion_core::block::check;
 use nanomotion_core::blocks::linear::MAX_DENSE_DELAY_STATES;
 use nanomotion_core::lti::StateSpace;
 use nanomotion_core::nalgebra::DMatrix;
-use nanomotion_core::{Block, BuildContext, ParamError, Port, Role, Tick, Tunable};
+use nanomotion_core::{Block, BuildContext, ParamError, Tick, Tunable, declared_block};
 use serde::{Deserialize, Serialize};
 
 /// Largest delay buffer (samples) a `time_delay` may allocate.
@@ -118,14 +118,8 @@ impl TimeDelay {
     }
 }
 
-#[typetag::serde(name = "time_delay")]
+#[declared_block]
 impl Block for TimeDelay {
-    fn inputs(&self) -> Vec<Port> {
-        vec![Port::new("u", 1)]
-    }
-    fn outputs(&self) -> Vec<Port> {
-        vec![Port::new("y", 1)]
-    }
     fn build(&mut self, ctx: &BuildContext) -> Result<(), ParamError> {
         Self::check_delay(self.delay_s, self.max_delay_s)?;
         check::positive("dt", ctx.dt)?;
@@ -196,9 +190,6 @@ impl Block for TimeDelay {
             let b = self.buf[(i0 + len - 1) % len];
             a + self.frac * (b - a)
         };
-    }
-    fn role(&self) -> Role {
-        Role::Math
     }
     fn tunable(&self) -> Option<&dyn Tunable> {
         Some(self)

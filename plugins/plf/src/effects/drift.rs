@@ -2,7 +2,7 @@
 
 use super::{MAX_MAGNITUDE, check_bounded, check_len};
 use nanomotion_core::Params;
-use nanomotion_core::{Block, BuildContext, ParamError, Port, Role, Tick, Tunable};
+use nanomotion_core::{Block, BuildContext, ParamError, Tick, Tunable, declared_block};
 use serde::{Deserialize, Serialize};
 
 /// `drift`: PLF effect: y = u + offset + rate·t + curvature·t²; tunable [offset, rate,
@@ -49,22 +49,13 @@ impl Drift {
     }
 }
 
-#[typetag::serde(name = "drift")]
+#[declared_block]
 impl Block for Drift {
-    fn inputs(&self) -> Vec<Port> {
-        vec![Port::new("u", 1)]
-    }
-    fn outputs(&self) -> Vec<Port> {
-        vec![Port::new("y", 1)]
-    }
     fn build(&mut self, _ctx: &BuildContext) -> Result<(), ParamError> {
         Self::check([self.offset, self.rate, self.curvature])
     }
     fn output(&mut self, tick: Tick, u: &[f64], y: &mut [f64]) {
         y[0] = u[0] + self.at(tick.t);
-    }
-    fn role(&self) -> Role {
-        Role::Source
     }
     fn tunable(&self) -> Option<&dyn Tunable> {
         Some(self)

@@ -4,7 +4,7 @@
 use super::{MAX_MAGNITUDE, check_bounded, check_len};
 use nanomotion_core::Params;
 use nanomotion_core::block::check;
-use nanomotion_core::{Block, BuildContext, ParamError, Port, Role, Tick, Tunable};
+use nanomotion_core::{Block, BuildContext, ParamError, Port, Tick, Tunable, declared_block};
 use serde::{Deserialize, Serialize};
 
 /// `friction`: PLF effect: friction force from a position, y = −tanh(v/v_eps)(F_C + F_S
@@ -76,7 +76,7 @@ impl Friction {
     }
 }
 
-#[typetag::serde(name = "friction")]
+#[declared_block]
 impl Block for Friction {
     fn inputs(&self) -> Vec<Port> {
         vec![Port::new("u", 1)]
@@ -101,9 +101,6 @@ impl Block for Friction {
         };
         self.prev = Some(x);
         y[0] = self.force(v);
-    }
-    fn role(&self) -> Role {
-        Role::Plant
     }
     fn tunable(&self) -> Option<&dyn Tunable> {
         Some(self)

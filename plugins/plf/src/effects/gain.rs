@@ -3,7 +3,7 @@
 
 use super::{MAX_MAGNITUDE, check_bounded, check_len};
 use nanomotion_core::Params;
-use nanomotion_core::{Block, BuildContext, ParamError, Port, Role, Tick, Tunable};
+use nanomotion_core::{Block, BuildContext, ParamError, Port, Tick, Tunable, declared_block};
 use serde::{Deserialize, Serialize};
 
 /// Highest polynomial order of a `position_dependent_gain`.
@@ -92,7 +92,7 @@ impl PositionDependentGain {
     }
 }
 
-#[typetag::serde(name = "position_dependent_gain")]
+#[declared_block]
 impl Block for PositionDependentGain {
     fn inputs(&self) -> Vec<Port> {
         match self.variable {
@@ -116,9 +116,6 @@ impl Block for PositionDependentGain {
             GainVariable::Input => u[0],
         };
         y[0] = u[0] * self.gain(s);
-    }
-    fn role(&self) -> Role {
-        Role::Plant
     }
     fn tunable(&self) -> Option<&dyn Tunable> {
         Some(self)

@@ -4,7 +4,7 @@
 use super::check_len;
 use nanomotion_core::Params;
 use nanomotion_core::models::hysteresis::{ChParams, ColemanHodgdon};
-use nanomotion_core::{Block, BuildContext, ParamError, Port, Role, Sector, Tick, Tunable};
+use nanomotion_core::{Block, BuildContext, ParamError, Sector, Tick, Tunable, declared_block};
 use serde::{Deserialize, Serialize};
 
 /// `hysteresis`: PLF effect: Coleman–Hodgdon hysteresis dy/dt = α|u̇|(b·u − y) + c·u̇
@@ -79,14 +79,8 @@ impl Hysteresis {
     }
 }
 
-#[typetag::serde(name = "hysteresis")]
+#[declared_block]
 impl Block for Hysteresis {
-    fn inputs(&self) -> Vec<Port> {
-        vec![Port::new("u", 1)]
-    }
-    fn outputs(&self) -> Vec<Port> {
-        vec![Port::new("y", 1)]
-    }
     fn build(&mut self, _ctx: &BuildContext) -> Result<(), ParamError> {
         self.h = Some(Self::model(self.trace(), self.retrace)?);
         self.started = false;
@@ -112,9 +106,6 @@ impl Block for Hysteresis {
         // The model's range from its built state (y = 0 at u = 0, then y₀ = b·u₀:
         // both on the anhysteretic line).
         self.h.as_ref()?.sector()
-    }
-    fn role(&self) -> Role {
-        Role::Actuator
     }
     fn tunable(&self) -> Option<&dyn Tunable> {
         Some(self)

@@ -2,7 +2,7 @@
 
 use super::{MAX_MAGNITUDE, check_bounded, check_len};
 use nanomotion_core::Params;
-use nanomotion_core::{Block, BuildContext, ParamError, Port, Role, Tick, Tunable};
+use nanomotion_core::{Block, BuildContext, ParamError, Port, Tick, Tunable, declared_block};
 use serde::{Deserialize, Serialize};
 use std::f64::consts::TAU;
 
@@ -104,7 +104,7 @@ impl RepetitiveDisturbance {
     }
 }
 
-#[typetag::serde(name = "repetitive_disturbance")]
+#[declared_block]
 impl Block for RepetitiveDisturbance {
     fn inputs(&self) -> Vec<Port> {
         match self.variable {
@@ -124,9 +124,6 @@ impl Block for RepetitiveDisturbance {
             PhaseVariable::Signal => (u[1] - self.origin) / self.period,
         };
         y[0] = u[0] + self.disturbance(phi);
-    }
-    fn role(&self) -> Role {
-        Role::Source
     }
     fn tunable(&self) -> Option<&dyn Tunable> {
         Some(self)

@@ -4,7 +4,7 @@ use super::check_len;
 use nanomotion_core::Params;
 use nanomotion_core::block::check;
 use nanomotion_core::lti::{C2dMethod, StateSpace, TransferFunction};
-use nanomotion_core::{Block, BuildContext, ParamError, Port, Role, Tick, Tunable};
+use nanomotion_core::{Block, BuildContext, ParamError, Tick, Tunable, declared_block};
 use serde::{Deserialize, Serialize};
 use std::f64::consts::TAU;
 
@@ -239,14 +239,8 @@ impl UnmodeledResonance {
     }
 }
 
-#[typetag::serde(name = "unmodeled_resonance")]
+#[declared_block]
 impl Block for UnmodeledResonance {
-    fn inputs(&self) -> Vec<Port> {
-        vec![Port::new("u", 1)]
-    }
-    fn outputs(&self) -> Vec<Port> {
-        vec![Port::new("y", 1)]
-    }
     fn build(&mut self, ctx: &BuildContext) -> Result<(), ParamError> {
         check::positive("dt", ctx.dt)?;
         Self::check(
@@ -284,9 +278,6 @@ impl Block for UnmodeledResonance {
     }
     fn lti(&self) -> Option<StateSpace> {
         self.model.clone()
-    }
-    fn role(&self) -> Role {
-        Role::Plant
     }
     fn tunable(&self) -> Option<&dyn Tunable> {
         Some(self)

@@ -2,7 +2,7 @@
 
 use super::{MAX_MAGNITUDE, check_bounded, check_len};
 use nanomotion_core::Params;
-use nanomotion_core::{Block, BuildContext, ParamError, Port, Role, Tick, Tunable};
+use nanomotion_core::{Block, BuildContext, ParamError, Tick, Tunable, declared_block};
 use serde::{Deserialize, Serialize};
 
 /// Longest error table of an `encoder_slit_error`.
@@ -64,14 +64,8 @@ impl EncoderSlitError {
     }
 }
 
-#[typetag::serde(name = "encoder_slit_error")]
+#[declared_block]
 impl Block for EncoderSlitError {
-    fn inputs(&self) -> Vec<Port> {
-        vec![Port::new("u", 1)]
-    }
-    fn outputs(&self) -> Vec<Port> {
-        vec![Port::new("y", 1)]
-    }
     fn build(&mut self, _ctx: &BuildContext) -> Result<(), ParamError> {
         // pitch > 0 and 1 to 4096 errors: declared
         self.check_params()?;
@@ -81,9 +75,6 @@ impl Block for EncoderSlitError {
     fn output(&mut self, _tick: Tick, u: &[f64], y: &mut [f64]) {
         let e = self.errors.get(self.slit(u[0])).copied().unwrap_or(0.0);
         y[0] = u[0] + e;
-    }
-    fn role(&self) -> Role {
-        Role::Sensor
     }
     fn tunable(&self) -> Option<&dyn Tunable> {
         Some(self)
