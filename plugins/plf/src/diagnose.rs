@@ -752,7 +752,7 @@ impl<'c, 'a> Search<'c, 'a> {
             held_out_gain(ctx, (&excess, at_floor), &self.cur.residual, &win.residual);
         let hb = holdout_rms(ctx, &self.cur.residual);
         let ha = holdout_rms(ctx, &win.residual);
-        if test.p_value >= level || excess_cut < opts.min_excess_cut {
+        if !passes(opts, level, &test, excess_cut) {
             if let Some((why, table, _)) = self.locked_retry.take() {
                 (self.stopped, self.rejected_candidates) = (why, table);
                 return Ok(Next::Stop);
@@ -857,7 +857,7 @@ impl<'c, 'a> Search<'c, 'a> {
         again.retain(|c| c.effect != "encoder_slit_error");
         if at_floor {
             cands.retain(|c| {
-                matches!(c.effect, "quantization" | "encoder_slit_error")
+                can_look_white(c.effect)
                     && matches!(c.site, Site::Output { .. } | Site::Sensor { .. })
             });
             again.clear();
@@ -973,7 +973,7 @@ impl<'c, 'a> Search<'c, 'a> {
             } else if let (test, cut) =
                 held_out_gain(ctx, (excess, at_floor), &cur.residual, &f.residual)
                 && if cur.free.is_empty() {
-                    test.p_value >= level || cut < opts.min_excess_cut
+                    !passes(opts, level, &test, cut)
                 } else {
                     cut <= 0.0
                 }
@@ -1362,13 +1362,8 @@ impl<'c, 'a> Search<'c, 'a> {
                     &self.cur.residual,
                 );
                 // At the floor only what can look white is looked for (see `step`).
-                let white = matches!(
-                    self.steps[i].effect.as_str(),
-                    "quantization" | "encoder_slit_error"
-                );
-                let needed = test.p_value < self.levels[i]
-                    && cut >= opts.min_excess_cut
-                    && (white || !at_floor);
+                let needed = passes(opts, self.levels[i], &test, cut)
+                    && (!at_floor || can_look_white(&self.steps[i].effect));
                 if !needed && weakest.as_ref().is_none_or(|w| test.p_value > w.2.p_value) {
                     weakest = Some((i, without, test, cut));
                 }
@@ -2441,6 +2436,20 @@ fn holdout_weighted_vectors(ctx: &Ctx<'_>, a: &[Vec<f64>], b: &[Vec<f64>]) -> (V
 
 /// Whether every output's held-out mean square is within 20 % of its noise
 /// floor's (`excess`: from [`excess_ms`]): nothing above the noise to explain.
+/// Whether an effect can itself look like white noise: memoryless functions
+/// of the measured position (a rounding, slit errors), when the stage
+/// crosses about an lsb per sample — the only effects looked for at the
+/// noise floor.
+fn can_look_white(effect: &str) -> bool {
+    matches!(effect, "quantization" | "encoder_slit_error")
+}
+
+/// Step 5's tests of a name: significant at `level` and at least
+/// `min_excess_cut` of the excess over the noise floor removed (`cut`).
+fn passes(opts: &Options, level: f64, test: &stats::Test, cut: f64) -> bool {
+    test.p_value < level && cut >= opts.min_excess_cut
+}
+
 fn at_noise_floor(excess: &[(f64, f64)]) -> bool {
     excess.iter().all(|&(ms, floor)| ms <= 1.2 * floor * floor)
 }
@@ -3685,8 +3694,8 @@ fn repetitive(
 /// record sampled at `fs` shows as a delay: from
 /// [`MIN_RESOLVED_DELAY_SAMPLES`] (what `TimeDelay::implausible` refuses
 /// below) to 200 samples. Fitted freely, a delay took the phase a nominal a
-/// few per cent off leaves (0.04–0.4 samples after the calibration: tuning
-/// 52, 80, 768) and was named; refused after the fit, a real delay of one
+/// few per cent off leaves (0.08–0.39 samples after the calibration: tuning
+/// 52, 80, 213, 768, 1440) and was named; refused after the fit, a real delay of one
 /// sample fitted at 0.46 on the nominal before its calibration was lost
 /// (tuning 738).
 fn time_delay(fs: f64, site: Site, output: Option<usize>, rate_hz: Option<f64>) -> Cand {
