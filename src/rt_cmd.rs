@@ -182,13 +182,7 @@ fn config(lp: &Loop, graph: RealtimeSpec) -> Result<RtConfig, String> {
 }
 
 fn watchdog(lp: &Loop) -> Result<Duration, String> {
-    if !(lp.watchdog_ms.is_finite() && lp.watchdog_ms > 0.0 && lp.watchdog_ms <= 60_000.0) {
-        return Err(format!(
-            "--watchdog-ms {}: must be in (0, 60000] (fix: e.g. --watchdog-ms 50)",
-            lp.watchdog_ms
-        ));
-    }
-    Ok(Duration::from_secs_f64(lp.watchdog_ms * 1e-3))
+    nanomotion_rt::shm::watchdog_ms(lp.watchdog_ms).map_err(|e| format!("--watchdog-ms: {e}"))
 }
 
 /// Print a status line on a terminal (stderr) for each status event, and
@@ -313,15 +307,11 @@ fn run_loop<D: Device>(
     if command == "rt" {
         // Live updates from standard input, judged by the stability gate on a
         // second build of the same graph (never ticked).
-        let sender = runner.param_sender().map_err(|e| e.to_string())?;
-        let mut spec = load(graph, lp)?;
-        let require = spec.require.clone().unwrap_or_default();
-        // The gate reads blocks and wiring only: no log buffers for the copy.
-        spec.log.clear();
-        spec.score.clear();
-        spec.compare.clear();
-        let (copy, _) = spec.build().map_err(|e| e.to_string())?;
-        let sender = sender.gated(copy, require).map_err(|e| e.to_string())?;
+        let sender = runner
+            .param_sender()
+            .map_err(|e| e.to_string())?
+            .gated_spec(load(graph, lp)?)
+            .map_err(|e| e.to_string())?;
         if !params.is_empty() && std::io::IsTerminal::is_terminal(&std::io::stdin()) {
             tell!(
                 "live parameters: {} (type `set {}=VALUE` and Enter to change one while the loop runs)",
@@ -492,29 +482,21 @@ fn write_outputs(
 pub fn rt(a: RtArgs) -> Result<(), String> {
     nanomotion_rt::link_blocks();
     let built = build(&a.graph, &a.lp)?;
-    let (report, sched, _) = match a.device.as_deref() {
-        None => run_loop(&a.graph, built, NoDevice, &a.lp, "rt", None)?,
-        Some(d) => {
-            let Some(name) = d.strip_prefix("shm:") else {
-                return Err(format!(
-                    "--device {d}: unknown device (fix: `shm:NAME` for a plant served by `nanomotion plant --serve NAME`)"
-                ));
-            };
-            if !(a.connect_timeout.is_finite() && a.connect_timeout >= 0.0) {
-                return Err(format!(
-                    "--connect-timeout {}: must be ≥ 0 s",
-                    a.connect_timeout
-                ));
+    let (report, sched, _) =
+        match a.device.as_deref() {
+            None => run_loop(&a.graph, built, NoDevice, &a.lp, "rt", None)?,
+            Some(d) => {
+                let dev = ShmDevice::connect_named(d, a.connect_timeout, a.lp.watchdog_ms)
+                    .map_err(|e| match e {
+                        nanomotion_rt::ConnectError::ConnectTimeout(_) => {
+                            format!("--connect-timeout: {e}")
+                        }
+                        nanomotion_rt::ConnectError::Watchdog(_) => format!("--watchdog-ms: {e}"),
+                        _ => e.to_string(),
+                    })?;
+                run_loop(&a.graph, built, dev, &a.lp, "rt", None)?
             }
-            let dev = ShmDevice::connect(
-                name,
-                Duration::from_secs_f64(a.connect_timeout),
-                watchdog(&a.lp)?,
-            )
-            .map_err(|e| e.to_string())?;
-            run_loop(&a.graph, built, dev, &a.lp, "rt", None)?
-        }
-    };
+        };
     print_scores(&sched);
     match report.stopped {
         Stop::Completed | Stop::Interrupted => Ok(()),

@@ -60,7 +60,7 @@ pub use runner::{
     BlockTime, Event, NoDevice, OverrunPolicy, ParamChange, RealtimeRunner, Recording, RtConfig,
     RtError, Stop, Timing, TimingReport, hw_blocks,
 };
-pub use shm::{PlantInfo, ShmDevice, ShmPlant};
+pub use shm::{ConnectError, PlantInfo, ShmDevice, ShmPlant};
 
 /// Make sure this crate's blocks (`hw_input`, `hw_output`) are linked into a
 /// binary that only loads YAML (typetag registers them through the linker).

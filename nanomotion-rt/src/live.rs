@@ -44,12 +44,12 @@
 //! assert!(y.iter().all(|&v| v == 3.0));
 //! ```
 
-use nanomotion_core::Scheduler;
 use nanomotion_core::error::{GraphError, ParamError};
 use nanomotion_core::gate::Require;
 use nanomotion_core::gate::{self, GateReport};
 use nanomotion_core::overrides::{Override, Segment};
 use nanomotion_core::{Block, BuildContext};
+use nanomotion_core::{GraphSpec, Scheduler};
 
 /// One parameter update on its way into the loop: a row of the graph's table
 /// of live parameters ([`live_params`]) and the new value. Plain data: the
@@ -174,6 +174,10 @@ pub enum LiveError {
         /// The path.
         path: String,
     },
+    /// The gate's copy of the graph did not build
+    /// ([`ParamSender::gated_spec`]).
+    #[error("the stability gate's copy of the graph did not build: {0}")]
+    Copy(Box<GraphError>),
     /// [`ParamSender::gated`] was given another graph.
     #[error(
         "the gate's copy of the graph is not the graph that runs (blocks {copy:?} vs {runs:?}) (fix: build the copy from the same file and overrides)"
@@ -301,6 +305,20 @@ impl ParamSender {
             require,
         });
         Ok(self)
+    }
+
+    /// [`ParamSender::gated`] on a second build of `spec` — the graph the
+    /// loop runs, loaded again with the same overrides — against its
+    /// `require:` section. The copy is built without its logs, scores and
+    /// comparisons (the gate reads blocks and wiring only). `nanomotion rt`
+    /// and Python's `rt_start` judge their updates this way.
+    pub fn gated_spec(self, mut spec: GraphSpec) -> Result<Self, LiveError> {
+        let require = spec.require.clone().unwrap_or_default();
+        spec.log.clear();
+        spec.score.clear();
+        spec.compare.clear();
+        let (copy, _) = spec.build().map_err(|e| LiveError::Copy(Box::new(e)))?;
+        self.gated(copy, require)
     }
 
     /// The graph's live parameters (row `i` is [`ParamUpdate::param`] `= i`).

@@ -99,6 +99,34 @@ pub enum ShmError {
     TooLarge(usize),
 }
 
+/// Why a device named as the front ends name it (`shm:NAME`, a connect
+/// timeout, a watchdog) could not be connected ([`ShmDevice::connect_named`]).
+#[derive(Debug, thiserror::Error)]
+pub enum ConnectError {
+    /// Not `shm:NAME`.
+    #[error(
+        "device `{0}`: unknown device (fix: `shm:NAME` for a plant served by `nanomotion plant GRAPH --serve NAME`)"
+    )]
+    UnknownDevice(String),
+    /// The connect timeout is not a finite number of seconds ≥ 0.
+    #[error("connect timeout {0} s: must be a finite number ≥ 0 (fix: e.g. 10 s)")]
+    ConnectTimeout(f64),
+    /// The watchdog is out of range.
+    #[error("watchdog {0} ms: must be in (0, 60000] ms (fix: e.g. 50 ms)")]
+    Watchdog(f64),
+    /// The segment could not be used.
+    #[error(transparent)]
+    Shm(#[from] ShmError),
+}
+
+/// The watchdog of a device or a served plant from milliseconds: in (0, 60000].
+pub fn watchdog_ms(ms: f64) -> Result<Duration, ConnectError> {
+    if !(ms.is_finite() && ms > 0.0 && ms <= 60_000.0) {
+        return Err(ConnectError::Watchdog(ms));
+    }
+    Ok(Duration::from_secs_f64(ms * 1e-3))
+}
+
 /// The segment file of plant `name`.
 pub fn segment_path(name: &str) -> Result<PathBuf, ShmError> {
     let ok = !name.is_empty()
@@ -438,6 +466,30 @@ impl std::fmt::Debug for ShmDevice {
 }
 
 impl ShmDevice {
+    /// Connect to the device `spec` as the front ends name it — `shm:NAME`
+    /// (`nanomotion rt --device`, Python's `device=`) — waiting up to
+    /// `connect_timeout_s` for the plant to appear; the loop stops when its
+    /// heartbeat stalls for longer than `watchdog_ms`. Every setting is checked
+    /// before anything is opened.
+    pub fn connect_named(
+        spec: &str,
+        connect_timeout_s: f64,
+        watchdog: f64,
+    ) -> Result<Self, ConnectError> {
+        let Some(name) = spec.strip_prefix("shm:") else {
+            return Err(ConnectError::UnknownDevice(spec.into()));
+        };
+        if !(connect_timeout_s.is_finite() && connect_timeout_s >= 0.0) {
+            return Err(ConnectError::ConnectTimeout(connect_timeout_s));
+        }
+        let watchdog = watchdog_ms(watchdog)?;
+        Ok(Self::connect(
+            name,
+            Duration::from_secs_f64(connect_timeout_s),
+            watchdog,
+        )?)
+    }
+
     /// Connect to plant `name`, waiting up to `wait` for it to appear. The loop
     /// stops when the plant's heartbeat stalls for longer than `watchdog`.
     pub fn connect(name: &str, wait: Duration, watchdog: Duration) -> Result<Self, ShmError> {

@@ -708,6 +708,75 @@ fn the_stability_gate_refuses_an_update_that_destabilises_the_loop() {
     // The loop's PI is now the PI built with that gain, to the bit.
     let (fresh, _) = spec(Some(stable)).build().unwrap();
     assert_eq!(r.scheduler().lti_of("pi"), fresh.lti_of("pi"));
+
+    // `gated_spec` (what `nanomotion rt` and Python use): the copy built from
+    // the graph's spec, with its `require:`, judges the same.
+    let (sched, _) = spec(None).build().unwrap();
+    let mut r = RealtimeRunner::new(sched, NoDevice, config(OverrunPolicy::Skip)).unwrap();
+    let mut sender = r.param_sender().unwrap().gated_spec(spec(None)).unwrap();
+    assert!(sender.is_gated());
+    match sender.set("pi.kp", unstable) {
+        Err(LiveError::Gate { reasons, .. }) => assert_eq!(reasons, refused.failures()),
+        other => panic!("{other:?}"),
+    }
+    sender.set("pi.kp", stable).unwrap();
+    // A copy that does not build is named as such.
+    let mut bad = spec(None);
+    bad.connections.clear();
+    let (sched, _) = spec(None).build().unwrap();
+    let mut r = RealtimeRunner::new(sched, NoDevice, config(OverrunPolicy::Skip)).unwrap();
+    match r.param_sender().unwrap().gated_spec(bad) {
+        Err(e @ LiveError::Copy(_)) => assert!(
+            e.to_string()
+                .starts_with("the stability gate's copy of the graph did not build: "),
+            "{e}"
+        ),
+        other => panic!("{other:?}"),
+    }
+}
+
+#[test]
+fn a_device_named_wrongly_is_refused_before_anything_is_opened() {
+    use nanomotion_rt::shm::{ShmError, watchdog_ms};
+    use nanomotion_rt::{ConnectError, ShmDevice};
+    let connect = |spec: &str, timeout_s: f64, watchdog: f64| {
+        ShmDevice::connect_named(spec, timeout_s, watchdog).map(|_| ())
+    };
+    match connect("tcp:stage", 0.0, 50.0) {
+        Err(e @ ConnectError::UnknownDevice(_)) => assert_eq!(
+            e.to_string(),
+            "device `tcp:stage`: unknown device (fix: `shm:NAME` for a plant served by `nanomotion plant GRAPH --serve NAME`)"
+        ),
+        other => panic!("{other:?}"),
+    }
+    for t in [f64::NAN, -1.0, f64::INFINITY] {
+        assert!(
+            matches!(connect("shm:x", t, 50.0), Err(ConnectError::ConnectTimeout(v)) if v.to_bits() == t.to_bits())
+        );
+    }
+    for w in [0.0, -5.0, 60_000.5, f64::NAN] {
+        assert!(matches!(
+            connect("shm:x", 0.0, w),
+            Err(ConnectError::Watchdog(_))
+        ));
+    }
+    assert_eq!(watchdog_ms(50.0).unwrap(), Duration::from_millis(50));
+    assert_eq!(watchdog_ms(60_000.0).unwrap(), Duration::from_secs(60));
+    assert!(matches!(
+        connect("shm:a/b", 0.0, 50.0),
+        Err(ConnectError::Shm(ShmError::BadName(n))) if n == "a/b"
+    ));
+    let e = connect("shm:nobody-serves-this-name", 0.0, 50.0).unwrap_err();
+    assert!(
+        matches!(e, ConnectError::Shm(ShmError::NoPlant { .. })),
+        "{e}"
+    );
+    assert!(
+        e.to_string().contains(
+            "fix: start `nanomotion plant PLANT.yaml --serve nobody-serves-this-name` first"
+        ),
+        "{e}"
+    );
 }
 
 #[test]

@@ -8,8 +8,9 @@ The Rust library behind the ``nanomotion`` command, in-process:
 
 - graphs: :func:`load`, :func:`check` (the stability gate), :func:`run`
   (overrides by dotted path, seed, duration, measured data; signals as numpy
-  arrays, scores), :func:`rt` (the same on the wall clock, with its timing
-  report), :func:`diagnose` (name what a model misses),
+  arrays, scores), :func:`rt` (the same on the wall clock, alone or against
+  a plant in another process, with its timing report) and :func:`rt_start`
+  (in the background, with live parameter updates), :func:`diagnose` (name what a model misses),
   :func:`compensate` (compensate what it named in a controller graph);
 - studies: :func:`sweep` over a SWEEP.yaml, on local cores or on Ray;
 - analysis: :func:`psd_welch`, :func:`cumulative_psd`, :func:`frf_h1`,
@@ -73,6 +74,7 @@ __all__ = [
     "ModelError",
     "NanomotionError",
     "RtResult",
+    "RtRun",
     "RunResult",
     "Score",
     "SweepError",
@@ -88,6 +90,7 @@ __all__ = [
     "psd_welch",
     "read_results",
     "rt",
+    "rt_start",
     "run",
     "run_chunk",
     "sweep",
@@ -136,6 +139,90 @@ class RtResult(RunResult):
     ``p50_ns``, ``p99_ns``, ``p999_ns``, ``max_ns``; docs/realtime.md)."""
 
     timing: dict[str, Any] = field(default_factory=dict)
+
+
+class RtRun:
+    """A graph running on the wall clock in the background (:func:`rt_start`).
+
+    ``set("pi.kp", 4e7)`` changes a live parameter at the loop's next tick
+    boundary, judged first exactly as ``set pi.kp=4e7`` on ``nanomotion rt``'s
+    standard input is (the block's validation, then the stability gate on a
+    copy of the graph): a refusal raises :class:`GraphError` (no such live
+    parameter, a value the block refuses) or :class:`GateError` (a loop that
+    passes would fail), naming the parameter and the fix, and nothing reaches
+    the loop. ``status()`` reports the ticks so far and every update applied
+    with the tick it took effect at. ``wait()`` lets the loop run its
+    duration, ``stop()`` ends it at the next tick boundary (outputs safe); both
+    return the :class:`RtResult` (the same object on later calls, also as
+    ``result``). As a context manager it waits at the end of the ``with``
+    block, or stops the loop if the block raised.
+    """
+
+    def __init__(self, run: "_nm.RtRun") -> None:
+        self._run = run
+        self._result: RtResult | None = None
+
+    @property
+    def live_params(self) -> list[str]:
+        """The graph's parameters that can change while it runs (``BLOCK.PARAM``)."""
+        return self._run.live_params
+
+    @property
+    def device(self) -> str:
+        """The device the loop drives: ``"none"`` or ``"shm:NAME"``."""
+        return self._run.device
+
+    @property
+    def running(self) -> bool:
+        """Whether the loop still runs."""
+        return self._run.running
+
+    def set(self, path: str, value: float | str) -> None:
+        """Set live parameter ``path`` (``"pi.kp"`` or ``"blocks.pi.kp"``) to
+        ``value`` (a number, or the text of one) at the next tick boundary."""
+        self._run.set(path, value)
+
+    def status(self) -> dict[str, Any]:
+        """``running``, ``device``, ``ticks`` and ``t_s`` (at the loop's last
+        status, every 0.1 s of ticks), ``overruns``,
+        ``worst_wakeup_latency_ns``, ``worst_execution_ns``, and ``updates``:
+        each update applied as ``{"path", "value", "tick", "t_s"}``, ``tick``
+        the first tick computed with the new value."""
+        return self._run.status()
+
+    def _finish(self, stop: bool) -> RtResult:
+        if self._result is not None:
+            return self._result
+        r, timing = self._run.stop() if stop else self._run.wait()
+        r["scores"] = {k: Score(**v) for k, v in r["scores"].items()}
+        self._result = RtResult(**r, timing=json.loads(timing))
+        return self._result
+
+    def wait(self) -> RtResult:
+        """Wait until the loop has run its duration (Ctrl-C stops it)."""
+        return self._finish(stop=False)
+
+    def stop(self) -> RtResult:
+        """Stop the loop at its next tick boundary, outputs safe
+        (``timing["stop"] == "interrupted"`` if it had not ended already)."""
+        return self._finish(stop=True)
+
+    @property
+    def result(self) -> RtResult | None:
+        """The run, once :meth:`wait` or :meth:`stop` returned it."""
+        return self._result
+
+    def __enter__(self) -> "RtRun":
+        return self
+
+    def __exit__(self, exc_type: Any, exc: Any, tb: Any) -> None:
+        if exc_type is None:
+            self.wait()
+        else:
+            self.stop()
+
+    def __repr__(self) -> str:
+        return f"RtRun(device={self.device!r}, running={self.running})"
 
 
 @dataclass(frozen=True)
@@ -243,14 +330,28 @@ class Graph:
     def rt(self, overrides: Mapping[str, Any] | None = None, *, duration: float | None = None,
            allow_unproven: bool = False, allow_soft: bool = False, priority: int = 80,
            cpu: int | None = None, overrun: str | None = None, max_overruns: int | None = None,
-           allow_idle_states: bool = False) -> RtResult:
+           allow_idle_states: bool = False, device: str | None = None,
+           connect_timeout: float = 10.0, watchdog_ms: float = 50.0) -> RtResult:
         """Run the graph on the wall clock (``nanomotion rt`` without files). See :func:`rt`."""
-        r, timing = _nm.rt_graph(**self._source(overrides), duration=duration,
-                                 allow_unproven=allow_unproven, allow_soft=allow_soft,
-                                 priority=priority, cpu=cpu, overrun=overrun,
-                                 max_overruns=max_overruns, allow_idle_states=allow_idle_states)
-        r["scores"] = {k: Score(**v) for k, v in r["scores"].items()}
-        return RtResult(**r, timing=json.loads(timing))
+        return self.rt_start(overrides, duration=duration, allow_unproven=allow_unproven,
+                             allow_soft=allow_soft, priority=priority, cpu=cpu, overrun=overrun,
+                             max_overruns=max_overruns, allow_idle_states=allow_idle_states,
+                             device=device, connect_timeout=connect_timeout,
+                             watchdog_ms=watchdog_ms).wait()
+
+    def rt_start(self, overrides: Mapping[str, Any] | None = None, *,
+                 duration: float | None = None, allow_unproven: bool = False,
+                 allow_soft: bool = False, priority: int = 80, cpu: int | None = None,
+                 overrun: str | None = None, max_overruns: int | None = None,
+                 allow_idle_states: bool = False, device: str | None = None,
+                 connect_timeout: float = 10.0, watchdog_ms: float = 50.0) -> "RtRun":
+        """Start the graph on the wall clock in the background. See :func:`rt_start`."""
+        return RtRun(_nm.rt_start(**self._source(overrides), duration=duration,
+                                  allow_unproven=allow_unproven, allow_soft=allow_soft,
+                                  priority=priority, cpu=cpu, overrun=overrun,
+                                  max_overruns=max_overruns, allow_idle_states=allow_idle_states,
+                                  device=device, connect_timeout=connect_timeout,
+                                  watchdog_ms=watchdog_ms))
 
     def __repr__(self) -> str:
         return f"Graph({self.origin!r}, {len(self.blocks)} blocks, {self.duration_s} s at {self.base_rate_hz} Hz)"
@@ -308,24 +409,61 @@ def run(graph: PathLike | Graph, overrides: Mapping[str, Any] | None = None, *,
 def rt(graph: PathLike | Graph, overrides: Mapping[str, Any] | None = None, *,
        duration: float | None = None, allow_unproven: bool = False, allow_soft: bool = False,
        priority: int = 80, cpu: int | None = None, overrun: str | None = None,
-       max_overruns: int | None = None, allow_idle_states: bool = False) -> RtResult:
-    """Run a graph on the wall clock as ``nanomotion rt GRAPH`` does (no device:
-    the loop closes inside the graph), keeping the logs in memory.
+       max_overruns: int | None = None, allow_idle_states: bool = False,
+       device: str | None = None, connect_timeout: float = 10.0,
+       watchdog_ms: float = 50.0) -> RtResult:
+    """Run a graph on the wall clock as ``nanomotion rt GRAPH [--device
+    shm:NAME]`` does, keeping the logs in memory (:func:`rt_start`, then
+    :meth:`RtRun.wait`).
 
     The stability gate judges the graph first (:class:`GateError` unless
-    ``allow_unproven``). The loop thread runs SCHED_FIFO at ``priority``
-    (pinned to ``cpu``), with memory locked and the CPUs held out of deep idle
-    states (unless ``allow_idle_states``); where a privilege is refused the run
-    is refused, or runs at normal priority with ``allow_soft``. ``overrun`` is
-    ``"skip"`` (stay on the grid, count missed ticks) or ``"catch-up"`` (run
-    late ticks back to back: every tick runs, so the logs equal :func:`run`'s);
-    the default is the graph's ``realtime:`` section, else ``"skip"``. The
-    loop stops, outputs safe, after more than ``max_overruns``. The GIL is
-    released while the loop runs. See docs/realtime.md.
+    ``allow_unproven``). Without ``device`` the loop closes inside the graph
+    (a graph with ``hw_input``/``hw_output`` blocks is refused); with
+    ``device="shm:NAME"`` its ``hw_input``/``hw_output`` blocks are the
+    channels of a plant served by ``nanomotion plant PLANT.yaml --serve NAME``
+    (waiting up to ``connect_timeout`` s for it; the loop stops when the plant
+    is silent for ``watchdog_ms``). The loop thread runs SCHED_FIFO at
+    ``priority`` (pinned to ``cpu``), with memory locked and the CPUs held out
+    of deep idle states (unless ``allow_idle_states``); where a privilege is
+    refused the run is refused, or runs at normal priority with
+    ``allow_soft``. ``overrun`` is ``"skip"`` (stay on the grid, count missed
+    ticks) or ``"catch-up"`` (run late ticks back to back: every tick runs, so
+    the logs equal :func:`run`'s); the default is the graph's ``realtime:``
+    section, else ``"skip"``. The loop stops, outputs safe, after more than
+    ``max_overruns``, or when the device fails (``timing["stop"]`` says why).
+    The GIL is released while the loop runs. See docs/realtime.md.
     """
     return _graph(graph).rt(overrides, duration=duration, allow_unproven=allow_unproven,
                             allow_soft=allow_soft, priority=priority, cpu=cpu, overrun=overrun,
-                            max_overruns=max_overruns, allow_idle_states=allow_idle_states)
+                            max_overruns=max_overruns, allow_idle_states=allow_idle_states,
+                            device=device, connect_timeout=connect_timeout,
+                            watchdog_ms=watchdog_ms)
+
+
+def rt_start(graph: PathLike | Graph, overrides: Mapping[str, Any] | None = None, *,
+             duration: float | None = None, allow_unproven: bool = False,
+             allow_soft: bool = False, priority: int = 80, cpu: int | None = None,
+             overrun: str | None = None, max_overruns: int | None = None,
+             allow_idle_states: bool = False, device: str | None = None,
+             connect_timeout: float = 10.0, watchdog_ms: float = 50.0) -> RtRun:
+    """Start a graph on the wall clock in the background, as :func:`rt` runs
+    it (same arguments), and return its :class:`RtRun` at once: change live
+    parameters while it runs (``h.set("pi.kp", 4e7)``), watch it
+    (``h.status()``), end it (``h.wait()`` / ``h.stop()`` return the
+    :class:`RtResult`). Everything :func:`rt` refuses is refused here, before
+    the loop starts.
+
+    >>> with nm.rt_start("examples/quickstart.yaml", duration=2.0) as h:  # doctest: +SKIP
+    ...     time.sleep(0.5)
+    ...     h.set("pi.kp", 4e7)
+    >>> h.result.timing["param_updates"]                                     # doctest: +SKIP
+    1
+    """
+    return _graph(graph).rt_start(overrides, duration=duration, allow_unproven=allow_unproven,
+                                  allow_soft=allow_soft, priority=priority, cpu=cpu,
+                                  overrun=overrun, max_overruns=max_overruns,
+                                  allow_idle_states=allow_idle_states, device=device,
+                                  connect_timeout=connect_timeout, watchdog_ms=watchdog_ms)
 
 
 def diagnose(model: PathLike, data: PathLike, *, max_effects: int = 3, holdout: float = 0.3,

@@ -38,7 +38,21 @@ def run_graph(
     data_rate: float | None = None,
     allow_unproven: bool = False,
 ) -> dict[str, Any]: ...
-def rt_graph(
+class RtRun:
+    """A loop running in the background (see nanomotion.rt_start)."""
+
+    @property
+    def live_params(self) -> list[str]: ...
+    @property
+    def device(self) -> str: ...
+    @property
+    def running(self) -> bool: ...
+    def set(self, path: str, value: float | str) -> None: ...
+    def status(self) -> dict[str, Any]: ...
+    def wait(self) -> tuple[dict[str, Any], str]: ...
+    def stop(self) -> tuple[dict[str, Any], str]: ...
+
+def rt_start(
     path: _Path | None = None,
     text: str | None = None,
     origin: str = "<string>",
@@ -51,7 +65,10 @@ def rt_graph(
     overrun: str | None = None,
     max_overruns: int | None = None,
     allow_idle_states: bool = False,
-) -> tuple[dict[str, Any], str]: ...
+    device: str | None = None,
+    connect_timeout: float = 10.0,
+    watchdog_ms: float = 50.0,
+) -> RtRun: ...
 def diagnose_graph(
     model: _Path,
     data: _Path,

@@ -14,7 +14,8 @@
 //!   feed-forward (6.6) on the extended model (6.4), the time-stamping estimator
 //!   (8.1)–(8.4) with the encoder of Ch. 8;
 //! - the wall clock ([`rt`]): a graph run in real time as `nanomotion rt` runs
-//!   it, with its timing report;
+//!   it, alone or against a plant in another process (`device="shm:NAME"`),
+//!   in the background with live parameter updates, with its timing report;
 //! - sweeps ([`sweep`]): the pieces of `nanomotion::sweep` a distributed engine
 //!   (Ray) needs, and the local rayon path.
 //!
