@@ -28,7 +28,8 @@
 //! with `typetag` under that name and writes what the impl leaves out:
 //! `inputs`/`outputs` from `ports` when that string is a declaration
 //! ([`DeclaredPorts`]: `name[width] (unit) [scheduling]`, widths a number or a
-//! `usize` field, units SI symbols), `role` from `role` ([`DeclaredBlock`]), and
+//! `usize` field, units SI symbols; an output `name[width] [unit of u]` is in
+//! the unit of input `u`), `role` from `role` ([`DeclaredBlock`]), and
 //! `build` as the declared checks (`check_params()`, then `check_at_rate(ctx.dt)`),
 //! and, for a block that writes no `output`, its [`Source`](crate::Source):
 //! `sample` at the tick's time.

@@ -19,9 +19,11 @@
 //!   [`DeclaredPorts`](crate::block::DeclaredPorts): `inputs -> outputs`, each a
 //!   comma-separated list of `name[width] (unit) [scheduling]` — `[width]` a whole
 //!   number or a `usize` field (default 1), `(unit)` an SI symbol the port
-//!   carries (`m`, `m/s²`, `V`, `count`), `[scheduling]` a scheduling input (not
-//!   shown in the listing). `#[declared_block]` on the `impl Block` turns these
-//!   into the block's methods (see [`crate::block`]).
+//!   carries (`m`, `m/s²`, `V`, `count`), `[scheduling]` a scheduling input; an
+//!   output may instead be `name[width] [unit of u]`, in the unit of input `u`
+//!   whatever it is when the graph is built ([`Port::unit_of_input`](crate::Port::unit_of_input)).
+//!   The markers are not shown in the listing. `#[declared_block]` on the `impl
+//!   Block` turns these into the block's methods (see [`crate::block`]).
 //!
 //! | `#[param(…)]` | check | schema |
 //! |---|---|---|

@@ -29,7 +29,7 @@
 //! that only its consumer reads into the consumer's input (the consumer reads
 //! the source, the same value); [`Scheduler::tick_probed`] runs it as a block.
 
-use crate::block::{Block, BuildContext, Port, Role, Tick};
+use crate::block::{Block, BuildContext, Port, Tick};
 use crate::error::{GraphError, ParamError};
 use crate::lti::StateSpace;
 use serde::{Deserialize, Serialize};
@@ -1370,7 +1370,11 @@ pub const RATE_TRANSITION_PREFIX: &str = "rt:";
 /// reports it.
 #[derive(Debug, Clone, Serialize, Deserialize, crate::doc::Params)]
 #[serde(deny_unknown_fields)]
-#[block(type_name = "rate_transition", role = Math, ports = "u[width] -> y[width]")]
+#[block(
+    type_name = "rate_transition",
+    role = Math,
+    ports = "u[width] -> y[width] [unit of u]"
+)]
 pub struct RateTransition {
     /// Number of values carried.
     #[param(width)]
@@ -1384,18 +1388,9 @@ impl RateTransition {
     }
 }
 
-#[typetag::serde(name = "rate_transition")]
+#[crate::block::declared_block]
 impl Block for RateTransition {
-    fn inputs(&self) -> Vec<Port> {
-        vec![Port::new("u", self.width)]
-    }
-    fn outputs(&self) -> Vec<Port> {
-        vec![Port::new("y", self.width).unit_of_input(0)]
-    }
     fn output(&mut self, _tick: Tick, u: &[f64], y: &mut [f64]) {
         y.copy_from_slice(u);
-    }
-    fn role(&self) -> Role {
-        Role::Math
     }
 }

@@ -232,6 +232,55 @@ log: [fast.y, slower.y, slow.t]
     );
 }
 
+/// A `rate_transition` written in a graph file is the declared block: its
+/// output carries its input's unit, and a width outside [1, MAX_WIDTH] is
+/// refused by name when it is built.
+#[test]
+fn a_written_rate_transition_passes_the_unit_and_checks_its_width() {
+    let yaml = |width: usize| {
+        format!(
+            r#"
+base_rate_hz: 100
+duration_s: 0.05
+blocks:
+  - {{ name: slow, type: t_clock, rate_hz: 10 }}
+  - {{ name: hold, type: rate_transition, width: {width} }}
+connections:
+  - {{ from: slow.k, to: hold.u }}
+units: {{ slow.k: m }}
+log: [hold.y]
+"#
+        )
+    };
+    let (mut s, _) = GraphSpec::from_yaml(&yaml(1), "rt.yaml")
+        .unwrap()
+        .build()
+        .unwrap();
+    let res = s.run(|_| {});
+    assert_eq!(res.logs[0].unit.as_deref(), Some("m"));
+    assert_eq!(res.logs[0].data, vec![0.0; 5]);
+    for width in [0, nanomotion_core::block::MAX_WIDTH + 1] {
+        let err = GraphSpec::from_yaml(&yaml(width), "rt.yaml")
+            .unwrap()
+            .build()
+            .unwrap_err();
+        match err.root() {
+            GraphError::Param {
+                block,
+                type_name,
+                source,
+            } => {
+                assert_eq!(
+                    (block.as_str(), type_name.as_str()),
+                    ("hold", "rate_transition")
+                );
+                assert_eq!(source.field, "width", "{err}");
+            }
+            other => panic!("{other}"),
+        }
+    }
+}
+
 #[test]
 fn algebraic_loop_is_rejected_with_the_cycle() {
     let yaml = r#"

@@ -55,10 +55,10 @@ pub(crate) fn expand(args: TokenStream2, mut item: ItemImpl) -> syn::Result<Toke
     let blk = quote!(::nanomotion_core::block);
     let has = written(&item);
     let has = |name: &str| has.iter().any(|n| n == name);
-    // A macro invoked in the impl may write the ports and `output`: they are
-    // then its.
+    // A macro invoked in the impl may write `output` (and `update`, …): it is
+    // then its. The ports are the declaration's unless the impl names them.
     let macros = item.items.iter().any(|i| matches!(i, ImplItem::Macro(_)));
-    if !has("inputs") && !has("outputs") && !macros {
+    if !has("inputs") && !has("outputs") {
         item.items.push(parse_quote!(
             fn inputs(&self) -> ::std::vec::Vec<::nanomotion_core::Port> {
                 <Self as #blk::DeclaredPorts>::declared_inputs(self)
@@ -154,11 +154,12 @@ mod tests {
 
         let item: ItemImpl = parse_quote!(
             impl Block for LowPass {
-                siso_ports!(same_unit);
+                core_steps!();
             }
         );
         let out = methods(&expand(TokenStream2::new(), item).unwrap());
-        assert!(!out.contains("DeclaredPorts"), "{out}");
+        assert!(out.contains("DeclaredPorts"), "{out}");
+        assert!(!out.contains("Source :: sample"), "{out}");
     }
 
     #[test]

@@ -46,14 +46,14 @@ pub fn derive_params(input: TokenStream) -> TokenStream {
 ///
 /// - `inputs` and `outputs` (when the impl writes neither) from the declared
 ///   `ports` (`nanomotion_core::block::DeclaredPorts`; a `ports` string that is
-///   prose, not a declaration, does not compile here: write both by hand; a
-///   macro invoked in the impl is taken to write them),
+///   prose, not a declaration, does not compile here: write both by hand),
 /// - `role` from the declared role,
 /// - `build` as the declared checks: `check_params()`, then
 ///   `check_at_rate(ctx.dt)`,
 /// - `output`, for a source: `Source::sample` at the tick's time (a block
 ///   that writes no `output` and invokes no macro must implement
-///   `nanomotion_core::Source`).
+///   `nanomotion_core::Source`; a macro invoked in the impl is taken to write
+///   `output`).
 ///
 /// What the impl writes itself is kept. See `nanomotion_core::block`.
 #[proc_macro_attribute]

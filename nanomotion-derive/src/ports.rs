@@ -6,14 +6,19 @@
 //!
 //! ```text
 //! name[width] (unit) [scheduling]
+//! name[width] [unit of input]
 //! ```
 //!
 //! - `[width]` (optional, default 1): a whole number, or the name of a `usize`
 //!   field of the parameter struct (`y[width]` is `self.width` wide);
 //! - `(unit)` (optional): an SI unit (`m`, `m/s²`, `V`, `rad`, `count`), which the
 //!   port then carries (`Port::with_unit`);
-//! - `[scheduling]` (inputs only): a scheduling input (`Port::scheduling_input`).
-//!   The marker is not shown in `nanomotion blocks`.
+//! - `[scheduling]` (inputs only): a scheduling input (`Port::scheduling_input`);
+//! - `[unit of u]` (outputs only, instead of a `(unit)`): the output is in the
+//!   unit of input `u`, whatever that is when the graph is built
+//!   (`Port::unit_of_input`: sums, delays, filters, rate transitions).
+//!
+//! The markers are not shown in `nanomotion blocks`.
 //!
 //! Anything else (prose in parentheses, `...`, `<inner inputs>`, a width that
 //! is not a field, `[, optional port]`) makes the string a description only:
@@ -24,6 +29,9 @@ use quote::{format_ident, quote};
 
 /// The marker of a scheduling input.
 const SCHEDULING: &str = "[scheduling]";
+/// The start of the marker of an output in the unit of an input,
+/// `[unit of u]`.
+const UNIT_OF: &str = "[unit of ";
 
 /// One declared port.
 #[derive(Debug, PartialEq)]
@@ -32,6 +40,16 @@ pub(crate) struct PortDecl {
     pub width: Width,
     pub unit: Option<String>,
     pub scheduling: bool,
+    /// `[unit of u]`: the input named, then (once the inputs are known) its
+    /// index.
+    pub unit_of: Option<UnitOf>,
+}
+
+/// The input an output takes its unit from.
+#[derive(Debug, PartialEq)]
+pub(crate) enum UnitOf {
+    Named(String),
+    Input(usize),
 }
 
 /// The ports a `ports` string declares.
@@ -48,14 +66,27 @@ pub(crate) enum Width {
     Field(String),
 }
 
-/// The text shown for `ports`: as written, without the `[scheduling]` markers
-/// (and the blank before each).
+/// The text shown for `ports`: as written, without the `[scheduling]` and
+/// `[unit of …]` markers (and the blank before each).
 pub(crate) fn shown(ports: &str) -> String {
     let mut out = String::with_capacity(ports.len());
     let mut rest = ports;
-    while let Some(at) = rest.find(SCHEDULING) {
+    loop {
+        let next = [SCHEDULING, UNIT_OF]
+            .iter()
+            .filter_map(|m| rest.find(m).map(|at| (at, *m)))
+            .min();
+        let Some((at, marker)) = next else { break };
+        let end = if marker == UNIT_OF {
+            match rest[at..].find(']') {
+                Some(close) => at + close + 1,
+                None => break,
+            }
+        } else {
+            at + marker.len()
+        };
         out.push_str(rest[..at].trim_end());
-        rest = &rest[at + SCHEDULING.len()..];
+        rest = &rest[end..];
     }
     out.push_str(rest);
     out
@@ -79,6 +110,31 @@ pub(crate) fn declared(ports: &str, fields: &[String]) -> Result<Option<Declarat
             "`{}` is an output: only an input can be a scheduling input",
             p.name
         ));
+    }
+    if let Some(p) = ins.iter().find(|p| p.unit_of.is_some()) {
+        return Err(format!(
+            "`{}` is an input: only an output can be `[unit of …]` an input",
+            p.name
+        ));
+    }
+    let mut outs = outs;
+    for p in &mut outs {
+        let Some(UnitOf::Named(from)) = &p.unit_of else {
+            continue;
+        };
+        if p.unit.is_some() {
+            return Err(format!(
+                "`{}` has a unit and `[unit of {from}]`: give one of them",
+                p.name
+            ));
+        }
+        let Some(k) = ins.iter().position(|i| &i.name == from) else {
+            return Err(format!(
+                "`{}` is `[unit of {from}]`, but there is no input `{from}`: name one of the inputs",
+                p.name
+            ));
+        };
+        p.unit_of = Some(UnitOf::Input(k));
     }
     Ok(Some(Declaration {
         inputs: ins,
@@ -110,7 +166,8 @@ fn side(text: &str, fields: &[String]) -> Option<Vec<PortDecl>> {
     Some(ports)
 }
 
-/// `name[width] (unit) [scheduling]`, each part after the name optional.
+/// `name[width] (unit) [scheduling]` or `name[width] [unit of input]`, each
+/// part after the name optional.
 fn port(text: &str, fields: &[String]) -> Option<PortDecl> {
     let mut rest = text.trim();
     let scheduling = match rest.strip_suffix(SCHEDULING) {
@@ -119,6 +176,17 @@ fn port(text: &str, fields: &[String]) -> Option<PortDecl> {
             true
         }
         None => false,
+    };
+    let unit_of = match rest.rfind(UNIT_OF) {
+        Some(at) if rest.ends_with(']') => {
+            let from = &rest[at + UNIT_OF.len()..rest.len() - 1];
+            if !is_name(from) {
+                return None;
+            }
+            rest = rest[..at].trim_end();
+            Some(UnitOf::Named(from.to_string()))
+        }
+        _ => None,
     };
     let unit = match rest.strip_suffix(')') {
         Some(r) => {
@@ -147,11 +215,7 @@ fn port(text: &str, fields: &[String]) -> Option<PortDecl> {
         }
         None => (rest, Width::Fixed(1)),
     };
-    let mut chars = name.chars();
-    let first_ok = chars
-        .next()
-        .is_some_and(|c| c.is_ascii_alphabetic() || c == '_');
-    if !first_ok || !chars.all(|c| c.is_ascii_alphanumeric() || c == '_') {
+    if !is_name(name) {
         return None;
     }
     Some(PortDecl {
@@ -159,7 +223,17 @@ fn port(text: &str, fields: &[String]) -> Option<PortDecl> {
         width,
         unit,
         scheduling,
+        unit_of,
     })
+}
+
+/// Whether `text` is a port name (an ASCII identifier).
+fn is_name(text: &str) -> bool {
+    let mut chars = text.chars();
+    let first_ok = chars
+        .next()
+        .is_some_and(|c| c.is_ascii_alphabetic() || c == '_');
+    first_ok && chars.all(|c| c.is_ascii_alphanumeric() || c == '_')
 }
 
 /// Whether `text` is an SI unit: factors joined by `/` or `·`, each an
@@ -204,7 +278,12 @@ pub(crate) fn port_list(ports: &[PortDecl]) -> TokenStream2 {
         };
         let unit = p.unit.as_ref().map(|u| quote!(.with_unit(#u)));
         let scheduling = p.scheduling.then(|| quote!(.scheduling_input()));
-        quote!(::nanomotion_core::Port::new(#name, #width) #unit #scheduling)
+        let unit_of = match &p.unit_of {
+            Some(UnitOf::Input(k)) => quote!(.unit_of_input(#k)),
+            // `declared` resolves every name to an index
+            Some(UnitOf::Named(_)) | None => quote!(),
+        };
+        quote!(::nanomotion_core::Port::new(#name, #width) #unit #scheduling #unit_of)
     });
     quote!(::std::vec![#(#items),*])
 }
@@ -223,6 +302,7 @@ mod tests {
             width,
             unit: unit.map(String::from),
             scheduling,
+            unit_of: None,
         }
     }
 
@@ -276,8 +356,29 @@ mod tests {
     }
 
     #[test]
-    fn a_scheduling_output_is_refused() {
-        assert!(declared("u -> y [scheduling]", &fields()).is_err());
+    fn an_output_in_the_unit_of_an_input_names_it() {
+        let d = declared("e, u[width] -> y[width] [unit of u], n", &fields())
+            .unwrap()
+            .unwrap();
+        assert_eq!(d.outputs[0].unit_of, Some(UnitOf::Input(1)));
+        assert_eq!(d.outputs[0].width, Width::Field("width".into()));
+        assert_eq!(d.outputs[1].unit_of, None);
+        let out = port_list(&d.outputs).to_string();
+        assert!(out.contains(". unit_of_input (1usize)"), "{out}");
+    }
+
+    #[test]
+    fn a_marker_where_it_cannot_stand_is_refused() {
+        for text in [
+            "u -> y [scheduling]",
+            "u [unit of u] -> y",
+            "u -> y [unit of v]",
+            "u -> y (m) [unit of u]",
+        ] {
+            assert!(declared(text, &fields()).is_err(), "{text}");
+        }
+        // not a name: prose
+        assert_eq!(declared("u -> y [unit of the input]", &fields()), Ok(None));
     }
 
     #[test]
@@ -288,6 +389,14 @@ mod tests {
             "<inner inputs>, sigma[n] -> <inner outputs>, gain"
         );
         assert_eq!(shown("u -> y"), "u -> y");
+        assert_eq!(
+            shown("u[width] -> y[width] [unit of u]"),
+            "u[width] -> y[width]"
+        );
+        assert_eq!(
+            shown("e, a [scheduling] -> y [unit of e], n"),
+            "e, a -> y, n"
+        );
     }
 
     #[test]

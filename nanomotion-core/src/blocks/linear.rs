@@ -216,26 +216,6 @@ fn c2d_method(
     }
 }
 
-macro_rules! siso_ports {
-    () => {
-        fn inputs(&self) -> Vec<Port> {
-            vec![Port::new("u", self.width)]
-        }
-        fn outputs(&self) -> Vec<Port> {
-            vec![Port::new("y", self.width)]
-        }
-    };
-    // Filters and delays whose output is in the input's unit.
-    (same_unit) => {
-        fn inputs(&self) -> Vec<Port> {
-            vec![Port::new("u", self.width)]
-        }
-        fn outputs(&self) -> Vec<Port> {
-            vec![Port::new("y", self.width).unit_of_input(0)]
-        }
-    };
-}
-
 macro_rules! core_steps {
     () => {
         fn output(&mut self, _tick: Tick, u: &[f64], y: &mut [f64]) {
@@ -349,7 +329,6 @@ pub const MAX_SS_STATES: usize = 256;
 
 #[declared_block]
 impl Block for TransferFunctionBlock {
-    siso_ports!();
     core_steps!();
 
     fn direct_feedthrough(&self) -> bool {
@@ -747,7 +726,11 @@ fn default_order() -> usize {
 /// channel.
 #[derive(Debug, Clone, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
-#[block(type_name = "low_pass", role = Math, ports = "u[width] -> y[width]")]
+#[block(
+    type_name = "low_pass",
+    role = Math,
+    ports = "u[width] -> y[width] [unit of u]"
+)]
 pub struct LowPass {
     /// −3 dB frequency f_c in Hz.
     #[param(positive, below_nyquist)]
@@ -782,7 +765,6 @@ pub const MAX_LOW_PASS_ORDER: usize = 16;
 
 #[declared_block]
 impl Block for LowPass {
-    siso_ports!(same_unit);
     core_steps!();
 
     fn build(&mut self, ctx: &BuildContext) -> Result<(), ParamError> {
@@ -810,7 +792,11 @@ fn default_notch_damping() -> f64 {
 /// `centre_hz` is exactly `depth` and the DC gain is 1. Per channel.
 #[derive(Debug, Clone, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
-#[block(type_name = "notch", role = Math, ports = "u[width] -> y[width]")]
+#[block(
+    type_name = "notch",
+    role = Math,
+    ports = "u[width] -> y[width] [unit of u]"
+)]
 pub struct Notch {
     /// Centre frequency f₀ in Hz.
     #[param(positive, below_nyquist)]
@@ -859,7 +845,6 @@ impl Notch {
 
 #[declared_block]
 impl Block for Notch {
-    siso_ports!(same_unit);
     core_steps!();
 
     fn build(&mut self, ctx: &BuildContext) -> Result<(), ParamError> {
@@ -959,7 +944,6 @@ impl LeadLag {
 
 #[declared_block]
 impl Block for LeadLag {
-    siso_ports!();
     core_steps!();
 
     fn build(&mut self, ctx: &BuildContext) -> Result<(), ParamError> {
@@ -988,7 +972,11 @@ controller_impl!(LeadLag);
 /// it breaks algebraic loops.
 #[derive(Debug, Clone, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
-#[block(type_name = "delay", role = Math, ports = "u[width] -> y[width]")]
+#[block(
+    type_name = "delay",
+    role = Math,
+    ports = "u[width] -> y[width] [unit of u]"
+)]
 pub struct Delay {
     /// Delay d in samples of the block's rate; d · width ≤ 2^24.
     pub d: usize,
@@ -1022,8 +1010,6 @@ pub const MAX_DENSE_DELAY_STATES: usize = 512;
 
 #[declared_block]
 impl Block for Delay {
-    siso_ports!(same_unit);
-
     fn direct_feedthrough(&self) -> bool {
         self.d == 0
     }

@@ -28,7 +28,7 @@
 use crate::block::check;
 use crate::doc::Params;
 use crate::rng::Rng;
-use crate::{Block, BuildContext, ParamError, Port, Source, declared_block};
+use crate::{Block, BuildContext, ParamError, Source, declared_block};
 use serde::{Deserialize, Serialize};
 use std::f64::consts::{PI, TAU};
 
@@ -282,11 +282,7 @@ impl Source for TriangularScan {
 }
 
 #[declared_block]
-impl Block for TriangularScan {
-    fn outputs(&self) -> Vec<Port> {
-        vec![Port::new("y", 1)]
-    }
-}
+impl Block for TriangularScan {}
 
 // ---------------------------------------------------------------------------------
 // point_to_point

@@ -5,9 +5,7 @@
 
 use crate::hysteresis::{CH_NAMES_UM_V, ChParams, ColemanHodgdon, Direction, ExtendedCh};
 use nanomotion_core::Params;
-use nanomotion_core::{
-    Actuator, Block, BuildContext, ParamError, Port, Sector, Tick, declared_block,
-};
+use nanomotion_core::{Actuator, Block, BuildContext, ParamError, Sector, Tick, declared_block};
 use serde::{Deserialize, Serialize};
 
 /// `coleman_hodgdon`: Coleman–Hodgdon piezo hysteresis dx/dt = α|V̇|(bV − x) + uV̇
@@ -62,12 +60,6 @@ impl Actuator for ColemanHodgdonBlock {
 
 #[declared_block]
 impl Block for ColemanHodgdonBlock {
-    fn inputs(&self) -> Vec<Port> {
-        vec![Port::new("v", 1)]
-    }
-    fn outputs(&self) -> Vec<Port> {
-        vec![Port::new("x", 1)]
-    }
     fn build(&mut self, _ctx: &BuildContext) -> Result<(), ParamError> {
         self.check_params()?;
         let retrace = self.retrace.unwrap_or(self.trace);
@@ -115,12 +107,6 @@ pub struct ExtendedChBlock {
 
 #[declared_block]
 impl Block for ExtendedChBlock {
-    fn inputs(&self) -> Vec<Port> {
-        vec![Port::new("v", 1)]
-    }
-    fn outputs(&self) -> Vec<Port> {
-        vec![Port::new("x", 1)]
-    }
     fn build(&mut self, _ctx: &BuildContext) -> Result<(), ParamError> {
         self.model.trace.validate("model.trace.")?;
         self.model.retrace.validate("model.retrace.")?;

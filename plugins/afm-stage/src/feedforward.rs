@@ -378,12 +378,6 @@ impl Controller for PositionFeedForward {
 
 #[declared_block]
 impl Block for PositionFeedForward {
-    fn inputs(&self) -> Vec<Port> {
-        vec![Port::new("r", 1)]
-    }
-    fn outputs(&self) -> Vec<Port> {
-        vec![Port::new("v", 1)]
-    }
     fn output(&mut self, _tick: Tick, u: &[f64], y: &mut [f64]) {
         self.control(u, y);
     }

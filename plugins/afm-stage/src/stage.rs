@@ -28,7 +28,7 @@ use nanomotion_core::Params;
 use nanomotion_core::block::check;
 use nanomotion_core::lti::{C2dMethod, SsStepper, StateSpace};
 use nanomotion_core::rng::Rng;
-use nanomotion_core::{Block, BuildContext, ParamError, Plant, Port, Tick, declared_block};
+use nanomotion_core::{Block, BuildContext, ParamError, Plant, Tick, declared_block};
 use serde::{Deserialize, Serialize};
 use std::f64::consts::TAU;
 
@@ -505,17 +505,6 @@ impl Plant for AfmStage {
 
 #[declared_block]
 impl Block for AfmStage {
-    fn inputs(&self) -> Vec<Port> {
-        vec![Port::new("v", 3)]
-    }
-    fn outputs(&self) -> Vec<Port> {
-        vec![
-            Port::new("pos", 3),
-            Port::new("deflection", 1),
-            Port::new("true_pos", 3),
-            Port::new("saturated", 3),
-        ]
-    }
     fn direct_feedthrough(&self) -> bool {
         false
     }

@@ -9,21 +9,21 @@
 
 use nanomotion_core::block::Linearisation;
 use nanomotion_core::lti::StateSpace;
-use nanomotion_core::{Block, BuildContext, ParamError, Params, Port, Role, Tick};
+use nanomotion_core::{Block, BuildContext, ParamError, Params, Tick, declared_block};
 use serde::{Deserialize, Serialize};
 
 /// `backlash_inverse`: inverse of the play operator (backlash) of width w: the
 /// wanted output ± w/2 by its direction, held while it holds; before the actuator.
+/// Input `u`: the wanted output; output `y`: the input to give the play.
 ///
-/// u = P⁻¹(w) for the play operator P of total width `width`. Input `u` (the
-/// wanted output), output `y` (the input to give the play), the ports of an
-/// effect block.
+/// u = P⁻¹(w) for the play operator P of total width `width`; the ports are
+/// those of an effect block.
 #[derive(Debug, Clone, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
 #[block(
     type_name = "backlash_inverse",
     role = Controller,
-    ports = "u (wanted output) -> y (input to give the play)"
+    ports = "u -> y"
 )]
 pub struct BacklashInverse {
     /// Total play w (unit of the signal).
@@ -57,14 +57,8 @@ impl BacklashInverse {
     }
 }
 
-#[typetag::serde(name = "backlash_inverse")]
+#[declared_block]
 impl Block for BacklashInverse {
-    fn inputs(&self) -> Vec<Port> {
-        vec![Port::new("u", 1)]
-    }
-    fn outputs(&self) -> Vec<Port> {
-        vec![Port::new("y", 1)]
-    }
     fn build(&mut self, _ctx: &BuildContext) -> Result<(), ParamError> {
         self.check_params()?;
         self.last = None;
@@ -83,14 +77,12 @@ impl Block for BacklashInverse {
             ),
         ))
     }
-    fn role(&self) -> Role {
-        Role::Controller
-    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use nanomotion_core::Role;
     use nanomotion_plf::effects::Backlash;
 
     /// P(P⁻¹(w)) = w with the plf `backlash` block (the operator the diagnosis

@@ -17,22 +17,22 @@
 
 use nanomotion_core::block::Linearisation;
 use nanomotion_core::lti::StateSpace;
-use nanomotion_core::{Block, BuildContext, ParamError, Params, Port, Role, Tick};
+use nanomotion_core::{Block, BuildContext, ParamError, Params, Tick, declared_block};
 use nanomotion_plf::effects::BoucWen;
 use serde::{Deserialize, Serialize};
 
 /// `bouc_wen_inverse`: inverse of the Bouc–Wen operator y = linear·u + z (ν = 1):
-/// for each wanted output the drive that gives it; before the actuator.
+/// for each wanted output the drive that gives it; before the actuator. Input
+/// `u`: the wanted output; output `y`: the drive to give the operator.
 ///
-/// u = BW⁻¹(w) for the plf `bouc_wen` block with the same parameters. Input `u`
-/// (the wanted output), output `y` (the drive to give the operator). Needs a
+/// u = BW⁻¹(w) for the plf `bouc_wen` block with the same parameters. Needs a
 /// loop whose slope linear + dz/du stays positive.
 #[derive(Debug, Clone, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
 #[block(
     type_name = "bouc_wen_inverse",
     role = Controller,
-    ports = "u (wanted output) -> y (drive to give the operator)"
+    ports = "u -> y"
 )]
 pub struct BoucWenInverse {
     /// a of the operator: slope of z right after a reversal.
@@ -141,14 +141,8 @@ impl BoucWenInverse {
     }
 }
 
-#[typetag::serde(name = "bouc_wen_inverse")]
+#[declared_block]
 impl Block for BoucWenInverse {
-    fn inputs(&self) -> Vec<Port> {
-        vec![Port::new("u", 1)]
-    }
-    fn outputs(&self) -> Vec<Port> {
-        vec![Port::new("y", 1)]
-    }
     fn build(&mut self, _ctx: &BuildContext) -> Result<(), ParamError> {
         self.check_params()?;
         self.slopes = self.slope_bounds().map_err(|why| {
@@ -178,9 +172,6 @@ impl Block for BoucWenInverse {
                 1.0 / self.slopes.0
             ),
         ))
-    }
-    fn role(&self) -> Role {
-        Role::Controller
     }
 }
 

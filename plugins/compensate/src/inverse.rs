@@ -26,26 +26,27 @@ use afm_stage::hysteresis::Branch;
 use nanomotion_core::block::{Linearisation, check};
 use nanomotion_core::lti::StateSpace;
 use nanomotion_core::models::hysteresis::{ChParams, Direction};
-use nanomotion_core::{Block, BuildContext, ParamError, Params, Port, Role, Tick};
+use nanomotion_core::{Block, BuildContext, ParamError, Params, Tick, declared_block};
 use serde::{Deserialize, Serialize};
 
 /// `hysteresis_inverse`: exact inverse of the Coleman–Hodgdon operator (6.3) by
 /// the Lambert-W branch inverse (6.6), re-anchored at every reversal of the wanted
-/// output; before the actuator.
+/// output; before the actuator. Input `u`: the wanted output w; output `y`: the
+/// input to give the operator; output `state`: the unreachable samples so far.
 ///
 /// u = H⁻¹(w) for the Coleman–Hodgdon operator H with parameters `alpha`, `b`,
 /// `c` (and `retrace` for decreasing input), the same fields as the plf
-/// `hysteresis` effect block. Input `u`: the output w the actuator should
-/// produce; output `y`: the input to give it (the ports of an effect block, so
-/// graph surgery places it like one). A wanted output the branch cannot reach (a
-/// non-monotone branch: the state far off the anhysteretic line) holds the last
-/// input and is counted on output `state`.
+/// `hysteresis` effect block. `u` is the output the actuator should produce, `y`
+/// the input to give it (the ports of an effect block, so graph surgery places
+/// it like one). A wanted output the branch cannot reach (a non-monotone branch:
+/// the state far off the anhysteretic line) holds the last input and is counted
+/// on output `state`.
 #[derive(Debug, Clone, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
 #[block(
     type_name = "hysteresis_inverse",
     role = Controller,
-    ports = "u (wanted output w) -> y (input to give the operator), state (unreachable samples so far)"
+    ports = "u -> y, state"
 )]
 pub struct HysteresisInverse {
     /// α (1/\[u\]) of the operator to invert.
@@ -184,14 +185,8 @@ impl HysteresisInverse {
     }
 }
 
-#[typetag::serde(name = "hysteresis_inverse")]
+#[declared_block]
 impl Block for HysteresisInverse {
-    fn inputs(&self) -> Vec<Port> {
-        vec![Port::new("u", 1)]
-    }
-    fn outputs(&self) -> Vec<Port> {
-        vec![Port::new("y", 1), Port::new("state", 1)]
-    }
     fn build(&mut self, _ctx: &BuildContext) -> Result<(), ParamError> {
         self.check_params()?;
         // k = (b − c)/α finite; the retrace set's slopes must be positive too.
@@ -234,9 +229,6 @@ impl Block for HysteresisInverse {
             points,
             note: "inverse hysteresis judged at the two ends of its small-signal gain (1/c after a reversal, 1/b on the anhysteretic line)".into(),
         })
-    }
-    fn role(&self) -> Role {
-        Role::Controller
     }
 }
 

@@ -4,20 +4,21 @@
 
 use nanomotion_core::block::Linearisation;
 use nanomotion_core::lti::StateSpace;
-use nanomotion_core::{Block, BuildContext, ParamError, Params, Port, Role, Tick};
+use nanomotion_core::{Block, Params, Tick, declared_block};
 use serde::{Deserialize, Serialize};
 
 /// `drive_offset`: y = u + offset, a constant added to the drive (the
-/// feed-forward that sets back a drive's zero).
+/// feed-forward that sets back a drive's zero). Input `u`: the drive asked for;
+/// output `y`: the drive given, in the unit of `u`.
 ///
-/// Input `u` (the drive the controller asks for), output `y` (the drive given
-/// to the actuator), the ports of an effect block.
+/// `u` is the drive the controller asks for, `y` the drive given to the
+/// actuator: the ports of an effect block.
 #[derive(Debug, Clone, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
 #[block(
     type_name = "drive_offset",
     role = Controller,
-    ports = "u (drive asked for) -> y (drive given)"
+    ports = "u -> y [unit of u]"
 )]
 pub struct DriveOffset {
     /// The constant added (unit of the drive).
@@ -32,17 +33,8 @@ impl DriveOffset {
     }
 }
 
-#[typetag::serde(name = "drive_offset")]
+#[declared_block]
 impl Block for DriveOffset {
-    fn inputs(&self) -> Vec<Port> {
-        vec![Port::new("u", 1)]
-    }
-    fn outputs(&self) -> Vec<Port> {
-        vec![Port::new("y", 1).unit_of_input(0)]
-    }
-    fn build(&mut self, _ctx: &BuildContext) -> Result<(), ParamError> {
-        self.check_params()
-    }
     fn output(&mut self, _tick: Tick, u: &[f64], y: &mut [f64]) {
         y[0] = u[0] + self.offset;
     }
@@ -56,14 +48,12 @@ impl Block for DriveOffset {
             ),
         ))
     }
-    fn role(&self) -> Role {
-        Role::Controller
-    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use nanomotion_core::BuildContext;
     use nanomotion_plf::effects::Drift;
 
     /// The fitted drift of the drive (plf's `drift`, rate and curvature 0)

@@ -15,7 +15,7 @@ use nanomotion_core::Params;
 use nanomotion_core::block::check;
 use nanomotion_core::blocks::control::Pi;
 use nanomotion_core::lti::{C2dMethod, Margins, StateSpace, c2d, delay, series, stability_margins};
-use nanomotion_core::{Block, BuildContext, Controller, ParamError, Port, Tick, declared_block};
+use nanomotion_core::{Block, BuildContext, Controller, ParamError, Tick, declared_block};
 use serde::{Deserialize, Serialize};
 use std::f64::consts::{FRAC_PI_2, FRAC_PI_4, TAU};
 
@@ -237,16 +237,6 @@ pub struct StepSizeFeedForwardBlock {
 
 #[declared_block]
 impl Block for StepSizeFeedForwardBlock {
-    fn inputs(&self) -> Vec<Port> {
-        vec![Port::new("r_dot", 1)]
-    }
-    fn outputs(&self) -> Vec<Port> {
-        vec![
-            Port::new("amplitude", 1),
-            Port::new("phase", 1),
-            Port::new("phase_diff", 1),
-        ]
-    }
     fn build(&mut self, _ctx: &BuildContext) -> Result<(), ParamError> {
         self.params.validate()
     }

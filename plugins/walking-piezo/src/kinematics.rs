@@ -12,7 +12,7 @@ use nalgebra::DMatrix;
 use nanomotion_core::Params;
 use nanomotion_core::block::check;
 use nanomotion_core::lti::StateSpace;
-use nanomotion_core::{Block, BuildContext, ParamError, Port, Tick, declared_block};
+use nanomotion_core::{Block, BuildContext, ParamError, Tick, declared_block};
 use serde::{Deserialize, Serialize};
 
 /// Bending coefficient c_x of the Ch. 5 motor (m/V).
@@ -126,12 +126,6 @@ pub struct LegKinematicsBlock {
 
 #[declared_block]
 impl Block for LegKinematicsBlock {
-    fn inputs(&self) -> Vec<Port> {
-        vec![Port::new("u", 4)]
-    }
-    fn outputs(&self) -> Vec<Port> {
-        vec![Port::new("x_p", 2), Port::new("y_p", 2)]
-    }
     fn build(&mut self, ctx: &BuildContext) -> Result<(), ParamError> {
         self.kinematics.validate()?;
         self.dt = ctx.dt;

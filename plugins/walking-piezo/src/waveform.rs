@@ -9,7 +9,7 @@
 //! with α(t) = α0 + 2π f_α t.
 
 use nanomotion_core::Params;
-use nanomotion_core::{Block, BuildContext, ParamError, Port, Source, Tick, declared_block};
+use nanomotion_core::{Block, BuildContext, ParamError, Source, Tick, declared_block};
 use serde::{Deserialize, Serialize};
 use std::f64::consts::{FRAC_PI_2, PI, TAU};
 
@@ -110,9 +110,6 @@ pub struct WalkingWaveformBlock {
 
 #[declared_block]
 impl Block for WalkingWaveformBlock {
-    fn outputs(&self) -> Vec<Port> {
-        vec![Port::new("u", 4), Port::new("alpha", 1)]
-    }
     fn build(&mut self, _ctx: &BuildContext) -> Result<(), ParamError> {
         self.waveform.validate()
     }
