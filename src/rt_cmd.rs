@@ -494,6 +494,20 @@ pub fn rt(a: RtArgs) -> Result<(), String> {
                         nanomotion_rt::ConnectError::Watchdog(_) => format!("--watchdog-ms: {e}"),
                         _ => e.to_string(),
                     })?;
+                // The loop closes through the device: the gate judges it with
+                // the plant's graph and the device's latency, before it runs.
+                let mut built = built;
+                let lines = nanomotion_rt::through::before_run_through(
+                    load(&a.graph, &a.lp)?,
+                    &dev,
+                    a.lp.allow_unproven,
+                    &nanomotion::core::gate::FrontEnd::CLI,
+                )
+                .map_err(|e| format!("{}: {e}", a.graph.display()))?;
+                for l in &lines {
+                    say!("stability gate: {l}");
+                }
+                built.gate.extend(lines);
                 run_loop(&a.graph, built, dev, &a.lp, "rt", None)?
             }
         };
@@ -530,6 +544,8 @@ pub fn plant(a: PlantArgs) -> Result<(), String> {
         rate_hz: built.sched.base_rate_hz(),
         to_plant: to_plant.into_iter().map(channel).collect(),
         from_plant: from_plant.into_iter().map(channel).collect(),
+        // For the controller's stability gate on the loop through the device.
+        graph: Some(serde_json::to_value(load(&a.graph, &lp)?).map_err(|e| e.to_string())?),
     };
     if info.to_plant.is_empty() && info.from_plant.is_empty() {
         return Err(format!(

@@ -245,6 +245,16 @@ fn a_recorded_two_process_run_replays_bit_for_bit_and_a_changed_gain_does_not() 
         .output()
         .unwrap();
     succeeded(&out);
+    // Before the run, the stability gate judged the loop through the device:
+    // the plant's graph (shared by `plant --serve`) with the device's one tick
+    // of latency (nanomotion-rt's tests/through.rs checks the figures).
+    let said = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        said.contains(&format!(
+            "stability gate: loop `pi` closed through device `shm:{name}` with its latency of 1 tick (250.0 µs): phase margin 76."
+        )),
+        "{said}"
+    );
     let plant = plant.wait_with_output().unwrap();
     assert!(
         plant.status.success(),

@@ -10,6 +10,7 @@
 //! | [`Device::read`] | the loop thread | start of every tick | **no**: bounded time, no allocation, no lock |
 //! | [`Device::write`] | the loop thread | end of every tick | **no** |
 //! | [`Device::safe_state`] | the loop thread | once, when the loop stops (end, fault, overruns, Ctrl-C) | bounded |
+//! | [`Device::latency_ticks`], [`Device::plant_model`] | the caller, before the loop | once, for the stability gate on the loop through the device ([`crate::through`]) | yes |
 //!
 //! `read` and `write` may do the device's own I/O (a register access, a
 //! `sendto`, a DMA kick) and nothing else. A device that loses contact returns
@@ -144,10 +145,25 @@ pub trait Device: Send {
             self.write(crate::clock::now_ns(), &v)
         }
     }
-    /// Transport delay this device adds, in loop ticks (documentation and the
-    /// timing report; 0 for a device sampled at the tick).
+    /// Transport delay this device adds, in loop ticks: how many ticks after
+    /// [`Device::write`] the outputs reach what they drive and come back,
+    /// measured, through [`Device::read`] (0 for a device sampled and driven
+    /// at the tick). It is in the timing report (`device_latency_ticks`), and
+    /// the stability gate adds it as a delay to the loop closed through the
+    /// device when the device has a [`Device::plant_model`]
+    /// ([`crate::through`]): a loop whose margin the latency eats is refused
+    /// before it runs.
     fn latency_ticks(&self) -> u32 {
         0
+    }
+    /// A model of what the device drives and measures, for the stability
+    /// gate ([`crate::through`]): a graph whose `hw_input` blocks are named
+    /// like the device's outputs and whose `hw_output` blocks like its inputs
+    /// (a plant graph, as `nanomotion plant --serve` runs). `Ok(None)`
+    /// (the default): no model, and the gate has no loop through the device
+    /// to judge. Called once, before the loop, on the caller's thread.
+    fn plant_model(&self) -> Result<Option<nanomotion_core::GraphSpec>, DeviceError> {
+        Ok(None)
     }
 }
 

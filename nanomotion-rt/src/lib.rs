@@ -23,6 +23,8 @@
 //!   MCAP, and a bit-exact replay of it through the graph.
 //! - [`shm`]: a plant graph in another process (`nanomotion plant --serve`)
 //!   behind a [`ShmDevice`], over shared memory.
+//! - [`through`]: the stability gate on the loop closed through a device, with
+//!   the device's declared latency ([`Device::latency_ticks`]) as a delay in it.
 //!
 //! Nothing in a tick allocates, locks or calls the system except the sleep and
 //! the device's own I/O; events leave the loop through a wait-free ring.
@@ -47,6 +49,7 @@ pub mod live;
 pub mod record;
 pub mod runner;
 pub mod shm;
+pub mod through;
 
 pub use clock::{Missing, Privileges};
 pub use device::{Channel, Device, DeviceError, HwInput, HwOutput};

@@ -56,6 +56,12 @@ pub struct PlantInfo {
     pub to_plant: Vec<Channel>,
     /// Channels the plant publishes (its `hw_output` blocks).
     pub from_plant: Vec<Channel>,
+    /// The plant graph as it runs (serde form of its `GraphSpec`, overrides
+    /// applied), for the controller's stability gate
+    /// ([`Device::plant_model`]); left out when it does not fit the
+    /// descriptor ([`ShmPlant::serve`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub graph: Option<serde_json::Value>,
 }
 
 /// Errors of setting up the shared memory.
@@ -328,10 +334,20 @@ impl ShmPlant {
             drop(old);
             std::fs::remove_file(&path).map_err(io(&path))?;
         }
-        let desc = serde_json::to_vec(&info).map_err(|e| ShmError::Io {
-            path: path.display().to_string(),
-            message: e.to_string(),
-        })?;
+        let json = |info: &PlantInfo| {
+            serde_json::to_vec(info).map_err(|e| ShmError::Io {
+                path: path.display().to_string(),
+                message: e.to_string(),
+            })
+        };
+        let mut info = info;
+        let mut desc = json(&info)?;
+        if desc.len() > DESC_WORDS * 8 && info.graph.is_some() {
+            // The channels first: a plant too large to describe is served
+            // without its graph (the controller's gate then has no model).
+            info.graph = None;
+            desc = json(&info)?;
+        }
         if desc.len() > DESC_WORDS * 8 {
             return Err(ShmError::TooLarge(desc.len()));
         }
@@ -614,5 +630,19 @@ impl Device for ShmDevice {
     }
     fn latency_ticks(&self) -> u32 {
         1
+    }
+    /// The graph the plant serves, if it fitted the descriptor.
+    fn plant_model(&self) -> Result<Option<nanomotion_core::GraphSpec>, DeviceError> {
+        self.info
+            .graph
+            .clone()
+            .map(serde_json::from_value)
+            .transpose()
+            .map_err(|e| {
+                DeviceError::Config(format!(
+                    "{}: the plant's graph cannot be read: {e} (fix: the same nanomotion on both sides)",
+                    self.name
+                ))
+            })
     }
 }

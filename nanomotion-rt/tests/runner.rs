@@ -301,6 +301,7 @@ fn the_watchdog_stops_the_loop_when_the_plant_falls_silent() {
         rate_hz: 1000.0,
         to_plant: vec![Channel::new("cmd", None)],
         from_plant: vec![Channel::new("pos", Some("m"))],
+        graph: None,
     };
     let mut plant = ShmPlant::serve(&name, info, Duration::from_secs(1)).unwrap();
     let dev = ShmDevice::connect(&name, Duration::from_secs(1), Duration::from_millis(20)).unwrap();

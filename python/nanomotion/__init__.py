@@ -422,7 +422,9 @@ def rt(graph: PathLike | Graph, overrides: Mapping[str, Any] | None = None, *,
     ``device="shm:NAME"`` its ``hw_input``/``hw_output`` blocks are the
     channels of a plant served by ``nanomotion plant PLANT.yaml --serve NAME``
     (waiting up to ``connect_timeout`` s for it; the loop stops when the plant
-    is silent for ``watchdog_ms``). The loop thread runs SCHED_FIFO at
+    is silent for ``watchdog_ms``), and the stability gate then judges the
+    loop through it — the plant's graph joined to this one with the device's
+    latency of one tick — refusing a loop whose margin the latency eats. The loop thread runs SCHED_FIFO at
     ``priority`` (pinned to ``cpu``), with memory locked and the CPUs held out
     of deep idle states (unless ``allow_idle_states``); where a privilege is
     refused the run is refused, or runs at normal priority with

@@ -9,8 +9,10 @@
 use crate::errors::{gate_err, graph_err};
 use crate::graph::{Finished, finished_to_py, gate_before_run, load_spec};
 use nanomotion::core::Scheduler;
+use nanomotion::core::gate::FrontEnd;
 use nanomotion::core::graph::{OverrunPolicy, RealtimeSpec};
 use nanomotion::rt::clock::Privileges;
+use nanomotion::rt::through::{ThroughError, before_run_through};
 use nanomotion::rt::{
     ConnectError, Device, Event, LiveError, NoDevice, ParamSender, RealtimeRunner, RtConfig,
     RtError, ShmDevice, TimingReport,
@@ -128,7 +130,9 @@ fn launch<D: Device + 'static>(
 /// shm:NAME]` does (without files), in the background: built, judged by the
 /// stability gate (refused unless `allow_unproven`), connected to `device`
 /// (`"shm:NAME"`, waiting up to `connect_timeout` s for the plant; stopped by
-/// a watchdog after `watchdog_ms` of silence), then ticked at its base rate by
+/// a watchdog after `watchdog_ms` of silence; the loop through it judged by
+/// the gate with the plant's graph and the device's latency), then ticked at
+/// its base rate by
 /// a SCHED_FIFO thread (`priority`, pinned to `cpu`; `allow_soft`: at normal
 /// priority where that is refused), the CPUs held out of deep idle states
 /// unless `allow_idle_states`, late ticks skipped or caught up (`overrun`,
@@ -184,7 +188,7 @@ fn rt_start(
     let require = spec.require.clone();
     let settings = spec.realtime.unwrap_or_default();
     let (sched, _) = spec.build().map_err(graph_err)?;
-    let gate_lines = gate_before_run(
+    let mut gate_lines = gate_before_run(
         &crate::graph::analyse(&sched, require.as_ref()),
         allow_unproven,
     )?;
@@ -229,6 +233,14 @@ fn rt_start(
                     ConnectError::Watchdog(_) => graph_err(format!("watchdog_ms: {e}")),
                     _ => graph_err(e),
                 })?;
+            // The loop closes through the device: the gate judges it with the
+            // plant's graph and the device's latency, before it runs.
+            let through = before_run_through(load()?, &dev, allow_unproven, &FrontEnd::PYTHON)
+                .map_err(|e| match e {
+                    ThroughError::Refused(_) => gate_err(e),
+                    _ => graph_err(format!("device `{}`: {e}", dev.name())),
+                })?;
+            gate_lines.extend(through);
             start!(dev)
         }
     };

@@ -220,6 +220,11 @@ def test_a_controller_drives_a_plant_in_another_process_and_takes_a_live_gain(ro
     assert "the controller closed the connection" in out
     t = r.timing
     assert (t["stop"], t["ticks"], t["device_latency_ticks"]) == ("completed", 4000, 1)
+    # The stability gate judged the loop through the device, with the plant's
+    # graph and the device's latency of one tick (T = 250 µs): the
+    # quickstart's phase margin less 360°·f_c·T.
+    (line,) = r.stability_gate
+    assert line.startswith(f"loop `pi` closed through device `shm:{name}` with its latency of 1 tick (250.0 µs): phase margin 76.")
     (u,) = h.status()["updates"]
     j = u["tick"]
     assert 2000 <= j < 4000
@@ -236,6 +241,39 @@ def test_a_controller_drives_a_plant_in_another_process_and_takes_a_live_gain(ro
     err = ref - pos
     assert abs(np.mean(err[1000:j])) < 4 * 5e-9
     assert abs(np.mean(err[j + 400:])) < 4 * 5e-9
+
+
+def test_a_loop_whose_margin_the_devices_latency_eats_is_refused_before_it_runs(root, cli, tmp_path):
+    # The quickstart's delay margin is 10.617 ms, 42.47 controller ticks
+    # (`nanomotion check examples/quickstart.yaml`; nanomotion-rt's
+    # tests/through.rs computes it and refuses 43 ticks of latency, passes 42).
+    # A plant that itself delays the drive by 42 ticks leaves less than the
+    # shared-memory device's one tick of latency: the joined loop is refused.
+    text = (root / "examples/realtime/quickstart_plant.yaml").read_text()
+    text = text.replace("  - { from: drive.y, to: stage.u }",
+                        "  - { from: drive.y, to: late.u }\n  - { from: late.y, to: stage.u }")
+    text = text.replace("  - name: stage ", "  - { name: late, type: delay, d: 42, rate_hz: 4000 }\n  - name: stage ")
+    assert "late.y" in text and "type: delay" in text
+    plant_yaml = tmp_path / "late_plant.yaml"
+    plant_yaml.write_text(text)
+    name = f"pytest-late-{os.getpid()}"
+    p = subprocess.Popen([*cli, "plant", str(plant_yaml), "--serve", name, "--allow-soft"],
+                         cwd=root, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        with pytest.raises(nm.GateError, match=(
+                rf"the loop through device `shm:{name}` with its latency of 1 tick: the stability gate "
+                r"refuses the graph \(see nanomotion.check; fix the loop, or run anyway with "
+                r"allow_unproven=True\):\n  loop `pi` is unstable: closed-loop pole of modulus 1.0")):
+            nm.rt_start(root / "examples/realtime/quickstart_controller.yaml", allow_soft=True,
+                        device=f"shm:{name}", connect_timeout=60.0)
+        # Refused before the loop: the device was let go, the plant stops.
+        out, _ = p.communicate(timeout=60)
+        assert p.returncode == 0, out
+        assert "the controller closed the connection" in out
+    finally:
+        if p.poll() is None:
+            p.kill()
+            p.wait(timeout=30)
 
 
 def test_a_bad_device_raises_naming_the_setting_and_the_fix(root):
