@@ -249,3 +249,24 @@ fn a_channel_without_a_partner_is_named_with_the_fix() {
         other => panic!("{other:?}"),
     }
 }
+
+#[test]
+fn a_plant_graph_too_large_for_the_descriptor_is_served_without_it() {
+    // The descriptor holds 8 KiB: the channels always, the graph if it fits.
+    let name = format!("test-through-large-{}", std::process::id());
+    let info = PlantInfo {
+        title: None,
+        rate_hz: 40000.0,
+        to_plant: vec![Channel::new("drive", Some("Hz"))],
+        from_plant: vec![Channel::new("position", Some("m"))],
+        graph: Some(serde_json::Value::String("x".repeat(9000))),
+    };
+    let plant = ShmPlant::serve(&name, info, Duration::from_secs(5)).unwrap();
+    assert_eq!(plant.info().graph, None);
+    let dev = ShmDevice::connect(&name, Duration::from_secs(1), Duration::from_secs(5)).unwrap();
+    assert_eq!(dev.info().to_plant, [Channel::new("drive", Some("Hz"))]);
+    assert!(dev.plant_model().unwrap().is_none());
+    // No model: nothing judged, nothing said.
+    let lines = before_run_through(controller(), &dev, false, &FrontEnd::CLI).unwrap();
+    assert!(lines.is_empty());
+}

@@ -35,6 +35,8 @@ struct Progress {
     worst_execution_ns: u64,
     /// (first tick computed with it, row of the live parameter, value).
     updates: Vec<(u64, u32, f64)>,
+    /// The loop has ended (or never started).
+    ended: bool,
 }
 
 impl Progress {
@@ -114,6 +116,7 @@ fn launch<D: Device + 'static>(
             let start = Instant::now();
             let report = runner.run(|e| lock(&progress).on(e));
             let wall_s = start.elapsed().as_secs_f64();
+            lock(&progress).ended = true;
             let (sched, device) = runner.into_parts();
             // Let the device go at once: the plant sees the end now.
             drop(device);
@@ -369,9 +372,7 @@ impl RtRun {
     /// Whether the loop still runs.
     #[getter]
     fn running(&self) -> bool {
-        lock(&self.thread)
-            .as_ref()
-            .is_some_and(|h| !h.is_finished())
+        !lock(&self.progress).ended
     }
 
     /// The loop so far: `running`, `ticks` and `t_s` (at the last status,
@@ -380,8 +381,8 @@ impl RtRun {
     /// as `{path, value, tick, t_s}` (`tick`: the first tick computed with
     /// the value).
     fn status<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
-        let running = self.running();
         let p = lock(&self.progress);
+        let running = !p.ended;
         let d = PyDict::new(py);
         d.set_item("running", running)?;
         d.set_item("device", &self.device)?;

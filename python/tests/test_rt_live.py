@@ -175,6 +175,7 @@ def test_ctrl_c_while_waiting_and_a_dropped_handle_stop_the_loop():
         h.wait()
     assert time.monotonic() - t0 < 10.0
     assert loop_threads() == 0
+    assert not h.running and not h.status()["running"]
     r = h.wait()
     assert r.timing["stop"] == "interrupted" and 100 <= r.timing["ticks"] < 30000
     assert np.all(r.signals["k.y"] == 2.0)
