@@ -202,17 +202,23 @@ fn before_a_run_the_gate_judges_the_loop_with_the_devices_latency() {
     assert!(lines.is_empty());
 }
 
-#[test]
-fn a_served_plant_shares_its_graph_and_the_shm_device_declares_one_tick() {
-    let name = format!("test-through-{}", std::process::id());
+/// The quickstart plant's channels served under `name`, with `graph` in the
+/// descriptor.
+fn serve(name: &str, graph: serde_json::Value) -> ShmPlant {
     let info = PlantInfo {
         title: None,
         rate_hz: 40000.0,
         to_plant: vec![Channel::new("drive", Some("Hz"))],
         from_plant: vec![Channel::new("position", Some("m"))],
-        graph: Some(serde_json::to_value(plant()).unwrap()),
+        graph: Some(graph),
     };
-    let _plant = ShmPlant::serve(&name, info, Duration::from_secs(5)).unwrap();
+    ShmPlant::serve(name, info, Duration::from_secs(5)).unwrap()
+}
+
+#[test]
+fn a_served_plant_shares_its_graph_and_the_shm_device_declares_one_tick() {
+    let name = format!("test-through-{}", std::process::id());
+    let _plant = serve(&name, serde_json::to_value(plant()).unwrap());
     let dev = ShmDevice::connect(&name, Duration::from_secs(1), Duration::from_secs(5)).unwrap();
     assert_eq!(dev.latency_ticks(), 1);
     let model = dev
@@ -254,14 +260,7 @@ fn a_channel_without_a_partner_is_named_with_the_fix() {
 fn a_plant_graph_too_large_for_the_descriptor_is_served_without_it() {
     // The descriptor holds 8 KiB: the channels always, the graph if it fits.
     let name = format!("test-through-large-{}", std::process::id());
-    let info = PlantInfo {
-        title: None,
-        rate_hz: 40000.0,
-        to_plant: vec![Channel::new("drive", Some("Hz"))],
-        from_plant: vec![Channel::new("position", Some("m"))],
-        graph: Some(serde_json::Value::String("x".repeat(9000))),
-    };
-    let plant = ShmPlant::serve(&name, info, Duration::from_secs(5)).unwrap();
+    let plant = serve(&name, serde_json::Value::String("x".repeat(9000)));
     assert_eq!(plant.info().graph, None);
     let dev = ShmDevice::connect(&name, Duration::from_secs(1), Duration::from_secs(5)).unwrap();
     assert_eq!(dev.info().to_plant, [Channel::new("drive", Some("Hz"))]);
