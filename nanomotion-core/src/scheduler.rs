@@ -1370,11 +1370,7 @@ pub const RATE_TRANSITION_PREFIX: &str = "rt:";
 /// reports it.
 #[derive(Debug, Clone, Serialize, Deserialize, crate::doc::Params)]
 #[serde(deny_unknown_fields)]
-#[block(
-    type_name = "rate_transition",
-    role = Math,
-    ports = "u[width] -> y[width] [unit of u]"
-)]
+#[block(type_name = "rate_transition", role = Math, ports = "u[width] -> y[width] [unit of u]")]
 pub struct RateTransition {
     /// Number of values carried.
     #[param(width)]

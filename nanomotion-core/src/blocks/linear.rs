@@ -726,11 +726,7 @@ fn default_order() -> usize {
 /// channel.
 #[derive(Debug, Clone, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
-#[block(
-    type_name = "low_pass",
-    role = Math,
-    ports = "u[width] -> y[width] [unit of u]"
-)]
+#[block(type_name = "low_pass", role = Math, ports = "u[width] -> y[width] [unit of u]")]
 pub struct LowPass {
     /// −3 dB frequency f_c in Hz.
     #[param(positive, below_nyquist)]
@@ -792,11 +788,7 @@ fn default_notch_damping() -> f64 {
 /// `centre_hz` is exactly `depth` and the DC gain is 1. Per channel.
 #[derive(Debug, Clone, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
-#[block(
-    type_name = "notch",
-    role = Math,
-    ports = "u[width] -> y[width] [unit of u]"
-)]
+#[block(type_name = "notch", role = Math, ports = "u[width] -> y[width] [unit of u]")]
 pub struct Notch {
     /// Centre frequency f₀ in Hz.
     #[param(positive, below_nyquist)]
@@ -972,11 +964,7 @@ controller_impl!(LeadLag);
 /// it breaks algebraic loops.
 #[derive(Debug, Clone, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
-#[block(
-    type_name = "delay",
-    role = Math,
-    ports = "u[width] -> y[width] [unit of u]"
-)]
+#[block(type_name = "delay", role = Math, ports = "u[width] -> y[width] [unit of u]")]
 pub struct Delay {
     /// Delay d in samples of the block's rate; d · width ≤ 2^24.
     pub d: usize,

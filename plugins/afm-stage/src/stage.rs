@@ -93,78 +93,6 @@ impl Topography {
     }
 }
 
-fn default_hysteresis() -> [AxisHysteresis; 3] {
-    let xy = AxisHysteresis {
-        trace: ChParams::new(0.03, 1.0, 0.7),
-        retrace: ChParams::new(0.045, 0.93, 0.62),
-    };
-    let y = AxisHysteresis {
-        trace: ChParams::new(0.032, 0.98, 0.69),
-        retrace: ChParams::new(0.043, 0.92, 0.61),
-    };
-    let z = AxisHysteresis {
-        trace: ChParams::new(0.03, 0.2, 0.14),
-        retrace: ChParams::new(0.045, 0.186, 0.124),
-    };
-    [xy, y, z]
-}
-fn default_v_min() -> f64 {
-    0.0
-}
-fn default_v_max() -> f64 {
-    100.0
-}
-fn default_resonance() -> [f64; 3] {
-    [124.0, 126.0, 350.0]
-}
-fn default_damping() -> [f64; 3] {
-    [0.05, 0.05, 0.05]
-}
-fn default_static_coupling() -> [[f64; 3]; 3] {
-    [
-        [0.0, 0.005, 0.003],
-        [0.005, 0.0, 0.003],
-        [0.002, 0.002, 0.0],
-    ]
-}
-fn default_dynamic_coupling() -> [[f64; 3]; 3] {
-    [
-        [0.0, 0.005, 0.002],
-        [0.005, 0.0, 0.002],
-        [0.002, 0.002, 0.0],
-    ]
-}
-fn default_parasitic_hz() -> f64 {
-    400.0
-}
-fn default_parasitic_damping() -> f64 {
-    0.02
-}
-fn default_resolution() -> [f64; 3] {
-    [0.15e-9; 3]
-}
-fn default_noise_bound() -> [f64; 3] {
-    [5e-9, 4e-9, 2e-9]
-}
-fn default_defl_resolution() -> f64 {
-    0.05e-9
-}
-fn default_defl_noise() -> f64 {
-    0.15e-9
-}
-fn default_topography() -> Topography {
-    Topography::Grating {
-        pitch_m: 10e-6,
-        height_m: 20e-9,
-        duty: 0.5,
-        angle_rad: 0.0,
-        offset_m: 0.0,
-    }
-}
-fn default_contact_z() -> f64 {
-    10e-6
-}
-
 /// `afm_stage`: 3-DOF metrological AFM stage (Ch. 6-7): piezo hysteresis, 2nd-order
 /// modes, static+dynamic coupling, interferometers (Table 6.1), cantilever deflection
 /// over a grating.
@@ -188,74 +116,58 @@ fn default_contact_z() -> f64 {
 /// assert!((y[4] * 1e6 - want).abs() < 1e-6);
 /// ```
 #[derive(Debug, Clone, Serialize, Deserialize, Params)]
-#[serde(deny_unknown_fields)]
+#[serde(default, deny_unknown_fields)]
 #[block(type_name = "afm_stage", role = Plant, ports = "v[3] (V) -> pos[3] (m), deflection (m), true_pos[3] (m), saturated[3]")]
 pub struct AfmStage {
     /// Lowest drive voltage (V); lower inputs are clipped and reported.
-    #[serde(default = "default_v_min")]
     #[param(at_most = v_max_v)]
     pub v_min_v: f64,
     /// Highest drive voltage (V).
-    #[serde(default = "default_v_max")]
     pub v_max_v: f64,
     /// Per-axis hysteresis [x, y, z] (Coleman–Hodgdon trace/retrace sets, µm and V).
     /// Each axis: {trace: {alpha_per_v, b_um_per_v, u_um_per_v}, retrace: {...}}
     /// (Coleman–Hodgdon, (6.3)).
-    #[serde(default = "default_hysteresis")]
     #[param(default_doc = "asymmetric, ~1 µm/V x/y, 0.2 µm/V z")]
     pub hysteresis: [AxisHysteresis; 3],
     /// Resonance of each diagonal mode (Hz); Ch. 7: 124 Hz (x), 126 Hz (y).
-    #[serde(default = "default_resonance")]
     #[param(default_doc = "[124, 126, 350]")]
     pub resonance_hz: [f64; 3],
     /// Relative damping ζ of each diagonal mode (-).
-    #[serde(default = "default_damping")]
     #[param(positive, default_doc = "[0.05, 0.05, 0.05]")]
     pub damping: [f64; 3],
     /// Static coupling S (row = output j, column = input i; diagonal ignored), (-).
     /// 3×3, row-major.
-    #[serde(default = "default_static_coupling")]
     #[param(finite, default_doc = "≈0.005")]
     pub static_coupling: [[f64; 3]; 3],
     /// Dynamic coupling D through the parasitic mode (row = output, column = input), (-).
-    #[serde(default = "default_dynamic_coupling")]
     #[param(finite, default_doc = "≈0.005 (static + dynamic ≈ −40 dB at DC)")]
     pub dynamic_coupling: [[f64; 3]; 3],
     /// Parasitic mode frequency (Hz).
-    #[serde(default = "default_parasitic_hz")]
     #[param(positive)]
     pub parasitic_hz: f64,
     /// Parasitic mode damping (-).
-    #[serde(default = "default_parasitic_damping")]
     #[param(positive)]
     pub parasitic_damping: f64,
     /// Interferometer resolution per axis (m), Table 6.1: 0.15 nm.
-    #[serde(default = "default_resolution")]
     #[param(non_negative)]
     pub resolution_m: [f64; 3],
     /// Interferometer noise bound per axis (m), Table 6.1: ±5, ±4, ±2 nm. The noise is
     /// Gaussian with σ = bound/3, truncated at the bound.
-    #[serde(default = "default_noise_bound")]
     #[param(non_negative)]
     pub noise_bound_m: [f64; 3],
     /// Cantilever deflection resolution (m).
-    #[serde(default = "default_defl_resolution")]
     #[param(non_negative)]
     pub deflection_resolution_m: f64,
     /// Cantilever deflection noise bound (m).
-    #[serde(default = "default_defl_noise")]
     #[param(non_negative)]
     pub deflection_noise_bound_m: f64,
     /// Sample topography.
-    #[serde(default = "default_topography")]
     #[param(nested, default_doc = "grating 10 µm pitch, 20 nm steps")]
     pub topography: Topography,
     /// Stage z position at which the tip touches a zero-height sample (m).
-    #[serde(default = "default_contact_z")]
     #[param(finite)]
     pub contact_z_m: f64,
     /// Initial drive voltages (V), reached along the virgin curve from 0 V.
-    #[serde(default)]
     #[param(default_doc = "[0, 0, 0]")]
     pub initial_v: [f64; 3],
     #[serde(skip)]
@@ -275,23 +187,51 @@ struct Runtime {
 }
 
 impl Default for AfmStage {
+    /// The Ch. 6–7 stage (a graph file may leave any field out).
     fn default() -> Self {
         Self {
-            v_min_v: default_v_min(),
-            v_max_v: default_v_max(),
-            hysteresis: default_hysteresis(),
-            resonance_hz: default_resonance(),
-            damping: default_damping(),
-            static_coupling: default_static_coupling(),
-            dynamic_coupling: default_dynamic_coupling(),
-            parasitic_hz: default_parasitic_hz(),
-            parasitic_damping: default_parasitic_damping(),
-            resolution_m: default_resolution(),
-            noise_bound_m: default_noise_bound(),
-            deflection_resolution_m: default_defl_resolution(),
-            deflection_noise_bound_m: default_defl_noise(),
-            topography: default_topography(),
-            contact_z_m: default_contact_z(),
+            v_min_v: 0.0,
+            v_max_v: 100.0,
+            hysteresis: [
+                AxisHysteresis {
+                    trace: ChParams::new(0.03, 1.0, 0.7),
+                    retrace: ChParams::new(0.045, 0.93, 0.62),
+                },
+                AxisHysteresis {
+                    trace: ChParams::new(0.032, 0.98, 0.69),
+                    retrace: ChParams::new(0.043, 0.92, 0.61),
+                },
+                AxisHysteresis {
+                    trace: ChParams::new(0.03, 0.2, 0.14),
+                    retrace: ChParams::new(0.045, 0.186, 0.124),
+                },
+            ],
+            resonance_hz: [124.0, 126.0, 350.0],
+            damping: [0.05, 0.05, 0.05],
+            static_coupling: [
+                [0.0, 0.005, 0.003],
+                [0.005, 0.0, 0.003],
+                [0.002, 0.002, 0.0],
+            ],
+            dynamic_coupling: [
+                [0.0, 0.005, 0.002],
+                [0.005, 0.0, 0.002],
+                [0.002, 0.002, 0.0],
+            ],
+            parasitic_hz: 400.0,
+            parasitic_damping: 0.02,
+            resolution_m: [0.15e-9; 3],
+            noise_bound_m: [5e-9, 4e-9, 2e-9],
+            deflection_resolution_m: 0.05e-9,
+            deflection_noise_bound_m: 0.15e-9,
+            topography: Topography::Grating {
+                pitch_m: 10e-6,
+                height_m: 20e-9,
+                duty: 0.5,
+                angle_rad: 0.0,
+                offset_m: 0.0,
+            },
+            contact_z_m: 10e-6,
             initial_v: [0.0; 3],
             rt: None,
         }
@@ -694,7 +634,7 @@ mod tests {
         let mut s = AfmStage::noiseless();
         s.contact_z_m = 0.0;
         let mut s = built(s, 0);
-        let g = default_topography();
+        let g = AfmStage::default().topography;
         assert_eq!(g.height(2e-6, 0.0), 20e-9);
         assert_eq!(g.height(7e-6, 0.0), 0.0);
         let rot = Topography::Grating {
@@ -752,7 +692,7 @@ mod tests {
             }),
             "resonance_hz[2]"
         );
-        let mut h = default_hysteresis();
+        let mut h = AfmStage::default().hysteresis;
         h[1].retrace.alpha = -1.0;
         assert_eq!(
             err(AfmStage {

@@ -20,11 +20,7 @@ use serde::{Deserialize, Serialize};
 /// those of an effect block.
 #[derive(Debug, Clone, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
-#[block(
-    type_name = "backlash_inverse",
-    role = Controller,
-    ports = "u -> y"
-)]
+#[block(type_name = "backlash_inverse", role = Controller, ports = "u -> y")]
 pub struct BacklashInverse {
     /// Total play w (unit of the signal).
     #[param(non_negative)]

@@ -29,11 +29,7 @@ use serde::{Deserialize, Serialize};
 /// loop whose slope linear + dz/du stays positive.
 #[derive(Debug, Clone, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
-#[block(
-    type_name = "bouc_wen_inverse",
-    role = Controller,
-    ports = "u -> y"
-)]
+#[block(type_name = "bouc_wen_inverse", role = Controller, ports = "u -> y")]
 pub struct BoucWenInverse {
     /// a of the operator: slope of z right after a reversal.
     #[param(finite)]

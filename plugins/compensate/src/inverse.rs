@@ -43,11 +43,7 @@ use serde::{Deserialize, Serialize};
 /// on output `state`.
 #[derive(Debug, Clone, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
-#[block(
-    type_name = "hysteresis_inverse",
-    role = Controller,
-    ports = "u -> y, state"
-)]
+#[block(type_name = "hysteresis_inverse", role = Controller, ports = "u -> y, state")]
 pub struct HysteresisInverse {
     /// α (1/\[u\]) of the operator to invert.
     #[param(positive)]

@@ -15,11 +15,7 @@ use serde::{Deserialize, Serialize};
 /// actuator: the ports of an effect block.
 #[derive(Debug, Clone, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
-#[block(
-    type_name = "drive_offset",
-    role = Controller,
-    ports = "u -> y [unit of u]"
-)]
+#[block(type_name = "drive_offset", role = Controller, ports = "u -> y [unit of u]")]
 pub struct DriveOffset {
     /// The constant added (unit of the drive).
     #[param(finite)]

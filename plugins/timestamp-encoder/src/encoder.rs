@@ -56,22 +56,6 @@ pub const MAX_REGISTER_LEN: usize = crate::fit::MAX_N;
 /// slit-error table, 32 MiB).
 pub const MAX_LINES: usize = 1 << 20;
 
-fn d_lines() -> usize {
-    100
-}
-fn d_rev() -> f64 {
-    std::f64::consts::TAU
-}
-fn d_clock() -> f64 {
-    DEFAULT_CLOCK_HZ
-}
-fn d_n() -> usize {
-    DEFAULT_REGISTER_LEN
-}
-fn d_deriv() -> usize {
-    1
-}
-
 /// `timestamp_encoder`: optical incremental encoder (Ch. 8): quadrature edges with slit
 /// errors, events time-stamped on a 20 MHz clock by crossing detection, register of the
 /// last n events with skip σ (8.5)-(8.7).
@@ -99,59 +83,47 @@ fn d_deriv() -> usize {
 /// assert!((reg[2] - t12).abs() <= 50e-9 && reg[3] == 12.0);
 /// ```
 #[derive(Debug, Clone, Serialize, Deserialize, Params)]
-#[serde(deny_unknown_fields)]
+#[serde(default, deny_unknown_fields)]
 #[block(type_name = "timestamp_encoder", role = Sensor, ports = "x[1+derivatives] -> register[2+2n] = [count, n_valid, t_1, x_1, …] newest first (s, counts), x_q (count·Δ)")]
 pub struct TimestampEncoder {
     /// Slits per revolution N (-); 4N counts per revolution. Default 100.
     /// 1 ≤ N ≤ 2^20.
-    #[serde(default = "d_lines")]
     #[param(size(1, MAX_LINES))]
     pub lines: usize,
     /// Input units per revolution (2π for rad, the default; a linear scale's length
     /// in m for a linear encoder).
-    #[serde(default = "d_rev")]
     #[param(positive)]
     pub revolution: f64,
     /// Time-stamp clock f_clk (Hz), default 20 MHz (Sec. 8.5).
-    #[serde(default = "d_clock")]
     #[param(positive)]
     pub clock_hz: f64,
     /// Register length n (events), default 5 (the thesis's hardware), at most 16.
-    #[serde(default = "d_n")]
     #[param(size(1, MAX_REGISTER_LEN))]
     pub register_len: usize,
     /// Skip σ (events skipped between stored ones), (8.5)–(8.7), default 0.
     /// The newest event is always kept.
-    #[serde(default)]
     #[param(range(0, 1_000_000))]
     pub skip: i64,
     /// Derivatives provided on the input: 0 → `[x]`, 1 → `[x, ẋ]` (default),
     /// 2 → `[x, ẋ, ẍ]`; sets the interpolant between ticks (linear, cubic, quintic).
-    #[serde(default = "d_deriv")]
     #[param(size(0, 2))]
     pub derivatives: usize,
     /// Random per-slit spacing error, standard deviation (counts), seeded. Default 0.
-    #[serde(default)]
     #[param(non_negative)]
     pub slit_error_std_counts: f64,
     /// Explicit edge errors (counts): N values (per slit) or 4N (per edge). Default none.
-    #[serde(default)]
     #[param(finite)]
     pub slit_errors_counts: Vec<f64>,
     /// Eccentricity: amplitude of the once-per-revolution error (counts). Default 0.
-    #[serde(default)]
     #[param(finite)]
     pub eccentricity_counts: f64,
     /// Eccentricity phase φ (rad). Default 0.
-    #[serde(default)]
     #[param(finite)]
     pub eccentricity_phase_rad: f64,
     /// Shift of channel B's edges (counts): A/B photodiode misplacement. Default 0.
-    #[serde(default)]
     #[param(finite)]
     pub quadrature_error_counts: f64,
     /// Shift of the falling edges (counts): slit width (duty-cycle) error. Default 0.
-    #[serde(default)]
     #[param(finite)]
     pub duty_error_counts: f64,
     /// Run-time state (events, count); not a parameter. Public only so that
@@ -161,14 +133,15 @@ pub struct TimestampEncoder {
 }
 
 impl Default for TimestampEncoder {
+    /// The defaults of every field (a graph file may leave any out).
     fn default() -> Self {
         Self {
-            lines: d_lines(),
-            revolution: d_rev(),
-            clock_hz: d_clock(),
-            register_len: d_n(),
+            lines: 100,
+            revolution: std::f64::consts::TAU,
+            clock_hz: DEFAULT_CLOCK_HZ,
+            register_len: DEFAULT_REGISTER_LEN,
             skip: 0,
-            derivatives: d_deriv(),
+            derivatives: 1,
             slit_error_std_counts: 0.0,
             slit_errors_counts: Vec::new(),
             eccentricity_counts: 0.0,

@@ -238,48 +238,37 @@ impl Default for WaveformShape {
 
 /// Parameters of the driver (block `walking_piezo_driver`).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Params)]
-#[serde(deny_unknown_fields)]
+#[serde(default, deny_unknown_fields)]
 pub struct DriverParams {
     /// The waveform shape; default the asymmetric waveform with q = 1/3.
     /// overlap_q ∈ (0, 1) for the asymmetric ones; points_v: 4×8 V for free.
-    #[serde(default)]
     #[param(nested, default_doc = "{kind: asymmetric, overlap_q: 1/3}")]
     pub shape: WaveformShape,
     /// Amplitude A (V) when no `amplitude` input is used; in [0, V_max]. Ā = 46 V.
-    #[serde(default = "d_a")]
     pub amplitude_v: f64,
     /// Phase φ (rad) of (2.2) when no `phase` input is used (φ = 0: largest step).
-    #[serde(default)]
     #[param(finite)]
     pub phase_rad: f64,
     /// Angle α at t = 0 (rad).
-    #[serde(default)]
     #[param(finite)]
     pub alpha0_rad: f64,
     /// Upper voltage limit V_max (V) of the amplifiers; thesis 46 V.
-    #[serde(default = "d_a")]
     #[param(positive)]
     pub voltage_max_v: f64,
     /// Add an input port `amplitude` (1, V) for A(t), e.g. from the feed-forward (2.11).
-    #[serde(default)]
     pub amplitude_input: bool,
     /// Add an input port `phase` (1, rad) for φ(t), e.g. from the feed-forward (2.12).
-    #[serde(default)]
     pub phase_input: bool,
-}
-
-fn d_a() -> f64 {
-    46.0
 }
 
 impl Default for DriverParams {
     fn default() -> Self {
         Self {
             shape: WaveformShape::default(),
-            amplitude_v: d_a(),
+            amplitude_v: 46.0,
             phase_rad: 0.0,
             alpha0_rad: 0.0,
-            voltage_max_v: d_a(),
+            voltage_max_v: 46.0,
             amplitude_input: false,
             phase_input: false,
         }

@@ -20,30 +20,21 @@ pub const C_X_M_PER_V: f64 = 64.5e-9;
 /// Extension coefficient c_y of the Ch. 5 motor (m/V).
 pub const C_Y_M_PER_V: f64 = 29.8e-9;
 
-fn d_cx() -> [f64; 4] {
-    [C_X_M_PER_V; 4]
-}
-fn d_cy() -> [f64; 4] {
-    [C_Y_M_PER_V; 4]
-}
-
 /// Per-stack bending and extension coefficients of (4.2).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, Params)]
-#[serde(deny_unknown_fields)]
+#[serde(default, deny_unknown_fields)]
 pub struct LegKinematics {
     /// Bending coefficients c_x1..c_x4 (m/V); default 64.5 nm/V each (Ch. 5).
-    #[serde(default = "d_cx")]
     pub c_x_m_v: [f64; 4],
     /// Extension coefficients c_y1..c_y4 (m/V); default 29.8 nm/V each (Ch. 5).
-    #[serde(default = "d_cy")]
     pub c_y_m_v: [f64; 4],
 }
 
 impl Default for LegKinematics {
     fn default() -> Self {
         Self {
-            c_x_m_v: d_cx(),
-            c_y_m_v: d_cy(),
+            c_x_m_v: [C_X_M_PER_V; 4],
+            c_y_m_v: [C_Y_M_PER_V; 4],
         }
     }
 }

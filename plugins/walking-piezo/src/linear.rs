@@ -35,48 +35,32 @@ fn lti_to_param(field: &str, e: LtiError) -> ParamError {
 
 /// Parameters of the Ch. 2 linear model (2.7). Defaults are the thesis's values.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Params)]
-#[serde(deny_unknown_fields)]
+#[serde(default, deny_unknown_fields)]
 pub struct LinearStageParams {
     /// Stage mass M (kg); thesis: 0.255 kg.
-    #[serde(default = "d_lin_mass")]
     #[param(positive)]
     pub mass_kg: f64,
     /// Resonance f_res (Hz) giving the stiffness k = 4π²M f_res²; thesis: 575 Hz.
-    #[serde(default = "d_lin_fres")]
     #[param(positive)]
     pub f_res_hz: f64,
     /// Damping b (N·s/m) of the rubber casting; thesis: 16 N·s/m.
-    #[serde(default = "d_lin_b")]
     #[param(non_negative)]
     pub damping_ns_m: f64,
     /// Motor constant c (m per cycle of α), the leg travel per waveform period
     /// (2.5). From (2.8), |P| = −138 dB (m/Hz) at 10 Hz: c = 2π·10·10^(−138/20)
     /// = 7.91 µm.
-    #[serde(default = "d_lin_c")]
     #[param(finite)]
     pub motor_constant_m: f64,
 }
 
-fn d_lin_mass() -> f64 {
-    0.255
-}
-fn d_lin_fres() -> f64 {
-    575.0
-}
-fn d_lin_b() -> f64 {
-    16.0
-}
-fn d_lin_c() -> f64 {
-    2.0 * PI * 10.0 * 10f64.powf(-138.0 / 20.0)
-}
-
 impl Default for LinearStageParams {
+    /// The thesis's values (a graph file may leave any field out).
     fn default() -> Self {
         Self {
-            mass_kg: d_lin_mass(),
-            f_res_hz: d_lin_fres(),
-            damping_ns_m: d_lin_b(),
-            motor_constant_m: d_lin_c(),
+            mass_kg: 0.255,
+            f_res_hz: 575.0,
+            damping_ns_m: 16.0,
+            motor_constant_m: 2.0 * PI * 10.0 * 10f64.powf(-138.0 / 20.0),
         }
     }
 }
@@ -282,40 +266,31 @@ impl Block for LinearStageBlock {
 /// driven by the leg pair that is higher (y_p1 ≥ y_p2: pair 1), with leg positions
 /// from the voltages by (4.2).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Params)]
-#[serde(deny_unknown_fields)]
+#[serde(default, deny_unknown_fields)]
 pub struct SwitchedStageParams {
     /// Stage mass M (kg); thesis: 0.255 kg.
-    #[serde(default = "d_lin_mass")]
     pub mass_kg: f64,
     /// Resonance f_res (Hz), k = 4π²M f_res²; thesis: 575 Hz.
-    #[serde(default = "d_lin_fres")]
     pub f_res_hz: f64,
     /// Damping b (N·s/m); thesis: 16 N·s/m.
-    #[serde(default = "d_lin_b")]
     pub damping_ns_m: f64,
     /// Bending coefficients c_x1..c_x4 (m/V).
-    #[serde(default = "d_sw_cx")]
     pub c_x_m_v: [f64; 4],
     /// Extension coefficients c_y1..c_y4 (m/V).
-    #[serde(default = "d_sw_cy")]
     pub c_y_m_v: [f64; 4],
 }
 
-fn d_sw_cx() -> [f64; 4] {
-    [crate::kinematics::C_X_M_PER_V; 4]
-}
-fn d_sw_cy() -> [f64; 4] {
-    [crate::kinematics::C_Y_M_PER_V; 4]
-}
-
 impl Default for SwitchedStageParams {
+    /// The linear model's mass, resonance and damping, the Ch. 5 motor's
+    /// coefficients (a graph file may leave any field out).
     fn default() -> Self {
+        let lin = LinearStageParams::default();
         Self {
-            mass_kg: d_lin_mass(),
-            f_res_hz: d_lin_fres(),
-            damping_ns_m: d_lin_b(),
-            c_x_m_v: d_sw_cx(),
-            c_y_m_v: d_sw_cy(),
+            mass_kg: lin.mass_kg,
+            f_res_hz: lin.f_res_hz,
+            damping_ns_m: lin.damping_ns_m,
+            c_x_m_v: [crate::kinematics::C_X_M_PER_V; 4],
+            c_y_m_v: [crate::kinematics::C_Y_M_PER_V; 4],
         }
     }
 }
@@ -495,77 +470,49 @@ impl Block for SwitchedStageBlock {
 /// The b's are the thesis's "2ζ" coefficients; their printed values lost their
 /// zeros and are read as 0.33, 0.2 and 0.175.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Params)]
-#[serde(deny_unknown_fields)]
+#[serde(default, deny_unknown_fields)]
 pub struct FittedStageParams {
     /// Low-frequency gain c (m per cycle): G(s) ≈ c/s.
-    #[serde(default = "d_lin_c")]
     #[param(finite)]
     pub gain_m_per_cycle: f64,
     /// First resonance f_p1 (Hz); thesis: 527 Hz.
-    #[serde(default = "d_fp1")]
     #[param(positive)]
     pub f_p1_hz: f64,
     /// Damping coefficient b_p1 (= 2ζ) of the first resonance.
-    #[serde(default = "d_bp1")]
     #[param(positive)]
     pub b_p1: f64,
     /// Anti-resonance f_z1 (Hz); thesis: 624 Hz.
-    #[serde(default = "d_fz1")]
     #[param(positive)]
     pub f_z1_hz: f64,
     /// Damping coefficient b_z1 (= 2ζ) of the anti-resonance.
-    #[serde(default = "d_bz1")]
     #[param(non_negative)]
     pub b_z1: f64,
     /// Second resonance f_p2 (Hz); thesis: 650 Hz.
-    #[serde(default = "d_fp2")]
     #[param(positive)]
     pub f_p2_hz: f64,
     /// Damping coefficient b_p2 (= 2ζ) of the second resonance.
-    #[serde(default = "d_bp2")]
     #[param(positive)]
     pub b_p2: f64,
     /// Pure delay (s), an integer number of block periods; thesis: three samples
     /// at 4 kHz = 0.75 ms.
     /// At most 2^24 periods (a ring buffer; the LTI model carries it as states up to 512).
-    #[serde(default = "d_delay")]
     #[param(non_negative)]
     pub delay_s: f64,
 }
 
-fn d_fp1() -> f64 {
-    527.0
-}
-fn d_bp1() -> f64 {
-    0.33
-}
-fn d_fz1() -> f64 {
-    624.0
-}
-fn d_bz1() -> f64 {
-    0.2
-}
-fn d_fp2() -> f64 {
-    650.0
-}
-fn d_bp2() -> f64 {
-    0.175
-}
-fn d_delay() -> f64 {
-    3.0 / 4000.0
-}
-
 impl Default for FittedStageParams {
+    /// The thesis's values, the gain the linear model's motor constant (a
+    /// graph file may leave any field out).
     fn default() -> Self {
         Self {
-            gain_m_per_cycle: d_lin_c(),
-            f_p1_hz: d_fp1(),
-            b_p1: d_bp1(),
-            f_z1_hz: d_fz1(),
-            b_z1: d_bz1(),
-            f_p2_hz: d_fp2(),
-            b_p2: d_bp2(),
-            delay_s: d_delay(),
+            gain_m_per_cycle: LinearStageParams::default().motor_constant_m,
+            f_p1_hz: 527.0,
+            b_p1: 0.33,
+            f_z1_hz: 624.0,
+            b_z1: 0.2,
+            f_p2_hz: 650.0,
+            b_p2: 0.175,
+            delay_s: 3.0 / 4000.0,
         }
     }
 }

@@ -41,71 +41,55 @@ use thiserror::Error;
 /// per-stack coefficients, μ) and q1 lost their digits in the text, so those
 /// defaults are physically reasoned and marked as such.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Params)]
-#[serde(deny_unknown_fields)]
+#[serde(default, deny_unknown_fields)]
 pub struct StageParams {
     /// Stage mass M_s (kg); thesis: 0.428 kg (weighed).
-    #[serde(default = "d_mass")]
     #[param(positive)]
     pub stage_mass_kg: f64,
     /// Leg stiffness k_x1, k_x2 (N/m); thesis: from M_s and the 543 Hz resonance,
     /// k_x = 4π²M_s·543² = 4.98·10⁶ N/m.
-    #[serde(default = "d_kx")]
     #[param(positive)]
     pub leg_stiffness_x_n_m: [f64; 2],
     /// Leg damping d_x1, d_x2 (N·s/m). Table 4.1 value lost; default 100 N·s/m
     /// (ζ ≈ 0.03 at the 543 Hz mode).
-    #[serde(default = "d_dx")]
     #[param(non_negative)]
     pub leg_damping_x_ns_m: [f64; 2],
     /// Leg stiffness k_y1, k_y2 (N/m); thesis: EA/L = 70 GPa·9 mm²/4 mm.
-    #[serde(default = "d_ky")]
     #[param(positive)]
     pub leg_stiffness_y_n_m: [f64; 2],
     /// Leg damping d_y1, d_y2 (N·s/m). Table 4.1 value lost; default 5000 N·s/m
     /// ("the damping in the piezo legs is very high", time constant ≈ 30 µs).
-    #[serde(default = "d_dy")]
     #[param(non_negative)]
     pub leg_damping_y_ns_m: [f64; 2],
     /// Bending coefficients c_x1..c_x4 (m/V) of (4.2); default 64.5 nm/V (Ch. 5).
-    #[serde(default = "d_cx")]
     pub c_x_m_v: [f64; 4],
     /// Extension coefficients c_y1..c_y4 (m/V) of (4.2); default 29.8 nm/V (Ch. 5).
-    #[serde(default = "d_cy")]
     pub c_y_m_v: [f64; 4],
     /// Preload F_p (N); thesis: 55 N.
-    #[serde(default = "d_fp")]
     #[param(positive)]
     pub preload_n: f64,
     /// Contact law q1 (m·N^−q2) of (4.4). Thesis value lost; default 1.5·10⁻⁸, a
     /// deformation of ≈ 0.1 µm per pair at half the preload (Fig. 4.3 scale).
-    #[serde(default = "d_q1")]
     pub contact_q1: f64,
     /// Contact law exponent q2 (−) of (4.4); thesis: 0.75.
-    #[serde(default = "d_q2")]
     pub contact_q2: f64,
     /// Nominal friction coefficient μ (−). Table 4.1 value lost; default 0.2
     /// (holding force μF_p ≈ 11 N).
-    #[serde(default = "d_mu")]
     #[param(non_negative)]
     pub mu: f64,
     /// Relative standard deviation of the per-pair μ difference.
-    #[serde(default = "d_mu_pair")]
     #[param(non_negative)]
     pub mu_pair_rel: f64,
     /// Relative standard deviation of μ along the drive strip.
-    #[serde(default = "d_mu_spatial")]
     #[param(non_negative)]
     pub mu_spatial_rel: f64,
     /// Correlation length of μ along the strip (m).
-    #[serde(default = "d_mu_corr")]
     #[param(positive)]
     pub mu_spatial_corr_m: f64,
     /// Relative standard deviation of μ in time.
-    #[serde(default = "d_mu_temporal")]
     #[param(non_negative)]
     pub mu_temporal_rel: f64,
     /// Correlation time of μ in time (s).
-    #[serde(default = "d_mu_tau")]
     #[param(positive)]
     pub mu_temporal_tau_s: f64,
     /// rms height σ_h (m) of the drive strip's surface profile (roughness and
@@ -116,40 +100,33 @@ pub struct StageParams {
     /// tilts the contact normal (x-force −F_N·h' on the stage, reacted on the
     /// leg), which decides when a pair slips on a steep spot. So the step per α
     /// cycle varies from cycle to cycle.
-    #[serde(default)]
     #[param(non_negative)]
     pub strip_height_rms_m: f64,
     /// Correlation length of the strip profile (m); default 2 µm, a fraction of
     /// a step (≈ 7 µm per cycle), so each touch-down lands on a fresh height.
-    #[serde(default = "d_strip_corr")]
     #[param(positive)]
     pub strip_height_corr_m: f64,
     /// Pitch of the four legs A, B, C, D along the strip (m); default 2 mm. The
     /// pair {A, D} sees the mean height under A and D, {B, C} under B and C.
-    #[serde(default = "d_strip_pitch")]
     #[param(non_negative)]
     pub strip_leg_pitch_m: f64,
     /// Internal sub-steps per block period (the thesis's Δt = 25 µs is one step at
     /// 40 kHz, or 10 sub-steps at 4 kHz).
-    #[serde(default = "d_substeps")]
     #[param(range(1, MAX_SUBSTEPS), hint = "or raise the block's rate_hz")]
     pub substeps: u32,
     /// r of (4.18) (N·s/m); leave out for r* = 2/(λ_min(W) + λ_max(W)), the
     /// fastest; must be below 2/λ_max(W).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[serde(skip_serializing_if = "Option::is_none")]
     #[param(default_doc = "optimal r* = 2/(λ_min+λ_max)")]
     pub prox_r: Option<f64>,
     /// Tolerance ε on |λ^{L+1} − λ^L| (N).
-    #[serde(default = "d_tol")]
     #[param(positive)]
     pub tol_n: f64,
     /// Iteration cap of the fixed-point iteration; hitting it is counted and
     /// reported.
-    #[serde(default = "d_max_iter")]
     #[param(range(1, MAX_ITER), hint = "e.g. 200")]
     pub max_iter: u32,
     /// Add an input port `f_ext` (N): an external force on the stage.
-    #[serde(default)]
     pub external_force_input: bool,
 }
 
@@ -158,97 +135,34 @@ pub const MAX_SUBSTEPS: u32 = 1000;
 /// Most fixed-point iterations per sub-step of `walking_piezo_stage`: 100 000.
 pub const MAX_ITER: u32 = 100_000;
 
-fn d_mass() -> f64 {
-    0.428
-}
-fn d_kx() -> [f64; 2] {
-    let k = 4.0 * PI * PI * 0.428 * 543.0 * 543.0;
-    [k, k]
-}
-fn d_dx() -> [f64; 2] {
-    [100.0; 2]
-}
-fn d_ky() -> [f64; 2] {
-    [70e9 * 9e-6 / 4e-3; 2]
-}
-fn d_dy() -> [f64; 2] {
-    [5e3; 2]
-}
-fn d_cx() -> [f64; 4] {
-    [C_X_M_PER_V; 4]
-}
-fn d_cy() -> [f64; 4] {
-    [C_Y_M_PER_V; 4]
-}
-fn d_fp() -> f64 {
-    55.0
-}
-fn d_q1() -> f64 {
-    1.5e-8
-}
-fn d_q2() -> f64 {
-    0.75
-}
-fn d_mu() -> f64 {
-    0.2
-}
-fn d_mu_pair() -> f64 {
-    0.1
-}
-fn d_mu_spatial() -> f64 {
-    0.1
-}
-fn d_mu_corr() -> f64 {
-    20e-6
-}
-fn d_mu_temporal() -> f64 {
-    0.05
-}
-fn d_mu_tau() -> f64 {
-    0.5
-}
-fn d_strip_corr() -> f64 {
-    2e-6
-}
-fn d_strip_pitch() -> f64 {
-    2e-3
-}
-fn d_substeps() -> u32 {
-    1
-}
-fn d_tol() -> f64 {
-    1e-10
-}
-fn d_max_iter() -> u32 {
-    200
-}
-
 impl Default for StageParams {
+    /// The defaults of every field (a graph file may leave any out).
     fn default() -> Self {
+        let k_x = 4.0 * PI * PI * 0.428 * 543.0 * 543.0;
         Self {
-            stage_mass_kg: d_mass(),
-            leg_stiffness_x_n_m: d_kx(),
-            leg_damping_x_ns_m: d_dx(),
-            leg_stiffness_y_n_m: d_ky(),
-            leg_damping_y_ns_m: d_dy(),
-            c_x_m_v: d_cx(),
-            c_y_m_v: d_cy(),
-            preload_n: d_fp(),
-            contact_q1: d_q1(),
-            contact_q2: d_q2(),
-            mu: d_mu(),
-            mu_pair_rel: d_mu_pair(),
-            mu_spatial_rel: d_mu_spatial(),
-            mu_spatial_corr_m: d_mu_corr(),
-            mu_temporal_rel: d_mu_temporal(),
-            mu_temporal_tau_s: d_mu_tau(),
+            stage_mass_kg: 0.428,
+            leg_stiffness_x_n_m: [k_x, k_x],
+            leg_damping_x_ns_m: [100.0; 2],
+            leg_stiffness_y_n_m: [70e9 * 9e-6 / 4e-3; 2],
+            leg_damping_y_ns_m: [5e3; 2],
+            c_x_m_v: [C_X_M_PER_V; 4],
+            c_y_m_v: [C_Y_M_PER_V; 4],
+            preload_n: 55.0,
+            contact_q1: 1.5e-8,
+            contact_q2: 0.75,
+            mu: 0.2,
+            mu_pair_rel: 0.1,
+            mu_spatial_rel: 0.1,
+            mu_spatial_corr_m: 20e-6,
+            mu_temporal_rel: 0.05,
+            mu_temporal_tau_s: 0.5,
             strip_height_rms_m: 0.0,
-            strip_height_corr_m: d_strip_corr(),
-            strip_leg_pitch_m: d_strip_pitch(),
-            substeps: d_substeps(),
+            strip_height_corr_m: 2e-6,
+            strip_leg_pitch_m: 2e-3,
+            substeps: 1,
             prox_r: None,
-            tol_n: d_tol(),
-            max_iter: d_max_iter(),
+            tol_n: 1e-10,
+            max_iter: 200,
             external_force_input: false,
         }
     }

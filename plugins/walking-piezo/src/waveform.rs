@@ -27,38 +27,27 @@ use std::f64::consts::{FRAC_PI_2, PI, TAU};
 /// assert_eq!(y[4], 0.0);                          // α
 /// ```
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, Params)]
-#[serde(deny_unknown_fields)]
+#[serde(default, deny_unknown_fields)]
 pub struct SinusoidalWaveform {
     /// Drive frequency f_α (Hz).
-    #[serde(default = "d_f")]
     #[param(finite)]
     pub f_alpha_hz: f64,
     /// Amplitude A (V), the peak-to-peak voltage of each waveform; in [0, 46] V.
-    #[serde(default = "d_a")]
     #[param(range(0.0, 46.0))]
     pub amplitude_v: f64,
     /// Additional phase φ (rad) of (2.2); 0 gives the largest step.
-    #[serde(default)]
     #[param(finite)]
     pub phase_rad: f64,
     /// Angle at t = 0 (rad).
-    #[serde(default)]
     #[param(finite)]
     pub alpha0_rad: f64,
-}
-
-fn d_f() -> f64 {
-    10.0
-}
-fn d_a() -> f64 {
-    46.0
 }
 
 impl Default for SinusoidalWaveform {
     fn default() -> Self {
         Self {
-            f_alpha_hz: d_f(),
-            amplitude_v: d_a(),
+            f_alpha_hz: 10.0,
+            amplitude_v: 46.0,
             phase_rad: 0.0,
             alpha0_rad: 0.0,
         }
