@@ -411,6 +411,9 @@ struct Ctx<'a> {
     /// a held-out record may come from another sensor setting (EMPS: the
     /// validation record's position is not on the estimation record's grid).
     grid_floors: Vec<[f64; 2]>,
+    /// The level at which a line in a residual is structure, not noise
+    /// ([`floor_sigma`]): a step's false-alarm level, [`Options::alpha`].
+    line_level: f64,
 }
 
 /// The estimation or the held-out samples of a record (or records).
@@ -431,14 +434,16 @@ impl Ctx<'_> {
 }
 
 /// The noise floor (σ) of `part` of output `i`'s residual `r` (all samples): the white part from its
-/// sample-to-sample differences ([`stats::noise_floor`]), but never below the
+/// sample-to-sample differences once its significant lines are taken out
+/// ([`stats::noise_floor_without_lines`]: a fast line is structure, which the
+/// differences alone would count as noise), but never below the
 /// rounding noise of a quantised measurement (q/√12, Widrow's model). On a
 /// column that holds its level most samples (a slow stage on a coarse
 /// encoder), the differences are mostly zero and their spread says nothing
 /// of the rounding error every model must leave.
 fn floor_sigma(ctx: &Ctx<'_>, i: usize, r: &[f64], part: Part) -> f64 {
     let grid = ctx.grid_floors.get(i).map_or(0.0, |g| g[part as usize]);
-    stats::noise_floor(ctx.part(r, part)).max(grid)
+    stats::noise_floor_without_lines(ctx.part(r, part), ctx.line_level).max(grid)
 }
 
 /// The options must be in range (`holdout`, `max-effects`, every
@@ -570,6 +575,7 @@ fn context<'a>(
         n,
         n_est,
         fs,
+        line_level: opts.alpha,
     };
     let mut runs = 0usize;
     let cur = evaluate_current(&ctx, nominal, Vec::new(), &mut runs)?;
@@ -4445,6 +4451,38 @@ mod tests {
             .collect();
         let y = x.iter().map(|&u| h.step(u)).collect();
         (x, y)
+    }
+
+    /// A line near the Nyquist frequency (a disturbance periodic in position on
+    /// a fast scan looks like this in time) is structure, not noise: on an
+    /// effect-free record with a sine at 0.31 of the sample rate, three times
+    /// the noise's σ, added to the measured position, the floor from the
+    /// sample-to-sample differences alone counted the sine as white (σ × 3.5)
+    /// and the search stopped "at its noise floor" with nothing named. With the
+    /// line taken out of the floor, the disturbance is named, at its period and
+    /// amplitude.
+    #[test]
+    fn a_fast_periodic_disturbance_is_not_taken_for_the_noise_floor() {
+        let _ = std::any::type_name::<crate::effects::Effect>();
+        let rec = crate::generate::second_order("none", 5, 12_000, false).unwrap();
+        let y = rec.data.column("y").unwrap();
+        let sigma = stats::noise_floor(y);
+        let (f_line, amp) = (0.31, 3.0 * sigma);
+        let with_line: Vec<f64> = y
+            .iter()
+            .enumerate()
+            .map(|(k, y)| y + amp * (std::f64::consts::TAU * f_line * k as f64 + 0.4).sin())
+            .collect();
+        assert!(stats::noise_floor(&with_line) > 3.0 * sigma);
+        let data = rec.data.with_column("y", with_line).unwrap();
+        let spec = GraphSpec::from_yaml(&rec.nominal_yaml, "nominal.yaml").unwrap();
+        let r = diagnose(&spec, &data, &Options::default()).unwrap();
+        assert_eq!(r.found, ["repetitive_disturbance"], "{}", r.stopped_because);
+        let p = &r.steps[0].final_params;
+        let period_s = 1.0 / (f_line * data.rate_hz());
+        assert!((p["period"] - period_s).abs() < 1e-4 * period_s, "{p:?}");
+        let fitted = p["cos[0]"].hypot(p["sin[0]"]);
+        assert!((fitted - amp).abs() < 0.05 * amp, "{fitted} vs {amp}");
     }
 
     /// Backward elimination (`Search::prune`): with the record's drift in
