@@ -412,7 +412,7 @@ struct Ctx<'a> {
     /// validation record's position is not on the estimation record's grid).
     grid_floors: Vec<[f64; 2]>,
     /// The level at which a line in a residual is structure, not noise
-    /// ([`floor_sigma`]): a step's false-alarm level, [`Options::alpha`].
+    /// ([`at_noise_floor`]): a step's false-alarm level, [`Options::alpha`].
     line_level: f64,
 }
 
@@ -434,16 +434,18 @@ impl Ctx<'_> {
 }
 
 /// The noise floor (σ) of `part` of output `i`'s residual `r` (all samples): the white part from its
-/// sample-to-sample differences once its significant lines are taken out
-/// ([`stats::noise_floor_without_lines`]: a fast line is structure, which the
-/// differences alone would count as noise), but never below the
+/// sample-to-sample differences ([`stats::noise_floor`]), but never below the
 /// rounding noise of a quantised measurement (q/√12, Widrow's model). On a
 /// column that holds its level most samples (a slow stage on a coarse
 /// encoder), the differences are mostly zero and their spread says nothing
 /// of the rounding error every model must leave.
 fn floor_sigma(ctx: &Ctx<'_>, i: usize, r: &[f64], part: Part) -> f64 {
-    let grid = ctx.grid_floors.get(i).map_or(0.0, |g| g[part as usize]);
-    stats::noise_floor_without_lines(ctx.part(r, part), ctx.line_level).max(grid)
+    stats::noise_floor(ctx.part(r, part)).max(grid_floor(ctx, i, part))
+}
+
+/// The rounding noise q/√12 of output `i`'s measured column on `part` (0 off a grid).
+fn grid_floor(ctx: &Ctx<'_>, i: usize, part: Part) -> f64 {
+    ctx.grid_floors.get(i).map_or(0.0, |g| g[part as usize])
 }
 
 /// The options must be in range (`holdout`, `max-effects`, every
@@ -688,7 +690,7 @@ impl<'c, 'a> Search<'c, 'a> {
     fn calibration_only(&mut self) -> Result<(), PlfError> {
         let (ctx, opts) = (self.ctx, self.opts);
         let excess = excess_ms(ctx, &self.cur);
-        let at_floor = at_noise_floor(&excess);
+        let at_floor = at_noise_floor(ctx, &self.cur);
         if let Some((mut cal, calibrated, (before_ms, cal_ms))) =
             calibrate(ctx, &self.cur, &mut self.runs)?
         {
@@ -721,7 +723,7 @@ impl<'c, 'a> Search<'c, 'a> {
         // they are tried, and they must then cut the whole mean square (not an
         // excess the floor cannot separate from the noise).
         let excess = excess_ms(ctx, &self.cur);
-        let at_floor = at_noise_floor(&excess);
+        let at_floor = at_noise_floor(ctx, &self.cur);
         let floor_stop = "the held-out residual is at its noise floor (mean square within 20 % of the white-noise estimate)";
         let Some(mut ranked) = self.fit_and_rank(at_floor, step_no, progress)? else {
             self.stopped = floor_stop.into();
@@ -1360,7 +1362,7 @@ impl<'c, 'a> Search<'c, 'a> {
                     continue;
                 };
                 let excess = excess_ms(ctx, &without);
-                let at_floor = at_noise_floor(&excess);
+                let at_floor = at_noise_floor(ctx, &without);
                 let (test, cut) = held_out_gain(
                     ctx,
                     (&excess, at_floor),
@@ -2440,8 +2442,6 @@ fn holdout_weighted_vectors(ctx: &Ctx<'_>, a: &[Vec<f64>], b: &[Vec<f64>]) -> (V
     (va, vb)
 }
 
-/// Whether every output's held-out mean square is within 20 % of its noise
-/// floor's (`excess`: from [`excess_ms`]): nothing above the noise to explain.
 /// Whether an effect can itself look like white noise: memoryless functions
 /// of the measured position (a rounding, slit errors), when the stage
 /// crosses about an lsb per sample — the only effects looked for at the
@@ -2456,8 +2456,27 @@ fn passes(opts: &Options, level: f64, test: &stats::Test, cut: f64) -> bool {
     test.p_value < level && cut >= opts.min_excess_cut
 }
 
-fn at_noise_floor(excess: &[(f64, f64)]) -> bool {
-    excess.iter().all(|&(ms, floor)| ms <= 1.2 * floor * floor)
+/// Whether every output's held-out mean square is within 20 % of its noise
+/// floor's: nothing above the noise to explain. The floor here is
+/// [`floor_sigma`]'s once the residual's significant spectral lines are out
+/// ([`stats::noise_floor_without_lines`] at [`Ctx::line_level`]): a line is
+/// structure however fast it is, and one near the Nyquist frequency (a
+/// disturbance periodic in position on a fast scan) makes large
+/// sample-to-sample differences that the plain estimate counts as white —
+/// the search stopped "at the floor" with nothing named. Without a
+/// significant line it is `floor_sigma` exactly. (Only this decision reads
+/// it: the floor an effect's cut is measured against, and the outputs'
+/// weights, stay `floor_sigma`'s.)
+fn at_noise_floor(ctx: &Ctx<'_>, cur: &Current) -> bool {
+    cur.residual.iter().enumerate().all(|(i, r)| {
+        let held = ctx.part(r, Part::HeldOut);
+        let floor = stats::noise_floor_without_lines(held, ctx.line_level).max(grid_floor(
+            ctx,
+            i,
+            Part::HeldOut,
+        ));
+        stats::mean_square(held) <= 1.2 * floor * floor
+    })
 }
 
 /// (held-out mean square, its noise floor σ) per output.
