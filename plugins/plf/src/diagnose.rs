@@ -411,6 +411,9 @@ struct Ctx<'a> {
     /// a held-out record may come from another sensor setting (EMPS: the
     /// validation record's position is not on the estimation record's grid).
     grid_floors: Vec<[f64; 2]>,
+    /// The level at which a line in a residual is structure, not noise
+    /// ([`at_noise_floor`]): a step's false-alarm level, [`Options::alpha`].
+    line_level: f64,
 }
 
 /// The estimation or the held-out samples of a record (or records).
@@ -437,8 +440,12 @@ impl Ctx<'_> {
 /// encoder), the differences are mostly zero and their spread says nothing
 /// of the rounding error every model must leave.
 fn floor_sigma(ctx: &Ctx<'_>, i: usize, r: &[f64], part: Part) -> f64 {
-    let grid = ctx.grid_floors.get(i).map_or(0.0, |g| g[part as usize]);
-    stats::noise_floor(ctx.part(r, part)).max(grid)
+    stats::noise_floor(ctx.part(r, part)).max(grid_floor(ctx, i, part))
+}
+
+/// The rounding noise q/√12 of output `i`'s measured column on `part` (0 off a grid).
+fn grid_floor(ctx: &Ctx<'_>, i: usize, part: Part) -> f64 {
+    ctx.grid_floors.get(i).map_or(0.0, |g| g[part as usize])
 }
 
 /// The options must be in range (`holdout`, `max-effects`, every
@@ -570,6 +577,7 @@ fn context<'a>(
         n,
         n_est,
         fs,
+        line_level: opts.alpha,
     };
     let mut runs = 0usize;
     let cur = evaluate_current(&ctx, nominal, Vec::new(), &mut runs)?;
@@ -682,7 +690,7 @@ impl<'c, 'a> Search<'c, 'a> {
     fn calibration_only(&mut self) -> Result<(), PlfError> {
         let (ctx, opts) = (self.ctx, self.opts);
         let excess = excess_ms(ctx, &self.cur);
-        let at_floor = at_noise_floor(&excess);
+        let at_floor = at_noise_floor(ctx, &self.cur);
         if let Some((mut cal, calibrated, (before_ms, cal_ms))) =
             calibrate(ctx, &self.cur, &mut self.runs)?
         {
@@ -715,7 +723,7 @@ impl<'c, 'a> Search<'c, 'a> {
         // they are tried, and they must then cut the whole mean square (not an
         // excess the floor cannot separate from the noise).
         let excess = excess_ms(ctx, &self.cur);
-        let at_floor = at_noise_floor(&excess);
+        let at_floor = at_noise_floor(ctx, &self.cur);
         let floor_stop = "the held-out residual is at its noise floor (mean square within 20 % of the white-noise estimate)";
         let Some(mut ranked) = self.fit_and_rank(at_floor, step_no, progress)? else {
             self.stopped = floor_stop.into();
@@ -1354,7 +1362,7 @@ impl<'c, 'a> Search<'c, 'a> {
                     continue;
                 };
                 let excess = excess_ms(ctx, &without);
-                let at_floor = at_noise_floor(&excess);
+                let at_floor = at_noise_floor(ctx, &without);
                 let (test, cut) = held_out_gain(
                     ctx,
                     (&excess, at_floor),
@@ -2434,8 +2442,6 @@ fn holdout_weighted_vectors(ctx: &Ctx<'_>, a: &[Vec<f64>], b: &[Vec<f64>]) -> (V
     (va, vb)
 }
 
-/// Whether every output's held-out mean square is within 20 % of its noise
-/// floor's (`excess`: from [`excess_ms`]): nothing above the noise to explain.
 /// Whether an effect can itself look like white noise: memoryless functions
 /// of the measured position (a rounding, slit errors), when the stage
 /// crosses about an lsb per sample — the only effects looked for at the
@@ -2450,8 +2456,27 @@ fn passes(opts: &Options, level: f64, test: &stats::Test, cut: f64) -> bool {
     test.p_value < level && cut >= opts.min_excess_cut
 }
 
-fn at_noise_floor(excess: &[(f64, f64)]) -> bool {
-    excess.iter().all(|&(ms, floor)| ms <= 1.2 * floor * floor)
+/// Whether every output's held-out mean square is within 20 % of its noise
+/// floor's: nothing above the noise to explain. The floor here is
+/// [`floor_sigma`]'s once the residual's significant spectral lines are out
+/// ([`stats::noise_floor_without_lines`] at [`Ctx::line_level`]): a line is
+/// structure however fast it is, and one near the Nyquist frequency (a
+/// disturbance periodic in position on a fast scan) makes large
+/// sample-to-sample differences that the plain estimate counts as white —
+/// the search stopped "at the floor" with nothing named. Without a
+/// significant line it is `floor_sigma` exactly. (Only this decision reads
+/// it: the floor an effect's cut is measured against, and the outputs'
+/// weights, stay `floor_sigma`'s.)
+fn at_noise_floor(ctx: &Ctx<'_>, cur: &Current) -> bool {
+    cur.residual.iter().enumerate().all(|(i, r)| {
+        let held = ctx.part(r, Part::HeldOut);
+        let floor = stats::noise_floor_without_lines(held, ctx.line_level).max(grid_floor(
+            ctx,
+            i,
+            Part::HeldOut,
+        ));
+        stats::mean_square(held) <= 1.2 * floor * floor
+    })
 }
 
 /// (held-out mean square, its noise floor σ) per output.
@@ -4445,6 +4470,38 @@ mod tests {
             .collect();
         let y = x.iter().map(|&u| h.step(u)).collect();
         (x, y)
+    }
+
+    /// A line near the Nyquist frequency (a disturbance periodic in position on
+    /// a fast scan looks like this in time) is structure, not noise: on an
+    /// effect-free record with a sine at 0.31 of the sample rate, three times
+    /// the noise's σ, added to the measured position, the floor from the
+    /// sample-to-sample differences alone counted the sine as white (σ × 3.5)
+    /// and the search stopped "at its noise floor" with nothing named. With the
+    /// line taken out of the floor, the disturbance is named, at its period and
+    /// amplitude.
+    #[test]
+    fn a_fast_periodic_disturbance_is_not_taken_for_the_noise_floor() {
+        let _ = std::any::type_name::<crate::effects::Effect>();
+        let rec = crate::generate::second_order("none", 5, 12_000, false).unwrap();
+        let y = rec.data.column("y").unwrap();
+        let sigma = stats::noise_floor(y);
+        let (f_line, amp) = (0.31, 3.0 * sigma);
+        let with_line: Vec<f64> = y
+            .iter()
+            .enumerate()
+            .map(|(k, y)| y + amp * (std::f64::consts::TAU * f_line * k as f64 + 0.4).sin())
+            .collect();
+        assert!(stats::noise_floor(&with_line) > 3.0 * sigma);
+        let data = rec.data.with_column("y", with_line).unwrap();
+        let spec = GraphSpec::from_yaml(&rec.nominal_yaml, "nominal.yaml").unwrap();
+        let r = diagnose(&spec, &data, &Options::default()).unwrap();
+        assert_eq!(r.found, ["repetitive_disturbance"], "{}", r.stopped_because);
+        let p = &r.steps[0].final_params;
+        let period_s = 1.0 / (f_line * data.rate_hz());
+        assert!((p["period"] - period_s).abs() < 1e-4 * period_s, "{p:?}");
+        let fitted = p["cos[0]"].hypot(p["sin[0]"]);
+        assert!((fitted - amp).abs() < 0.05 * amp, "{fitted} vs {amp}");
     }
 
     /// Backward elimination (`Search::prune`): with the record's drift in

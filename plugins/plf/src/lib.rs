@@ -14,7 +14,10 @@
 //! - [`fit`]: parameter fitting by re-simulation (Levenberg–Marquardt).
 //! - [`pool`]: independent fits run on every core, results in a fixed order.
 //! - [`diagnose()`]: the workflow itself.
+//! - [`datasets`]: measured records from outside, joined and scaled as their
+//!   authors describe (the rack-and-pinion friction rig).
 
+pub mod datasets;
 pub mod diagnose;
 pub mod effects;
 pub mod fit;

@@ -662,6 +662,68 @@ pub fn noise_floor(r: &[f64]) -> f64 {
     1.4826 * median(&mut dev) / std::f64::consts::SQRT_2
 }
 
+/// [`noise_floor`] of `r` with its significant periodic lines taken out
+/// first. A line is structure, not noise, however fast it is: a disturbance
+/// periodic in position on a fast scan, or any line near the Nyquist
+/// frequency, makes large sample-to-sample differences that the plain
+/// estimate counts as white, so a residual holding little else looks "at its
+/// noise floor" and nothing is looked for. Lines are found one at a time by
+/// Fisher's g over the periodogram bins not yet taken (the strongest bin
+/// against their sum, `p = m(1 − g)^{m−1}` for `m` bins), each removing its
+/// bin ± [`TONE_BINS`] from the spectrum, while `p < level`, until a quarter
+/// of the bins is gone; the floor is then [`noise_floor`] of what is left
+/// (inverse FFT). With no line found it is `noise_floor(r)` exactly.
+pub fn noise_floor_without_lines(r: &[f64], level: f64) -> f64 {
+    use rustfft::{FftPlanner, num_complex::Complex};
+    let n = r.len();
+    let bins = n.div_ceil(2).saturating_sub(1); // k = 1..N/2, as `periodogram`
+    if bins < 4 * (2 * TONE_BINS + 1) {
+        return noise_floor(r);
+    }
+    let m = mean(r);
+    let mut spectrum: Vec<Complex<f64>> = r.iter().map(|v| Complex::new(v - m, 0.0)).collect();
+    let mut planner = FftPlanner::new();
+    planner.plan_fft_forward(n).process(&mut spectrum);
+    // Bin k (1-based Fourier index) at power[k − 1]; NaN once taken.
+    let mut power: Vec<f64> = (1..=bins).map(|k| spectrum[k].norm_sqr()).collect();
+    let mut taken = 0;
+    while taken < bins / 4 {
+        let (mut total, mut left, mut peak, mut at) = (0.0, 0usize, 0.0, 0);
+        for (j, &p) in power.iter().enumerate() {
+            if p.is_nan() {
+                continue;
+            }
+            total += p;
+            left += 1;
+            if p > peak {
+                (peak, at) = (p, j);
+            }
+        }
+        if !(total > 0.0) {
+            break;
+        }
+        let g = peak / total;
+        if left as f64 * (1.0 - g).powf(left as f64 - 1.0) >= level {
+            break;
+        }
+        for j in at.saturating_sub(TONE_BINS)..(at + TONE_BINS + 1).min(bins) {
+            if !power[j].is_nan() {
+                power[j] = f64::NAN;
+                taken += 1;
+            }
+            // Bin k = j + 1 and its mirror N − k: the line's whole power.
+            spectrum[j + 1] = Complex::new(0.0, 0.0);
+            spectrum[n - j - 1] = Complex::new(0.0, 0.0);
+        }
+    }
+    if taken == 0 {
+        return noise_floor(r);
+    }
+    planner.plan_fft_inverse(n).process(&mut spectrum);
+    let clean: Vec<f64> = spectrum.iter().map(|c| c.re / n as f64).collect();
+    noise_floor(&clean)
+}
+
 /// Median (reorders the slice).
 pub fn median(x: &mut [f64]) -> f64 {
     if x.is_empty() {
@@ -1448,6 +1510,29 @@ mod tests {
                 t.statistic
             );
         }
+    }
+
+    #[test]
+    fn a_fast_line_is_not_counted_in_the_noise_floor() {
+        // White noise of σ = 1 and a sine at 0.31 of the sample rate, amplitude
+        // 3: the differences see the sine (2A·sin(π·0.31) ≈ 4.9 against the
+        // noise's √2), the floor without lines sees σ alone.
+        let noise = white(4000, 17);
+        let r: Vec<f64> = noise
+            .iter()
+            .enumerate()
+            .map(|(k, e)| e + 3.0 * (2.0 * std::f64::consts::PI * 0.31 * k as f64 + 0.4).sin())
+            .collect();
+        let plain = noise_floor(&r);
+        let clean = noise_floor_without_lines(&r, 1e-3);
+        let truth = noise_floor(&noise);
+        assert!(plain > 2.0 * truth, "plain {plain}, noise {truth}");
+        assert!(
+            (clean - truth).abs() < 0.05 * truth,
+            "without lines {clean}, noise {truth}"
+        );
+        // White noise alone has no line: the same estimate to the bit.
+        assert_eq!(noise_floor_without_lines(&noise, 1e-3), truth);
     }
 
     #[test]

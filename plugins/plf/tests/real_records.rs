@@ -9,12 +9,17 @@
 //!   benchmark's own protocol on its validation record (simulate the position
 //!   from the measured drive) against the nominal linear model.
 //! - An SMA actuator's first-order reversal curves: `hysteresis`.
+//! - Mnich's rack-and-pinion rig, one move pushed through a load cell:
+//!   `friction`, alone, with its Coulomb and viscous levels within 25 % of the
+//!   dataset author's own inverse-model identification (F − M·a against the
+//!   velocity), computed here from the same record.
 //!
 //! Needs `../shared/data`: fails when `CI` is set and the data is missing, and
 //! says SKIPPED loudly otherwise (`shared_data_or_skip`).
 
 use nanomotion_core::data::{Dataset, shared_data_or_skip};
 use nanomotion_core::graph::GraphSpec;
+use nanomotion_plf::datasets::rack_pinion;
 use nanomotion_plf::diagnose::{Options, diagnose};
 use nanomotion_plf::fit::Evaluator;
 use std::path::PathBuf;
@@ -142,4 +147,64 @@ fn sma_actuator_reversal_curves_name_hysteresis() {
         r.found
     );
     assert!(r.final_scores.holdout_rms < 0.6 * r.nominal.holdout_rms);
+}
+
+/// The dataset author's identification (`extraction.m`, the friction model's
+/// dry and viscous parts): the friction force F − M·a on the samples where the
+/// rack moves (v > 0.05 m/s), a = Δv/Δt, fitted by least squares as
+/// F_C + F_v·v. Returns (F_C in N, F_v in N·s/m).
+fn rack_inverse_model(force: &[f64], velocity: &[f64], rate_hz: f64, mass_kg: f64) -> (f64, f64) {
+    let (mut s1, mut sv, mut svv, mut sf, mut svf) = (0.0, 0.0, 0.0, 0.0, 0.0);
+    for k in 1..force.len() {
+        let v = velocity[k];
+        if v <= 0.05 {
+            continue;
+        }
+        let friction = force[k] - mass_kg * (v - velocity[k - 1]) * rate_hz;
+        s1 += 1.0;
+        sv += v;
+        svv += v * v;
+        sf += friction;
+        svf += v * friction;
+    }
+    let det = s1 * svv - sv * sv;
+    ((svv * sf - sv * svf) / det, (s1 * svf - sv * sf) / det)
+}
+
+#[test]
+fn rack_and_pinion_move_names_friction_at_the_inverse_models_level() {
+    link();
+    let dir = root().join("../shared/data/friction_rack_pinion");
+    if shared_data_or_skip(&dir.join("a3NI.csv"), "rack-and-pinion diagnose").is_none() {
+        return;
+    }
+    let data = rack_pinion(&dir).unwrap();
+    let (coulomb_ref, viscous_ref) = rack_inverse_model(
+        data.column("force_n").unwrap(),
+        data.column("velocity_m_s").unwrap(),
+        data.rate_hz(),
+        24.7, // the reduced mass of the author's `extraction.m` and of the nominal
+    );
+    let spec =
+        GraphSpec::from_file(root().join("examples/diagnose/rack_pinion_nominal.yaml")).unwrap();
+    let r = diagnose(&spec, &data, &Options::default()).unwrap();
+    eprintln!(
+        "rack and pinion: found {:?}; held-out rms {:.3e} -> {:.3e}; {}; inverse model F_C = {coulomb_ref:.2} N, F_v = {viscous_ref:.2} N s/m",
+        r.found, r.nominal.holdout_rms, r.final_scores.holdout_rms, r.stopped_because
+    );
+    assert_eq!(r.found, ["friction"]);
+    // Named with the friction block itself: its own Coulomb level and viscous coefficient.
+    assert_eq!(r.steps[0].block.type_name, "friction");
+    let coulomb = r.steps[0].final_params["coulomb"];
+    let viscous = r.steps[0].final_params["viscous"];
+    eprintln!("rack and pinion: diagnosed F_C = {coulomb:.2} N, F_v = {viscous:.2} N s/m");
+    assert!(
+        (coulomb - coulomb_ref).abs() <= 0.25 * coulomb_ref,
+        "Coulomb level {coulomb} N, the inverse model's {coulomb_ref} N"
+    );
+    assert!(
+        (viscous - viscous_ref).abs() <= 0.25 * viscous_ref,
+        "viscous coefficient {viscous} N s/m, the inverse model's {viscous_ref} N s/m"
+    );
+    assert!(r.final_scores.holdout_rms < 0.05 * r.nominal.holdout_rms);
 }
