@@ -699,7 +699,7 @@ pub fn noise_floor_without_lines(r: &[f64], level: f64) -> f64 {
                 (peak, at) = (p, j);
             }
         }
-        if !(total > 0.0) {
+        if total.is_nan() || total <= 0.0 {
             break;
         }
         let g = peak / total;
