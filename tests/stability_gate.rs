@@ -9,22 +9,20 @@ use nanomotion::core::graph::GraphSpec;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
+/// Every `.yaml` under examples/, at any depth (examples/compensate/position_ripple/…).
 fn graphs() -> Vec<PathBuf> {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples");
-    let mut v = Vec::new();
-    for e in std::fs::read_dir(&root).unwrap() {
-        let p = e.unwrap().path();
-        if p.is_dir() {
-            for e in std::fs::read_dir(&p).unwrap() {
-                let q = e.unwrap().path();
-                if q.extension().is_some_and(|x| x == "yaml") {
-                    v.push(q);
-                }
+    fn walk(dir: &Path, v: &mut Vec<PathBuf>) {
+        for e in std::fs::read_dir(dir).unwrap() {
+            let p = e.unwrap().path();
+            if p.is_dir() {
+                walk(&p, v);
+            } else if p.extension().is_some_and(|x| x == "yaml") {
+                v.push(p);
             }
-        } else if p.extension().is_some_and(|x| x == "yaml") {
-            v.push(p);
         }
     }
+    let mut v = Vec::new();
+    walk(&Path::new(env!("CARGO_MANIFEST_DIR")).join("examples"), &mut v);
     v.sort();
     v
 }
