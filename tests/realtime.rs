@@ -652,28 +652,40 @@ fn diagnose_reads_a_recording_as_its_measured_data_like_the_same_csv() {
 #[test]
 fn rt_lets_its_plant_go_before_writing_its_files() {
     // When the controller's loop ends, the plant must see the connection close
-    // at once. `rt` used to keep the device until its files were written
-    // (an 8 s recording takes longer than 100 ms here), so a plant with a
-    // 100 ms watchdog stopped on it and failed; the device now detaches in
-    // its safe state, from the loop thread as it stops, and the plant ends
-    // cleanly.
+    // at once. `rt` used to keep the device until its files were written (an
+    // 8 s recording takes longer than 100 ms here), so a plant with a short
+    // watchdog stopped on it and failed; the device now detaches in its safe
+    // state, from the loop thread as it stops, and the plant ends cleanly.
+    //
+    // The order is read off what the two processes recorded, not inferred from
+    // a watchdog that did not fire: the plant's last tick, the one that found
+    // the controller gone (its timing.json, CLOCK_MONOTONIC), came before `rt`
+    // had finished writing any of its files (their modification times on the
+    // same clock). The old order (files first, then the device let go) puts
+    // that tick after all of them. Both watchdogs are long (10 s): whether a
+    // loaded machine (CI's 2 cores running builds) ever stalls one loop for
+    // the old 100 ms or the default 50 ms is not what this test is about, and
+    // such a stall must not fail it.
     let name = format!("test-letgo-{}", std::process::id());
     let dir = std::env::temp_dir().join(format!("nanomotion-rt-letgo-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
+    let (plant_dir, rt_dir) = (dir.join("plant"), dir.join("rt"));
     let bin = env!("CARGO_BIN_EXE_nanomotion");
-    let plant = serve_quickstart_plant(&name, &["--watchdog-ms", "100"]);
+    let plant_out = plant_dir.display().to_string();
+    let plant = serve_quickstart_plant(&name, &["--watchdog-ms", "10000", "--out", &plant_out]);
     let out = Command::new(bin)
         .args([
             "rt",
             &format!("{EXAMPLES}/realtime/quickstart_controller.yaml"),
         ])
         .args(["--device", &format!("shm:{name}"), "--duration", "8"])
+        .args(["--watchdog-ms", "10000"])
         .args(["--allow-soft", "--record", "--out"])
-        .arg(&dir)
+        .arg(&rt_dir)
         .output()
         .unwrap();
     succeeded(&out);
-    assert!(dir.join("run.mcap").exists());
+    assert!(rt_dir.join("run.mcap").exists());
     let plant = plant.wait_with_output().unwrap();
     let log = String::from_utf8_lossy(&plant.stdout).into_owned()
         + &String::from_utf8_lossy(&plant.stderr);
@@ -682,5 +694,39 @@ fn rt_lets_its_plant_go_before_writing_its_files() {
         log.contains("the controller closed the connection"),
         "{log}"
     );
+    let timing = |d: &std::path::Path| -> serde_json::Value {
+        serde_json::from_str(&std::fs::read_to_string(d.join("timing.json")).unwrap()).unwrap()
+    };
+    let (plant_timing, rt_timing) = (timing(&plant_dir), timing(&rt_dir));
+    assert_eq!(rt_timing["stop"], "completed", "{rt_timing}");
+    assert_eq!(rt_timing["ticks"], 32_000, "{rt_timing}");
+    assert_eq!(
+        plant_timing["stop"], "stopped by the device: the controller closed the connection",
+        "{plant_timing}"
+    );
+    let plant_saw_close = plant_timing["last_wake_ns"].as_u64().unwrap() as i128;
+    // CLOCK_REALTIME − CLOCK_MONOTONIC, to put the files' times on the loops'
+    // clock (a file time lags by at most a coarse-clock tick, a few ms).
+    let since_epoch = |t: std::time::SystemTime| {
+        t.duration_since(std::time::UNIX_EPOCH).unwrap().as_nanos() as i128
+    };
+    let offset =
+        since_epoch(std::time::SystemTime::now()) - nanomotion::rt::clock::now_ns() as i128;
+    let written: Vec<(String, i128)> = std::fs::read_dir(&rt_dir)
+        .unwrap()
+        .map(|e| {
+            let e = e.unwrap();
+            let t = since_epoch(e.metadata().unwrap().modified().unwrap()) - offset;
+            (e.file_name().to_string_lossy().into_owned(), t)
+        })
+        .collect();
+    assert!(written.len() >= 3, "{written:?}");
+    for (file, t) in &written {
+        assert!(
+            plant_saw_close < *t,
+            "the plant saw the controller close {} ms after `rt` wrote {file}",
+            (plant_saw_close - t) as f64 * 1e-6
+        );
+    }
     let _ = std::fs::remove_dir_all(&dir);
 }
