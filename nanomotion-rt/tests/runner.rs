@@ -201,9 +201,11 @@ fn the_grid_is_held_over_ten_thousand_ticks_at_10_khz() {
     // The last tick started at its grid time (plus its latency only).
     let expected_last = report.t0_ns + ((n - 1) as f64 * period_ns).round() as u64;
     assert_eq!(report.last_deadline_ns, expected_last);
-    // Mean period over the run equals T to within the jitter of two ticks.
-    let mean = (reads[n as usize - 1] - reads[0]) as f64 / (n - 1) as f64;
-    assert!((mean - period_ns).abs() < 100.0, "mean period {mean} ns");
+    // The mean period over the run is T to within 50 µs / 9 000 ticks
+    // ≈ 6 ns: the drift bound above, between the typical starts (median
+    // lateness) of the first and last thousand ticks. (It was read off the
+    // first and last read alone, where one wake-up delayed 1 ms by a loaded
+    // machine at either end failed it.)
     // The histograms saw every tick; the period one every consecutive pair.
     assert_eq!(report.wakeup_latency.count, n);
     assert_eq!(report.execution.count, n);
