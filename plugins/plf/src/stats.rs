@@ -671,7 +671,9 @@ pub fn noise_floor(r: &[f64]) -> f64 {
 /// Fisher's g over the periodogram bins not yet taken (the strongest bin
 /// against their sum, `p = m(1 − g)^{m−1}` for `m` bins), each removing its
 /// bin ± [`TONE_BINS`] from the spectrum, while `p < level`, until a quarter
-/// of the bins is gone; the floor is then [`noise_floor`] of what is left
+/// of the bins is gone (a residual with more than that in lines is not
+/// "lines on white noise", and what is left would be too few bins to speak
+/// for the noise); the floor is then [`noise_floor`] of what is left
 /// (inverse FFT). With no line found it is `noise_floor(r)` exactly.
 pub fn noise_floor_without_lines(r: &[f64], level: f64) -> f64 {
     use rustfft::{FftPlanner, num_complex::Complex};
