@@ -113,24 +113,7 @@ pub fn c2d(sys: &StateSpace, dt: f64, method: C2dMethod) -> Result<StateSpace, L
             })
         }
         C2dMethod::Tustin { prewarp_hz } => {
-            let k = match prewarp_hz {
-                None => 2.0 / dt,
-                Some(f0) => {
-                    if !(f0.is_finite() && f0 > 0.0 && f0 < 0.5 / dt) {
-                        return Err(LtiError::param(
-                            "prewarp_hz",
-                            format!(
-                                "{f0} Hz ({} rad/s) must be > 0 and below the Nyquist frequency {} Hz ({} rad/s)",
-                                2.0 * PI * f0,
-                                0.5 / dt,
-                                PI / dt
-                            ),
-                        ));
-                    }
-                    let w0 = 2.0 * PI * f0;
-                    w0 / (w0 * dt / 2.0).tan()
-                }
-            };
+            let k = tustin_k(prewarp_hz, dt)?;
             // Mp = (I − A/k)⁻¹; A_d = Mp (I + A/k); B_d = (2/k) Mp B; C_d = C Mp;
             // D_d = D + C Mp B / k.
             let ident = DMatrix::<f64>::identity(n, n);
@@ -152,6 +135,30 @@ pub fn c2d(sys: &StateSpace, dt: f64, method: C2dMethod) -> Result<StateSpace, L
             })
         }
     }
+}
+
+/// The scale k of the bilinear map s = k·(z − 1)/(z + 1) at period `dt` (s):
+/// 2/T, or ω₀/tan(ω₀T/2) pre-warped at `prewarp_hz` f₀ = ω₀/2π (which must be
+/// above 0 and below Nyquist). Allocates only when it refuses.
+pub(crate) fn tustin_k(prewarp_hz: Option<f64>, dt: f64) -> Result<f64, LtiError> {
+    Ok(match prewarp_hz {
+        None => 2.0 / dt,
+        Some(f0) => {
+            if !(f0.is_finite() && f0 > 0.0 && f0 < 0.5 / dt) {
+                return Err(LtiError::param(
+                    "prewarp_hz",
+                    format!(
+                        "{f0} Hz ({} rad/s) must be > 0 and below the Nyquist frequency {} Hz ({} rad/s)",
+                        2.0 * PI * f0,
+                        0.5 / dt,
+                        PI / dt
+                    ),
+                ));
+            }
+            let w0 = 2.0 * PI * f0;
+            w0 / (w0 * dt / 2.0).tan()
+        }
+    })
 }
 
 impl StateSpace {

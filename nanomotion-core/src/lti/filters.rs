@@ -1,12 +1,13 @@
 //! Filter design and second-order-section tools: linear-phase FIR low-pass
 //! ([`fir_lowpass`]), Butterworth low-pass as second-order sections
-//! ([`butter_lowpass`]), SOS simulation ([`SosCascade`]) and conversion
-//! ([`sos2ss`], [`ss2sos`], [`sos_freqresp`], [`fir2ss`]).
+//! ([`butter_lowpass`], [`butter_lowpass_into`]), the Tustin image of one
+//! continuous section ([`tustin_section`]), SOS simulation ([`SosCascade`]) and
+//! conversion ([`sos2ss`], [`sos_realise_into`], [`ss2sos`], [`sos_freqresp`],
+//! [`fir2ss`]).
 
-use super::linalg::poly_trim;
-use super::ss::series;
-use super::tf::{tf2sos, tf2ss};
-use super::{Complex, LtiError, SosSection, StateSpace, TransferFunction};
+use super::discretise::tustin_k;
+use super::tf::tf2sos;
+use super::{Complex, LtiError, SosSection, StateSpace};
 use nalgebra::DMatrix;
 use std::f64::consts::PI;
 
@@ -90,13 +91,29 @@ pub fn fir2ss(h: &[f64], dt: f64) -> StateSpace {
 
 /// Digital Butterworth low-pass of order `order` (≥ 1) with −3 dB frequency
 /// `cutoff_hz` (Hz, below Nyquist) at sample period `dt` (s), as second-order
-/// sections (scipy `butter(order, fc, output='sos', fs=1/dt)`).
+/// sections (scipy `butter(order, fc, output='sos', fs=1/dt)`); the sections of
+/// [`butter_lowpass_into`] in a vector.
+pub fn butter_lowpass(order: usize, cutoff_hz: f64, dt: f64) -> Result<Vec<SosSection>, LtiError> {
+    let mut sos = vec![[0.0; 6]; order.div_ceil(2)];
+    butter_lowpass_into(order, cutoff_hz, dt, &mut sos)?;
+    Ok(sos)
+}
+
+/// [`butter_lowpass`] written into `out` (at least ⌈order/2⌉ sections; the
+/// first ⌈order/2⌉ are written, their number returned). Does not allocate
+/// unless it refuses: a filter block re-designs itself with it between two
+/// ticks when its corner changes.
 ///
 /// Analog prototype poles ωₐ·e^{jπ(2k+n+1)/(2n)} with the pre-warped cutoff
 /// ωₐ = (2/T)·tan(π f_c T), mapped by the bilinear transform; all zeros at z = −1.
 /// Each section has unity DC gain, so the cascade has too; odd orders end with a
 /// first-order section (b₂ = a₂ = 0).
-pub fn butter_lowpass(order: usize, cutoff_hz: f64, dt: f64) -> Result<Vec<SosSection>, LtiError> {
+pub fn butter_lowpass_into(
+    order: usize,
+    cutoff_hz: f64,
+    dt: f64,
+    out: &mut [SosSection],
+) -> Result<usize, LtiError> {
     if order == 0 {
         return Err(LtiError::param("order", "must be ≥ 1"));
     }
@@ -110,24 +127,70 @@ pub fn butter_lowpass(order: usize, cutoff_hz: f64, dt: f64) -> Result<Vec<SosSe
             format!("{cutoff_hz} Hz must be in (0, {nyq}) Hz"),
         ));
     }
+    let sections = order.div_ceil(2);
+    let Some(out) = out.get_mut(..sections) else {
+        return Err(LtiError::param(
+            "sos",
+            format!(
+                "{} sections given, order {order} needs {sections}",
+                out.len()
+            ),
+        ));
+    };
     let wa = 2.0 / dt * (PI * cutoff_hz * dt).tan();
     let n = order as f64;
     let bilinear = |p: Complex<f64>| (1.0 + p * (dt / 2.0)) / (1.0 - p * (dt / 2.0));
-    let mut sos = Vec::with_capacity(order.div_ceil(2));
-    for k in 0..order / 2 {
+    for (k, s) in out.iter_mut().enumerate().take(order / 2) {
         let theta = PI * (2.0 * k as f64 + n + 1.0) / (2.0 * n);
         let pz = bilinear(Complex::from_polar(wa, theta));
         let a1 = -2.0 * pz.re;
         let a2 = pz.norm_sqr();
         let g = (1.0 + a1 + a2) / 4.0;
-        sos.push([g, 2.0 * g, g, 1.0, a1, a2]);
+        *s = [g, 2.0 * g, g, 1.0, a1, a2];
     }
     if order % 2 == 1 {
         let pz = bilinear(Complex::new(-wa, 0.0)).re;
         let g = (1.0 - pz) / 2.0;
-        sos.push([g, g, 0.0, 1.0, -pz, 0.0]);
+        out[sections - 1] = [g, g, 0.0, 1.0, -pz, 0.0];
     }
-    Ok(sos)
+    Ok(sections)
+}
+
+/// The bilinear (Tustin) image of one continuous section
+/// N(s)/D(s) = (n₂s² + n₁s + n₀)/(d₂s² + d₁s + d₀) (`num`, `den`: highest power
+/// first) at sample period `dt` (s): s = k·(1 − z⁻¹)/(1 + z⁻¹), k = 2/T or,
+/// pre-warped at `prewarp_hz` (below Nyquist), the k of [`c2d`](super::c2d)'s
+/// Tustin. Normalised to a₀ = 1. A first-order section (n₂ = d₂ = 0) gives
+/// b₂ = a₂ = 0 and b₀ = n₁k + n₀, b₁ = n₀ − n₁k over a₀ = d₁k + d₀,
+/// a₁ = d₀ − d₁k; a second-order one b₀ = n₂k² + n₁k + n₀, b₁ = 2(n₀ − n₂k²),
+/// b₂ = n₂k² − n₁k + n₀ (and the same for a). Closed form, allocation-free
+/// unless it refuses; a D(s) whose a₀ vanishes gives non-finite coefficients,
+/// which [`sos_realise_into`] refuses.
+pub fn tustin_section(
+    num: [f64; 3],
+    den: [f64; 3],
+    dt: f64,
+    prewarp_hz: Option<f64>,
+) -> Result<SosSection, LtiError> {
+    let k = tustin_k(prewarp_hz, dt)?;
+    let first_order = num[0] == 0.0 && den[0] == 0.0;
+    let map = |[p2, p1, p0]: [f64; 3]| {
+        if first_order {
+            [p1 * k + p0, p0 - p1 * k, 0.0]
+        } else {
+            let k2 = p2 * k * k;
+            [k2 + p1 * k + p0, 2.0 * (p0 - k2), k2 - p1 * k + p0]
+        }
+    };
+    let (b, a) = (map(num), map(den));
+    Ok([
+        b[0] / a[0],
+        b[1] / a[0],
+        b[2] / a[0],
+        1.0,
+        a[1] / a[0],
+        a[2] / a[0],
+    ])
 }
 
 /// Frequency response of an SOS cascade at `w_rad_s` (rad/s), period `dt` (s).
@@ -143,29 +206,101 @@ pub fn sos_freqresp(sos: &[SosSection], dt: f64, w_rad_s: &[f64]) -> Vec<Complex
         .collect()
 }
 
-/// Series state-space realisation of an SOS cascade at period `dt` (s); each
-/// section in controllable canonical form (first-order sections get one state).
+/// Series state-space realisation of an SOS cascade at period `dt` (s), each
+/// section in direct form II transposed (see [`sos_realise_into`]); a cascade
+/// ending with a first-order section (b₂ = a₂ = 0) gives it one state.
 pub fn sos2ss(sos: &[SosSection], dt: f64) -> Result<StateSpace, LtiError> {
-    let mut sys = StateSpace::gain(DMatrix::from_element(1, 1, 1.0), Some(dt));
-    for s in sos {
-        if s[3] == 0.0 {
-            return Err(LtiError::param("sos", "a0 of a section is zero"));
-        }
-        let (num, den) = if s[2] == 0.0 && s[5] == 0.0 {
-            (vec![s[0], s[1]], vec![s[3], s[4]])
-        } else {
-            (vec![s[0], s[1], s[2]], vec![s[3], s[4], s[5]])
-        };
-        // In z: multiply num and den (in z⁻¹) by z^deg; keep den degree even if
-        // its trailing coefficient is zero (a pole at the origin).
-        let part = tf2ss(&TransferFunction {
-            num: poly_trim(&num),
-            den,
-            dt: Some(dt),
-        })?;
-        sys = series(&sys, &part)?;
-    }
+    let last_first_order = sos.last().is_some_and(|s| s[2] == 0.0 && s[5] == 0.0);
+    let n = 2 * sos.len() - usize::from(last_first_order);
+    let mut sys = StateSpace {
+        a: DMatrix::zeros(n, n),
+        b: DMatrix::zeros(n, 1),
+        c: DMatrix::zeros(1, n),
+        d: DMatrix::zeros(1, 1),
+        dt: Some(dt),
+    };
+    sos_realise_into(sos, &mut sys)?;
     Ok(sys)
+}
+
+/// Write the series realisation of the cascade `sos` into `sys` (a discrete
+/// 1×1 model of 2·len states, or 2·len − 1 when the last section is
+/// first-order, b₂ = a₂ = 0), overwriting A, B, C and D; nothing else changes
+/// and nothing is allocated unless it refuses (a section with a₀ = 0 or a
+/// non-finite coefficient, or a model of other dimensions: `sys` is then left
+/// as it was). The state of section i is its direct-form-II-transposed delay
+/// line (z₀, z₁) (scipy `sosfilt`, [`SosCascade`]): with v its input,
+/// y = b₀v + z₀, z₀ ← −a₁z₀ + z₁ + (b₁ − a₁b₀)v, z₁ ← −a₂z₀ + (b₂ − a₂b₀)v
+/// (coefficients over a₀), and v of section i + 1 is y of section i. A filter
+/// block whose corner changes re-derives its model with this, keeping the
+/// delay lines.
+pub fn sos_realise_into(sos: &[SosSection], sys: &mut StateSpace) -> Result<(), LtiError> {
+    let n = sys.a.nrows();
+    let last_first_order = n + 1 == 2 * sos.len();
+    let shape_ok = (n == 2 * sos.len() || last_first_order)
+        && sys.a.shape() == (n, n)
+        && sys.b.shape() == (n, 1)
+        && sys.c.shape() == (1, n)
+        && sys.d.shape() == (1, 1)
+        && sys.dt.is_some();
+    if !shape_ok {
+        return Err(LtiError::Dimension(format!(
+            "{} sections do not fit a {}×{} discrete model of {n} states",
+            sos.len(),
+            sys.noutputs(),
+            sys.ninputs()
+        )));
+    }
+    if let Some(bad) = sos
+        .iter()
+        .position(|s| s[3] == 0.0 || s.iter().any(|x| !x.is_finite()))
+    {
+        return Err(LtiError::param(
+            "sos",
+            format!("section {bad} needs finite coefficients and a0 ≠ 0"),
+        ));
+    }
+    if last_first_order && sos.last().is_some_and(|s| s[2] != 0.0 || s[5] != 0.0) {
+        return Err(LtiError::param(
+            "sos",
+            "the last section has one state but b2 or a2 ≠ 0",
+        ));
+    }
+    sys.a.fill(0.0);
+    sys.b.fill(0.0);
+    sys.c.fill(0.0);
+    // C and D express the input v of the section being written in the states
+    // of the sections before it and in u: v₁ = u.
+    sys.d[(0, 0)] = 1.0;
+    let mut o = 0; // first state of the section
+    for (i, s) in sos.iter().enumerate() {
+        let [b0, b1, b2, _, a1, a2] = s.map(|x| x / s[3]);
+        let states = if last_first_order && i + 1 == sos.len() {
+            1
+        } else {
+            2
+        };
+        // B of the section (v → z) and its rows of A.
+        let bs = [b1 - a1 * b0, b2 - a2 * b0];
+        let ars = [[-a1, 1.0], [-a2, 0.0]];
+        for (r, (b, row)) in bs.iter().zip(&ars).enumerate().take(states) {
+            for j in 0..o {
+                sys.a[(o + r, j)] = b * sys.c[(0, j)];
+            }
+            for (j, a) in row.iter().enumerate().take(states) {
+                sys.a[(o + r, o + j)] = *a;
+            }
+            sys.b[(o + r, 0)] = b * sys.d[(0, 0)];
+        }
+        // The section's output y = b₀v + z₀ is the next section's input.
+        for j in 0..o {
+            sys.c[(0, j)] *= b0;
+        }
+        sys.c[(0, o)] = 1.0;
+        sys.d[(0, 0)] *= b0;
+        o += states;
+    }
+    Ok(())
 }
 
 /// Second-order sections of a discrete SISO state-space model (via its transfer
@@ -289,6 +424,41 @@ mod tests {
         }
         assert!(butter_lowpass(0, 10.0, dt).is_err());
         assert!(butter_lowpass(2, 2000.0, dt).is_err());
+    }
+
+    #[test]
+    fn the_realisations_state_is_the_cascades_delay_lines() {
+        // 5th order: two biquads and a first-order section (5 states).
+        let dt = 1e-3;
+        let sos = butter_lowpass(5, 40.0, dt).unwrap();
+        let mut sys = sos2ss(&sos, dt).unwrap();
+        let mut stepper = crate::lti::SsStepper::new(&sys).unwrap();
+        let mut casc = SosCascade::new(&sos).unwrap();
+        let mut rng = crate::rng::Rng::new(3);
+        for _ in 0..200 {
+            let u = rng.normal();
+            let y = stepper.step_siso(u);
+            assert!((y - casc.step(u)).abs() < 1e-12);
+            let z: Vec<f64> = casc.state.iter().flatten().copied().take(5).collect();
+            for (a, b) in stepper.state().iter().zip(&z) {
+                assert!((a - b).abs() < 1e-12, "{a} {b}");
+            }
+        }
+        // Refusals leave the model as it was: too few sections, a0 = 0, a
+        // last section with one state but b2 ≠ 0.
+        let kept = sys.clone();
+        assert!(sos_realise_into(&sos[..2], &mut sys).is_err());
+        let mut zero_a0 = sos.clone();
+        zero_a0[1][3] = 0.0;
+        assert!(sos_realise_into(&zero_a0, &mut sys).is_err());
+        let mut second = sos.clone();
+        second[2][2] = 0.1;
+        assert!(sos_realise_into(&second, &mut sys).is_err());
+        assert_eq!(sys, kept);
+        // A model of the same shape takes a new design in place.
+        let other = butter_lowpass(5, 90.0, dt).unwrap();
+        sos_realise_into(&other, &mut sys).unwrap();
+        assert_eq!(sys, sos2ss(&other, dt).unwrap());
     }
 
     #[test]

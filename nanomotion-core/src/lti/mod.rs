@@ -90,7 +90,10 @@ pub mod tf;
 pub mod zpetc;
 
 pub use discretise::{C2dMethod, c2d};
-pub use filters::{SosCascade, butter_lowpass, fir_lowpass, fir2ss, sos_freqresp, sos2ss, ss2sos};
+pub use filters::{
+    SosCascade, butter_lowpass, butter_lowpass_into, fir_lowpass, fir2ss, sos_freqresp,
+    sos_realise_into, sos2ss, ss2sos, tustin_section,
+};
 pub use freqeval::FrequencyEvaluator;
 pub use hinf::{HinfNorm, hinfnorm};
 pub use hinfsyn::{HinfSyn, HinfSynOptions, augw, hinfsyn, lft};

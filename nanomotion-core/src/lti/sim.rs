@@ -146,6 +146,50 @@ impl SsStepper {
         })
     }
 
+    /// Take the coefficients of `sys` — a model of the same dimensions, with
+    /// feed-through only if this one has it — keeping the state x\[k\]: the
+    /// next [`output`](Self::output) is C′x\[k\] + D′u\[k\]. Does not allocate.
+    /// A model of other dimensions, a continuous one or one that would add
+    /// feed-through (the caller orders its blocks by it) is refused and
+    /// nothing changes.
+    pub fn set_coefficients(&mut self, sys: &StateSpace) -> Result<(), LtiError> {
+        let same = sys.a.shape() == self.a.shape()
+            && sys.b.shape() == self.b.shape()
+            && sys.c.shape() == self.c.shape()
+            && sys.d.shape() == self.d.shape();
+        if !same || sys.dt.is_none() || (sys.has_feedthrough() && !self.feedthrough) {
+            return Err(LtiError::Dimension(format!(
+                "new coefficients must keep the model's shape ({} states, {} inputs, {} outputs), be discrete and add no feed-through",
+                self.nstates(),
+                self.ninputs(),
+                self.noutputs()
+            )));
+        }
+        self.a.copy_from(&sys.a);
+        self.b.copy_from(&sys.b);
+        self.c.copy_from(&sys.c);
+        self.d.copy_from(&sys.d);
+        fn take<const N: usize>(k: &mut Siso<N>, sys: &StateSpace, feedthrough: bool) {
+            let x = k.x;
+            *k = Siso::new(sys);
+            k.x = x;
+            // D stays in the sum when the model has feed-through (a D′ of 0
+            // adds 0·u).
+            if feedthrough {
+                k.d = Some(sys.d[(0, 0)]);
+            }
+        }
+        let ft = self.feedthrough;
+        match &mut self.kernel {
+            Kernel::Siso1(k) => take(k, sys, ft),
+            Kernel::Siso2(k) => take(k, sys, ft),
+            Kernel::Siso3(k) => take(k, sys, ft),
+            Kernel::Siso4(k) => take(k, sys, ft),
+            Kernel::General => {}
+        }
+        Ok(())
+    }
+
     /// Number of states.
     pub fn nstates(&self) -> usize {
         self.a.nrows()
