@@ -2,17 +2,20 @@
 //! `notch`, `lead_lag` and `delay`.
 //!
 //! Every block is realised as a discrete state-space model at the block's own rate
-//! (built once in [`Block::build`], from a cascade of first/second-order sections
+//! (built in [`Block::build`], from a cascade of first/second-order sections
 //! where it starts from a transfer function — never as one high-order polynomial
 //! difference equation, see SPEC §1) and stepped by an allocation-free
-//! [`SsStepper`]. Filters act channel by channel on an input of width `width`
-//! (default 1). Input port `u`, output port `y`. [`Block::lti`] returns the exact
-//! discrete model that is simulated.
+//! [`SsStepper`]. The filters (`low_pass`, `notch`, `lead_lag`) are designed
+//! as closed-form second-order sections realised in direct form II transposed,
+//! and re-designed in place, states kept, when a corner changes while the loop
+//! runs ([`Block::set_live_param`]). Filters act channel by channel on an
+//! input of width `width` (default 1). Input port `u`, output port `y`.
+//! [`Block::lti`] returns the exact discrete model that is simulated.
 
 use crate::block::{BuildContext, Port, Tick, check};
 use crate::doc::Params;
 use crate::error::ParamError;
-use crate::lti::{self, C2dMethod, LtiError, SsStepper, StateSpace, TransferFunction};
+use crate::lti::{self, C2dMethod, LtiError, SosSection, SsStepper, StateSpace, TransferFunction};
 use crate::{Block, Controller, declared_block};
 use nalgebra::DMatrix;
 use serde::{Deserialize, Serialize};
@@ -121,6 +124,19 @@ impl LinearCore {
         for s in &mut self.steppers {
             s.reset();
         }
+    }
+
+    /// Take the coefficients of the cascade `sos` (the structure it was built
+    /// with: [`lti::sos_realise_into`]), every channel's delay lines kept. No
+    /// allocation unless it refuses; on a refusal of the model the core is
+    /// unchanged, on one of a stepper (a cascade that would gain feed-through)
+    /// the model has changed and the caller re-applies the cascade it had.
+    fn retune(&mut self, sos: &[SosSection]) -> Result<(), LtiError> {
+        lti::sos_realise_into(sos, &mut self.model)?;
+        for s in &mut self.steppers {
+            s.set_coefficients(&self.model)?;
+        }
+        Ok(())
     }
 
     /// The model of all channels (block diagonal).
@@ -232,6 +248,67 @@ macro_rules! core_steps {
             self.core.as_ref().map(|c| c.lti())
         }
     };
+}
+
+/// Most second-order sections of a filter block: a `low_pass` of
+/// [`MAX_LOW_PASS_ORDER`].
+const MAX_SECTIONS: usize = MAX_LOW_PASS_ORDER.div_ceil(2);
+
+/// A filter block realised as a cascade of second-order sections in direct
+/// form II transposed (`low_pass`, `notch`, `lead_lag`). Its
+/// [`design`](SectionFilter::design) is the one function both
+/// [`Block::build`] and a live change call: the block's own checks, then the
+/// closed-form discrete sections.
+trait SectionFilter {
+    /// The block's checks at period `dt` (s), then its sections written into
+    /// `out`; their number. Allocation-free unless it refuses.
+    fn design(&self, dt: f64, out: &mut [SosSection]) -> Result<usize, ParamError>;
+    /// The parameter behind live slot `slot` ([`Block::live_params`]).
+    fn live_slot(&mut self, slot: usize) -> Option<&mut f64>;
+    /// The running core (after [`Block::build`]).
+    fn core_mut(&mut self) -> Option<&mut LinearCore>;
+    /// Number of channels.
+    fn channels(&self) -> usize;
+
+    /// The core of the design at period `dt` (s): [`Block::build`].
+    fn build_core(&self, dt: f64) -> Result<LinearCore, ParamError> {
+        let mut sos = [[0.0; 6]; MAX_SECTIONS];
+        let n = self.design(dt, &mut sos)?;
+        let model = lti::sos2ss(&sos[..n], dt).map_err(|e| lti_to_param("order", e))?;
+        LinearCore::new(model, self.channels()).map_err(|e| lti_to_param("order", e))
+    }
+
+    /// The running core re-designed from the parameters as they are, its
+    /// delay lines kept. Allocation-free unless it refuses.
+    fn redesign(&mut self) -> Result<(), ParamError> {
+        let Some(dt) = self.core_mut().and_then(|c| c.model.dt) else {
+            return Ok(()); // not built: `build` designs it
+        };
+        let mut sos = [[0.0; 6]; MAX_SECTIONS];
+        let n = self.design(dt, &mut sos)?;
+        if let Some(core) = self.core_mut() {
+            core.retune(&sos[..n])
+                .map_err(|e| lti_to_param("order", e))?;
+        }
+        Ok(())
+    }
+
+    /// [`Block::set_live_param`]: live parameter `slot` to `value` and the
+    /// sections re-designed, the delay lines kept; a value the design
+    /// refuses leaves the block as it was (the sender refuses it first,
+    /// building a copy of the block with it).
+    fn set_live(&mut self, slot: usize, value: f64) {
+        let Some(old) = self.live_slot(slot).map(|p| std::mem::replace(p, value)) else {
+            return;
+        };
+        if self.redesign().is_err() {
+            if let Some(p) = self.live_slot(slot) {
+                *p = old;
+            }
+            // The design it ran with, which passed before.
+            let _ = self.redesign();
+        }
+    }
 }
 
 macro_rules! controller_impl {
@@ -722,8 +799,17 @@ fn default_order() -> usize {
 }
 
 /// `low_pass`: digital Butterworth low-pass of order `order` with −3 dB
-/// frequency `cutoff_hz` (pre-warped bilinear design, unity DC gain), per
-/// channel.
+/// frequency `cutoff_hz` (pre-warped bilinear design, unity DC gain,
+/// [`lti::butter_lowpass_into`]), per channel, run as a cascade of
+/// second-order sections in direct form II transposed.
+///
+/// `cutoff_hz` can change while the loop runs (`set lp.cutoff_hz=…`,
+/// [`Block::live_params`]): the sections are re-designed in place by the
+/// build's own checks and design, and every section keeps its delay line
+/// (z₀, z₁). For one section (order ≤ 2) the output at the tick of the
+/// change moves by (b₀′ − b₀)·u\[k\] (y = z₀ + b₀u), the state then evolves
+/// under the new filter; a longer cascade also carries the change of the
+/// later sections' b₀ on the earlier sections' outputs.
 #[derive(Debug, Clone, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
 #[block(type_name = "low_pass", role = Math, ports = "u[width] -> y[width] [unit of u]")]
@@ -764,13 +850,32 @@ impl Block for LowPass {
     core_steps!();
 
     fn build(&mut self, ctx: &BuildContext) -> Result<(), ParamError> {
-        self.check_params()?;
-        self.check_at_rate(ctx.dt)?;
-        let sos = lti::butter_lowpass(self.order, self.cutoff_hz, ctx.dt)
-            .map_err(|e| lti_to_param("cutoff_hz", e))?;
-        let model = lti::sos2ss(&sos, ctx.dt).map_err(|e| lti_to_param("order", e))?;
-        self.core = Some(LinearCore::new(model, self.width).map_err(|e| lti_to_param("order", e))?);
+        self.core = Some(self.build_core(ctx.dt)?);
         Ok(())
+    }
+    fn live_params(&self) -> &'static [&'static str] {
+        &["cutoff_hz"]
+    }
+    fn set_live_param(&mut self, slot: usize, value: f64) {
+        self.set_live(slot, value);
+    }
+}
+
+impl SectionFilter for LowPass {
+    fn design(&self, dt: f64, out: &mut [SosSection]) -> Result<usize, ParamError> {
+        self.check_params()?;
+        self.check_at_rate(dt)?;
+        lti::butter_lowpass_into(self.order, self.cutoff_hz, dt, out)
+            .map_err(|e| lti_to_param("cutoff_hz", e))
+    }
+    fn live_slot(&mut self, slot: usize) -> Option<&mut f64> {
+        (slot == 0).then_some(&mut self.cutoff_hz)
+    }
+    fn core_mut(&mut self) -> Option<&mut LinearCore> {
+        self.core.as_mut()
+    }
+    fn channels(&self) -> usize {
+        self.width
     }
 }
 controller_impl!(LowPass);
@@ -784,8 +889,15 @@ fn default_notch_damping() -> f64 {
 
 /// `notch`: second-order notch
 /// N(s) = (s² + 2·depth·ζ·ω₀ s + ω₀²)/(s² + 2ζω₀ s + ω₀²), ω₀ = 2π·centre_hz,
-/// discretised by Tustin pre-warped at the centre so that the discrete gain at
-/// `centre_hz` is exactly `depth` and the DC gain is 1. Per channel.
+/// discretised by Tustin pre-warped at the centre ([`lti::tustin_section`]) so
+/// that the discrete gain at `centre_hz` is exactly `depth` and the DC gain is
+/// 1. Per channel, one second-order section in direct form II transposed.
+///
+/// `centre_hz`, `damping` and `depth` can change while the loop runs
+/// ([`Block::live_params`]): the section is re-designed in place by the
+/// build's own checks and design, its delay line (z₀, z₁) kept, so the output
+/// at the tick of the change moves by (b₀′ − b₀)·u\[k\] (y = z₀ + b₀u) and
+/// the state then evolves under the new notch.
 #[derive(Debug, Clone, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
 #[block(type_name = "notch", role = Math, ports = "u[width] -> y[width] [unit of u]")]
@@ -824,12 +936,22 @@ impl Notch {
         }
     }
 
+    /// The continuous prototype N(s): numerator and denominator, highest
+    /// power of s first.
+    fn prototype(&self) -> ([f64; 3], [f64; 3]) {
+        let w = 2.0 * PI * self.centre_hz;
+        (
+            [1.0, 2.0 * self.depth * self.damping * w, w * w],
+            [1.0, 2.0 * self.damping * w, w * w],
+        )
+    }
+
     /// The continuous prototype N(s).
     pub fn continuous_model(&self) -> TransferFunction {
-        let w = 2.0 * PI * self.centre_hz;
+        let (num, den) = self.prototype();
         TransferFunction {
-            num: vec![1.0, 2.0 * self.depth * self.damping * w, w * w],
-            den: vec![1.0, 2.0 * self.damping * w, w * w],
+            num: num.to_vec(),
+            den: den.to_vec(),
             dt: None,
         }
     }
@@ -840,20 +962,39 @@ impl Block for Notch {
     core_steps!();
 
     fn build(&mut self, ctx: &BuildContext) -> Result<(), ParamError> {
-        self.check_params()?;
-        self.check_at_rate(ctx.dt)?;
-        let model = self
-            .continuous_model()
-            .c2d(
-                ctx.dt,
-                C2dMethod::Tustin {
-                    prewarp_hz: Some(self.centre_hz),
-                },
-            )
-            .map_err(|e| lti_to_param("centre_hz", e))?;
-        self.core =
-            Some(LinearCore::new(model, self.width).map_err(|e| lti_to_param("centre_hz", e))?);
+        self.core = Some(self.build_core(ctx.dt)?);
         Ok(())
+    }
+    fn live_params(&self) -> &'static [&'static str] {
+        &["centre_hz", "damping", "depth"]
+    }
+    fn set_live_param(&mut self, slot: usize, value: f64) {
+        self.set_live(slot, value);
+    }
+}
+
+impl SectionFilter for Notch {
+    fn design(&self, dt: f64, out: &mut [SosSection]) -> Result<usize, ParamError> {
+        self.check_params()?;
+        self.check_at_rate(dt)?;
+        let (num, den) = self.prototype();
+        out[0] = lti::tustin_section(num, den, dt, Some(self.centre_hz))
+            .map_err(|e| lti_to_param("centre_hz", e))?;
+        Ok(1)
+    }
+    fn live_slot(&mut self, slot: usize) -> Option<&mut f64> {
+        match slot {
+            0 => Some(&mut self.centre_hz),
+            1 => Some(&mut self.damping),
+            2 => Some(&mut self.depth),
+            _ => None,
+        }
+    }
+    fn core_mut(&mut self) -> Option<&mut LinearCore> {
+        self.core.as_mut()
+    }
+    fn channels(&self) -> usize {
+        self.width
     }
 }
 controller_impl!(Notch);
@@ -869,7 +1010,14 @@ fn default_gain() -> f64 {
 /// ω_p = 2π·pole_hz (a lead for zero_hz < pole_hz, a lag otherwise), discretised
 /// by Tustin pre-warped at `prewarp_hz` (default: the geometric mean
 /// √(zero_hz·pole_hz), where a lead's phase peaks, if that is below Nyquist;
-/// otherwise plain Tustin). DC gain `gain`. Per channel.
+/// otherwise plain Tustin; [`lti::tustin_section`]). DC gain `gain`. Per
+/// channel, one first-order section in direct form II transposed.
+///
+/// `zero_hz` and `pole_hz` can change while the loop runs
+/// ([`Block::live_params`]; the default pre-warp frequency follows them): the
+/// section is re-designed in place by the build's own checks and design, its
+/// delay line z₀ kept, so the output at the tick of the change moves by
+/// (b₀′ − b₀)·u\[k\] (y = z₀ + b₀u).
 #[derive(Debug, Clone, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
 #[block(type_name = "lead_lag", role = Controller, ports = "u[width] -> y[width]")]
@@ -914,13 +1062,20 @@ impl LeadLag {
         }
     }
 
-    /// The continuous prototype C(s).
-    pub fn continuous_model(&self) -> TransferFunction {
+    /// The continuous prototype C(s): numerator and denominator, highest
+    /// power of s first (a first-order section: no s²).
+    fn prototype(&self) -> ([f64; 3], [f64; 3]) {
         let wz = 2.0 * PI * self.zero_hz;
         let wp = 2.0 * PI * self.pole_hz;
+        ([0.0, self.gain / wz, self.gain], [0.0, 1.0 / wp, 1.0])
+    }
+
+    /// The continuous prototype C(s).
+    pub fn continuous_model(&self) -> TransferFunction {
+        let (num, den) = self.prototype();
         TransferFunction {
-            num: vec![self.gain / wz, self.gain],
-            den: vec![1.0 / wp, 1.0],
+            num: num[1..].to_vec(),
+            den: den[1..].to_vec(),
             dt: None,
         }
     }
@@ -939,19 +1094,38 @@ impl Block for LeadLag {
     core_steps!();
 
     fn build(&mut self, ctx: &BuildContext) -> Result<(), ParamError> {
-        self.check_params()?;
-        self.check_at_rate(ctx.dt)?;
-        let method = C2dMethod::Tustin {
-            prewarp_hz: self.effective_prewarp_hz(ctx.dt),
-        };
-        let model = self
-            .continuous_model()
-            .to_ss()
-            .and_then(|s| s.c2d(ctx.dt, method))
-            .map_err(|e| lti_to_param("pole_hz", e))?;
-        self.core =
-            Some(LinearCore::new(model, self.width).map_err(|e| lti_to_param("pole_hz", e))?);
+        self.core = Some(self.build_core(ctx.dt)?);
         Ok(())
+    }
+    fn live_params(&self) -> &'static [&'static str] {
+        &["zero_hz", "pole_hz"]
+    }
+    fn set_live_param(&mut self, slot: usize, value: f64) {
+        self.set_live(slot, value);
+    }
+}
+
+impl SectionFilter for LeadLag {
+    fn design(&self, dt: f64, out: &mut [SosSection]) -> Result<usize, ParamError> {
+        self.check_params()?;
+        self.check_at_rate(dt)?;
+        let (num, den) = self.prototype();
+        out[0] = lti::tustin_section(num, den, dt, self.effective_prewarp_hz(dt))
+            .map_err(|e| lti_to_param("pole_hz", e))?;
+        Ok(1)
+    }
+    fn live_slot(&mut self, slot: usize) -> Option<&mut f64> {
+        match slot {
+            0 => Some(&mut self.zero_hz),
+            1 => Some(&mut self.pole_hz),
+            _ => None,
+        }
+    }
+    fn core_mut(&mut self) -> Option<&mut LinearCore> {
+        self.core.as_mut()
+    }
+    fn channels(&self) -> usize {
+        self.width
     }
 }
 controller_impl!(LeadLag);
@@ -1353,6 +1527,292 @@ mod tests {
                 }
             });
             assert_eq!(info.count_total, 0, "{text}");
+        }
+    }
+
+    /// One sample of a second-order section [b₀, b₁, b₂, 1, a₁, a₂] in direct
+    /// form II transposed (scipy `sosfilt`), written out.
+    fn df2t(s: [f64; 6], z: &mut [f64; 2], u: f64) -> f64 {
+        let y = s[0] * u + z[0];
+        z[0] = s[1] * u - s[4] * y + z[1];
+        z[1] = s[2] * u - s[5] * y;
+        y
+    }
+
+    /// The 2nd-order digital Butterworth low-pass at `fc` (Hz), period DT, in
+    /// the textbook closed form: K = tan(π f_c T),
+    /// b = K²·[1, 2, 1]/(1 + √2K + K²), a = [1, 2(K² − 1), 1 − √2K + K²]/(…).
+    fn butterworth2(fc: f64) -> [f64; 6] {
+        let k = (PI * fc * DT).tan();
+        let n = 1.0 + 2f64.sqrt() * k + k * k;
+        let b0 = k * k / n;
+        let a1 = 2.0 * (k * k - 1.0) / n;
+        let a2 = (1.0 - 2f64.sqrt() * k + k * k) / n;
+        [b0, 2.0 * b0, b0, 1.0, a1, a2]
+    }
+
+    #[test]
+    fn a_live_cutoff_change_runs_on_as_the_closed_form_butterworth_from_the_same_delay_line() {
+        let (f1, f2) = (200.0, 60.0);
+        let mut lp = LowPass::new(2, f1);
+        lp.build(&BuildContext::new("lp", DT, 0)).unwrap();
+        assert_eq!(lp.live_params(), ["cutoff_hz"]);
+        let mut rng = crate::rng::Rng::new(27);
+        let mut z = [0.0; 2];
+        let mut y = [0.0];
+        let mut step = |lp: &mut LowPass, z: &mut [f64; 2], s: [f64; 6], u: f64| {
+            lp.output(Tick::new(0, DT), &[u], &mut y);
+            let want = df2t(s, z, u);
+            assert!(
+                (y[0] - want).abs() <= 1e-13 * want.abs().max(1.0),
+                "{} {want}",
+                y[0]
+            );
+            // The block's state is the section's delay line.
+            let x = lp.core.as_ref().unwrap().steppers[0].state();
+            assert!((x[0] - z[0]).abs() < 1e-13 && (x[1] - z[1]).abs() < 1e-13);
+            y[0]
+        };
+        for _ in 0..300 {
+            step(&mut lp, &mut z, butterworth2(f1), rng.normal());
+        }
+        let before = lp.clone();
+        lp.set_live_param(0, f2);
+        assert_eq!(lp.cutoff_hz, f2);
+        // The first output moves by (b₀′ − b₀)·u (y = z₀ + b₀u), then the
+        // new filter runs on from the same delay line.
+        let u = rng.normal();
+        let mut old = before.clone();
+        let mut y_old = [0.0];
+        old.output(Tick::new(0, DT), &[u], &mut y_old);
+        let y_new = step(&mut lp, &mut z, butterworth2(f2), u);
+        let db0 = butterworth2(f2)[0] - butterworth2(f1)[0];
+        assert!(
+            (y_new - y_old[0] - db0 * u).abs() < 1e-15,
+            "{y_new} {y_old:?}"
+        );
+        for _ in 0..300 {
+            step(&mut lp, &mut z, butterworth2(f2), rng.normal());
+        }
+        // At a steady input u₀ the bump is (b₀′ − b₀)·u₀, the decay the new filter's.
+        let mut steady = LowPass::new(2, f1);
+        steady.build(&BuildContext::new("lp", DT, 0)).unwrap();
+        let mut y = [0.0];
+        for _ in 0..4000 {
+            steady.output(Tick::new(0, DT), &[1.0], &mut y);
+        }
+        assert!((y[0] - 1.0).abs() < 1e-12);
+        steady.set_live_param(0, f2);
+        steady.output(Tick::new(0, DT), &[1.0], &mut y);
+        assert!((y[0] - (1.0 + db0)).abs() < 1e-12, "{}", y[0]);
+    }
+
+    /// `live`, built, driven by noise, then live parameter `slot` set to
+    /// `value`; `fresh`, built with that value, started from `live`'s state at
+    /// the change: from then on the two give the same samples, to the bit, and
+    /// `live`'s model is `fresh`'s; for one section the change moved the
+    /// output by (D′ − D)·u.
+    fn runs_on_as_built_fresh<T: Block + SectionFilter + Clone>(
+        mut live: T,
+        mut fresh: T,
+        slot: usize,
+        value: f64,
+    ) {
+        let ctx = BuildContext::new("f", DT, 0);
+        live.build(&ctx).unwrap();
+        fresh.build(&ctx).unwrap();
+        let m: usize = live.inputs().iter().map(|p| p.width).sum();
+        let mut rng = crate::rng::Rng::new(slot as u64 + 1);
+        let mut noise = |n: usize| -> Vec<Vec<f64>> {
+            (0..n)
+                .map(|_| (0..m).map(|_| rng.normal()).collect())
+                .collect()
+        };
+        run(&mut live, &noise(250));
+        let before = live.clone();
+        let d_before = live.lti().unwrap().d[(0, 0)];
+        live.set_live_param(slot, value);
+        let d_after = fresh.lti().unwrap().d[(0, 0)];
+        assert_eq!(live.lti(), fresh.lti());
+        let states: Vec<Vec<f64>> = live
+            .core_mut()
+            .unwrap()
+            .steppers
+            .iter()
+            .map(|s| s.state().to_vec())
+            .collect();
+        for (s, x) in fresh.core_mut().unwrap().steppers.iter_mut().zip(&states) {
+            s.set_state(x);
+        }
+        let u = noise(250);
+        let (y_live, y_fresh) = (run(&mut live, &u), run(&mut fresh, &u));
+        assert_eq!(y_live, y_fresh);
+        // One section (y = z₀ + b₀v): the output moved by (D′ − D)·u at the
+        // change; a cascade's C moves too.
+        if live.lti().unwrap().nstates() <= 2 {
+            let y_old = run(&mut before.clone(), &u[..1]);
+            for ((a, b), u) in y_live[0].iter().zip(&y_old[0]).zip(&u[0]) {
+                assert!((a - b - (d_after - d_before) * u).abs() < 1e-14, "{a} {b}");
+            }
+        }
+        assert_ne!(d_after, d_before);
+    }
+
+    #[test]
+    fn a_live_corner_change_runs_on_as_the_filter_built_with_it_from_the_same_state() {
+        let mut lp = LowPass::new(5, 300.0);
+        lp.width = 3;
+        let mut lp2 = LowPass::new(5, 90.0);
+        lp2.width = 3;
+        runs_on_as_built_fresh(lp, lp2, 0, 90.0);
+        let notch = || Notch::new(527.0, 0.1, 0.1);
+        for (slot, value) in [(0, 611.0), (1, 0.25), (2, 0.02)] {
+            let mut f = notch();
+            *f.live_slot(slot).unwrap() = value;
+            runs_on_as_built_fresh(notch(), f, slot, value);
+        }
+        let ll = || LeadLag::new(50.0, 450.0, 2.0);
+        for (slot, value) in [(0, 80.0), (1, 3000.0)] {
+            let mut f = ll();
+            *f.live_slot(slot).unwrap() = value;
+            runs_on_as_built_fresh(ll(), f, slot, value);
+        }
+    }
+
+    #[test]
+    fn live_corners_give_the_tustin_image_of_the_new_prototype() {
+        // Tustin with scale k maps the unit circle onto the imaginary axis:
+        // H(e^{jωT}) = N(j·k·tan(ωT/2)) at every ω, k = ω_w/tan(ω_wT/2)
+        // pre-warped at ω_w (2/T without). Checked on the model after the change.
+        let image = |b: &dyn Block, proto: &TransferFunction, prewarp_hz: Option<f64>| {
+            let model = b.lti().unwrap();
+            let k = prewarp_hz.map_or(2.0 / DT, |f| {
+                let w = 2.0 * PI * f;
+                w / (w * DT / 2.0).tan()
+            });
+            for f in [0.0, 3.0, 50.0, 333.0, 611.0, 1200.0, 1990.0] {
+                let w = 2.0 * PI * f;
+                let want = proto.eval(Complex::new(0.0, k * (w * DT / 2.0).tan()));
+                let got = model.freqresp_siso_at(w);
+                assert!(
+                    (got - want).norm() < 1e-11 * want.norm().max(1.0),
+                    "{f} Hz: {got} {want}"
+                );
+            }
+        };
+        let mut n = Notch::new(527.0, 0.1, 0.1);
+        n.build(&BuildContext::new("n", DT, 0)).unwrap();
+        n.set_live_param(0, 611.0);
+        n.set_live_param(1, 0.3);
+        n.set_live_param(2, 0.05);
+        let w0 = 2.0 * PI * 611.0;
+        let proto = TransferFunction {
+            num: vec![1.0, 2.0 * 0.05 * 0.3 * w0, w0 * w0],
+            den: vec![1.0, 2.0 * 0.3 * w0, w0 * w0],
+            dt: None,
+        };
+        image(&n, &proto, Some(611.0));
+        // Depth exactly at the new centre, unity DC gain.
+        let g = n.lti().unwrap().freqresp_siso_at(w0);
+        assert!((g - Complex::new(0.05, 0.0)).norm() < 1e-12, "{g}");
+        let mut ll = LeadLag::new(50.0, 450.0, 2.0);
+        ll.build(&BuildContext::new("l", DT, 0)).unwrap();
+        ll.set_live_param(0, 20.0);
+        ll.set_live_param(1, 900.0);
+        let (wz, wp) = (2.0 * PI * 20.0, 2.0 * PI * 900.0);
+        let proto = TransferFunction {
+            num: vec![2.0 / wz, 2.0],
+            den: vec![1.0 / wp, 1.0],
+            dt: None,
+        };
+        // The default pre-warp follows the corners: √(20·900) = 134.16 Hz.
+        image(&ll, &proto, Some((20.0f64 * 900.0).sqrt()));
+        // A pole at 1 MHz: the geometric mean √(20·10⁶) ≈ 4.5 kHz is above
+        // Nyquist, so plain Tustin.
+        ll.set_live_param(1, 1.0e6);
+        let proto = TransferFunction {
+            num: vec![2.0 / wz, 2.0],
+            den: vec![1.0 / (2.0 * PI * 1.0e6), 1.0],
+            dt: None,
+        };
+        image(&ll, &proto, None);
+        // The low-pass after a change: the digital Butterworth magnitude
+        // 1/√(1 + (tan(πfT)/tan(πf_cT))^{2n}).
+        let mut lp = LowPass::new(4, 200.0);
+        lp.build(&BuildContext::new("lp", DT, 0)).unwrap();
+        lp.set_live_param(0, 750.0);
+        let model = lp.lti().unwrap();
+        for f in [0.0, 50.0, 750.0, 1500.0] {
+            let r = (PI * f * DT).tan() / (PI * 750.0 * DT).tan();
+            let want = 1.0 / (1.0 + r.powi(8)).sqrt();
+            assert!((model.freqresp_siso_at(2.0 * PI * f).norm() - want).abs() < 1e-12);
+        }
+    }
+
+    /// `b`, built and run a little, given `bad` for live parameter `slot`:
+    /// its parameters, model and state stay as they were, and a copy built
+    /// with the value is refused naming the parameter.
+    fn refuses_live<T: Block + Clone + Serialize>(mut b: T, slot: usize, bad: f64) {
+        b.build(&BuildContext::new("b", DT, 0)).unwrap();
+        run(&mut b, &[vec![1.0], vec![-0.5]]);
+        let before = b.clone();
+        let params = serde_json::to_value(&b).unwrap();
+        b.set_live_param(slot, bad);
+        assert_eq!(serde_json::to_value(&b).unwrap(), params);
+        assert_eq!(b.lti(), before.lti());
+        let u = [vec![0.3], vec![0.7]];
+        assert_eq!(run(&mut b, &u), run(&mut before.clone(), &u));
+        if bad.is_finite() {
+            let field = b.live_params()[slot];
+            let mut p = params;
+            p[field] = serde_json::json!(bad);
+            p["type"] = serde_json::json!(b.typetag_name());
+            let mut copy: Box<dyn Block> = serde_json::from_value(p).unwrap();
+            let e = copy.build(&BuildContext::new("b", DT, 0)).unwrap_err();
+            assert_eq!(e.field, field, "{e}");
+        }
+    }
+
+    #[test]
+    fn a_corner_the_build_refuses_leaves_the_running_filter_as_it_was() {
+        // The sender refuses such a value first (it builds a copy of the block
+        // with it: `Block::build`'s checks and message); given one anyway, the
+        // block keeps its parameters, model and state.
+        for bad in [2000.0, 2500.0, 0.0, -1.0, f64::NAN] {
+            refuses_live(LowPass::new(3, 200.0), 0, bad);
+            refuses_live(Notch::new(527.0, 0.1, 0.1), 0, bad);
+        }
+        refuses_live(Notch::new(527.0, 0.1, 0.1), 1, -0.1);
+        refuses_live(Notch::new(527.0, 0.1, 0.1), 1, 0.0);
+        refuses_live(Notch::new(527.0, 0.1, 0.1), 2, -1.0);
+        for bad in [0.0, -3.0, f64::INFINITY] {
+            refuses_live(LeadLag::new(50.0, 450.0, 2.0), 0, bad);
+            refuses_live(LeadLag::new(50.0, 450.0, 2.0), 1, bad);
+        }
+    }
+
+    #[test]
+    fn a_live_corner_change_does_not_allocate() {
+        let mut lp = LowPass::new(MAX_LOW_PASS_ORDER, 200.0);
+        lp.width = 3;
+        let mut lp5 = LowPass::new(5, 200.0);
+        lp5.width = 2;
+        let blocks: [(Box<dyn Block>, &[f64]); 4] = [
+            (Box::new(lp), &[150.0]),
+            (Box::new(lp5), &[40.0]),
+            (Box::new(Notch::new(527.0, 0.1, 0.1)), &[600.0, 0.2, 0.3]),
+            (Box::new(LeadLag::new(50.0, 450.0, 2.0)), &[70.0, 5000.0]),
+        ];
+        for (mut b, values) in blocks {
+            b.build(&BuildContext::new("b", DT, 0)).unwrap();
+            let model = b.lti();
+            let info = allocation_counter::measure(|| {
+                for (slot, v) in values.iter().enumerate() {
+                    b.set_live_param(slot, *v);
+                }
+            });
+            assert_eq!(info.count_total, 0, "{}", b.typetag_name());
+            assert_ne!(b.lti(), model);
         }
     }
 
