@@ -1605,6 +1605,11 @@ mod tests {
         steady.set_live_param(0, f2);
         steady.output(Tick::new(0, DT), &[1.0], &mut y);
         assert!((y[0] - (1.0 + db0)).abs() < 1e-12, "{}", y[0]);
+        // … and the new filter, of unity DC gain, brings it back to u₀.
+        for _ in 0..4000 {
+            steady.output(Tick::new(0, DT), &[1.0], &mut y);
+        }
+        assert!((y[0] - 1.0).abs() < 1e-12, "{}", y[0]);
     }
 
     /// `live`, built, driven by noise, then live parameter `slot` set to
