@@ -3,7 +3,8 @@
 //!
 //! A block declares the parameters it can change between two ticks, keeping
 //! its state ([`Block::live_params`]: a
-//! `gain`'s `k`, a `pi`'s `kp` and `zero_hz`, a `pid`'s `kp`, `ki`, `kd`).
+//! `gain`'s `k`, a `pi`'s `kp` and `zero_hz`, a `pid`'s `kp`, `ki`, `kd`,
+//! a filter's corners — docs/realtime.md lists them).
 //! An update is resolved and judged **outside** the loop, by the
 //! [`ParamSender`] on the caller's thread:
 //!
@@ -377,7 +378,7 @@ impl ParamSender {
             .unwrap_or_default();
         let all = || {
             if self.table.is_empty() {
-                "this graph has none (gain `k`, pi `kp`/`zero_hz`, pid `kp`/`ki`/`kd` are live); restart the run with `--set`".to_string()
+                "this graph has none (live are: gain `k`, pi `kp`/`zero_hz`, pid `kp`/`ki`/`kd`, saturation `lower`/`upper`, low_pass `cutoff_hz`, notch `centre_hz`/`damping`/`depth`, lead_lag `zero_hz`/`pole_hz`); restart the run with `--set`".to_string()
             } else {
                 format!(
                     "live parameters of this graph: {}",

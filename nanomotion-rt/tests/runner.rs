@@ -855,6 +855,148 @@ fn the_stability_gate_refuses_an_update_that_destabilises_the_loop() {
     }
 }
 
+/// The quickstart loop with a 2nd-order Butterworth low-pass `lp` at
+/// `cutoff_hz` on the encoder's reading (encoder → lp → err), at 4 kHz.
+fn filtered_quickstart(cutoff_hz: f64) -> GraphSpec {
+    use nanomotion_core::blocks::linear::LowPass;
+    use nanomotion_core::graph::{BlockSpec, Connection};
+    let mut spec = GraphSpec::from_file_with_overrides("../examples/quickstart.yaml", &[]).unwrap();
+    spec.blocks.push(BlockSpec {
+        name: "lp".into(),
+        rate_hz: Some(4000.0),
+        block: Box::new(LowPass::new(2, cutoff_hz)),
+    });
+    let feedback = spec
+        .connections
+        .iter_mut()
+        .find(|c| c.from == "encoder.y" && c.to == "err.in1")
+        .unwrap();
+    feedback.to = "lp.u".into();
+    spec.connections.push(Connection {
+        from: "lp.y".into(),
+        to: "err.in1".into(),
+    });
+    spec
+}
+
+#[test]
+fn the_stability_gate_judges_a_filter_corner_changed_live() {
+    // A low-pass in the quickstart's feedback path: at 1 kHz it costs the
+    // loop a few degrees at its 20 Hz crossover; pulled down to 5 Hz its lag
+    // there destabilises the loop. The gate judges the loop with the new
+    // corner, as it judges a gain.
+    let require = filtered_quickstart(1000.0)
+        .require
+        .clone()
+        .unwrap_or_default();
+    let gate = |fc: f64| {
+        let (s, _) = filtered_quickstart(fc).build().unwrap();
+        nanomotion_core::gate::analyse(&s, &require)
+    };
+    let (start, unstable, stable) = (1000.0, 5.0, 150.0);
+    assert!(gate(start).passes());
+    let refused = gate(unstable);
+    assert!(!refused.passes() && gate(stable).passes());
+
+    let (sched, _) = filtered_quickstart(start).build().unwrap();
+    let cfg = RtConfig {
+        ticks: Some(200),
+        ..config(OverrunPolicy::Skip)
+    };
+    let mut r = RealtimeRunner::new(sched, NoDevice, cfg).unwrap();
+    let mut sender = r
+        .param_sender()
+        .unwrap()
+        .gated_spec(filtered_quickstart(start))
+        .unwrap();
+    assert!(sender.params().iter().any(|p| p.path == "lp.cutoff_hz"));
+    match sender.set("lp.cutoff_hz", unstable) {
+        Err(e @ LiveError::Gate { .. }) => {
+            let LiveError::Gate { ref reasons, .. } = e else {
+                unreachable!()
+            };
+            assert_eq!(*reasons, refused.failures());
+            assert!(
+                e.to_string()
+                    .starts_with("`lp.cutoff_hz` = 5 refused by the stability gate: "),
+                "{e}"
+            );
+        }
+        other => panic!("{other:?}"),
+    }
+    sender.set("lp.cutoff_hz", stable).unwrap();
+    let report = r.run(|_| {}).unwrap();
+    assert_eq!(report.param_updates, 1);
+    // The loop's filter is now the one built with that corner, to the bit.
+    let (fresh, _) = filtered_quickstart(stable).build().unwrap();
+    assert_eq!(r.scheduler().lti_of("lp"), fresh.lti_of("lp"));
+    assert_ne!(r.scheduler().lti_of("lp"), lp_model(start));
+}
+
+/// The model of `lp` built at `cutoff_hz`.
+fn lp_model(cutoff_hz: f64) -> Option<nanomotion_core::lti::StateSpace> {
+    let (s, _) = filtered_quickstart(cutoff_hz).build().unwrap();
+    s.lti_of("lp")
+}
+
+#[test]
+fn a_filter_corner_the_block_refuses_is_refused_with_its_reason() {
+    let (sched, _) = filtered_quickstart(1000.0).build().unwrap();
+    let cfg = RtConfig {
+        ticks: Some(200),
+        ..config(OverrunPolicy::Skip)
+    };
+    let mut r = RealtimeRunner::new(sched, NoDevice, cfg).unwrap();
+    let mut sender = r.param_sender().unwrap();
+    // The block's own build check, at its own rate (4 kHz: Nyquist 2 kHz).
+    let refused = |e: LiveError| match e {
+        LiveError::Refused { path, source, .. } => (
+            path,
+            source.field.clone(),
+            source.problem.clone(),
+            source.fix.clone(),
+        ),
+        other => panic!("{other:?}"),
+    };
+    let (path, field, problem, fix) = refused(sender.set("lp.cutoff_hz", 2000.0).unwrap_err());
+    assert_eq!(
+        (path.as_str(), field.as_str()),
+        ("lp.cutoff_hz", "cutoff_hz")
+    );
+    assert_eq!(
+        problem,
+        "2000 Hz is not below the Nyquist frequency 2000 Hz of the block's rate"
+    );
+    assert_eq!(fix, "lower the frequency or raise the block's rate");
+    let (_, field, problem, _) = refused(sender.set("lp.cutoff_hz", 0.0).unwrap_err());
+    assert_eq!(
+        (field.as_str(), problem.as_str()),
+        ("cutoff_hz", "is 0, must be > 0")
+    );
+    let (_, field, _, _) = refused(sender.set("lp.cutoff_hz", -50.0).unwrap_err());
+    assert_eq!(field, "cutoff_hz");
+    assert!(matches!(
+        sender.set("lp.cutoff_hz", f64::NAN),
+        Err(LiveError::NotANumber { .. })
+    ));
+    assert!(matches!(
+        sender.set_text("lp.cutoff_hz=fast"),
+        Err(LiveError::NotANumber { .. })
+    ));
+    // The order is not live: it would change the filter's states.
+    match sender.set("lp.order", 4.0) {
+        Err(e @ LiveError::Path { .. }) => assert!(
+            e.to_string().contains("`order` of block `lp` cannot change while the loop runs (its live parameters: cutoff_hz)"),
+            "{e}"
+        ),
+        other => panic!("{other:?}"),
+    }
+    // Nothing reached the loop.
+    sender.set("lp.cutoff_hz", 300.0).unwrap();
+    let report = r.run(|_| {}).unwrap();
+    assert_eq!(report.param_updates, 1);
+}
+
 #[test]
 fn a_device_named_wrongly_is_refused_before_anything_is_opened() {
     use nanomotion_rt::shm::{ShmError, watchdog_ms};
