@@ -27,15 +27,17 @@
 //! [`crate::doc`]). `#[declared_block]` on the `impl Block` then registers the type
 //! with `typetag` under that name and writes what the impl leaves out:
 //! `inputs`/`outputs` from `ports` when that string is a declaration
-//! ([`DeclaredPorts`]: `name[width] (unit) [scheduling]`, widths a number or a
-//! `usize` field, units SI symbols; an output `name[width] [unit of u]` is in
-//! the unit of input `u`), `role` from `role` ([`DeclaredBlock`]), and
+//! ([`DeclaredPorts`]: `name[width] (unit) [scheduling]`, widths a number, a
+//! `usize` field or a list's sum, units SI symbols; an output `name[width]
+//! [unit of u]` is in the unit of input `u`; a port `… if flag` exists when a
+//! `bool` field is true, a group `in{i}[width] for i in 0..count` repeats; see
+//! [`crate::doc`]), `role` from `role` ([`DeclaredBlock`]), and
 //! `build` as the declared checks (`check_params()`, then `check_at_rate(ctx.dt)`),
 //! and, for a block that writes no `output`, its [`Source`](crate::Source):
 //! `sample` at the tick's time.
 //! A block writes itself only what the declaration cannot say: its `output`, and
-//! ports whose number or units depend on parameters, a `build` that prepares more
-//! than checks.
+//! ports those forms cannot say (a width computed from several fields), a
+//! `build` that prepares more than checks.
 //!
 //! ```
 //! use nanomotion_core::{Block, BuildContext, Params, Role, Tick, declared_block};

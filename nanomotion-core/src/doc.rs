@@ -17,13 +17,23 @@
 //!   [`DeclaredBlock`](crate::block::DeclaredBlock) (the type name and role) and,
 //!   when `ports` is a declaration rather than prose,
 //!   [`DeclaredPorts`](crate::block::DeclaredPorts): `inputs -> outputs`, each a
-//!   comma-separated list of `name[width] (unit) [scheduling]` — `[width]` a whole
-//!   number or a `usize` field (default 1), `(unit)` an SI symbol the port
-//!   carries (`m`, `m/s²`, `V`, `count`), `[scheduling]` a scheduling input; an
+//!   comma-separated list of `name[width] (unit) "note" [scheduling]` — `[width]` a whole
+//!   number, a `usize` field or the sum of a list of widths (`[Σwidths]`; default 1),
+//!   `(unit)` an SI symbol the port carries (`m`, `m/s²`, `V`, `count`),
+//!   `"note"` words for the reader only (listed in parentheses: `pair "1 or 2"`),
+//!   `[scheduling]` a scheduling input; an
 //!   output may instead be `name[width] [unit of u]`, in the unit of input `u`
 //!   whatever it is when the graph is built ([`Port::unit_of_input`](crate::Port::unit_of_input)).
-//!   The markers are not shown in the listing. `#[declared_block]` on the `impl
-//!   Block` turns these into the block's methods (see [`crate::block`]).
+//!   A port may end in `if flag` (it exists when the `bool` field `flag` is
+//!   true: `amplitude (V) if amplitude_input`), or be a repeated group, `{i}` in
+//!   its name: `in{i}[width] for i in 0..factors` (a `usize` field) or `for i in
+//!   0..len(signs)` (a list's entries, a string's characters), with `[widths[i]]`
+//!   entry `i` of the list counted (`mux`: `in{i}[widths[i]] for i in
+//!   0..len(widths) -> y[Σwidths]`; `sum`'s output is `[unit of in0]`, the
+//!   group's first). In a `#[serde(transparent)]` block the names are the
+//!   wrapped struct's fields. The markers are not shown in the listing.
+//!   `#[declared_block]` on the `impl Block` turns these into the block's
+//!   methods (see [`crate::block`]).
 //!
 //! | `#[param(…)]` | check | schema |
 //! |---|---|---|
@@ -546,6 +556,33 @@ pub mod __derive {
 
     pub fn number() -> Value {
         json!({ "type": "number" })
+    }
+
+    /// What a repeated port group `for i in 0..len(list)` counts: the
+    /// entries of a list, the characters of a string (one input of `sum` per
+    /// sign).
+    pub trait PortCount {
+        /// How many ports.
+        fn port_count(&self) -> usize;
+    }
+    impl<T> PortCount for Vec<T> {
+        fn port_count(&self) -> usize {
+            self.len()
+        }
+    }
+    impl<T, const N: usize> PortCount for [T; N] {
+        fn port_count(&self) -> usize {
+            N
+        }
+    }
+    impl PortCount for String {
+        fn port_count(&self) -> usize {
+            self.chars().count()
+        }
+    }
+    /// The ports of a group `for i in 0..len(list)`.
+    pub fn port_count(list: &impl PortCount) -> usize {
+        list.port_count()
     }
     pub fn unsigned() -> Value {
         json!({ "type": "integer", "minimum": 0 })

@@ -1021,18 +1021,35 @@ fn expand(input: &DeriveInput) -> syn::Result<TokenStream2> {
             let ports = b.ports.unwrap_or_default();
             let summary = summary_of(&input.attrs, &tag);
             let shown = ports::shown(&ports);
-            let fields: Vec<String> = match &input.data {
-                Data::Struct(s) => s
-                    .fields
-                    .iter()
-                    .filter_map(|f| f.ident.as_ref().map(|i| i.to_string()))
-                    .collect(),
-                _ => Vec::new(),
+            let fields = match &input.data {
+                Data::Struct(s) => ports::Fields {
+                    names: s
+                        .fields
+                        .iter()
+                        .filter_map(|f| f.ident.as_ref().map(|i| i.to_string()))
+                        .collect(),
+                    // transparent: the ports name the wrapped struct's fields
+                    wrapped: if container.transparent {
+                        s.fields
+                            .iter()
+                            .find(|f| serde_field(&f.attrs).is_ok_and(|s| !s.skip))
+                            .and_then(|f| f.ident.as_ref().map(|i| i.to_string()))
+                    } else {
+                        None
+                    },
+                },
+                _ => ports::Fields {
+                    names: Vec::new(),
+                    wrapped: None,
+                },
             };
             let blk = quote!(::nanomotion_core::block);
             let declared_ports = match ports::declared(&ports, &fields) {
                 Ok(Some(d)) => {
-                    let (ins, outs) = (ports::port_list(&d.inputs), ports::port_list(&d.outputs));
+                    let (ins, outs) = (
+                        ports::port_list(&d.inputs, &fields),
+                        ports::port_list(&d.outputs, &fields),
+                    );
                     quote!(impl #blk::DeclaredPorts for #name {
                         fn declared_inputs(&self) -> ::std::vec::Vec<::nanomotion_core::Port> {
                             #ins
