@@ -20,7 +20,7 @@
 use crate::block::check;
 use crate::doc::Params;
 use crate::lti::StateSpace;
-use crate::{Block, BuildContext, ParamError, Port, Tick, declared_block};
+use crate::{Block, BuildContext, ParamError, Tick, declared_block};
 use nalgebra::DMatrix;
 use serde::{Deserialize, Serialize};
 
@@ -45,15 +45,6 @@ pub(crate) fn static_ss(d: DMatrix<f64>, dt: f64) -> StateSpace {
     }
 }
 
-/// Ports `prefix0`, `prefix1`, ... with the given widths.
-fn numbered_ports(prefix: &str, widths: impl IntoIterator<Item = usize>) -> Vec<Port> {
-    widths
-        .into_iter()
-        .enumerate()
-        .map(|(i, w)| Port::new(format!("{prefix}{i}"), w))
-        .collect()
-}
-
 // ---------------------------------------------------------------------------------
 // gain
 // ---------------------------------------------------------------------------------
@@ -61,7 +52,7 @@ fn numbered_ports(prefix: &str, widths: impl IntoIterator<Item = usize>) -> Vec<
 /// `gain`: y = k·u, element-wise on a vector of width `n`.
 #[derive(Debug, Clone, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
-#[block(type_name = "gain", role = Math, ports = "u[n] -> y[n]")]
+#[block(type_name = "gain", role = Math, ports = "u[width] -> y[width]")]
 pub struct Gain {
     /// Gain k (unit of y per unit of u).
     #[param(finite)]
@@ -97,12 +88,6 @@ impl Gain {
 
 #[declared_block]
 impl Block for Gain {
-    fn inputs(&self) -> Vec<Port> {
-        vec![Port::new("u", self.width)]
-    }
-    fn outputs(&self) -> Vec<Port> {
-        vec![Port::new("y", self.width)]
-    }
     fn build(&mut self, ctx: &BuildContext) -> Result<(), ParamError> {
         self.check_params()?;
         self.dt = ctx.dt;
@@ -135,7 +120,11 @@ impl Block for Gain {
 /// y = in0 − in1, the error r − y of a feedback loop).
 #[derive(Debug, Clone, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
-#[block(type_name = "sum", role = Math, ports = "in0[n], in1[n], ... -> y[n]")]
+#[block(
+    type_name = "sum",
+    role = Math,
+    ports = "in{i}[width] for i in 0..len(signs) -> y[width] [unit of in0]"
+)]
 pub struct Sum {
     /// One `+` or `-` per input, in port order (`in0`, `in1`, ...).
     #[param(schema = "signs_schema")]
@@ -232,12 +221,6 @@ impl Sum {
 
 #[declared_block]
 impl Block for Sum {
-    fn inputs(&self) -> Vec<Port> {
-        numbered_ports("in", self.signs.chars().map(|_| self.width))
-    }
-    fn outputs(&self) -> Vec<Port> {
-        vec![Port::new("y", self.width).unit_of_input(0)]
-    }
     fn build(&mut self, ctx: &BuildContext) -> Result<(), ParamError> {
         self.parse()?;
         self.dt = ctx.dt;
@@ -265,7 +248,11 @@ impl Block for Sum {
 /// `product`: element-wise product y = in0·in1·…  of `factors` inputs of width `n`.
 #[derive(Debug, Clone, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
-#[block(type_name = "product", role = Math, ports = "in0[n], in1[n], ... -> y[n]")]
+#[block(
+    type_name = "product",
+    role = Math,
+    ports = "in{i}[width] for i in 0..factors -> y[width]"
+)]
 pub struct Product {
     /// Number of inputs multiplied.
     #[serde(default = "two")]
@@ -295,12 +282,6 @@ impl Product {
 
 #[declared_block]
 impl Block for Product {
-    fn inputs(&self) -> Vec<Port> {
-        numbered_ports("in", (0..self.factors).map(|_| self.width))
-    }
-    fn outputs(&self) -> Vec<Port> {
-        vec![Port::new("y", self.width)]
-    }
     fn output(&mut self, _tick: Tick, u: &[f64], y: &mut [f64]) {
         self.apply(u, y);
     }
@@ -323,7 +304,11 @@ impl Block for Product {
 /// `[sharpness]` when it is set.
 #[derive(Debug, Clone, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
-#[block(type_name = "saturation", role = Math, ports = "u[n] -> y[n]")]
+#[block(
+    type_name = "saturation",
+    role = Math,
+    ports = "u[width] -> y[width] [unit of u]"
+)]
 pub struct Saturation {
     /// Lower limit (unit of u).
     #[param(at_most = upper)]
@@ -388,12 +373,6 @@ impl Saturation {
 
 #[declared_block]
 impl Block for Saturation {
-    fn inputs(&self) -> Vec<Port> {
-        vec![Port::new("u", self.width)]
-    }
-    fn outputs(&self) -> Vec<Port> {
-        vec![Port::new("y", self.width).unit_of_input(0)]
-    }
     fn output(&mut self, _tick: Tick, u: &[f64], y: &mut [f64]) {
         self.apply(u, y);
     }
@@ -473,7 +452,11 @@ impl crate::Tunable for Saturation {
 /// of u's move, in its direction.
 #[derive(Debug, Clone, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
-#[block(type_name = "deadzone", role = Math, ports = "u[n] -> y[n]")]
+#[block(
+    type_name = "deadzone",
+    role = Math,
+    ports = "u[width] -> y[width] [unit of u]"
+)]
 pub struct Deadzone {
     /// Start of the dead zone (unit of u).
     #[param(at_most = upper)]
@@ -511,12 +494,6 @@ impl Deadzone {
 
 #[declared_block]
 impl Block for Deadzone {
-    fn inputs(&self) -> Vec<Port> {
-        vec![Port::new("u", self.width)]
-    }
-    fn outputs(&self) -> Vec<Port> {
-        vec![Port::new("y", self.width).unit_of_input(0)]
-    }
     fn output(&mut self, _tick: Tick, u: &[f64], y: &mut [f64]) {
         for (yi, &ui) in y.iter_mut().zip(u) {
             *yi = self.map(ui);
@@ -559,7 +536,11 @@ fn identity_ss(widths: &[usize], dt: f64) -> StateSpace {
 /// vector `y`.
 #[derive(Debug, Clone, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
-#[block(type_name = "mux", role = Math, ports = "in0[w0], in1[w1], ... -> y[Σw]")]
+#[block(
+    type_name = "mux",
+    role = Math,
+    ports = "in{i}[widths[i]] for i in 0..len(widths) -> y[Σwidths]"
+)]
 pub struct Mux {
     /// Width of each input, in port order, e.g. [1, 1, 1].
     #[param(len(1, MAX_PORTS), width, hint = "one width per port, e.g. [1, 1]")]
@@ -577,12 +558,6 @@ impl Mux {
 
 #[declared_block]
 impl Block for Mux {
-    fn inputs(&self) -> Vec<Port> {
-        numbered_ports("in", self.widths.iter().copied())
-    }
-    fn outputs(&self) -> Vec<Port> {
-        vec![Port::new("y", self.widths.iter().sum())]
-    }
     fn build(&mut self, ctx: &BuildContext) -> Result<(), ParamError> {
         self.check_params()?;
         check_total_width(&self.widths)?;
@@ -600,7 +575,11 @@ impl Block for Mux {
 /// `demux`: splits the input `u` into outputs `y0`, `y1`, ... (widths from `widths`).
 #[derive(Debug, Clone, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
-#[block(type_name = "demux", role = Math, ports = "u[Σw] -> y0[w0], y1[w1], ...")]
+#[block(
+    type_name = "demux",
+    role = Math,
+    ports = "u[Σwidths] -> y{i}[widths[i]] for i in 0..len(widths)"
+)]
 pub struct Demux {
     /// Width of each output, in port order, e.g. [1, 1, 1].
     #[param(len(1, MAX_PORTS), width, hint = "one width per port, e.g. [1, 1]")]
@@ -618,12 +597,6 @@ impl Demux {
 
 #[declared_block]
 impl Block for Demux {
-    fn inputs(&self) -> Vec<Port> {
-        vec![Port::new("u", self.widths.iter().sum())]
-    }
-    fn outputs(&self) -> Vec<Port> {
-        numbered_ports("y", self.widths.iter().copied())
-    }
     fn build(&mut self, ctx: &BuildContext) -> Result<(), ParamError> {
         self.check_params()?;
         check_total_width(&self.widths)?;
@@ -641,6 +614,7 @@ impl Block for Demux {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::Port;
 
     fn ctx() -> BuildContext {
         BuildContext::new("t", 1e-3, 0)
@@ -826,6 +800,45 @@ mod tests {
         assert_eq!(
             Demux::new(vec![1, 0]).build(&ctx()).unwrap_err().field,
             "widths[1]"
+        );
+    }
+
+    /// The ports each block declares: names, widths from `width`/`widths`,
+    /// one input per sign or factor, and the unit passed through where the
+    /// output is in its input's unit.
+    #[test]
+    fn declared_ports_follow_the_parameters() {
+        let same = |n: usize| (Port::new("u", n), Port::new("y", n).unit_of_input(0));
+        let g = Gain::with_width(2.0, 3);
+        assert_eq!(
+            (g.inputs(), g.outputs()),
+            (vec![Port::new("u", 3)], vec![Port::new("y", 3)])
+        );
+        let mut sat = Saturation::new(0.0, 1.0);
+        sat.width = 2;
+        let mut dz = Deadzone::new(0.0, 1.0);
+        dz.width = 2;
+        for b in [&sat as &dyn Block, &dz] {
+            let (u, y) = same(2);
+            assert_eq!((b.inputs(), b.outputs()), (vec![u], vec![y]));
+        }
+        let s = Sum::with_width("+-+", 2).unwrap();
+        let ins: Vec<Port> = (0..3).map(|i| Port::new(format!("in{i}"), 2)).collect();
+        assert_eq!(s.inputs(), ins);
+        assert_eq!(s.outputs(), vec![Port::new("y", 2).unit_of_input(0)]);
+        let p = Product::new(3, 2);
+        assert_eq!(p.inputs(), ins);
+        assert_eq!(p.outputs(), vec![Port::new("y", 2)]);
+        let m = Mux::new(vec![1, 4]);
+        assert_eq!(m.inputs(), vec![Port::new("in0", 1), Port::new("in1", 4)]);
+        let d = Demux::new(vec![1, 4]);
+        assert_eq!(d.inputs(), vec![Port::new("u", 5)]);
+        // unchecked widths that overflow a sum give no panic (build refuses them)
+        let huge = Mux::new(vec![usize::MAX, 2]);
+        assert_eq!(huge.outputs()[0].width, usize::MAX);
+        assert_eq!(
+            Demux::new(vec![usize::MAX, 2]).inputs()[0].width,
+            usize::MAX
         );
     }
 

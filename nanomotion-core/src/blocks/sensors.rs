@@ -17,7 +17,7 @@
 
 use crate::block::check;
 use crate::rng::Rng;
-use crate::{Block, BuildContext, ParamError, Params, Port, Sensor, Tick, Tunable, declared_block};
+use crate::{Block, BuildContext, ParamError, Params, Sensor, Tick, Tunable, declared_block};
 use serde::{Deserialize, Serialize};
 
 /// Resolution of the metrological AFM's laser interferometers (m), Ch. 6.
@@ -49,7 +49,11 @@ fn round() -> Rounding {
 /// [`Tunable`] parameter vector: `[lsb, offset]`.
 #[derive(Debug, Clone, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
-#[block(type_name = "quantizer", role = Sensor, ports = "u[n] -> y[n]")]
+#[block(
+    type_name = "quantizer",
+    role = Sensor,
+    ports = "u[width] -> y[width] [unit of u]"
+)]
 pub struct Quantizer {
     /// Resolution: one least-significant bit (unit of u, e.g. 0.15e-9 m for the
     /// interferometer).
@@ -139,12 +143,6 @@ impl Sensor for Quantizer {
 
 #[declared_block]
 impl Block for Quantizer {
-    fn inputs(&self) -> Vec<Port> {
-        vec![Port::new("u", self.width)]
-    }
-    fn outputs(&self) -> Vec<Port> {
-        vec![Port::new("y", self.width).unit_of_input(0)]
-    }
     fn output(&mut self, tick: Tick, u: &[f64], y: &mut [f64]) {
         self.measure(tick.t, u, y);
     }
@@ -189,7 +187,11 @@ fn placeholder_rng() -> Rng {
 /// bits), independent per channel.
 #[derive(Debug, Clone, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
-#[block(type_name = "measurement_noise", role = Sensor, ports = "u[n] -> y[n]")]
+#[block(
+    type_name = "measurement_noise",
+    role = Sensor,
+    ports = "u[width] -> y[width] [unit of u]"
+)]
 pub struct MeasurementNoise {
     /// Distribution of w.
     #[serde(default = "gaussian")]
@@ -282,12 +284,6 @@ impl Sensor for MeasurementNoise {
 
 #[declared_block]
 impl Block for MeasurementNoise {
-    fn inputs(&self) -> Vec<Port> {
-        vec![Port::new("u", self.width)]
-    }
-    fn outputs(&self) -> Vec<Port> {
-        vec![Port::new("y", self.width).unit_of_input(0)]
-    }
     fn build(&mut self, ctx: &BuildContext) -> Result<(), ParamError> {
         self.prepare(ctx.seed)
     }
