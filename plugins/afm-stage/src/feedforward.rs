@@ -9,7 +9,7 @@
 use crate::error::{AfmError, finite};
 use crate::hysteresis::{Branch, Direction, ExtendedCh};
 use nanomotion_core::Params;
-use nanomotion_core::{Block, BuildContext, Controller, ParamError, Port, Tick, declared_block};
+use nanomotion_core::{Block, BuildContext, Controller, ParamError, Tick, declared_block};
 use serde::{Deserialize, Serialize};
 
 /// Solve for the voltage range [V_m, V_M] on which branch `dir` of `model` runs from
@@ -253,7 +253,11 @@ pub enum FfRange {
 /// and `state` = [direction (+1 trace, −1 retrace), out-of-range samples so far].
 #[derive(Debug, Clone, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
-#[block(type_name = "hysteresis_feedforward", role = Controller, ports = "r (m) -> v (V), state[2] (direction ±1, out-of-range count)")]
+#[block(
+    type_name = "hysteresis_feedforward",
+    role = Controller,
+    ports = "r (m) -> v (V), state[2] \"direction ±1, out-of-range count\""
+)]
 pub struct HysteresisFeedForwardBlock {
     /// The identified model (6.4): `trace` and `retrace` parameter sets (µm, V).
     /// Each set: {a_um_per_v, b_um_per_v, c_per_v, u_um_per_v, alpha_per_v, d_um_per_v2,
@@ -298,12 +302,6 @@ impl Controller for HysteresisFeedForwardBlock {
 
 #[declared_block]
 impl Block for HysteresisFeedForwardBlock {
-    fn inputs(&self) -> Vec<Port> {
-        vec![Port::new("r", 1)]
-    }
-    fn outputs(&self) -> Vec<Port> {
-        vec![Port::new("v", 1), Port::new("state", 2)]
-    }
     fn build(&mut self, _ctx: &BuildContext) -> Result<(), ParamError> {
         self.check_params()?;
         self.model.trace.validate("model.trace.")?;

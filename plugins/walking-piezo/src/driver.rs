@@ -41,7 +41,7 @@
 
 use nanomotion_core::Params;
 use nanomotion_core::block::check;
-use nanomotion_core::{Actuator, Block, BuildContext, ParamError, Port, Tick, declared_block};
+use nanomotion_core::{Actuator, Block, BuildContext, ParamError, Tick, declared_block};
 use serde::{Deserialize, Serialize};
 use std::f64::consts::{FRAC_PI_2, PI, TAU};
 use thiserror::Error;
@@ -506,7 +506,11 @@ impl Actuator for WaveformDriver {
 /// outside [0, V_max]; the last valid f_α, A, φ are then used).
 #[derive(Debug, Clone, Default, Serialize, Deserialize, Params)]
 #[serde(transparent)]
-#[block(type_name = "walking_piezo_driver", role = Actuator, ports = "f_alpha (Hz) [, amplitude (V)] [, phase (rad)] -> u[4] (V), alpha (rad), faults")]
+#[block(
+    type_name = "walking_piezo_driver",
+    role = Actuator,
+    ports = "f_alpha (Hz), amplitude (V) if amplitude_input, phase (rad) if phase_input -> u[4] (V), alpha (rad), faults"
+)]
 pub struct WaveformDriverBlock {
     /// The parameters.
     pub params: DriverParams,
@@ -534,23 +538,6 @@ impl WaveformDriverBlock {
 
 #[declared_block]
 impl Block for WaveformDriverBlock {
-    fn inputs(&self) -> Vec<Port> {
-        let mut v = vec![Port::new("f_alpha", 1)];
-        if self.params.amplitude_input {
-            v.push(Port::new("amplitude", 1));
-        }
-        if self.params.phase_input {
-            v.push(Port::new("phase", 1));
-        }
-        v
-    }
-    fn outputs(&self) -> Vec<Port> {
-        vec![
-            Port::new("u", 4),
-            Port::new("alpha", 1),
-            Port::new("faults", 1),
-        ]
-    }
     fn build(&mut self, ctx: &BuildContext) -> Result<(), ParamError> {
         self.driver = Some(WaveformDriver::new(self.params.clone(), ctx.dt)?);
         self.last = [0.0, self.params.amplitude_v, self.params.phase_rad];
@@ -592,7 +579,7 @@ impl Block for WaveformDriverBlock {
 mod tests {
     use super::*;
     use crate::SinusoidalWaveform;
-    use nanomotion_core::Role;
+    use nanomotion_core::{Port, Role};
 
     const DT: f64 = 2.5e-4;
 
@@ -912,9 +899,9 @@ mod tests {
         assert_eq!(
             b.inputs(),
             vec![
-                Port::new("f_alpha", 1),
-                Port::new("amplitude", 1),
-                Port::new("phase", 1)
+                Port::new("f_alpha", 1).with_unit("Hz"),
+                Port::new("amplitude", 1).with_unit("V"),
+                Port::new("phase", 1).with_unit("rad")
             ]
         );
         assert_eq!(b.role(), Role::Actuator);

@@ -17,7 +17,7 @@ use nalgebra::DMatrix;
 use nanomotion_core::Params;
 use nanomotion_core::block::check;
 use nanomotion_core::lti::{C2dMethod, LtiError, SsStepper, StateSpace, series};
-use nanomotion_core::{Block, BuildContext, ParamError, Plant, Port, Tick, declared_block};
+use nanomotion_core::{Block, BuildContext, ParamError, Plant, Tick, declared_block};
 use serde::{Deserialize, Serialize};
 use std::f64::consts::PI;
 
@@ -189,7 +189,11 @@ impl Plant for LinearStage {
 /// Graph block `walking_piezo_linear`: the model (2.7), f_α (Hz) → x_s (m), ẋ_s (m/s).
 #[derive(Debug, Clone, Default, Serialize, Deserialize, Params)]
 #[serde(transparent)]
-#[block(type_name = "walking_piezo_linear", role = Plant, ports = "f_alpha[1] (Hz) -> x_s[1] (m), v_s[1] (m/s), faults[1] (count of non-finite inputs)")]
+#[block(
+    type_name = "walking_piezo_linear",
+    role = Plant,
+    ports = "f_alpha[1] (Hz) -> x_s[1] (m), v_s[1] (m/s), faults[1] (count) \"of non-finite inputs\""
+)]
 pub struct LinearStageBlock {
     /// The parameters.
     pub params: LinearStageParams,
@@ -212,16 +216,6 @@ impl LinearStageBlock {
 
 #[declared_block]
 impl Block for LinearStageBlock {
-    fn inputs(&self) -> Vec<Port> {
-        vec![Port::new("f_alpha", 1)]
-    }
-    fn outputs(&self) -> Vec<Port> {
-        vec![
-            Port::new("x_s", 1),
-            Port::new("v_s", 1),
-            Port::new("faults", 1),
-        ]
-    }
     fn direct_feedthrough(&self) -> bool {
         false
     }
@@ -409,7 +403,11 @@ impl Plant for SwitchedStage {
 /// u (4, V) → x_s (m), x_p (m), pair (1 or 2).
 #[derive(Debug, Clone, Default, Serialize, Deserialize, Params)]
 #[serde(transparent)]
-#[block(type_name = "walking_piezo_switched", role = Plant, ports = "u[4] (V) -> x_s[1] (m), x_p[1] (m), pair[1] (1 or 2), faults[1]")]
+#[block(
+    type_name = "walking_piezo_switched",
+    role = Plant,
+    ports = "u[4] (V) -> x_s[1] (m), x_p[1] (m), pair[1] \"1 or 2\", faults[1]"
+)]
 pub struct SwitchedStageBlock {
     /// The parameters.
     pub params: SwitchedStageParams,
@@ -421,17 +419,6 @@ pub struct SwitchedStageBlock {
 
 #[declared_block]
 impl Block for SwitchedStageBlock {
-    fn inputs(&self) -> Vec<Port> {
-        vec![Port::new("u", 4)]
-    }
-    fn outputs(&self) -> Vec<Port> {
-        vec![
-            Port::new("x_s", 1),
-            Port::new("x_p", 1),
-            Port::new("pair", 1),
-            Port::new("faults", 1),
-        ]
-    }
     fn direct_feedthrough(&self) -> bool {
         false
     }
@@ -760,7 +747,11 @@ impl Plant for FittedStage {
 /// Graph block `walking_piezo_fitted`: the Ch. 5 model (5.31), f_α (Hz) → x_s (m).
 #[derive(Debug, Clone, Default, Serialize, Deserialize, Params)]
 #[serde(transparent)]
-#[block(type_name = "walking_piezo_fitted", role = Plant, ports = "f_alpha[1] (Hz) -> x_s[1] (m), faults[1] (count of non-finite inputs)")]
+#[block(
+    type_name = "walking_piezo_fitted",
+    role = Plant,
+    ports = "f_alpha[1] (Hz) -> x_s[1] (m), faults[1] (count) \"of non-finite inputs\""
+)]
 pub struct FittedStageBlock {
     /// The parameters.
     pub params: FittedStageParams,
@@ -783,15 +774,6 @@ impl FittedStageBlock {
 
 #[declared_block]
 impl Block for FittedStageBlock {
-    fn inputs(&self) -> Vec<Port> {
-        vec![Port::new("f_alpha", 1)]
-    }
-    fn outputs(&self) -> Vec<Port> {
-        vec![
-            Port::new("x_s", 1).with_unit("m"),
-            Port::new("faults", 1).with_unit("count"),
-        ]
-    }
     fn direct_feedthrough(&self) -> bool {
         false
     }
