@@ -120,11 +120,7 @@ impl Block for Gain {
 /// y = in0 − in1, the error r − y of a feedback loop).
 #[derive(Debug, Clone, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
-#[block(
-    type_name = "sum",
-    role = Math,
-    ports = "in{i}[width] for i in 0..len(signs) -> y[width] [unit of in0]"
-)]
+#[block(type_name = "sum", role = Math, ports = "in{i}[width] for i in 0..len(signs) -> y[width] [unit of in0]")]
 pub struct Sum {
     /// One `+` or `-` per input, in port order (`in0`, `in1`, ...).
     #[param(schema = "signs_schema")]
@@ -248,11 +244,7 @@ impl Block for Sum {
 /// `product`: element-wise product y = in0·in1·…  of `factors` inputs of width `n`.
 #[derive(Debug, Clone, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
-#[block(
-    type_name = "product",
-    role = Math,
-    ports = "in{i}[width] for i in 0..factors -> y[width]"
-)]
+#[block(type_name = "product", role = Math, ports = "in{i}[width] for i in 0..factors -> y[width]")]
 pub struct Product {
     /// Number of inputs multiplied.
     #[serde(default = "two")]
@@ -304,11 +296,7 @@ impl Block for Product {
 /// `[sharpness]` when it is set.
 #[derive(Debug, Clone, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
-#[block(
-    type_name = "saturation",
-    role = Math,
-    ports = "u[width] -> y[width] [unit of u]"
-)]
+#[block(type_name = "saturation", role = Math, ports = "u[width] -> y[width] [unit of u]")]
 pub struct Saturation {
     /// Lower limit (unit of u).
     #[param(at_most = upper)]
@@ -452,11 +440,7 @@ impl crate::Tunable for Saturation {
 /// of u's move, in its direction.
 #[derive(Debug, Clone, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
-#[block(
-    type_name = "deadzone",
-    role = Math,
-    ports = "u[width] -> y[width] [unit of u]"
-)]
+#[block(type_name = "deadzone", role = Math, ports = "u[width] -> y[width] [unit of u]")]
 pub struct Deadzone {
     /// Start of the dead zone (unit of u).
     #[param(at_most = upper)]
@@ -536,11 +520,7 @@ fn identity_ss(widths: &[usize], dt: f64) -> StateSpace {
 /// vector `y`.
 #[derive(Debug, Clone, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
-#[block(
-    type_name = "mux",
-    role = Math,
-    ports = "in{i}[widths[i]] for i in 0..len(widths) -> y[Σwidths]"
-)]
+#[block(type_name = "mux", role = Math, ports = "in{i}[widths[i]] for i in 0..len(widths) -> y[Σwidths]")]
 pub struct Mux {
     /// Width of each input, in port order, e.g. [1, 1, 1].
     #[param(len(1, MAX_PORTS), width, hint = "one width per port, e.g. [1, 1]")]
@@ -575,11 +555,7 @@ impl Block for Mux {
 /// `demux`: splits the input `u` into outputs `y0`, `y1`, ... (widths from `widths`).
 #[derive(Debug, Clone, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
-#[block(
-    type_name = "demux",
-    role = Math,
-    ports = "u[Σwidths] -> y{i}[widths[i]] for i in 0..len(widths)"
-)]
+#[block(type_name = "demux", role = Math, ports = "u[Σwidths] -> y{i}[widths[i]] for i in 0..len(widths)")]
 pub struct Demux {
     /// Width of each output, in port order, e.g. [1, 1, 1].
     #[param(len(1, MAX_PORTS), width, hint = "one width per port, e.g. [1, 1]")]

@@ -49,11 +49,7 @@ fn round() -> Rounding {
 /// [`Tunable`] parameter vector: `[lsb, offset]`.
 #[derive(Debug, Clone, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
-#[block(
-    type_name = "quantizer",
-    role = Sensor,
-    ports = "u[width] -> y[width] [unit of u]"
-)]
+#[block(type_name = "quantizer", role = Sensor, ports = "u[width] -> y[width] [unit of u]")]
 pub struct Quantizer {
     /// Resolution: one least-significant bit (unit of u, e.g. 0.15e-9 m for the
     /// interferometer).
@@ -187,11 +183,7 @@ fn placeholder_rng() -> Rng {
 /// bits), independent per channel.
 #[derive(Debug, Clone, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
-#[block(
-    type_name = "measurement_noise",
-    role = Sensor,
-    ports = "u[width] -> y[width] [unit of u]"
-)]
+#[block(type_name = "measurement_noise", role = Sensor, ports = "u[width] -> y[width] [unit of u]")]
 pub struct MeasurementNoise {
     /// Distribution of w.
     #[serde(default = "gaussian")]

@@ -253,11 +253,7 @@ pub enum FfRange {
 /// and `state` = [direction (+1 trace, −1 retrace), out-of-range samples so far].
 #[derive(Debug, Clone, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
-#[block(
-    type_name = "hysteresis_feedforward",
-    role = Controller,
-    ports = "r (m) -> v (V), state[2] \"direction ±1, out-of-range count\""
-)]
+#[block(type_name = "hysteresis_feedforward", role = Controller, ports = "r (m) -> v (V), state[2] \"direction ±1, out-of-range count\"")]
 pub struct HysteresisFeedForwardBlock {
     /// The identified model (6.4): `trace` and `retrace` parameter sets (µm, V).
     /// Each set: {a_um_per_v, b_um_per_v, c_per_v, u_um_per_v, alpha_per_v, d_um_per_v2,

@@ -506,11 +506,7 @@ impl Actuator for WaveformDriver {
 /// outside [0, V_max]; the last valid f_α, A, φ are then used).
 #[derive(Debug, Clone, Default, Serialize, Deserialize, Params)]
 #[serde(transparent)]
-#[block(
-    type_name = "walking_piezo_driver",
-    role = Actuator,
-    ports = "f_alpha (Hz), amplitude (V) if amplitude_input, phase (rad) if phase_input -> u[4] (V), alpha (rad), faults"
-)]
+#[block(type_name = "walking_piezo_driver", role = Actuator, ports = "f_alpha (Hz), amplitude (V) if amplitude_input, phase (rad) if phase_input -> u[4] (V), alpha (rad), faults")]
 pub struct WaveformDriverBlock {
     /// The parameters.
     pub params: DriverParams,

@@ -189,11 +189,7 @@ impl Plant for LinearStage {
 /// Graph block `walking_piezo_linear`: the model (2.7), f_α (Hz) → x_s (m), ẋ_s (m/s).
 #[derive(Debug, Clone, Default, Serialize, Deserialize, Params)]
 #[serde(transparent)]
-#[block(
-    type_name = "walking_piezo_linear",
-    role = Plant,
-    ports = "f_alpha[1] (Hz) -> x_s[1] (m), v_s[1] (m/s), faults[1] (count) \"of non-finite inputs\""
-)]
+#[block(type_name = "walking_piezo_linear", role = Plant, ports = "f_alpha[1] (Hz) -> x_s[1] (m), v_s[1] (m/s), faults[1] (count) \"of non-finite inputs\"")]
 pub struct LinearStageBlock {
     /// The parameters.
     pub params: LinearStageParams,
@@ -403,11 +399,7 @@ impl Plant for SwitchedStage {
 /// u (4, V) → x_s (m), x_p (m), pair (1 or 2).
 #[derive(Debug, Clone, Default, Serialize, Deserialize, Params)]
 #[serde(transparent)]
-#[block(
-    type_name = "walking_piezo_switched",
-    role = Plant,
-    ports = "u[4] (V) -> x_s[1] (m), x_p[1] (m), pair[1] \"1 or 2\", faults[1]"
-)]
+#[block(type_name = "walking_piezo_switched", role = Plant, ports = "u[4] (V) -> x_s[1] (m), x_p[1] (m), pair[1] \"1 or 2\", faults[1]")]
 pub struct SwitchedStageBlock {
     /// The parameters.
     pub params: SwitchedStageParams,
@@ -747,11 +739,7 @@ impl Plant for FittedStage {
 /// Graph block `walking_piezo_fitted`: the Ch. 5 model (5.31), f_α (Hz) → x_s (m).
 #[derive(Debug, Clone, Default, Serialize, Deserialize, Params)]
 #[serde(transparent)]
-#[block(
-    type_name = "walking_piezo_fitted",
-    role = Plant,
-    ports = "f_alpha[1] (Hz) -> x_s[1] (m), faults[1] (count) \"of non-finite inputs\""
-)]
+#[block(type_name = "walking_piezo_fitted", role = Plant, ports = "f_alpha[1] (Hz) -> x_s[1] (m), faults[1] (count) \"of non-finite inputs\"")]
 pub struct FittedStageBlock {
     /// The parameters.
     pub params: FittedStageParams,
