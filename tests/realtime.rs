@@ -352,6 +352,53 @@ fn rt_applies_a_gain_typed_on_stdin_and_refuses_bad_lines_with_their_reason() {
 }
 
 #[test]
+fn rt_judges_a_filter_corner_typed_on_stdin_with_the_new_corner() {
+    // The quickstart with a 2nd-order low-pass `lp` (1 kHz) on the encoder's
+    // reading: at 5 Hz its lag destabilises the loop (nanomotion-rt's
+    // `the_stability_gate_judges_a_filter_corner_changed_live` compares the
+    // gate's figures), 2 kHz is the block's Nyquist, 150 Hz is benign.
+    let dir = std::env::temp_dir().join(format!("nanomotion-rt-lp-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let quickstart = std::fs::read_to_string(format!("{EXAMPLES}/quickstart.yaml")).unwrap();
+    let feedback = "  - { from: encoder.y, to: err.in1 }\n";
+    assert!(quickstart.contains(feedback));
+    let filtered = quickstart
+        .replace(
+            feedback,
+            "  - { from: encoder.y, to: lp.u }\n  - { from: lp.y, to: err.in1 }\n",
+        )
+        .replace(
+            "connections:\n",
+            "  - { name: lp, type: low_pass, rate_hz: 4000, cutoff_hz: 1000, order: 2 }\nconnections:\n",
+        );
+    let graph = dir.join("filtered_quickstart.yaml");
+    std::fs::write(&graph, filtered).unwrap();
+    let out = rt_with_stdin(
+        &[graph.to_str().unwrap(), "--duration", "0.6", "--allow-soft"],
+        "set lp.cutoff_hz=5\nset lp.cutoff_hz=2000\nset lp.order=4\nset lp.cutoff_hz=150\n",
+        Duration::from_millis(100),
+    );
+    let err = String::from_utf8_lossy(&out.stderr);
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{err}");
+    assert!(
+        err.contains("`lp.cutoff_hz` = 5 refused by the stability gate: loop `pi` "),
+        "{err}"
+    );
+    assert!(
+        err.contains("`lp.cutoff_hz` = 2000 refused by block `lp` (low_pass): field `cutoff_hz`: 2000 Hz is not below the Nyquist frequency 2000 Hz of the block's rate (fix: lower the frequency or raise the block's rate)"),
+        "{err}"
+    );
+    assert!(
+        err.contains("`order` of block `lp` cannot change while the loop runs (its live parameters: cutoff_hz)"),
+        "{err}"
+    );
+    assert!(err.contains("set lp.cutoff_hz = 150 at tick "), "{err}");
+    assert!(text.contains("live parameter updates 1"), "{text}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
 fn a_gain_set_from_stdin_is_recorded_and_replays_bit_for_bit() {
     let name = format!("test-live-{}", std::process::id());
     let dir = std::env::temp_dir().join(format!("nanomotion-rt-live-{}", std::process::id()));
