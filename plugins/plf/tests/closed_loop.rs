@@ -38,6 +38,26 @@ fn graph(sensor_delay: bool) -> String {
     )
 }
 
+/// The record of the loop `truth_yaml` under reference `r`: the reference
+/// and the signal `measured` with white noise of 1 nm.
+fn record(truth_yaml: &str, measured: &str, r: Vec<f64>, rng: &mut Rng) -> Dataset {
+    let drive = Dataset::from_columns("loop", RATE, 0.0, vec![("r".into(), r.clone())]).unwrap();
+    let mut truth = GraphSpec::from_yaml(truth_yaml, "truth.yaml").unwrap();
+    truth.log.push(measured.into());
+    let (mut s, _) = truth.build_with_data(Arc::new(drive)).unwrap();
+    let run = s.run(|_| {});
+    let y: Vec<f64> = run
+        .logs
+        .iter()
+        .find(|l| l.name == measured)
+        .unwrap()
+        .data
+        .iter()
+        .map(|v| v + 1e-9 * rng.normal())
+        .collect();
+    Dataset::from_columns("loop", RATE, 0.0, vec![("r".into(), r), ("y".into(), y)]).unwrap()
+}
+
 #[test]
 fn a_delay_in_the_sensor_path_is_placed_inside_the_loop() {
     let _ = std::any::type_name::<nanomotion_plf::effects::Effect>();
@@ -62,22 +82,7 @@ fn a_delay_in_the_sensor_path_is_placed_inside_the_loop() {
             1e-6 * (2.0 * PI * 0.4 * t).sin() + steps + 0.05e-6 * ms / 5.0
         })
         .collect();
-    let drive = Dataset::from_columns("loop", RATE, 0.0, vec![("r".into(), r.clone())]).unwrap();
-    let mut truth = GraphSpec::from_yaml(&graph(true), "truth.yaml").unwrap();
-    truth.log.push("sensor.y".into());
-    let (mut s, _) = truth.build_with_data(Arc::new(drive)).unwrap();
-    let run = s.run(|_| {});
-    let y: Vec<f64> = run
-        .logs
-        .iter()
-        .find(|l| l.name == "sensor.y")
-        .unwrap()
-        .data
-        .iter()
-        .map(|v| v + 1e-9 * rng.normal())
-        .collect();
-    let data =
-        Dataset::from_columns("loop", RATE, 0.0, vec![("r".into(), r), ("y".into(), y)]).unwrap();
+    let data = record(&graph(true), "sensor.y", r, &mut rng);
     let nominal = GraphSpec::from_yaml(&graph(false), "nominal.yaml").unwrap();
     let rep = diagnose(&nominal, &data, &Options::default()).unwrap();
     eprintln!(
@@ -196,7 +201,6 @@ fn a_force_periodic_in_position_is_found_through_the_loops_response() {
                     .sum::<f64>()
         })
         .collect();
-    let drive = Dataset::from_columns("loop", RATE, 0.0, vec![("r".into(), r.clone())]).unwrap();
     let truth_yaml = graph(false)
         .replace(
             "connections:\n",
@@ -208,20 +212,7 @@ fn a_force_periodic_in_position_is_found_through_the_loops_response() {
             "  - { from: ctrl.u, to: stage.u }\n",
             "  - { from: ctrl.u, to: cogging.u }\n  - { from: stage.y, to: cogging.s }\n  - { from: cogging.y, to: stage.u }\n",
         );
-    let truth = GraphSpec::from_yaml(&truth_yaml, "truth.yaml").unwrap();
-    let (mut s, _) = truth.build_with_data(Arc::new(drive)).unwrap();
-    let run = s.run(|_| {});
-    let y: Vec<f64> = run
-        .logs
-        .iter()
-        .find(|l| l.name == "stage.y")
-        .unwrap()
-        .data
-        .iter()
-        .map(|v| v + 1e-9 * rng.normal())
-        .collect();
-    let data =
-        Dataset::from_columns("loop", RATE, 0.0, vec![("r".into(), r), ("y".into(), y)]).unwrap();
+    let data = record(&truth_yaml, "stage.y", r, &mut rng);
     let nominal = GraphSpec::from_yaml(&graph(false), "nominal.yaml").unwrap();
     let rep = diagnose(&nominal, &data, &Options::default()).unwrap();
     eprintln!(
