@@ -66,8 +66,9 @@ fn a_cogging_force_through_the_plant_is_named_by_its_response() {
 /// hidden) at z = 3.9, p = 10⁻³, with a concentration on the grid of 0.04
 /// where the record's noise (σ/q = 0.02) asks 0.99 of a true one. The grid
 /// must concentrate the values as its noise allows (`stats::value_grid`):
-/// neither record has a grid now, and 4463's true rounding (noise after the
-/// rounding at half a step) still has one.
+/// neither record has a grid now; 4463's and 4817's true roundings keep
+/// theirs, at the step (4817's best pitch was half the step: the multiples
+/// of the pitch found are tried too).
 #[test]
 fn a_grid_must_hold_the_values_as_tightly_as_the_noise_allows() {
     for seed in [4422, 4515] {
@@ -80,9 +81,24 @@ fn a_grid_must_hold_the_values_as_tightly_as_the_noise_allows() {
             stats::value_grid(y)
         );
     }
-    let s = studied(4463);
-    assert!(s.record.truth.contains("rounded"), "{}", s.record.truth);
-    let y = s.record.data.column("y").unwrap();
-    let g = stats::value_grid(y).expect("the rounding's grid");
-    assert!(g.test.p_value < 1e-20, "{g:?}");
+    for seed in [4463, 4817] {
+        let s = studied(seed);
+        assert!(s.record.truth.contains("rounded"), "{}", s.record.truth);
+        let y = s.record.data.column("y").unwrap();
+        let g = stats::value_grid(y).expect("the rounding's grid");
+        assert!(g.test.p_value < 1e-20, "{seed}: {g:?}");
+        // The step, not a fraction of it: the values concentrate more at it
+        // than at half of it (4817's best pitch was half its step, where
+        // they concentrate less than the noise allows) or at twice it.
+        let concentration = |q: f64| {
+            let (re, im) = y.iter().fold((0.0, 0.0), |(re, im), v| {
+                let (s, c) = (2.0 * std::f64::consts::PI * v / q).sin_cos();
+                (re + c, im + s)
+            });
+            re.hypot(im) / y.len() as f64
+        };
+        let at = concentration(g.pitch);
+        assert!(at > concentration(0.5 * g.pitch), "{seed}: {g:?}");
+        assert!(at > 2.0 * concentration(2.0 * g.pitch), "{seed}: {g:?}");
+    }
 }
