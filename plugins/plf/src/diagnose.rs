@@ -849,17 +849,19 @@ impl<'c, 'a> Search<'c, 'a> {
         // Those copies (`again`) are fitted all the same: they are what a new
         // name must beat (see `same_form` in `step`).
         let (mut cands, mut again): (Vec<Cand>, Vec<Cand>) =
-            enumerate(ctx, &self.cur, opts)?.into_iter().partition(|c| {
-                let outs = outputs_of(ctx, &c.site);
-                let own_motion = matches!(c.site, Site::Feedback { .. });
-                !named.iter().any(|(e, o)| {
-                    (*e == c.effect || (own_motion && *e == "friction"))
-                        && o.iter().any(|&k| {
-                            outs.iter()
-                                .any(|&j| ctx.channels[k].same_axis(&ctx.channels[j]))
-                        })
-                })
-            });
+            enumerate(ctx, &self.cur, opts, &mut self.runs)?
+                .into_iter()
+                .partition(|c| {
+                    let outs = outputs_of(ctx, &c.site);
+                    let own_motion = matches!(c.site, Site::Feedback { .. });
+                    !named.iter().any(|(e, o)| {
+                        (*e == c.effect || (own_motion && *e == "friction"))
+                            && o.iter().any(|&k| {
+                                outs.iter()
+                                    .any(|&j| ctx.channels[k].same_axis(&ctx.channels[j]))
+                            })
+                    })
+                });
         // A second slit table on an axis that has one has no form the first
         // lacks (every entry of a table is free): no copy to beat.
         again.retain(|c| c.effect != "encoder_slit_error");
@@ -1257,7 +1259,7 @@ impl<'c, 'a> Search<'c, 'a> {
                     "named although its line is locked to the excitation (a map of the input could leave such a line): none of the maps of the input tried explains it; an excitation at a frequency that is not a multiple of the line's would tell them apart; ",
                 None => "",
             },
-            evidence(ctx, &self.cur, cand),
+            evidence(ctx, &self.cur, cand, &mut self.runs),
             cand.effect,
             cand.site.describe(),
             hb,
@@ -3230,6 +3232,7 @@ fn force_pitch(
     site: &Site,
     position: &str,
     pos: &[f64],
+    runs: &mut usize,
 ) -> Option<(f64, f64, f64, f64)> {
     // The phase is read off the measured position where it is measured: the
     // model's position is off by the very residual looked into (a cogging
@@ -3259,6 +3262,7 @@ fn force_pitch(
     let Site::Input { from, .. } = site else {
         return None;
     };
+    *runs += 1;
     let eps = 1e-3 * std_of(&signal(ctx, cur, from).ok()?).max(1e-300);
     let block = surgery::block_from_json(
         json!({"type": "repetitive_disturbance", "period": p0, "variable": "signal", "cos": [0.0], "sin": [0.0]}),
@@ -3299,6 +3303,7 @@ fn force_pitch(
     let mut ev = Evaluator::over(spec, ctx.records, &free, 0).ok()?;
     ev.set_weights(&ctx.weights);
     let n = ctx.n_est;
+    *runs += 1;
     if !ev.run(&[0.0, 0.0, 0.0], n) {
         return None;
     }
@@ -3322,6 +3327,7 @@ fn force_pitch(
                 if j == 0 { 1.0 } else { 0.0 },
                 if j == 1 { 1.0 } else { 0.0 },
             ];
+            *runs += 1;
             if !ev.run(&zz, n) {
                 break;
             }
@@ -3363,7 +3369,12 @@ fn force_pitch(
     best.map(|(e, p, c, s)| (p, c, s, e / total.max(f64::MIN_POSITIVE)))
 }
 
-fn enumerate(ctx: &Ctx<'_>, cur: &Current, opts: &Options) -> Result<Vec<Cand>, PlfError> {
+fn enumerate(
+    ctx: &Ctx<'_>,
+    cur: &Current,
+    opts: &Options,
+    runs: &mut usize,
+) -> Result<Vec<Cand>, PlfError> {
     let want = |e: &str| opts.effects.is_empty() || opts.effects.iter().any(|x| x == e);
     let mut out = Vec::new();
     let fs = ctx.fs;
@@ -3837,7 +3848,7 @@ fn enumerate(ctx: &Ctx<'_>, cur: &Current, opts: &Options) -> Result<Vec<Cand>, 
                 // the share of the residual a name must cut (tuning 635: a
                 // pitch explaining 19 % of what a hysteresis left was named
                 // for 18 % more; the cogging forces named explain 31–96 %).
-                let matched = force_pitch(ctx, cur, &inp, &ch.position, &pos)
+                let matched = force_pitch(ctx, cur, &inp, &ch.position, &pos, runs)
                     .filter(|m| m.3 >= opts.min_excess_cut);
                 let binned = clearest_position_period(ctx, cur, &pos).map(|(p, _, _)| p);
                 let mut starts: Vec<serde_json::Value> = matched
@@ -4499,7 +4510,7 @@ fn revealing_variable(ctx: &Ctx<'_>, cur: &Current, c: &Cand) -> (String, Vec<f6
     }
 }
 
-fn evidence(ctx: &Ctx<'_>, cur: &Current, c: &Cand) -> String {
+fn evidence(ctx: &Ctx<'_>, cur: &Current, c: &Cand, runs: &mut usize) -> String {
     let i = c.output.unwrap_or(0);
     let r = &cur.residual[i][..ctx.n_est];
     let (var, x) = revealing_variable(ctx, cur, c);
@@ -4572,7 +4583,7 @@ fn evidence(ctx: &Ctx<'_>, cur: &Current, c: &Cand) -> String {
                     "the residual of {} binned against {var} repeats every {period:.4e} (Fisher g over the bins, p = {p:.1e})",
                     ctx.channels[j].column
                 ),
-                None => match force_pitch(ctx, cur, &c.site, &c.s[0], x) {
+                None => match force_pitch(ctx, cur, &c.site, &c.s[0], x, runs) {
                     Some((period, _, _, share)) => format!(
                         "a force of pitch {period:.4e} in {var} on the drive, run through the model, explains {:.0} % of the residual (the best of the pitches tried)",
                         100.0 * share
