@@ -386,6 +386,9 @@ pub trait Block: Send + Debug {
     /// graph runs, between two ticks, **keeping the block's state** (an
     /// integrator keeps its value when a gain changes): slot `i` of
     /// [`Block::set_live_param`] is `live_params()[i]`. The default: none.
+    /// A block with a `#[block(…)]` declares them there (`live = "kp,
+    /// zero_hz"`, [`DeclaredBlock::LIVE_PARAMS`]) and [`declared_block`]
+    /// writes this method.
     /// `nanomotion rt` applies such changes from the terminal
     /// (`set ctrl.kp=1.2`), see `nanomotion-rt`'s `ParamSender`.
     fn live_params(&self) -> &'static [&'static str] {
@@ -495,17 +498,25 @@ impl Sector {
 pub use crate::doc::{BlockDoc, ParamDoc, Role, block_docs};
 
 /// Completes an `impl Block for T` from `T`'s `#[block(…)]` (module
-/// documentation): the typetag registration under the declared `type_name`, and
-/// `inputs`/`outputs`, `role` and `build` where the impl leaves them out.
+/// documentation): the typetag registration under the declared `type_name`,
+/// `live_params` from the declared `live`, and `inputs`/`outputs`, `role` and
+/// `build` where the impl leaves them out.
 pub use nanomotion_derive::declared_block;
 
-/// What a block's `#[block(type_name = "…", role = …, ports = "…")]` declares,
-/// implemented by `#[derive(Params)]`; [`declared_block`] reads it.
+/// What a block's `#[block(type_name = "…", role = …, ports = "…", live =
+/// "…")]` declares, implemented by `#[derive(Params)]`; [`declared_block`]
+/// reads it.
 pub trait DeclaredBlock {
     /// The block's `type:` in a graph file (its typetag name).
     const TYPE_NAME: &'static str;
     /// The role the block plays ([`Block::role`]).
     const ROLE: Role;
+    /// The parameters that may change while the graph runs
+    /// ([`Block::live_params`], in slot order; `live = "kp, zero_hz"`), none
+    /// when `live` is left out. The one declaration of them: the block's
+    /// `live_params`, its [`BlockDoc::live`] (`nanomotion blocks`) and
+    /// [`live_params_by_type`](crate::doc::live_params_by_type) read it.
+    const LIVE_PARAMS: &'static [&'static str];
 }
 
 /// The ports a block's `#[block(ports = "…")]` declares, implemented by

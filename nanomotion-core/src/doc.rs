@@ -33,7 +33,13 @@
 //!   group's first). In a `#[serde(transparent)]` block the names are the
 //!   wrapped struct's fields. The markers are not shown in the listing.
 //!   `#[declared_block]` on the `impl Block` turns these into the block's
-//!   methods (see [`crate::block`]).
+//!   methods (see [`crate::block`]),
+//! - `#[block(…, live = "kp, zero_hz")]`: the parameters that may change while
+//!   the graph runs, in the slot order of `Block::set_live_param` (each a
+//!   field; a name that is not one does not compile) —
+//!   [`DeclaredBlock::LIVE_PARAMS`](crate::block::DeclaredBlock::LIVE_PARAMS),
+//!   the block's `Block::live_params`, [`BlockDoc::live`] (the `live:` line of
+//!   `nanomotion blocks`) and [`live_params_by_type`].
 //!
 //! | `#[param(…)]` | check | schema |
 //! |---|---|---|
@@ -245,6 +251,9 @@ pub struct BlockDoc {
     /// Whether unknown parameters are refused (`deny_unknown_fields`): the schema
     /// then refuses them too.
     pub closed: bool,
+    /// The parameters that may change while the graph runs
+    /// ([`DeclaredBlock::LIVE_PARAMS`](crate::block::DeclaredBlock::LIVE_PARAMS)).
+    pub live: &'static [&'static str],
 }
 
 inventory::collect!(BlockDoc);
@@ -265,6 +274,12 @@ impl BlockDoc {
             self.summary,
             self.ports
         );
+        if !self.live.is_empty() {
+            s.push_str(&format!(
+                "    live: {} (may change while the graph runs: `set BLOCK.PARAM=VALUE`)\n",
+                self.live.join(", ")
+            ));
+        }
         for p in self.param_docs() {
             let mut line = format!("    {:<22} {}", p.name, p.doc);
             if let Some(c) = choices(&p.schema) {
@@ -442,6 +457,7 @@ macro_rules! submit_block_doc {
                     ports: $p,
                     params,
                     closed: false,
+                    live: &[],
                 }
             }
         };
@@ -449,6 +465,22 @@ macro_rules! submit_block_doc {
     ($doc:expr) => {
         $crate::__private::inventory::submit! { $doc }
     };
+}
+
+/// Every registered block type that declares live parameters, sorted by type
+/// name, in one line: `` `gain` `k`; `pi` `kp`, `zero_hz`; … `` — what
+/// `nanomotion rt` says a graph without any could have, and what
+/// docs/realtime.md lists (a test holds the two to this).
+pub fn live_params_by_type() -> String {
+    block_docs()
+        .iter()
+        .filter(|d| !d.live.is_empty())
+        .map(|d| {
+            let params: Vec<String> = d.live.iter().map(|p| format!("`{p}`")).collect();
+            format!("`{}` {}", d.type_name, params.join(", "))
+        })
+        .collect::<Vec<_>>()
+        .join("; ")
 }
 
 /// All registered block documentation, sorted by type name.

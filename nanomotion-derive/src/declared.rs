@@ -70,6 +70,20 @@ pub(crate) fn expand(args: TokenStream2, mut item: ItemImpl) -> syn::Result<Toke
             }
         ));
     }
+    if let Some(f) = item.items.iter().find_map(|i| match i {
+        ImplItem::Fn(f) if f.sig.ident == "live_params" => Some(f),
+        _ => None,
+    }) {
+        return Err(syn::Error::new_spanned(
+            &f.sig,
+            "#[declared_block] writes `live_params` from the #[block(live = \"…\")] of the parameter struct: declare the live parameters there and write only `set_live_param`",
+        ));
+    }
+    item.items.push(parse_quote!(
+        fn live_params(&self) -> &'static [&'static str] {
+            <Self as #blk::DeclaredBlock>::LIVE_PARAMS
+        }
+    ));
     if !has("role") {
         item.items.push(parse_quote!(
             fn role(&self) -> ::nanomotion_core::Role {
@@ -121,6 +135,7 @@ mod tests {
         for m in [
             "fn inputs",
             "fn outputs",
+            "fn live_params",
             "fn role",
             "fn build",
             "fn output",
@@ -169,6 +184,13 @@ mod tests {
             impl Block for Step {}
         );
         assert!(expand(TokenStream2::new(), item).is_err());
+        let item: ItemImpl = parse_quote!(
+            impl Block for Gain {
+                fn live_params(&self) -> &'static [&'static str] { &["k"] }
+            }
+        );
+        let e = expand(TokenStream2::new(), item).unwrap_err().to_string();
+        assert!(e.contains("#[block(live"), "{e}");
         let item: ItemImpl = parse_quote!(
             impl Source for Step {}
         );

@@ -48,6 +48,8 @@ pub fn derive_params(input: TokenStream) -> TokenStream {
 ///   `ports` (`nanomotion_core::block::DeclaredPorts`; a `ports` string that is
 ///   prose, not a declaration, does not compile here: write both by hand),
 /// - `role` from the declared role,
+/// - `live_params` from the declared `live` parameters (the impl writes only
+///   `set_live_param`; a hand-written `live_params` does not compile),
 /// - `build` as the declared checks: `check_params()`, then
 ///   `check_at_rate(ctx.dt)`,
 /// - `output`, for a source: `Source::sample` at the tick's time (a block
@@ -444,6 +446,8 @@ struct BlockAttr {
     type_name: Option<String>,
     role: Option<Ident>,
     ports: Option<String>,
+    /// `live = "a, b"`: the parameters that may change while the graph runs.
+    live: Vec<String>,
 }
 
 fn block_attr(attrs: &[Attribute]) -> syn::Result<Option<BlockAttr>> {
@@ -455,9 +459,19 @@ fn block_attr(attrs: &[Attribute]) -> syn::Result<Option<BlockAttr>> {
                 "type_name" => b.type_name = Some(meta.value()?.parse::<LitStr>()?.value()),
                 "role" => b.role = Some(meta.value()?.parse()?),
                 "ports" => b.ports = Some(meta.value()?.parse::<LitStr>()?.value()),
+                "live" => {
+                    b.live = meta
+                        .value()?
+                        .parse::<LitStr>()?
+                        .value()
+                        .split(',')
+                        .map(|s| s.trim().to_string())
+                        .filter(|s| !s.is_empty())
+                        .collect()
+                }
                 other => {
                     return Err(meta.error(format!(
-                        "unknown #[block] item `{other}`: expected type_name, role, ports"
+                        "unknown #[block] item `{other}`: expected type_name, role, ports, live"
                     )));
                 }
             }
@@ -1044,6 +1058,18 @@ fn expand(input: &DeriveInput) -> syn::Result<TokenStream2> {
                 },
             };
             let blk = quote!(::nanomotion_core::block);
+            let live = b.live;
+            if let Some(p) = live
+                .iter()
+                .find(|p| fields.wrapped.is_none() && !fields.names.iter().any(|n| n == *p))
+            {
+                return Err(syn::Error::new_spanned(
+                    name,
+                    format!(
+                        "#[block] live: `{p}` is not a field of `{name}` (fix: name the parameters that may change while the graph runs, as spelled in the struct, comma-separated)"
+                    ),
+                ));
+            }
             let declared_ports = match ports::declared(&ports, &fields) {
                 Ok(Some(d)) => {
                     let (ins, outs) = (
@@ -1071,6 +1097,7 @@ fn expand(input: &DeriveInput) -> syn::Result<TokenStream2> {
                 impl #blk::DeclaredBlock for #name {
                     const TYPE_NAME: &'static str = #tag;
                     const ROLE: ::nanomotion_core::Role = ::nanomotion_core::Role::#role;
+                    const LIVE_PARAMS: &'static [&'static str] = &[#(#live),*];
                 }
                 #declared_ports
                 ::nanomotion_core::__private::inventory::submit! {
@@ -1081,6 +1108,7 @@ fn expand(input: &DeriveInput) -> syn::Result<TokenStream2> {
                         ports: #shown,
                         params: <#name as ::nanomotion_core::doc::Params>::param_docs,
                         closed: <#name as ::nanomotion_core::doc::Params>::CLOSED,
+                        live: <#name as #blk::DeclaredBlock>::LIVE_PARAMS,
                     }
                 }
             )

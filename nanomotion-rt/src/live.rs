@@ -2,9 +2,11 @@
 //! [`ParamSender::set`] from Rust.
 //!
 //! A block declares the parameters it can change between two ticks, keeping
-//! its state ([`Block::live_params`]: a
-//! `gain`'s `k`, a `pi`'s `kp` and `zero_hz`, a `pid`'s `kp`, `ki`, `kd`,
-//! a filter's corners — docs/realtime.md lists them).
+//! its state, in its `#[block(live = "…")]`
+//! ([`DeclaredBlock::LIVE_PARAMS`](nanomotion_core::block::DeclaredBlock::LIVE_PARAMS),
+//! its [`Block::live_params`]); `nanomotion blocks` shows them per block and
+//! [`live_params_by_type`](nanomotion_core::doc::live_params_by_type) lists
+//! every registered block's (the list docs/realtime.md holds, by a test).
 //! An update is resolved and judged **outside** the loop, by the
 //! [`ParamSender`] on the caller's thread:
 //!
@@ -378,7 +380,10 @@ impl ParamSender {
             .unwrap_or_default();
         let all = || {
             if self.table.is_empty() {
-                "this graph has none (live are: gain `k`, pi `kp`/`zero_hz`, pid `kp`/`ki`/`kd`, saturation `lower`/`upper`, low_pass `cutoff_hz`, notch `centre_hz`/`damping`/`depth`, lead_lag `zero_hz`/`pole_hz`); restart the run with `--set`".to_string()
+                format!(
+                    "this graph has none (live are: {}); restart the run with `--set`",
+                    nanomotion_core::doc::live_params_by_type()
+                )
             } else {
                 format!(
                     "live parameters of this graph: {}",

@@ -105,7 +105,7 @@ struct Coeffs {
 /// See the [module documentation](self) for the exact discrete equations.
 #[derive(Debug, Clone, Default, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
-#[block(type_name = "pid", role = Controller, ports = "e -> u")]
+#[block(type_name = "pid", role = Controller, ports = "e -> u", live = "kp, ki, kd")]
 pub struct Pid {
     /// Proportional gain k_p (unit of u per unit of e).
     #[param(finite)]
@@ -369,9 +369,6 @@ impl Block for Pid {
     fn output(&mut self, _tick: Tick, u: &[f64], y: &mut [f64]) {
         self.control(u, y);
     }
-    fn live_params(&self) -> &'static [&'static str] {
-        &["kp", "ki", "kd"]
-    }
     fn set_live_param(&mut self, slot: usize, value: f64) {
         self.retune(slot, value);
     }
@@ -397,7 +394,7 @@ impl Block for Pid {
 /// anti-windup).
 #[derive(Debug, Clone, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
-#[block(type_name = "pi", role = Controller, ports = "e -> u")]
+#[block(type_name = "pi", role = Controller, ports = "e -> u", live = "kp, zero_hz")]
 pub struct Pi {
     /// Gain k_p (unit of u per unit of e; for f_α in Hz per m of error).
     #[param(finite)]
@@ -539,9 +536,6 @@ impl Block for Pi {
     }
     fn output(&mut self, _tick: Tick, u: &[f64], y: &mut [f64]) {
         self.control(u, y);
-    }
-    fn live_params(&self) -> &'static [&'static str] {
-        &["kp", "zero_hz"]
     }
     /// k_p or f_i changed, the integrator's value kept (bumpless at zero error).
     fn set_live_param(&mut self, slot: usize, value: f64) {

@@ -812,7 +812,7 @@ fn default_order() -> usize {
 /// later sections' b₀ on the earlier sections' outputs.
 #[derive(Debug, Clone, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
-#[block(type_name = "low_pass", role = Math, ports = "u[width] -> y[width] [unit of u]")]
+#[block(type_name = "low_pass", role = Math, ports = "u[width] -> y[width] [unit of u]", live = "cutoff_hz")]
 pub struct LowPass {
     /// −3 dB frequency f_c in Hz.
     #[param(positive, below_nyquist)]
@@ -852,9 +852,6 @@ impl Block for LowPass {
     fn build(&mut self, ctx: &BuildContext) -> Result<(), ParamError> {
         self.core = Some(self.build_core(ctx.dt)?);
         Ok(())
-    }
-    fn live_params(&self) -> &'static [&'static str] {
-        &["cutoff_hz"]
     }
     fn set_live_param(&mut self, slot: usize, value: f64) {
         self.set_live(slot, value);
@@ -900,7 +897,7 @@ fn default_notch_damping() -> f64 {
 /// the state then evolves under the new notch.
 #[derive(Debug, Clone, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
-#[block(type_name = "notch", role = Math, ports = "u[width] -> y[width] [unit of u]")]
+#[block(type_name = "notch", role = Math, ports = "u[width] -> y[width] [unit of u]", live = "centre_hz, damping, depth")]
 pub struct Notch {
     /// Centre frequency f₀ in Hz.
     #[param(positive, below_nyquist)]
@@ -965,9 +962,6 @@ impl Block for Notch {
         self.core = Some(self.build_core(ctx.dt)?);
         Ok(())
     }
-    fn live_params(&self) -> &'static [&'static str] {
-        &["centre_hz", "damping", "depth"]
-    }
     fn set_live_param(&mut self, slot: usize, value: f64) {
         self.set_live(slot, value);
     }
@@ -1020,7 +1014,7 @@ fn default_gain() -> f64 {
 /// (b₀′ − b₀)·u\[k\] (y = z₀ + b₀u).
 #[derive(Debug, Clone, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
-#[block(type_name = "lead_lag", role = Controller, ports = "u[width] -> y[width]")]
+#[block(type_name = "lead_lag", role = Controller, ports = "u[width] -> y[width]", live = "zero_hz, pole_hz")]
 pub struct LeadLag {
     /// Zero frequency (Hz).
     #[param(positive)]
@@ -1096,9 +1090,6 @@ impl Block for LeadLag {
     fn build(&mut self, ctx: &BuildContext) -> Result<(), ParamError> {
         self.core = Some(self.build_core(ctx.dt)?);
         Ok(())
-    }
-    fn live_params(&self) -> &'static [&'static str] {
-        &["zero_hz", "pole_hz"]
     }
     fn set_live_param(&mut self, slot: usize, value: f64) {
         self.set_live(slot, value);

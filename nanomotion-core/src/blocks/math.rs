@@ -52,7 +52,7 @@ pub(crate) fn static_ss(d: DMatrix<f64>, dt: f64) -> StateSpace {
 /// `gain`: y = k·u, element-wise on a vector of width `n`.
 #[derive(Debug, Clone, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
-#[block(type_name = "gain", role = Math, ports = "u[width] -> y[width]")]
+#[block(type_name = "gain", role = Math, ports = "u[width] -> y[width]", live = "k")]
 pub struct Gain {
     /// Gain k (unit of y per unit of u).
     #[param(finite)]
@@ -95,9 +95,6 @@ impl Block for Gain {
     }
     fn output(&mut self, _tick: Tick, u: &[f64], y: &mut [f64]) {
         self.apply(u, y);
-    }
-    fn live_params(&self) -> &'static [&'static str] {
-        &["k"]
     }
     fn set_live_param(&mut self, slot: usize, value: f64) {
         if slot == 0 {
@@ -296,7 +293,7 @@ impl Block for Product {
 /// `[sharpness]` when it is set.
 #[derive(Debug, Clone, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
-#[block(type_name = "saturation", role = Math, ports = "u[width] -> y[width] [unit of u]")]
+#[block(type_name = "saturation", role = Math, ports = "u[width] -> y[width] [unit of u]", live = "lower, upper")]
 pub struct Saturation {
     /// Lower limit (unit of u).
     #[param(at_most = upper)]
@@ -367,9 +364,6 @@ impl Block for Saturation {
     /// The limits (a drive's voltage or current limit tightened or relaxed
     /// while the stage moves); the sender's copy of the block refuses a
     /// `lower` above `upper` before it reaches the loop.
-    fn live_params(&self) -> &'static [&'static str] {
-        &["lower", "upper"]
-    }
     fn set_live_param(&mut self, slot: usize, value: f64) {
         match slot {
             0 => self.lower = value,
