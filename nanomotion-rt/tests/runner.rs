@@ -696,13 +696,41 @@ fn a_run_with_a_live_update_replays_bit_for_bit_from_its_mcap_file() {
 /// The graph `yaml` built for a run without a device (skip policy, soft),
 /// and a sender of live updates into it.
 fn without_device(yaml: &str) -> (RealtimeRunner<NoDevice>, ParamSender) {
-    let (sched, _) = GraphSpec::from_yaml(yaml, "t.yaml")
-        .unwrap()
-        .build()
-        .unwrap();
-    let mut r = RealtimeRunner::new(sched, NoDevice, config(OverrunPolicy::Skip)).unwrap();
+    spec_without_device(GraphSpec::from_yaml(yaml, "t.yaml").unwrap(), None)
+}
+
+/// `spec` built for a run of `ticks` (its duration if `None`) without a
+/// device (skip policy, soft), and a sender of live updates into it.
+fn spec_without_device(
+    spec: GraphSpec,
+    ticks: Option<u64>,
+) -> (RealtimeRunner<NoDevice>, ParamSender) {
+    let (sched, _) = spec.build().unwrap();
+    let cfg = RtConfig {
+        ticks,
+        ..config(OverrunPolicy::Skip)
+    };
+    let mut r = RealtimeRunner::new(sched, NoDevice, cfg).unwrap();
     let sender = r.param_sender().unwrap();
     (r, sender)
+}
+
+#[test]
+fn a_graph_without_live_parameters_names_the_blocks_that_declare_them() {
+    let yaml = "base_rate_hz: 1000\nduration_s: 0.01\nblocks:\n  - { name: one, type: constant, value: 1.0 }\n  - { name: d, type: delay, d: 1 }\nconnections:\n  - { from: one.y, to: d.u }\n";
+    let (_r, mut sender) = without_device(yaml);
+    assert!(sender.params().is_empty());
+    let declared = nanomotion_core::doc::live_params_by_type();
+    assert!(declared.contains("`gain` `k`"), "{declared}");
+    match sender.set("d.d", 2.0) {
+        Err(e @ LiveError::Path { .. }) => assert_eq!(
+            e.to_string(),
+            format!(
+                "`d.d`: block `d` has no parameter that can change while the loop runs (fix: set it before the run with `--set blocks.d.d=VALUE`; this graph has none (live are: {declared}); restart the run with `--set`)"
+            )
+        ),
+        other => panic!("{other:?}"),
+    }
 }
 
 #[test]
@@ -806,46 +834,35 @@ fn the_stability_gate_refuses_an_update_that_destabilises_the_loop() {
     let refused = gate(Some(unstable));
     assert!(!refused.passes() && gate(Some(stable)).passes());
 
-    let (sched, _) = spec(None).build().unwrap();
-    let (copy, _) = spec(None).build().unwrap();
-    let cfg = RtConfig {
-        ticks: Some(200),
-        ..config(OverrunPolicy::Skip)
-    };
-    let mut r = RealtimeRunner::new(sched, NoDevice, cfg).unwrap();
-    let mut sender = r
-        .param_sender()
-        .unwrap()
-        .gated(copy, require.clone())
-        .unwrap();
-    match sender.set("pi.kp", unstable) {
-        Err(LiveError::Gate { reasons, .. }) => assert_eq!(reasons, refused.failures()),
-        other => panic!("{other:?}"),
+    // `gated(copy, require)`, and `gated_spec` (what `nanomotion rt` and
+    // Python use: the copy built from the graph's spec, with its
+    // `require:`), judge the same.
+    for by_spec in [false, true] {
+        let (mut r, sender) = spec_without_device(spec(None), Some(200));
+        let mut sender = if by_spec {
+            sender.gated_spec(spec(None)).unwrap()
+        } else {
+            sender
+                .gated(spec(None).build().unwrap().0, require.clone())
+                .unwrap()
+        };
+        assert!(sender.is_gated());
+        match sender.set("pi.kp", unstable) {
+            Err(LiveError::Gate { reasons, .. }) => assert_eq!(reasons, refused.failures()),
+            other => panic!("{other:?}"),
+        }
+        sender.set("pi.kp", stable).unwrap();
+        let report = r.run(|_| {}).unwrap();
+        assert_eq!(report.param_updates, 1);
+        // The loop's PI is now the PI built with that gain, to the bit.
+        let (fresh, _) = spec(Some(stable)).build().unwrap();
+        assert_eq!(r.scheduler().lti_of("pi"), fresh.lti_of("pi"));
     }
-    sender.set("pi.kp", stable).unwrap();
-    let report = r.run(|_| {}).unwrap();
-    assert_eq!(report.param_updates, 1);
-    // The loop's PI is now the PI built with that gain, to the bit.
-    let (fresh, _) = spec(Some(stable)).build().unwrap();
-    assert_eq!(r.scheduler().lti_of("pi"), fresh.lti_of("pi"));
-
-    // `gated_spec` (what `nanomotion rt` and Python use): the copy built from
-    // the graph's spec, with its `require:`, judges the same.
-    let (sched, _) = spec(None).build().unwrap();
-    let mut r = RealtimeRunner::new(sched, NoDevice, config(OverrunPolicy::Skip)).unwrap();
-    let mut sender = r.param_sender().unwrap().gated_spec(spec(None)).unwrap();
-    assert!(sender.is_gated());
-    match sender.set("pi.kp", unstable) {
-        Err(LiveError::Gate { reasons, .. }) => assert_eq!(reasons, refused.failures()),
-        other => panic!("{other:?}"),
-    }
-    sender.set("pi.kp", stable).unwrap();
     // A copy that does not build is named as such.
     let mut bad = spec(None);
     bad.connections.clear();
-    let (sched, _) = spec(None).build().unwrap();
-    let mut r = RealtimeRunner::new(sched, NoDevice, config(OverrunPolicy::Skip)).unwrap();
-    match r.param_sender().unwrap().gated_spec(bad) {
+    let (_r, sender) = spec_without_device(spec(None), Some(200));
+    match sender.gated_spec(bad) {
         Err(e @ LiveError::Copy(_)) => assert!(
             e.to_string()
                 .starts_with("the stability gate's copy of the graph did not build: "),
@@ -898,17 +915,8 @@ fn the_stability_gate_judges_a_filter_corner_changed_live() {
     let refused = gate(unstable);
     assert!(!refused.passes() && gate(stable).passes());
 
-    let (sched, _) = filtered_quickstart(start).build().unwrap();
-    let cfg = RtConfig {
-        ticks: Some(200),
-        ..config(OverrunPolicy::Skip)
-    };
-    let mut r = RealtimeRunner::new(sched, NoDevice, cfg).unwrap();
-    let mut sender = r
-        .param_sender()
-        .unwrap()
-        .gated_spec(filtered_quickstart(start))
-        .unwrap();
+    let (mut r, sender) = spec_without_device(filtered_quickstart(start), Some(200));
+    let mut sender = sender.gated_spec(filtered_quickstart(start)).unwrap();
     assert!(sender.params().iter().any(|p| p.path == "lp.cutoff_hz"));
     match sender.set("lp.cutoff_hz", unstable) {
         Err(e @ LiveError::Gate { .. }) => {
@@ -941,13 +949,7 @@ fn lp_model(cutoff_hz: f64) -> Option<nanomotion_core::lti::StateSpace> {
 
 #[test]
 fn a_filter_corner_the_block_refuses_is_refused_with_its_reason() {
-    let (sched, _) = filtered_quickstart(1000.0).build().unwrap();
-    let cfg = RtConfig {
-        ticks: Some(200),
-        ..config(OverrunPolicy::Skip)
-    };
-    let mut r = RealtimeRunner::new(sched, NoDevice, cfg).unwrap();
-    let mut sender = r.param_sender().unwrap();
+    let (mut r, mut sender) = spec_without_device(filtered_quickstart(1000.0), Some(200));
     // The block's own build check, at its own rate (4 kHz: Nyquist 2 kHz).
     let refused = |e: LiveError| match e {
         LiveError::Refused { path, source, .. } => (
