@@ -100,6 +100,84 @@ def test_a_pi_gain_set_mid_run_parts_the_run_from_the_simulation_at_its_tick(roo
     assert (before[j] - after[j]) * np.sign(e) >= (6e7 - 3.1416e7) * abs(e)
 
 
+# A sine of 50 Hz (its phase keeps it off zero at every tick) through a 2nd-order Butterworth low-pass, at 1 kHz.
+LOW_PASS = """
+base_rate_hz: 1000
+duration_s: 3.0
+blocks:
+  - { name: sine, type: sinusoid, amplitude: 1.0, frequency_hz: 50.0, phase_rad: 0.3 }
+  - { name: lp, type: low_pass, order: 2, cutoff_hz: 200.0 }
+connections:
+  - { from: sine.y, to: lp.u }
+log: [sine.y, lp.y]
+"""
+
+
+def butterworth_gain(f_hz: float, cutoff_hz: float, order: int, rate_hz: float) -> float:
+    """|H(e^{jωT})| of the digital Butterworth low-pass (bilinear transform,
+    cutoff pre-warped): 1/√(1 + (tan(π f T)/tan(π f_c T))^{2n})."""
+    ratio = math.tan(math.pi * f_hz / rate_hz) / math.tan(math.pi * cutoff_hz / rate_hz)
+    return 1.0 / math.sqrt(1.0 + ratio ** (2 * order))
+
+
+def sine_fit(y: np.ndarray, f_hz: float, rate_hz: float, start: int, periods: int):
+    """(a, b) of y[k] = a·sin(ωk) + b·cos(ωk), ω = 2π f/rate, fitted over
+    `periods` whole periods from sample `start` by least squares (exact for
+    a steady sine: sin and cos are orthogonal over whole periods)."""
+    n = round(periods * rate_hz / f_hz)
+    k = np.arange(start, start + n)
+    w = 2.0 * math.pi * f_hz / rate_hz
+    basis = np.column_stack([np.sin(w * k), np.cos(w * k)])
+    (a, b), *_ = np.linalg.lstsq(basis, y[start : start + n], rcond=None)
+    return a, b
+
+
+def butterworth_b0(cutoff_hz: float, rate_hz: float) -> float:
+    """b₀ of the 2nd-order digital Butterworth section: K²/(1 + √2·K + K²),
+    K = tan(π f_c T)."""
+    k = math.tan(math.pi * cutoff_hz / rate_hz)
+    return k * k / (1.0 + math.sqrt(2.0) * k + k * k)
+
+
+def test_a_low_pass_corner_set_while_the_loop_runs_attenuates_as_the_butterworth_closed_form():
+    # 50 Hz through the 200 Hz corner passes at 0.99887…; with the corner
+    # moved to 20 Hz mid-run it comes out at 0.15586… — each the digital
+    # Butterworth's gain at 50 Hz, measured on the output of the running loop.
+    f, rate = 50.0, 1000.0
+    g = nm.Graph(yaml=LOW_PASS, origin="low_pass.yaml")
+    h = g.rt_start(allow_soft=True, overrun="catch-up")
+    assert h.live_params == ["lp.cutoff_hz"]
+    wait_for_ticks(h, 800)
+    h.set("lp.cutoff_hz", 20.0)
+    r = h.wait()
+    (u,) = h.status()["updates"]
+    assert (u["path"], u["value"]) == ("lp.cutoff_hz", 20.0)
+    tick = u["tick"]
+    assert 800 <= tick <= 2000, tick
+    assert r.timing["stop"] == "completed" and r.timing["param_updates"] == 1
+    x, y = r.signals["sine.y"], r.signals["lp.y"]
+    assert x.shape == y.shape == (3000,)
+    assert abs(math.hypot(*sine_fit(x, f, rate, 0, 10)) - 1.0) < 1e-12
+    # Before: the last 20 periods (400 ticks) before the update, the 200 Hz
+    # filter's start-up long decayed (its poles' modulus 0.57 per tick).
+    a, b = sine_fit(y, f, rate, tick - 400, 20)
+    # After: 20 periods from 300 ticks past the update (the 20 Hz poles,
+    # modulus 0.915 per tick, leave 0.915^300 ≈ 3e-12 of the switch).
+    after = math.hypot(*sine_fit(y, f, rate, tick + 300, 20))
+    expected = (butterworth_gain(f, 200.0, 2, rate), butterworth_gain(f, 20.0, 2, rate))
+    assert abs(math.hypot(a, b) - expected[0]) < 1e-9 * expected[0], (a, b, expected)
+    assert abs(after - expected[1]) < 1e-9 * expected[1], (after, expected)
+    assert 0.98 < expected[0] and expected[1] < 0.16
+    # The corner took effect at the tick reported, keeping the delay line:
+    # y = z₀ + b₀·u, so there the output leaves the 200 Hz filter's steady
+    # sine by exactly (b₀' − b₀)·u[tick] (docs/realtime.md, "A filter's corner").
+    w = 2.0 * math.pi * f / rate
+    old_filter = a * math.sin(w * tick) + b * math.cos(w * tick)
+    step = (butterworth_b0(20.0, rate) - butterworth_b0(200.0, rate)) * x[tick]
+    assert abs(y[tick] - old_filter - step) < 1e-9, (y[tick], old_filter, step)
+    assert abs(step) > 1e-3
+
+
 def test_updates_the_library_refuses_raise_naming_the_parameter_and_the_fix(root):
     g = quickstart(root)
     with g.rt_start(duration=20.0, allow_soft=True) as h:
