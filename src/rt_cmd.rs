@@ -306,11 +306,12 @@ fn run_loop<D: Device>(
     let params: Vec<String> = runner.live_params().into_iter().map(|p| p.path).collect();
     if command == "rt" {
         // Live updates from standard input, judged by the stability gate on a
-        // second build of the same graph (never ticked).
+        // second build of the same graph (never ticked), joined with the
+        // device's plant and latency when the loop closes through it.
         let sender = runner
             .param_sender()
             .map_err(|e| e.to_string())?
-            .gated_spec(load(graph, lp)?)
+            .gated_through(load(graph, lp)?, runner.device())
             .map_err(|e| e.to_string())?;
         if !params.is_empty() && std::io::IsTerminal::is_terminal(&std::io::stdin()) {
             tell!(

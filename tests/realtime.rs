@@ -417,11 +417,20 @@ fn a_gain_set_from_stdin_is_recorded_and_replays_bit_for_bit() {
             "--out",
             dir.to_str().unwrap(),
         ],
-        "set pi.kp=4e7\n",
+        "set pi.kp=3.1416e8\nset pi.kp=4e7\n",
         Duration::from_millis(300),
     );
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(out.status.success(), "{err}");
+    // The controller graph has no loop of its own: ten times the design's k_p
+    // is judged on the loop through the device, with its one tick, where it
+    // is unstable (tests/through.rs, nanomotion-rt, has the figures).
+    assert!(
+        err.contains(&format!(
+            "refused: `pi.kp` = 314160000 refused by the stability gate on the loop through device `shm:{name}` with its latency of 1 tick: loop `pi` is unstable: closed-loop pole of modulus 1.068204 ≥ 1; with the values accepted so far loop `pi` had phase margin 76.16°"
+        )),
+        "{err}"
+    );
     assert!(err.contains("set pi.kp = 40000000 at tick "), "{err}");
     let plant = plant.wait_with_output().unwrap();
     assert!(plant.status.success());

@@ -17,7 +17,12 @@
 //!    own build context; a refusal is the block's message;
 //! 3. optionally ([`ParamSender::gated`]) by the stability gate on a copy of
 //!    the graph that is never ticked: an update that makes a loop fail the
-//!    gate where it passed before is refused with the gate's reason.
+//!    gate where it passed before is refused with the gate's reason and the
+//!    loop's margins with the values accepted so far. When the loop closes
+//!    through a device that knows a model of its plant
+//!    ([`ParamSender::gated_through`]), the copy is that loop — the graph
+//!    joined with the device's plant and latency, as the gate judges it before
+//!    the run ([`crate::through`]).
 //!
 //! What crosses into the loop is a [`ParamUpdate`] — the row and the `f64` —
 //! through a wait-free single-producer/single-consumer ring ([`rtrb`]). The
@@ -47,9 +52,11 @@
 //! assert!(y.iter().all(|&v| v == 3.0));
 //! ```
 
+use crate::Device;
+use crate::through::{ThroughError, joined_through_device};
 use nanomotion_core::error::{GraphError, ParamError};
 use nanomotion_core::gate::Require;
-use nanomotion_core::gate::{self, GateReport};
+use nanomotion_core::gate::{self, GateReport, SisoMargins};
 use nanomotion_core::overrides::{Override, Segment};
 use nanomotion_core::{Block, BuildContext};
 use nanomotion_core::{GraphSpec, Scheduler};
@@ -139,8 +146,10 @@ pub enum LiveError {
     /// The stability gate passed with the current parameters and fails with
     /// the new value.
     #[error(
-        "`{path}` = {value} refused by the stability gate: {} (fix: give a value with which the loop passes; `nanomotion check GRAPH` prints the margins of the graph as written)",
-        reasons.join("; ")
+        "`{path}` = {value} refused by the stability gate{}: {}{} (fix: give a value with which the loop passes; `nanomotion check GRAPH` prints the margins of the graph as written)",
+        through.as_ref().map_or(String::new(), |t| format!(" on {t}")),
+        reasons.join("; "),
+        margins_text(margins)
     )]
     Gate {
         /// The path.
@@ -149,7 +158,19 @@ pub enum LiveError {
         value: f64,
         /// The gate's failures with the value, one per loop.
         reasons: Vec<String>,
+        /// The margins, with the values accepted so far, of each loop the
+        /// value makes fail (its first operating point; none for a loop
+        /// without SISO margins).
+        margins: Vec<(String, SisoMargins)>,
+        /// `Some` when the loop judged closes through a device
+        /// ([`ParamSender::gated_through`]): `the loop through device `NAME`
+        /// with its latency of N ticks`.
+        through: Option<String>,
     },
+    /// The loop through the device cannot be joined or built for the gate
+    /// ([`ParamSender::gated_through`]).
+    #[error("the stability gate's copy of the loop through the device: {0}")]
+    Through(Box<ThroughError>),
     /// More updates than the run takes.
     #[error(
         "`{path}`: {limit} updates already sent, the most one run takes (fix: raise RtConfig::max_param_updates, or start a new run)"
@@ -193,6 +214,25 @@ pub enum LiveError {
     },
 }
 
+/// `; with the values accepted so far loop `pi` had phase margin 76.16°,
+/// delay margin 10.3669 ms` (nothing for no margins).
+fn margins_text(margins: &[(String, SisoMargins)]) -> String {
+    if margins.is_empty() {
+        return String::new();
+    }
+    let each: Vec<String> = margins
+        .iter()
+        .map(|(name, m)| {
+            format!(
+                "loop `{name}` had phase margin {:.2}°, delay margin {:.4} ms",
+                m.phase_margin_deg,
+                m.delay_margin_s * 1e3
+            )
+        })
+        .collect();
+    format!("; with the values accepted so far {}", each.join(", "))
+}
+
 /// A block with live parameters, as the sender judges it: its parameters as
 /// last accepted (serde form) and its build context.
 struct Judge {
@@ -202,20 +242,40 @@ struct Judge {
     ctx: BuildContext,
 }
 
-/// The stability gate on a copy of the graph that is never ticked.
+/// The stability gate on a copy of the graph that is never ticked: the graph
+/// itself, or the loop it closes through a device.
 struct Gate {
     shadow: Scheduler,
     require: Require,
-    /// Whether each loop passed with the parameters accepted so far.
-    passing: Vec<bool>,
+    /// Block `i` of the graph that runs is block `index[i]` of the copy
+    /// (`None`: a block without live parameters the copy need not hold).
+    index: Vec<Option<usize>>,
+    /// Each loop with the parameters accepted so far: whether it passed, and
+    /// its margins (first operating point).
+    accepted: Vec<(bool, Option<SisoMargins>)>,
+    /// What the copy is, for the refusal, when it is a loop through a device.
+    through: Option<String>,
 }
 
 impl Gate {
-    /// Set live parameter `slot` of `block` back to its accepted value `old`
-    /// on the copy.
-    fn restore(&mut self, block: usize, slot: usize, old: Option<f64>) {
-        if let (Some(b), Some(old)) = (self.shadow.block_at_mut(block), old) {
-            b.set_live_param(slot, old);
+    /// Each loop of `report`: whether it passes, and its margins.
+    fn verdicts(report: &GateReport) -> Vec<(bool, Option<SisoMargins>)> {
+        report
+            .loops
+            .iter()
+            .map(|l| {
+                let margins = l.points.first().and_then(|p| p.margins.clone());
+                (l.passes(), margins)
+            })
+            .collect()
+    }
+
+    /// Set live parameter `slot` of the running graph's block `block` to
+    /// `value` on the copy.
+    fn set(&mut self, block: usize, slot: usize, value: Option<f64>) {
+        let at = self.index.get(block).copied().flatten();
+        if let (Some(b), Some(v)) = (at.and_then(|i| self.shadow.block_at_mut(i)), value) {
+            b.set_live_param(slot, v);
         }
     }
 }
@@ -286,35 +346,105 @@ impl ParamSender {
     /// block updates; the gate has nothing to lose there.)
     /// The copy's live parameters are set to the values the loop runs with
     /// (those it was built with and the updates accepted so far).
-    pub fn gated(mut self, mut copy: Scheduler, require: Require) -> Result<Self, LiveError> {
+    pub fn gated(self, copy: Scheduler, require: Require) -> Result<Self, LiveError> {
         if copy.block_names() != self.names.as_slice() {
             return Err(LiveError::NotTheSameGraph {
                 copy: copy.block_names().to_vec(),
                 runs: self.names.clone(),
             });
         }
+        let index = (0..self.names.len()).map(Some).collect();
+        Ok(self.gate_on(copy, require, index, None))
+    }
+
+    /// The gate on `copy`, block `i` of the graph that runs being block
+    /// `index[i]` there.
+    fn gate_on(
+        mut self,
+        copy: Scheduler,
+        require: Require,
+        index: Vec<Option<usize>>,
+        through: Option<String>,
+    ) -> Self {
+        let mut g = Gate {
+            shadow: copy,
+            require,
+            index,
+            accepted: Vec::new(),
+            through,
+        };
         for row in &self.table {
             let value = self.judges[row.block]
                 .as_ref()
                 .and_then(|j| j.params[row.name].as_f64());
-            if let (Some(b), Some(v)) = (copy.block_at_mut(row.block), value) {
-                b.set_live_param(row.slot, v);
+            g.set(row.block, row.slot, value);
+        }
+        g.accepted = Gate::verdicts(&gate::analyse(&g.shadow, &g.require));
+        self.gate = Some(g);
+        self
+    }
+
+    /// The gate of [`ParamSender::gated_spec`] where the loop closes through
+    /// `device`: when the device has a
+    /// [`plant_model`](crate::Device::plant_model), each update is judged on
+    /// the loop through it — `spec` (the graph the loop runs, loaded again
+    /// with the same overrides) joined with the device's plant and its
+    /// declared [`latency_ticks`](crate::Device::latency_ticks)
+    /// ([`joined_through_device`], the graph the gate judges before the run,
+    /// [`crate::through`]) — against `spec`'s `require:`; a refusal names the
+    /// device and its latency ([`LiveError::Gate`]'s `through`). Without a
+    /// model it is [`ParamSender::gated_spec`]. `nanomotion rt` and Python's
+    /// `rt_start` judge their updates this way, with or without a device.
+    pub fn gated_through<D: Device + ?Sized>(
+        self,
+        spec: GraphSpec,
+        device: &D,
+    ) -> Result<Self, LiveError> {
+        let through = |e: ThroughError| LiveError::Through(Box::new(e));
+        let Some(plant) = device
+            .plant_model()
+            .map_err(|e| through(ThroughError::Model(e)))?
+        else {
+            return self.gated_spec(spec);
+        };
+        let require = spec.require.clone().unwrap_or_default();
+        let latency = device.latency_ticks();
+        let joined = joined_through_device(spec, plant, latency).map_err(through)?;
+        let (copy, _) = joined
+            .build()
+            .map_err(|e| through(ThroughError::Build(Box::new(e))))?;
+        // The controller's blocks keep their names in the joined graph; each
+        // block with live parameters must be there, of the same type.
+        let mut index = Vec::with_capacity(self.names.len());
+        for (i, name) in self.names.iter().enumerate() {
+            let Some(j) = &self.judges[i] else {
+                index.push(None);
+                continue;
+            };
+            let at = copy.block_names().iter().position(|n| n == name);
+            match at.and_then(|k| copy.block_at(k).map(|b| (k, b))) {
+                Some((k, b)) if b.typetag_name() == j.type_name => index.push(Some(k)),
+                _ => {
+                    return Err(LiveError::NotTheSameGraph {
+                        copy: copy.block_names().to_vec(),
+                        runs: self.names.clone(),
+                    });
+                }
             }
         }
-        let report = gate::analyse(&copy, &require);
-        self.gate = Some(Gate {
-            passing: report.loops.iter().map(|l| l.passes()).collect(),
-            shadow: copy,
-            require,
-        });
-        Ok(self)
+        let on = format!(
+            "the loop through device `{}` with its latency of {latency} tick{}",
+            device.name(),
+            if latency == 1 { "" } else { "s" }
+        );
+        Ok(self.gate_on(copy, require, index, Some(on)))
     }
 
     /// [`ParamSender::gated`] on a second build of `spec` — the graph the
     /// loop runs, loaded again with the same overrides — against its
     /// `require:` section. The copy is built without its logs, scores and
-    /// comparisons (the gate reads blocks and wiring only). `nanomotion rt`
-    /// and Python's `rt_start` judge their updates this way.
+    /// comparisons (the gate reads blocks and wiring only). A graph that runs
+    /// against a device: [`ParamSender::gated_through`].
     pub fn gated_spec(self, mut spec: GraphSpec) -> Result<Self, LiveError> {
         let require = spec.require.clone().unwrap_or_default();
         spec.log.clear();
@@ -491,33 +621,38 @@ impl ParamSender {
         copy.build(&judge.ctx).map_err(refused)?;
         // The gate, on its copy of the graph: the value is set there, and set
         // back unless the update is sent.
-        let mut passing = None;
+        let mut accepted = None;
         if let Some(g) = &mut self.gate {
-            if let Some(b) = g.shadow.block_at_mut(block) {
-                b.set_live_param(slot, value);
-            }
+            g.set(block, slot, Some(value));
             let report: GateReport = gate::analyse(&g.shadow, &g.require);
-            let reasons: Vec<String> = report
+            let lost: Vec<_> = report
                 .loops
                 .iter()
-                .zip(&g.passing)
-                .filter(|(l, was)| **was && !l.passes())
-                .flat_map(|(l, _)| l.failures())
+                .zip(&g.accepted)
+                .filter(|(l, (was, _))| *was && !l.passes())
                 .collect();
-            if !reasons.is_empty() {
-                g.restore(block, slot, old);
+            if !lost.is_empty() {
+                let reasons = lost.iter().flat_map(|(l, _)| l.failures()).collect();
+                let margins = lost
+                    .iter()
+                    .filter_map(|(l, (_, m))| m.clone().map(|m| (l.name.clone(), m)))
+                    .collect();
+                let through = g.through.clone();
+                g.set(block, slot, old);
                 return Err(LiveError::Gate {
                     path,
                     value,
                     reasons,
+                    margins,
+                    through,
                 });
             }
-            passing = Some(report.loops.iter().map(|l| l.passes()).collect());
+            accepted = Some(Gate::verdicts(&report));
         }
         let update = ParamUpdate { param, value };
         if self.ring.push(update).is_err() {
             if let Some(g) = &mut self.gate {
-                g.restore(block, slot, old);
+                g.set(block, slot, old);
             }
             return Err(if self.ring.is_abandoned() {
                 LiveError::Closed { path }
@@ -528,8 +663,8 @@ impl ParamSender {
                 }
             });
         }
-        if let (Some(g), Some(p)) = (&mut self.gate, passing) {
-            g.passing = p;
+        if let (Some(g), Some(a)) = (&mut self.gate, accepted) {
+            g.accepted = a;
         }
         if let Some(j) = &mut self.judges[block] {
             j.params = params;

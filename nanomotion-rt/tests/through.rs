@@ -4,7 +4,10 @@
 use nanomotion_core::GraphSpec;
 use nanomotion_core::gate::{self, FrontEnd, GateReport, SisoMargins};
 use nanomotion_rt::through::{ThroughError, before_run_through, joined_through_device};
-use nanomotion_rt::{Channel, Device, DeviceError, PlantInfo, ShmDevice, ShmPlant};
+use nanomotion_rt::{
+    Channel, Device, DeviceError, LiveError, ParamSender, PlantInfo, RealtimeRunner, RtConfig,
+    ShmDevice, ShmPlant,
+};
 use std::time::Duration;
 
 const EXAMPLES: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../examples");
@@ -268,4 +271,161 @@ fn a_plant_graph_too_large_for_the_descriptor_is_served_without_it() {
     // No model: nothing judged, nothing said.
     let lines = before_run_through(controller(), &dev, false, &FrontEnd::CLI).unwrap();
     assert!(lines.is_empty());
+}
+
+/// The split quickstart's controller with the PI's k_p set to `kp`.
+fn controller_with_kp(kp: f64) -> GraphSpec {
+    let set = nanomotion_core::Override::parse(&format!("blocks.pi.kp={kp}")).unwrap();
+    nanomotion_rt::link_blocks();
+    GraphSpec::from_file_with_overrides(
+        format!("{EXAMPLES}/realtime/quickstart_controller.yaml"),
+        &[set],
+    )
+    .unwrap()
+}
+
+/// The gate on the controller with `kp` joined with the plant and `latency`.
+fn joined_gate_with_kp(kp: f64, latency: u32) -> GateReport {
+    let (sched, _) = joined_through_device(controller_with_kp(kp), plant(), latency)
+        .unwrap()
+        .build()
+        .unwrap();
+    gate::analyse(&sched, &Default::default())
+}
+
+/// `graph` built to run 20 ticks against `device` (soft), and the sender of
+/// its live updates, not yet gated.
+fn soft_runner<D: Device>(graph: GraphSpec, device: D) -> (RealtimeRunner<D>, ParamSender) {
+    let (sched, _) = graph.build().unwrap();
+    let cfg = RtConfig {
+        allow_soft: true,
+        ticks: Some(20),
+        ..RtConfig::default()
+    };
+    let mut r = RealtimeRunner::new(sched, device, cfg).unwrap();
+    let sender = r.param_sender().unwrap();
+    (r, sender)
+}
+
+/// The controller run against `device`, and the sender of its live updates
+/// judged on the loop through the device.
+fn through_runner<D: Device>(device: D) -> (RealtimeRunner<D>, ParamSender) {
+    let (r, sender) = soft_runner(controller(), device);
+    let sender = sender.gated_through(controller(), r.device()).unwrap();
+    (r, sender)
+}
+
+#[test]
+fn a_live_update_is_judged_on_the_loop_through_the_device_with_its_latency() {
+    // The loop gain is proportional to k_p (k_i = k_p·2π f_i), so the gain
+    // margin the gate reports gives the k_p at which the loop through the
+    // device goes unstable: 9.5e7 with no latency (GM 9.65 dB), 1.77e8 with one
+    // tick (GM 15.0 dB: the tick moves the phase crossover from 565 Hz to
+    // 517 Hz, where the stage's gain is lower). A k_p between the two is
+    // stable through the device with its tick and not without; ten times the
+    // design's is unstable with either.
+    let kp0 = 3.1416e7;
+    let critical = |latency| kp0 * 10f64.powf(margins(&joined_gate(latency)).gain_margin_db / 20.0);
+    let (c0, c1) = (critical(0), critical(1));
+    assert!(c0 < c1, "{c0} {c1}");
+    let (between, high) = ((c0 * c1).sqrt(), 10.0 * kp0);
+    assert!(!joined_gate_with_kp(between, 0).passes());
+    assert!(joined_gate_with_kp(between, 1).passes());
+    let refused = joined_gate_with_kp(high, 1);
+    assert!(!refused.passes(), "{refused}");
+
+    // The controller graph alone has no loop: its gate has nothing to judge.
+    let (_r, alone) = soft_runner(controller(), Modelled::new(1));
+    let mut alone = alone.gated_spec(controller()).unwrap();
+    alone.set("pi.kp", high).unwrap();
+
+    // Through the device with its one tick: refused, naming the parameter,
+    // the device and its latency, the gate's failures on the joined loop and
+    // the margins the loop had with the values accepted so far.
+    let (_r, mut sender) = through_runner(Modelled::new(1));
+    assert!(sender.is_gated());
+    let before = margins(&joined_gate(1));
+    let e = sender.set("pi.kp", high).unwrap_err();
+    let text = e.to_string();
+    match e {
+        LiveError::Gate {
+            path,
+            reasons,
+            margins,
+            through,
+            ..
+        } => {
+            assert_eq!(path, "pi.kp");
+            assert_eq!(reasons, refused.failures());
+            assert!(
+                reasons[0].starts_with("loop `pi` is unstable"),
+                "{reasons:?}"
+            );
+            assert_eq!(margins, [("pi".to_string(), before.clone())]);
+            assert_eq!(
+                through.as_deref(),
+                Some("the loop through device `modelled` with its latency of 1 tick")
+            );
+            assert!(
+                text.starts_with(&format!(
+                    "`pi.kp` = {high} refused by the stability gate on the loop through device `modelled` with its latency of 1 tick: loop `pi` is unstable"
+                )),
+                "{text}"
+            );
+            assert!(
+                text.contains(&format!(
+                    "; with the values accepted so far loop `pi` had phase margin {:.2}°, delay margin {:.4} ms (fix: ",
+                    before.phase_margin_deg,
+                    before.delay_margin_s * 1e3
+                )),
+                "{text}"
+            );
+        }
+        other => panic!("{other:?}"),
+    }
+    // Through the device with its one tick the value between holds; without
+    // latency the same value is refused, naming the device's 0 ticks.
+    sender.set("pi.kp", between).unwrap();
+    let (_r, mut sender) = through_runner(Modelled::new(0));
+    match sender.set("pi.kp", between) {
+        Err(LiveError::Gate {
+            reasons, through, ..
+        }) => {
+            assert_eq!(reasons, joined_gate_with_kp(between, 0).failures());
+            assert_eq!(
+                through.as_deref(),
+                Some("the loop through device `modelled` with its latency of 0 ticks")
+            );
+        }
+        other => panic!("{other:?}"),
+    }
+
+    // A stable change is applied, and the loop's PI is then the one built
+    // with it, to the bit; the gate judges the next change from there.
+    let (mut r, mut sender) = through_runner(Modelled::new(1));
+    sender.set("pi.kp", 6.0e7).unwrap();
+    let report = r.run(|_| {}).unwrap();
+    assert_eq!(report.param_updates, 1);
+    let (fresh, _) = controller_with_kp(6.0e7).build().unwrap();
+    assert_eq!(r.scheduler().lti_of("pi"), fresh.lti_of("pi"));
+    let accepted = margins(&joined_gate_with_kp(6.0e7, 1));
+    match sender.set("pi.kp", high) {
+        Err(LiveError::Gate { margins, .. }) => {
+            assert_eq!(margins, [("pi".to_string(), accepted)])
+        }
+        other => panic!("{other:?}"),
+    }
+}
+
+#[test]
+fn a_device_without_a_plant_model_leaves_live_updates_to_the_graphs_own_gate() {
+    // NoDevice has no model: `gated_through` is `gated_spec`.
+    let (r, sender) = soft_runner(spec("quickstart.yaml"), nanomotion_rt::NoDevice);
+    let mut sender = sender
+        .gated_through(spec("quickstart.yaml"), r.device())
+        .unwrap();
+    match sender.set("pi.kp", 3.1416e8) {
+        Err(LiveError::Gate { through, .. }) => assert_eq!(through, None),
+        other => panic!("{other:?}"),
+    }
 }

@@ -211,14 +211,15 @@ fn rt_start(
     let rate_hz = sched.base_rate_hz();
     let progress = Arc::new(Mutex::new(Progress::default()));
     // The runner, the sender of its live updates judged by the gate on a
-    // second build, the loop's thread.
+    // second build (joined with the device's plant when it has one), the
+    // loop's thread.
     macro_rules! start {
         ($dev:expr) => {{
             let mut runner = RealtimeRunner::new(sched, $dev, cfg).map_err(graph_err)?;
             let sender = runner
                 .param_sender()
                 .map_err(graph_err)?
-                .gated_spec(load()?)
+                .gated_through(load()?, runner.device())
                 .map_err(graph_err)?;
             let stop = runner.stop_handle();
             let name = runner.device().name().to_string();

@@ -290,8 +290,11 @@ def test_a_controller_drives_a_plant_in_another_process_and_takes_a_live_gain(ro
                     device=f"shm:{name}", connect_timeout=60.0, watchdog_ms=2000.0)
     assert h.device == f"shm:{name}"
     wait_for_ticks(h, 2000)
-    # The loop closes through the device, so the gate has no loop in this
-    # graph to judge: the block's validation alone judges the update.
+    # The loop closes through the device: the gate judges an update on it,
+    # joined with the served plant and the device's one tick, where ten times
+    # the design's k_p is unstable (the graph alone has no loop to judge).
+    with pytest.raises(nm.GateError, match=rf"`pi.kp` = 314160000 refused by the stability gate on the loop through device `shm:{name}` with its latency of 1 tick: loop `pi` is unstable: closed-loop pole of modulus 1.068204 ≥ 1; with the values accepted so far loop `pi` had phase margin 76.16°"):
+        h.set("pi.kp", 3.1416e8)
     h.set("pi.kp", 4e7)
     r = h.wait()
     out, _ = proc.communicate(timeout=60)
