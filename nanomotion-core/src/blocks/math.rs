@@ -510,6 +510,30 @@ fn identity_ss(widths: &[usize], dt: f64) -> StateSpace {
     static_ss(DMatrix::identity(n, n), dt)
 }
 
+/// The `impl Block` of `mux` and `demux` (each with its `widths` and `dt`):
+/// both are the identity on the concatenated vector — they differ in their
+/// declared ports only — checked as their declared bounds and
+/// [`check_total_width`].
+macro_rules! concatenation_block {
+    ($block:ident) => {
+        #[declared_block]
+        impl Block for $block {
+            fn build(&mut self, ctx: &BuildContext) -> Result<(), ParamError> {
+                self.check_params()?;
+                check_total_width(&self.widths)?;
+                self.dt = ctx.dt;
+                Ok(())
+            }
+            fn output(&mut self, _tick: Tick, u: &[f64], y: &mut [f64]) {
+                y.copy_from_slice(u);
+            }
+            fn lti(&self) -> Option<StateSpace> {
+                Some(identity_ss(&self.widths, self.dt))
+            }
+        }
+    };
+}
+
 /// `mux`: concatenates inputs `in0`, `in1`, ... (widths from `widths`) into one
 /// vector `y`.
 #[derive(Debug, Clone, Serialize, Deserialize, Params)]
@@ -530,21 +554,7 @@ impl Mux {
     }
 }
 
-#[declared_block]
-impl Block for Mux {
-    fn build(&mut self, ctx: &BuildContext) -> Result<(), ParamError> {
-        self.check_params()?;
-        check_total_width(&self.widths)?;
-        self.dt = ctx.dt;
-        Ok(())
-    }
-    fn output(&mut self, _tick: Tick, u: &[f64], y: &mut [f64]) {
-        y.copy_from_slice(u);
-    }
-    fn lti(&self) -> Option<StateSpace> {
-        Some(identity_ss(&self.widths, self.dt))
-    }
-}
+concatenation_block!(Mux);
 
 /// `demux`: splits the input `u` into outputs `y0`, `y1`, ... (widths from `widths`).
 #[derive(Debug, Clone, Serialize, Deserialize, Params)]
@@ -565,21 +575,7 @@ impl Demux {
     }
 }
 
-#[declared_block]
-impl Block for Demux {
-    fn build(&mut self, ctx: &BuildContext) -> Result<(), ParamError> {
-        self.check_params()?;
-        check_total_width(&self.widths)?;
-        self.dt = ctx.dt;
-        Ok(())
-    }
-    fn output(&mut self, _tick: Tick, u: &[f64], y: &mut [f64]) {
-        y.copy_from_slice(u);
-    }
-    fn lti(&self) -> Option<StateSpace> {
-        Some(identity_ss(&self.widths, self.dt))
-    }
-}
+concatenation_block!(Demux);
 
 #[cfg(test)]
 mod tests {
