@@ -99,10 +99,6 @@ impl Topography {
 ///
 /// The 3-DOF metrological AFM stage (see the [module docs](self)).
 ///
-/// Input `v[3]` (V): drive voltages of the x, y, z piezo stacks. Outputs:
-/// `pos[3]` (m, interferometer), `deflection` (m, cantilever), `true_pos[3]` (m,
-/// noise-free), `saturated[3]` (1 where the last input was clipped).
-///
 /// ```
 /// use afm_stage::stage::AfmStage;
 /// use nanomotion_core::{Block, BuildContext, Plant};
@@ -117,7 +113,7 @@ impl Topography {
 /// ```
 #[derive(Debug, Clone, Serialize, Deserialize, Params)]
 #[serde(default, deny_unknown_fields)]
-#[block(type_name = "afm_stage", role = Plant, ports = "v[3] (V) -> pos[3] (m), deflection (m), true_pos[3] (m), saturated[3]")]
+#[block(type_name = "afm_stage", role = Plant, ports = "v[3] (V) \"on the x, y, z piezo stacks\" -> pos[3] (m) \"by the interferometers\", deflection (m) \"of the cantilever\", true_pos[3] (m) \"without noise\", saturated[3] \"1 where the last input was clipped\"")]
 pub struct AfmStage {
     /// Lowest drive voltage (V); lower inputs are clipped and reported.
     #[param(at_most = v_max_v)]

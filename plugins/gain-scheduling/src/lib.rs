@@ -378,8 +378,6 @@ pub fn fit_power_db(sigma: &[f64], gain_db: &[f64]) -> Result<(GainLaw, f64), Fi
 ///
 /// Graph block `gain_scheduled`: any inner block with a gain schedule.
 ///
-/// Inputs: the inner block's inputs, then `sigma` (one value per factor of
-/// `schedule`). Outputs: the inner block's outputs, then `gain` (1, K(σ)).
 /// With `placement: input` every inner input is multiplied by K (the inner block
 /// should be linear in its inputs: a controller on the error e).
 ///
@@ -392,7 +390,7 @@ pub fn fit_power_db(sigma: &[f64], gain_db: &[f64]) -> Result<(GainLaw, f64), Fi
 /// ```
 #[derive(Debug, Serialize, Deserialize, Params)]
 #[serde(deny_unknown_fields)]
-#[block(type_name = "gain_scheduled", role = Controller, ports = "<inner inputs>, sigma[n] [scheduling] -> <inner outputs>, gain")]
+#[block(type_name = "gain_scheduled", role = Controller, ports = "<inner inputs>, sigma[n] \"one value per factor of schedule\" [scheduling] -> <inner outputs>, gain \"K(σ)\"")]
 pub struct GainScheduledBlock {
     /// The inner block (any registered type), e.g. `{type: pi, kp: 1, zero_hz: 2}`.
     pub controller: Box<dyn Block>,

@@ -498,15 +498,16 @@ impl Actuator for WaveformDriver {
 /// u1..u4 from sinusoidal (2.2), asymmetric (Sec. 2.4.1) or its Fourier fit (2.9),
 /// rhombic, or free (4.21)-(4.22) waveforms.
 ///
-/// Graph block `walking_piezo_driver`.
-///
-/// Inputs: `f_alpha` (1, Hz), then `amplitude` (1, V) if `amplitude_input`, then
-/// `phase` (1, rad) if `phase_input`. Outputs: `u` (4, V), `alpha` (1, rad),
-/// `faults` (1, cumulative count of refused samples: non-finite f_α, A or φ, or A
-/// outside [0, V_max]; the last valid f_α, A, φ are then used).
+/// Graph block `walking_piezo_driver`; its ports are those its
+/// `#[block(ports = …)]` declares. A refused sample (counted in `faults`) is
+/// replaced by the last valid f_α, A, φ.
 #[derive(Debug, Clone, Default, Serialize, Deserialize, Params)]
 #[serde(transparent)]
-#[block(type_name = "walking_piezo_driver", role = Actuator, ports = "f_alpha (Hz), amplitude (V) if amplitude_input, phase (rad) if phase_input -> u[4] (V), alpha (rad), faults")]
+#[block(
+    type_name = "walking_piezo_driver",
+    role = Actuator,
+    ports = "f_alpha (Hz), amplitude (V) if amplitude_input, phase (rad) if phase_input -> u[4] (V), alpha (rad), faults \"cumulative count of refused samples: non-finite f_α, A or φ, or A outside 0…V_max\""
+)]
 pub struct WaveformDriverBlock {
     /// The parameters.
     pub params: DriverParams,

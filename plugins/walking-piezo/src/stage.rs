@@ -27,7 +27,7 @@ use crate::kinematics::{C_X_M_PER_V, C_Y_M_PER_V, LegKinematics};
 use crate::variation::{MuVariation, MuVariationParams, StripProfile, StripProfileParams};
 use nanomotion_core::Params;
 use nanomotion_core::block::check;
-use nanomotion_core::{Block, BuildContext, ParamError, Plant, Port, Tick, declared_block};
+use nanomotion_core::{Block, BuildContext, ParamError, Plant, Tick, declared_block};
 use serde::{Deserialize, Serialize};
 use std::f64::consts::PI;
 use thiserror::Error;
@@ -708,16 +708,16 @@ impl Plant for WalkingPiezoStage {
 /// friction, one-sided contacts, preload sharing, dedicated time-stepping solver
 /// (4.16)-(4.19).
 ///
-/// Graph block `walking_piezo_stage`: the nonlinear model of Ch. 4.
-///
-/// Inputs: `u` (4, V) and, with `external_force_input: true`, `f_ext` (1, N).
-/// Outputs: `x_s`, `v_s`, `x_legs` (2), `y_legs` (2), `y_h`, `f_n` (2),
-/// `friction` (2), `slip` (2), `mu` (2), `iterations` (of the last step),
-/// `nonconverged` (cumulative count of sub-steps that hit the cap), `faults`
-/// (cumulative count of refused steps).
+/// Graph block `walking_piezo_stage`: the nonlinear model of Ch. 4; its
+/// ports are those its `#[block(ports = …)]` declares (`f_ext` with
+/// `external_force_input: true`).
 #[derive(Debug, Clone, Default, Serialize, Deserialize, Params)]
 #[serde(transparent)]
-#[block(type_name = "walking_piezo_stage", role = Plant, ports = "u[4] (V) [, f_ext[1] (N)] -> x_s, v_s, x_legs[2], y_legs[2], y_h, f_n[2], friction[2], slip[2], mu[2], iterations, nonconverged, faults")]
+#[block(
+    type_name = "walking_piezo_stage",
+    role = Plant,
+    ports = "u[4] (V), f_ext (N) if external_force_input -> x_s, v_s, x_legs[2], y_legs[2], y_h, f_n[2], friction[2], slip[2], mu[2], iterations \"of the last step\", nonconverged \"sub-steps that hit the cap, cumulative\", faults \"refused steps, cumulative\""
+)]
 pub struct WalkingPiezoStageBlock {
     /// The parameters.
     pub params: StageParams,
@@ -738,29 +738,6 @@ impl WalkingPiezoStageBlock {
 
 #[declared_block]
 impl Block for WalkingPiezoStageBlock {
-    fn inputs(&self) -> Vec<Port> {
-        let mut v = vec![Port::new("u", 4)];
-        if self.params.external_force_input {
-            v.push(Port::new("f_ext", 1));
-        }
-        v
-    }
-    fn outputs(&self) -> Vec<Port> {
-        vec![
-            Port::new("x_s", 1),
-            Port::new("v_s", 1),
-            Port::new("x_legs", 2),
-            Port::new("y_legs", 2),
-            Port::new("y_h", 1),
-            Port::new("f_n", 2),
-            Port::new("friction", 2),
-            Port::new("slip", 2),
-            Port::new("mu", 2),
-            Port::new("iterations", 1),
-            Port::new("nonconverged", 1),
-            Port::new("faults", 1),
-        ]
-    }
     fn direct_feedthrough(&self) -> bool {
         false
     }

@@ -131,3 +131,47 @@ fn overlap_q_is_a_declared_open_interval() {
     assert_eq!(asym["properties"]["overlap_q"]["exclusiveMinimum"], 0);
     assert_eq!(asym["properties"]["overlap_q"]["exclusiveMaximum"], 1);
 }
+
+#[test]
+fn the_stage_has_the_ports_its_block_declares_and_fills_every_output() {
+    // `f_ext` exists with `external_force_input: true`; the outputs are the
+    // 18 values the model writes per tick (`WalkingPiezoStage::plant_output`).
+    let ports = |text: &str| {
+        let b: Box<dyn Block> = nanomotion_core::yaml::from_str(text, "t").unwrap();
+        let named = |p: Vec<nanomotion_core::Port>| -> Vec<(String, usize, Option<String>)> {
+            p.into_iter().map(|p| (p.name, p.width, p.unit)).collect()
+        };
+        (named(b.inputs()), named(b.outputs()))
+    };
+    let (ins, outs) = ports("type: walking_piezo_stage\n");
+    assert_eq!(ins, [("u".to_string(), 4, Some("V".to_string()))]);
+    let (ins_f, outs_f) = ports("type: walking_piezo_stage\nexternal_force_input: true\n");
+    assert_eq!(
+        ins_f,
+        [
+            ("u".to_string(), 4, Some("V".to_string())),
+            ("f_ext".to_string(), 1, Some("N".to_string()))
+        ]
+    );
+    assert_eq!(outs, outs_f);
+    let widths: Vec<(&str, usize)> = outs.iter().map(|(n, w, _)| (n.as_str(), *w)).collect();
+    assert_eq!(
+        widths,
+        [
+            ("x_s", 1),
+            ("v_s", 1),
+            ("x_legs", 2),
+            ("y_legs", 2),
+            ("y_h", 1),
+            ("f_n", 2),
+            ("friction", 2),
+            ("slip", 2),
+            ("mu", 2),
+            ("iterations", 1),
+            ("nonconverged", 1),
+            ("faults", 1)
+        ]
+    );
+    assert_eq!(widths.iter().map(|(_, w)| w).sum::<usize>(), 18);
+    assert!(outs.iter().all(|(_, _, unit)| unit.is_none()));
+}
