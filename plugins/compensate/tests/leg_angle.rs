@@ -569,6 +569,10 @@ fn from_a_record_diagnose_names_the_leg_angle_dip_and_compensate_puts_a_dvrc_on_
         depth: 0.3,
         half_width_rad: PI / 5.0,
     };
+    // The record's δ̄ in closed form is δ's mean by quadrature.
+    for t in [TABLE_5_1_DIP, other] {
+        assert!((take_over_fourier(&t).0 - t.mean()).abs() < 1e-9, "{t:?}");
+    }
     for (t, v, swing, seed) in [
         (TABLE_5_1_DIP, V, (0.5, 0.5), 1),
         (other, 7e-6, (0.3, 0.7), 5),
