@@ -21,6 +21,8 @@ pub struct Args {
     pub holdout: f64,
     pub seed: Option<u64>,
     pub effects: Vec<String>,
+    /// `--phase`: a signal a disturbance may be periodic in (`Options::phase`).
+    pub phase: Option<String>,
     pub force: bool,
 }
 
@@ -60,6 +62,7 @@ pub fn run(a: Args) -> Result<(), String> {
         holdout: a.holdout,
         seed: a.seed,
         effects: a.effects.clone(),
+        phase: a.phase.clone(),
         ..Options::default()
     };
     let held_out = if a.validation.is_empty() {

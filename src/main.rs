@@ -245,6 +245,15 @@ enum Command {
         /// Only try these effects (comma separated vocabulary names).
         #[arg(long, value_delimiter = ',')]
         effects: Vec<String>,
+        /// A signal of the model (BLOCK.PORT) a disturbance may be periodic in
+        /// besides the position, e.g. `alpha.y`, the drive's phase (the leg
+        /// angle α = 2π∫f_α of a walking piezo drive, integrated in the model):
+        /// a `repetitive_disturbance` periodic in it is tried on the measured
+        /// output and on the drive, its period found from the data (docs/plf.md,
+        /// "A disturbance periodic in a declared phase"). A signal the model
+        /// lacks is refused, naming the model's signals.
+        #[arg(long, value_name = "SIGNAL")]
+        phase: Option<String>,
         /// Replace a non-empty output folder that does not hold a previous output.
         #[arg(long)]
         force: bool,
@@ -417,6 +426,7 @@ fn main() -> ExitCode {
             holdout,
             seed,
             effects,
+            phase,
             force,
         } => diagnose_cmd::run(diagnose_cmd::Args {
             model,
@@ -428,6 +438,7 @@ fn main() -> ExitCode {
             holdout,
             seed,
             effects,
+            phase,
             force,
         }),
         Command::Compensate(a) => compensate_cmd::run(a),

@@ -105,6 +105,23 @@ fn diagnose_command_reports_bad_input_and_writes_its_files() {
         "{err}"
     );
     assert!(!tmp.exists());
+    // A declared phase the model lacks (`--phase`): a typed error naming it
+    // and the model's scalar signals, nothing written.
+    let (ok, _, err) = cli(&[
+        "diagnose",
+        "examples/diagnose/model.yaml",
+        "examples/diagnose/record.csv",
+        "--phase",
+        "leg.y",
+        "--out",
+        tmp.to_str().unwrap(),
+    ]);
+    assert!(
+        !ok && err.contains("option `phase`: the model has no block `leg`")
+            && err.contains("the model's scalar signals: drive.y, stage.y"),
+        "{err}"
+    );
+    assert!(!tmp.exists());
     // A record without the model's columns: the error lists the columns there are.
     let (ok, _, err) = cli(&[
         "diagnose",

@@ -470,14 +470,18 @@ def rt_start(graph: PathLike | Graph, overrides: Mapping[str, Any] | None = None
 
 def diagnose(model: PathLike, data: PathLike, *, max_effects: int = 3, holdout: float = 0.3,
              seed: int | None = None, effects: Sequence[str] = (),
-             validation: Sequence[PathLike] = ()) -> DiagnoseResult:
+             validation: Sequence[PathLike] = (), phase: str | None = None) -> DiagnoseResult:
     """Name what a model graph misses against a measured record, fit it, and
     return the report and the augmented graph (``nanomotion diagnose``). With
     ``validation`` records, ``data`` estimates and they decide (each record
-    simulated from rest); without, the last ``holdout`` of ``data`` decides."""
+    simulated from rest); without, the last ``holdout`` of ``data`` decides.
+    ``phase`` (``--phase``) is a signal of the model, ``"BLOCK.PORT"`` such as
+    ``"alpha.y"`` (a walking drive's leg angle), that a disturbance may be
+    periodic in: one on the drive periodic in it is tried, its period found
+    from the data."""
     js, yaml = _nm.diagnose_graph(os.fspath(model), os.fspath(data), max_effects=max_effects,
                                   holdout=holdout, seed=seed, effects=list(effects),
-                                  validation=[os.fspath(v) for v in validation])
+                                  validation=[os.fspath(v) for v in validation], phase=phase)
     return DiagnoseResult(report=json.loads(js), augmented_yaml=yaml)
 
 

@@ -297,7 +297,7 @@ fn load_graph<'py>(
 /// `report.json`) and the augmented graph as YAML (`model_augmented.yaml`),
 /// or None when no effect was found.
 #[pyfunction]
-#[pyo3(signature = (model, data, max_effects=3, holdout=0.3, seed=None, effects=Vec::new(), validation=Vec::new()))]
+#[pyo3(signature = (model, data, max_effects=3, holdout=0.3, seed=None, effects=Vec::new(), validation=Vec::new(), phase=None))]
 #[allow(clippy::too_many_arguments)]
 fn diagnose_graph(
     py: Python<'_>,
@@ -308,6 +308,7 @@ fn diagnose_graph(
     seed: Option<u64>,
     effects: Vec<String>,
     validation: Vec<PathBuf>,
+    phase: Option<String>,
 ) -> PyResult<(String, Option<String>)> {
     let spec = GraphSpec::from_file(&model).map_err(graph_err)?;
     let mut records = vec![Dataset::from_file(&data).map_err(data_err)?];
@@ -319,6 +320,7 @@ fn diagnose_graph(
         holdout,
         seed,
         effects,
+        phase,
         ..Default::default()
     };
     let report = py

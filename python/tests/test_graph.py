@@ -138,6 +138,10 @@ def test_diagnose_names_the_hidden_hysteresis(root):
     assert d.report["final"]["holdout_rms"] < d.report["nominal"]["holdout_rms"]
     with pytest.raises(nm.DiagnoseError, match="holdout"):
         nm.diagnose(root / "examples/diagnose/model.yaml", root / "examples/diagnose/record.csv", holdout=0.95)
+    # A declared phase the model lacks is refused, naming it and the fix.
+    with pytest.raises(nm.DiagnoseError, match="phase.*no block `leg`"):
+        nm.diagnose(root / "examples/diagnose/model.yaml", root / "examples/diagnose/record.csv",
+                    phase="leg.y")
 
 
 def test_diagnose_decides_on_a_record_it_did_not_fit(root, tmp_path):

@@ -71,6 +71,19 @@ pub struct Options {
     /// (default true): the gain and the time, damping, lag and per-mode
     /// scales of every continuous `state_space` block (see [`Calibration`]).
     pub calibrate: bool,
+    /// A signal of the graph, `block.port`, that a disturbance may be
+    /// periodic in besides the position: the drive's phase, e.g. the leg
+    /// angle α = 2π∫f_α of a walking piezo drive (thesis Ch. 5), computed in
+    /// the model (`alpha.y`). A `repetitive_disturbance` periodic in it is
+    /// then a candidate on the measured output and on every plant input, its
+    /// period found from the data by the same searches as a position's pitch
+    /// (`position_period`, `force_pitch`); where the model's position
+    /// follows it in proportion, the position's own candidates are left out
+    /// (`periodic_variables`; docs/plf.md, "A disturbance periodic in a
+    /// declared phase"). `None` (default): periodic in time or in
+    /// the position only. A signal the model lacks is a
+    /// [`PlfError::Option`] naming it.
+    pub phase: Option<String>,
 }
 
 impl Default for Options {
@@ -84,6 +97,7 @@ impl Default for Options {
             effects: Vec::new(),
             threads: 2,
             calibrate: true,
+            phase: None,
         }
     }
 }
@@ -480,6 +494,51 @@ fn check_options(opts: &Options) -> Result<(), PlfError> {
     Ok(())
 }
 
+/// The declared phase ([`Options::phase`]) must be a scalar output of a block
+/// of the model: `BLOCK.PORT`.
+fn check_phase(spec: &GraphSpec, opts: &Options) -> Result<(), PlfError> {
+    let Some(phase) = opts.phase.as_deref() else {
+        return Ok(());
+    };
+    let scalar_outputs = || {
+        let all: Vec<String> = spec
+            .blocks
+            .iter()
+            .flat_map(|b| {
+                b.block
+                    .outputs()
+                    .into_iter()
+                    .filter(|p| p.width == 1)
+                    .map(move |p| format!("{}.{}", b.name, p.name))
+            })
+            .collect();
+        all.join(", ")
+    };
+    let problem = match phase.split_once('.') {
+        None => format!("`{phase}` is not a signal BLOCK.PORT"),
+        Some((block, port)) => match spec.blocks.iter().find(|b| b.name == block) {
+            None => format!("the model has no block `{block}`"),
+            Some(b) => match b.block.outputs().into_iter().find(|p| p.name == port) {
+                None => format!("block `{block}` has no output `{port}`"),
+                Some(p) if p.width != 1 => {
+                    format!(
+                        "`{phase}` has width {}; the phase must be a scalar",
+                        p.width
+                    )
+                }
+                Some(_) => return Ok(()),
+            },
+        },
+    };
+    Err(PlfError::Option {
+        option: "phase",
+        problem: format!(
+            "{problem}: give a scalar signal of the model the disturbance may be periodic in, such as an integrator of the drive scaled to the leg angle (alpha.y); the model's scalar signals: {}",
+            scalar_outputs()
+        ),
+    })
+}
+
 /// [`diagnose`] on several records with a progress callback: with one record,
 /// its last `opts.holdout` is held out; with more, `records[0]` estimates every
 /// parameter and the others (same columns and rate, other excitations) are
@@ -495,6 +554,7 @@ pub fn diagnose_records(
     check_record_lengths(records)?;
     let records = Records::concat(records)?;
     let data = records.all.clone();
+    check_phase(spec, opts)?;
     let (ctx, nominal, nominal_scores, runs) = context(spec, &records, &data, opts)?;
     let mut search = Search::new(&ctx, opts, nominal, nominal_scores, runs)?;
     // No effect asked for: the nominal calibration alone.
@@ -3386,6 +3446,7 @@ fn enumerate(
         let r = ctx.part(&cur.residual[i], Part::Estimation);
         let yhat = &cur.model[i];
         let pos = signal(ctx, cur, &ch.position)?;
+        let periodic_in = periodic_variables(ctx, cur, &ch.position, &pos, opts)?;
         let (sr, sy) = (std_of(r).max(1e-300), std_of(&pos).max(1e-300));
         let out_site = Site::Output {
             compare: i,
@@ -3421,15 +3482,17 @@ fn enumerate(
                     out_rate,
                 ));
             }
-            if let Some((p, _)) = position_period(r, &pos[..ctx.n_est]) {
-                out.push(repetitive(
-                    out_site.clone(),
-                    Some(i),
-                    p,
-                    vec![ch.position.clone()],
-                    sr,
-                    out_rate,
-                ));
+            for (variable, values) in &periodic_in {
+                if let Some((p, _)) = position_period(r, &values[..ctx.n_est]) {
+                    out.push(repetitive(
+                        out_site.clone(),
+                        Some(i),
+                        p,
+                        vec![variable.clone()],
+                        sr,
+                        out_rate,
+                    ));
+                }
             }
         }
         if want("quantization") {
@@ -3848,31 +3911,21 @@ fn enumerate(
                 // the share of the residual a name must cut (tuning 635: a
                 // pitch explaining 19 % of what a hysteresis left was named
                 // for 18 % more; the cogging forces named explain 31–96 %).
-                let matched = force_pitch(ctx, cur, &inp, &ch.position, &pos, runs)
-                    .filter(|m| m.3 >= opts.min_excess_cut);
-                let binned = clearest_position_period(ctx, cur, &pos).map(|(p, _, _)| p);
-                let mut starts: Vec<serde_json::Value> = matched
-                    .iter()
-                    .map(|&(p, c, s, _)| {
-                        json!({"type": "repetitive_disturbance", "period": p, "variable": "signal", "cos": [c, 0.0, 0.0], "sin": [s, 0.0, 0.0]})
-                    })
-                    .collect();
-                if let Some(p) =
-                    binned.filter(|p| matched.is_none_or(|m| (p / m.0).ln().abs() > 0.05))
-                {
-                    starts.push(json!({"type": "repetitive_disturbance", "period": p, "variable": "signal", "cos": [0.0, 0.0, 0.0], "sin": [0.0, 0.0, 0.0]}));
-                }
-                if !starts.is_empty() {
-                    let mut c = repetitive(
-                        inp.clone(),
-                        None,
-                        1.0,
-                        vec![ch.position.clone()],
+                //
+                // A disturbance periodic in a declared phase (the leg angle α
+                // of a walking drive, Ch. 5: a leg's take-over every cycle)
+                // is looked for the same way, over that signal
+                // ([`periodic_variables`]).
+                for (variable, values) in &periodic_in {
+                    out.extend(periodic_in_signal(
+                        ctx,
+                        cur,
+                        &inp,
+                        (variable, values),
                         0.1 * su,
-                        None,
-                    );
-                    c.starts = starts;
-                    out.push(c);
+                        opts,
+                        runs,
+                    ));
                 }
             }
         }
@@ -3905,6 +3958,82 @@ fn repetitive(
         s,
         rate_hz,
     }
+}
+
+/// The signals a disturbance may be periodic in, with their values over the
+/// record: the position `position` (values `pos`) and the declared phase
+/// ([`Options::phase`]). Where the model's position follows the phase in
+/// proportion — within 10⁻³ of its range off an affine map of it, as a walking
+/// stage's x_s = c·α/2π does — a disturbance periodic in the one is periodic
+/// in the other and no record run on this model can tell them apart: the
+/// phase declared is kept and the position left out (else the step would
+/// fit the same disturbance twice and name whichever rounding favours).
+fn periodic_variables(
+    ctx: &Ctx<'_>,
+    cur: &Current,
+    position: &str,
+    pos: &[f64],
+    opts: &Options,
+) -> Result<Vec<(String, Vec<f64>)>, PlfError> {
+    let Some(phase) = opts.phase.as_deref().filter(|p| *p != position) else {
+        return Ok(vec![(position.to_string(), pos.to_vec())]);
+    };
+    let values = signal(ctx, cur, phase)?;
+    let n = pos.len().min(values.len());
+    let phi = nalgebra::DMatrix::from_fn(n, 2, |k, j| if j == 0 { 1.0 } else { values[k] });
+    let follows = stats::least_squares(&phi, &pos[..n]).is_some_and(|(th, _)| {
+        let off: Vec<f64> = (0..n).map(|k| pos[k] - th[0] - th[1] * values[k]).collect();
+        stats::mean_square(&off).sqrt() <= 1e-3 * range(pos)
+    });
+    let mut out = Vec::new();
+    if !follows {
+        out.push((position.to_string(), pos.to_vec()));
+    }
+    out.push((phase.to_string(), values));
+    Ok(out)
+}
+
+/// A disturbance on the drive `inp` periodic in the signal `variable` (name,
+/// values over the record): its period started where a force of that period,
+/// run through the model, explains at least the share of the residual a name
+/// must cut ([`force_pitch`]), and where the compared residual binned against
+/// the signal shows its clearest line ([`clearest_position_period`]) when that
+/// is another period. `None` when neither gives a start. Coefficients on the
+/// scale `scale`.
+fn periodic_in_signal(
+    ctx: &Ctx<'_>,
+    cur: &Current,
+    inp: &Site,
+    (variable, values): (&str, &[f64]),
+    scale: f64,
+    opts: &Options,
+    runs: &mut usize,
+) -> Option<Cand> {
+    let matched =
+        force_pitch(ctx, cur, inp, variable, values, runs).filter(|m| m.3 >= opts.min_excess_cut);
+    let binned = clearest_position_period(ctx, cur, values).map(|(p, _, _)| p);
+    let mut starts: Vec<serde_json::Value> = matched
+        .iter()
+        .map(|&(p, c, s, _)| {
+            json!({"type": "repetitive_disturbance", "period": p, "variable": "signal", "cos": [c, 0.0, 0.0], "sin": [s, 0.0, 0.0]})
+        })
+        .collect();
+    if let Some(p) = binned.filter(|p| matched.is_none_or(|m| (p / m.0).ln().abs() > 0.05)) {
+        starts.push(json!({"type": "repetitive_disturbance", "period": p, "variable": "signal", "cos": [0.0, 0.0, 0.0], "sin": [0.0, 0.0, 0.0]}));
+    }
+    if starts.is_empty() {
+        return None;
+    }
+    let mut c = repetitive(
+        inp.clone(),
+        None,
+        1.0,
+        vec![variable.to_string()],
+        scale,
+        None,
+    );
+    c.starts = starts;
+    Some(c)
 }
 
 /// A fractional delay, started at 0.5 to 20 samples (buffer up to 200 samples).
