@@ -2630,32 +2630,45 @@ fn time_period(c: &Cand) -> Option<f64> {
         .flatten()
 }
 
-/// Why a residual periodic in time with period `period_s` must not be named an
-/// external disturbance: when an excitation of the model (a `data_column` the
-/// graph reads: the drive, or a closed loop's reference) itself repeats every
-/// m periods (m = 1…8: its own period, or the residual is one of its harmonics),
-/// any nonlinear map of the input leaves a residual locked in phase to it, and a
-/// disturbance independent of the input cannot be told from that on this record.
-/// The input-driven effects stay candidates. `None` when no excitation repeats.
 /// A residual line is locked to a measured input when the input repeats
 /// after one of the first `PHASE_LOCK_HARMONICS` multiples of the line's
 /// period with at least this correlation. The line's period is refined off
-/// the periodogram's grid ([`refine_line`]), so a truly locked line correlates
-/// to within round-off of the refinement; a looser bound (0.95, ±18° of phase)
-/// called a disturbance locked whenever one of eight multiples of its period
-/// happened to come near a multiple of a sine excitation's (about one record
-/// in two): 0.998 is ±3.6°.
+/// the periodogram's grid ([`stats::refine_line`]), so a truly locked line
+/// correlates to within round-off of the refinement; a looser bound (0.95,
+/// ±18° of phase) called a disturbance locked whenever one of eight
+/// multiples of its period happened to come near a multiple of a sine
+/// excitation's (about one record in two): 0.998 is ±3.6°.
 const PHASE_LOCK_CORRELATION: f64 = 0.998;
-/// See [`PHASE_LOCK_CORRELATION`].
+/// The harmonics m = 1…this of an excitation's period, or of one of its
+/// lines, that a residual line may sit at to be locked to it
+/// ([`phase_locked`]).
 const PHASE_LOCK_HARMONICS: usize = 6;
 
+/// Why a residual periodic in time with period `period_s` must not be named an
+/// external disturbance: when an excitation of the model (a `data_column` the
+/// graph reads: the drive, or a closed loop's reference) repeats every m
+/// periods (m = 1…[`PHASE_LOCK_HARMONICS`]: its own period, or the residual is
+/// one of its harmonics), or — repeating or not, a multisine — carries a line
+/// at the residual's frequency or at its m-th subharmonic, any map of the
+/// input (a hysteresis, a saturation, a gain the nominal has wrong near a
+/// resonance) leaves a residual line locked in phase to it there, and a
+/// disturbance independent of the input cannot be told from that on this
+/// record. The excitation's line must stand out of its own spectrum's local
+/// level at the step's level ([`stats::line_near`], Bonferroni over the
+/// harmonics, columns and bins searched) and sit within one bin of the residual's
+/// estimation part (its resolution) of a harmonic; a disturbance that close
+/// to an excitation line is not resolved by this record either. The
+/// input-driven effects stay candidates. `None` when no excitation is locked.
 fn phase_locked(ctx: &Ctx<'_>, spec: &GraphSpec, period_s: f64) -> Option<String> {
     let n = ctx.n;
     let lag0 = period_s * ctx.fs;
     if !(lag0.is_finite() && lag0 >= 2.0) {
         return None;
     }
-    for (col, x) in excitations(ctx, spec) {
+    let excitations = excitations(ctx, spec);
+    // The excitation lines tried: every harmonic of every column.
+    let tests = (PHASE_LOCK_HARMONICS * excitations.len()) as f64;
+    for (col, x) in excitations {
         let m0 = stats::mean(x);
         for m in 1..=PHASE_LOCK_HARMONICS {
             let lag = m as f64 * lag0;
@@ -2677,6 +2690,29 @@ fn phase_locked(ctx: &Ctx<'_>, spec: &GraphSpec, period_s: f64) -> Option<String
             if c > PHASE_LOCK_CORRELATION {
                 return Some(format!(
                     "the residual's line (period {period_s:.4e} s) is locked to the excitation: column `{col}` repeats every {m} × that period (correlation {c:.3}), so the residual is what a map of the input leaves, not a disturbance independent of it; an excitation that does not repeat at this period would tell them apart"
+                ));
+            }
+        }
+        // One of the excitation's lines, the whole not repeating (a
+        // multisine): a map of the input leaves lines at its harmonics.
+        let f = 1.0 / lag0;
+        for m in 1..=PHASE_LOCK_HARMONICS {
+            let Some((fd, ratio)) = stats::line_near(x, f / m as f64) else {
+                break;
+            };
+            if ratio > (stats::LINE_NEAR_SEARCHED * tests / ctx.line_level).ln()
+                && (m as f64 * fd - f).abs() <= 1.0 / ctx.n_est as f64
+            {
+                let which = if m == 1 {
+                    "at".to_string()
+                } else {
+                    format!("at the harmonic {m} of")
+                };
+                return Some(format!(
+                    "the residual's line at {:.4} Hz sits {which} a line of the excitation: column `{col}` carries a sine at {:.4} Hz ({ratio:.0}× its spectrum's local level), so the residual is what a map of the input leaves there, not a disturbance independent of it; an excitation without a line at {:.4} Hz would tell them apart",
+                    f * ctx.fs,
+                    fd * ctx.fs,
+                    f / m as f64 * ctx.fs
                 ));
             }
         }
@@ -2771,40 +2807,8 @@ fn single_tone_notes(ctx: &Ctx<'_>, spec: &GraphSpec) -> Vec<String> {
 /// fit in `r` (a slower "period" is a trend, not a repetition).
 fn line_period(r: &[f64]) -> Option<f64> {
     let (_, f) = stats::fisher_g(r);
-    let f = refine_line(r, f);
+    let f = stats::refine_line(r, f);
     (f > 0.0 && 1.0 / f <= r.len() as f64 / 3.0).then(|| 1.0 / f)
-}
-
-/// The frequency (cycles per sample) of the line of `r` near the periodogram
-/// bin `f0`, refined off the bin grid: the maximum of |Σ rₖ e^{−i2πfk}| over
-/// f0 ± one bin (golden-section search). A bin is 1/N wide, so a line between
-/// bins is found to a small fraction of it — what a phase comparison over the
-/// whole record needs.
-fn refine_line(r: &[f64], f0: f64) -> f64 {
-    let n = r.len();
-    if n < 8 || f0.is_nan() || f0 <= 0.0 {
-        return f0;
-    }
-    let m = stats::mean(r);
-    let power = |f: f64| {
-        let (mut re, mut im) = (0.0, 0.0);
-        let w = 2.0 * std::f64::consts::PI * f;
-        for (k, v) in r.iter().enumerate() {
-            let (s, c) = (w * k as f64).sin_cos();
-            re += (v - m) * c;
-            im -= (v - m) * s;
-        }
-        re * re + im * im
-    };
-    let bin = 1.0 / n as f64;
-    let (a, b, _, _) = nanomotion_core::lti::linalg::golden_section_max(
-        &power,
-        (f0 - bin).max(0.5 * bin),
-        (f0 + bin).min(0.5),
-        30,
-    );
-    let f = 0.5 * (a + b);
-    if power(f) >= power(f0) { f } else { f0 }
 }
 
 /// How a force fed back from the stage's own motion into its force balance
@@ -3274,7 +3278,8 @@ fn clearest_position_period(
 /// The pitch of a force periodic in the position `position` (values `pos`)
 /// acting at `site`, found as a matched filter through the current model:
 /// for each pitch p on a grid (three to 128 periods over the range travelled
-/// in the estimation part, every quarter period over the range, none shorter
+/// in the estimation part, every half period over the range, the best few
+/// refined to an eighth, none shorter
 /// than four times the travel of a fast sample), the model is run with a
 /// small force ε·cos(2πx/p) and ε·sin(2πx/p) added at the site, the two
 /// responses g_c, g_s (what the loop and the plant make of that force at the
@@ -3286,6 +3291,11 @@ fn clearest_position_period(
 /// binned against the position (a phase that varies with the speed blurs
 /// the bins). `None` when no pitch explains anything or the record does not
 /// move.
+/// The grid of [`force_pitch`]: periods over the range travelled, apart.
+const PITCH_COARSE_STEP: f64 = 0.5;
+/// The local maxima of [`force_pitch`]'s coarse grid refined (the best first).
+const PITCH_PEAKS_REFINED: usize = 3;
+
 fn force_pitch(
     ctx: &Ctx<'_>,
     cur: &Current,
@@ -3376,9 +3386,8 @@ fn force_pitch(
             ev.residual(i, 0..n).into_iter().map(move |v| v * w)
         })
         .collect();
-    let mut best: Option<(f64, f64, f64, f64)> = None;
-    let mut k = k_min;
-    while k <= k_max {
+    // (explained, a, b) of the pitch with k periods over the range.
+    let mut explain = |k: f64| -> Option<(f64, f64, f64)> {
         let z = (k_min / k).ln();
         let mut g = [Vec::new(), Vec::new()];
         for (j, gj) in g.iter_mut().enumerate() {
@@ -3389,7 +3398,7 @@ fn force_pitch(
             ];
             *runs += 1;
             if !ev.run(&zz, n) {
-                break;
+                return None;
             }
             *gj = (0..outputs)
                 .map(|i| {
@@ -3402,22 +3411,51 @@ fn force_pitch(
                 .collect::<Vec<_>>()
                 .concat();
         }
-        if g[1].len() == g[0].len() && !g[0].is_empty() {
-            let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
-            let (cc, cs, ss) = (dot(&g[0], &g[0]), dot(&g[0], &g[1]), dot(&g[1], &g[1]));
-            let (rc, rs) = (dot(&g[0], &r), dot(&g[1], &r));
-            let det = cc * ss - cs * cs;
-            if det > 1e-12 * cc * ss && det.is_finite() {
-                let a = (ss * rc - cs * rs) / det;
-                let b = (cc * rs - cs * rc) / det;
-                let explained = a * rc + b * rs;
-                if explained > best.map_or(0.0, |b| b.0) {
-                    best = Some((explained, span / k, a * eps, b * eps));
-                }
+        let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
+        let (cc, cs, ss) = (dot(&g[0], &g[0]), dot(&g[0], &g[1]), dot(&g[1], &g[1]));
+        let (rc, rs) = (dot(&g[0], &r), dot(&g[1], &r));
+        let det = cc * ss - cs * cs;
+        (det > 1e-12 * cc * ss && det.is_finite()).then(|| {
+            let a = (ss * rc - cs * rs) / det;
+            let b = (cc * rs - cs * rc) / det;
+            (a * rc + b * rs, a, b)
+        })
+    };
+    // Coarse to fine. Moving k by δ turns the phase at the range's far end by
+    // 2πδ, so a pitch's peak is about one period over the range wide: on a
+    // grid of half a period the peak is within a quarter of one (at least
+    // about 80 % of its height), and the best few local maxima are refined
+    // to an eighth.
+    let coarse: Vec<(f64, f64, f64, f64)> = (0..)
+        .map(|j| k_min + PITCH_COARSE_STEP * j as f64)
+        .take_while(|&k| k <= k_max)
+        .filter_map(|k| explain(k).map(|(e, a, b)| (k, e, a, b)))
+        .collect();
+    let mut peaks: Vec<(f64, f64, f64, f64)> = (0..coarse.len())
+        .filter(|&j| {
+            let e = coarse[j].1;
+            (j == 0 || coarse[j - 1].1 <= e) && coarse.get(j + 1).is_none_or(|c| c.1 <= e)
+        })
+        .map(|j| coarse[j])
+        .collect();
+    peaks.sort_by(|x, y| y.1.total_cmp(&x.1));
+    peaks.truncate(PITCH_PEAKS_REFINED);
+    let mut candidates = peaks.clone();
+    for &(k0, ..) in &peaks {
+        for d in [-3.0, -2.0, -1.0, 1.0, 2.0, 3.0] {
+            let k = k0 + d * PITCH_COARSE_STEP / 4.0;
+            if (k_min..=k_max).contains(&k)
+                && let Some((e, a, b)) = explain(k)
+            {
+                candidates.push((k, e, a, b));
             }
         }
-        k += 0.25;
     }
+    let best = candidates
+        .into_iter()
+        .filter(|c| c.1 > 0.0)
+        .max_by(|x, y| x.1.total_cmp(&y.1))
+        .map(|(k, e, a, b)| (e, span / k, a * eps, b * eps));
     let total: f64 = r.iter().map(|v| v * v).sum();
     tracing::debug!(
         span,

@@ -409,6 +409,88 @@ pub fn tone_share(x: &[f64]) -> (f64, f64) {
 /// Bins each side of a line that [`tone_share`] counts as the line's.
 pub const TONE_BINS: usize = 5;
 
+/// The frequency (cycles per sample) of the line of `x` near the periodogram
+/// bin `f0`, refined off the bin grid: the maximum of |Σ xₖ e^{−i2πfk}| over
+/// f0 ± one bin (golden-section search). A bin is 1/N wide, so a line between
+/// bins is found to a small fraction of it — what a phase comparison over the
+/// whole record needs.
+pub fn refine_line(x: &[f64], f0: f64) -> f64 {
+    let n = x.len();
+    if n < 8 || f0.is_nan() || f0 <= 0.0 {
+        return f0;
+    }
+    let m = mean(x);
+    let power = |f: f64| dtft_power(x, m, f);
+    let bin = 1.0 / n as f64;
+    let (a, b, _, _) = nanomotion_core::lti::linalg::golden_section_max(
+        &power,
+        (f0 - bin).max(0.5 * bin),
+        (f0 + bin).min(0.5),
+        30,
+    );
+    let f = 0.5 * (a + b);
+    if power(f) >= power(f0) { f } else { f0 }
+}
+
+/// |Σ (xₖ − m) e^{−i2πfk}|² / N: the periodogram of `x` (its mean `m` removed) at any
+/// frequency `f` (cycles per sample), on or off the bin grid.
+fn dtft_power(x: &[f64], m: f64, f: f64) -> f64 {
+    let (mut re, mut im) = (0.0, 0.0);
+    let w = 2.0 * PI * f;
+    for (k, v) in x.iter().enumerate() {
+        let (s, c) = (w * k as f64).sin_cos();
+        re += (v - m) * c;
+        im -= (v - m) * s;
+    }
+    (re * re + im * im) / x.len() as f64
+}
+
+/// About how many independent periodogram bins [`line_near`]'s search over
+/// ± one bin takes the largest of (the mean of the largest of three
+/// exponential variates of mean 1 is 1 + ½ + ⅓ ≈ 1.8).
+pub const LINE_NEAR_SEARCHED: f64 = 3.0;
+
+/// Bins each side of a frequency whose periodogram's median is the local
+/// level a line is judged against in [`line_near`] (the line's own
+/// ± [`TONE_BINS`] left out).
+pub const LOCAL_BINS: usize = 60;
+
+/// The strongest line of `x` within one bin (1/N) of the frequency `f0`
+/// (cycles per sample), refined off the grid ([`refine_line`]), and its
+/// power over the local level of `x`'s periodogram: the median of the bins
+/// within ± [`LOCAL_BINS`] of it (its own ± [`TONE_BINS`] left out) over
+/// ln 2. A periodogram bin of a noise with a smooth spectrum is an
+/// exponential variate whose median is ln 2 times its mean, so at one
+/// frequency chosen beforehand the ratio exceeds ln(1/p) with probability p
+/// (Schuster's test); a sine of amplitude A in noise of variance σ² per bin
+/// gives about N·A²/(4σ²).
+/// The strongest of ± one bin is about the largest of
+/// [`LINE_NEAR_SEARCHED`] independent bins: without a line, above ln(1/p)
+/// with probability about that many times p.
+/// `None` for a record too short for the local level or `f0` outside (0, ½).
+pub fn line_near(x: &[f64], f0: f64) -> Option<(f64, f64)> {
+    let n = x.len();
+    let per = periodogram(x);
+    if !(f0 > 0.0 && f0 < 0.5) || per.len() < 2 * LOCAL_BINS + 1 {
+        return None;
+    }
+    let f = refine_line(x, f0);
+    // Bin k (1-based) of frequency k/N sits at per[k − 1].
+    let k = ((f * n as f64).round() as usize).clamp(1, per.len());
+    let lo = k.saturating_sub(LOCAL_BINS).max(1);
+    let hi = (k + LOCAL_BINS).min(per.len());
+    let mut local: Vec<f64> = (lo..=hi)
+        .filter(|&j| j.abs_diff(k) > TONE_BINS)
+        .map(|j| per[j - 1])
+        .collect();
+    if local.is_empty() {
+        return None;
+    }
+    local.sort_by(f64::total_cmp);
+    let level = local[local.len() / 2] / std::f64::consts::LN_2;
+    Some((f, dtft_power(x, mean(x), f) / level.max(f64::MIN_POSITIVE)))
+}
+
 /// Fisher's g test for one periodic line hidden in white noise: g = max I_k / Σ I_k
 /// over the periodogram, p ≈ m(1 − g)^{m−1} (first term of the exact series).
 /// Returns the test and the frequency of the line as a fraction of the sample
@@ -1161,6 +1243,51 @@ mod tests {
         assert_eq!(tone_share(&[1.0; 64]), (0.0, 0.0));
     }
     use nanomotion_core::rng::Rng;
+
+    /// Schuster's statistic near a frequency chosen beforehand: in white
+    /// noise the largest of about three exponential variates of mean 1 (mean
+    /// ≈ 1.8; above ln 100 in about 3 % of frequencies); with a sine of
+    /// amplitude A off the bin grid, N·A²/(4σ²) plus that noise, at the
+    /// sine's frequency to a small part of a bin.
+    #[test]
+    fn a_line_is_judged_against_its_spectrums_local_level() {
+        let n = 8000;
+        let mut rng = Rng::new(17);
+        let noise: Vec<f64> = (0..n).map(|_| rng.normal()).collect();
+        let ratios: Vec<f64> = (0..400)
+            .map(|j| {
+                line_near(&noise, (40.0 + 9.37 * j as f64) / n as f64)
+                    .unwrap()
+                    .1
+            })
+            .collect();
+        let mean_ratio = mean(&ratios);
+        let above = ratios.iter().filter(|&&r| r > 100f64.ln()).count();
+        assert!((1.5..2.3).contains(&mean_ratio), "{mean_ratio}");
+        let expected_above = 400.0 * LINE_NEAR_SEARCHED / 100.0;
+        assert!(
+            (above as f64) < 2.5 * expected_above,
+            "{above} of 400 above ln 100 (about {expected_above} expected)"
+        );
+        let (a, f) = (0.2, 1234.3 / n as f64);
+        let x: Vec<f64> = noise
+            .iter()
+            .enumerate()
+            .map(|(k, v)| v + a * (2.0 * PI * f * k as f64 + 0.4).sin())
+            .collect();
+        let (found, ratio) = line_near(&x, f + 0.6 / n as f64).unwrap();
+        let expected = n as f64 * a * a / 4.0;
+        assert!(
+            (found - f).abs() < 0.05 / n as f64,
+            "{} bins off",
+            (found - f) * n as f64
+        );
+        assert!(
+            (ratio / expected - 1.0).abs() < 0.3,
+            "{ratio} against N·A²/(4σ²) = {expected}"
+        );
+        assert!(line_near(&x, 0.0).is_none() && line_near(&x[..100], f).is_none());
+    }
 
     /// A stage swept over ±1 by a sine and a chirp-like second sine, 12 000 samples.
     fn sweep(k: usize) -> f64 {
