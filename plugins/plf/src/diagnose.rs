@@ -941,7 +941,7 @@ impl<'c, 'a> Search<'c, 'a> {
         let spec_now = self.cur.spec()?;
         let mut locked: Vec<Option<String>> = cands
             .iter()
-            .map(|c| time_period(c).and_then(|p| phase_locked(ctx, &spec_now, p)))
+            .map(|c| time_period(c).and_then(|p| phase_locked(ctx, &self.cur, &spec_now, p)))
             .collect();
         let any_locked = locked[..total].iter().any(Option::is_some);
         // The level is set by every candidate of the step, tried again or not.
@@ -2655,17 +2655,34 @@ const PHASE_LOCK_HARMONICS: usize = 6;
 /// disturbance independent of the input cannot be told from that on this
 /// record. The excitation's line must stand out of its own spectrum's local
 /// level at the step's level ([`stats::line_near`], Bonferroni over the
-/// harmonics, columns and bins searched) and sit within one bin of the residual's
-/// estimation part (its resolution) of a harmonic; a disturbance that close
-/// to an excitation line is not resolved by this record either. The
+/// harmonics, columns and bins searched) and a harmonic of it must not differ
+/// from the residual's line significantly (at that level) given how well
+/// the two frequencies are known ([`stats::line_frequency_sd`]), and the
+/// residual's line must be weaker than the model's own response at the
+/// excitation's line (a map changes that response by less than all of it);
+/// a disturbance that close to an excitation line is not resolved by this
+/// record either. The
 /// input-driven effects stay candidates. `None` when no excitation is locked.
-fn phase_locked(ctx: &Ctx<'_>, spec: &GraphSpec, period_s: f64) -> Option<String> {
+fn phase_locked(ctx: &Ctx<'_>, cur: &Current, spec: &GraphSpec, period_s: f64) -> Option<String> {
     let n = ctx.n;
     let lag0 = period_s * ctx.fs;
     if !(lag0.is_finite() && lag0 >= 2.0) {
         return None;
     }
     let excitations = excitations(ctx, spec);
+    // How well the residual's line frequency is known: from its clearest
+    // output's estimation part.
+    // output's estimation part, and that output.
+    let clearest = cur
+        .residual
+        .iter()
+        .enumerate()
+        .filter_map(|(i, r)| {
+            let est = ctx.part(r, Part::Estimation);
+            stats::line_near(est, 1.0 / lag0).map(|(_, ratio)| (i, ratio))
+        })
+        .max_by(|a, b| a.1.total_cmp(&b.1));
+    let residual_line_sd = clearest.map(|(_, ratio)| stats::line_frequency_sd(ratio, ctx.n_est));
     // The excitation lines tried: every harmonic of every column.
     let tests = (PHASE_LOCK_HARMONICS * excitations.len()) as f64;
     for (col, x) in excitations {
@@ -2694,14 +2711,30 @@ fn phase_locked(ctx: &Ctx<'_>, spec: &GraphSpec, period_s: f64) -> Option<String
             }
         }
         // One of the excitation's lines, the whole not repeating (a
-        // multisine): a map of the input leaves lines at its harmonics.
+        // multisine): a map of the input leaves lines at its harmonics, at
+        // m·f_d exactly — to within what the two lines' frequencies can be
+        // told from their records (`stats::line_frequency_sd`).
         let f = 1.0 / lag0;
+        let Some(residual_sd) = residual_line_sd else {
+            continue;
+        };
         for m in 1..=PHASE_LOCK_HARMONICS {
             let Some((fd, ratio)) = stats::line_near(x, f / m as f64) else {
                 break;
             };
+            let sd = (m as f64 * stats::line_frequency_sd(ratio, n)).hypot(residual_sd);
+            // A map of the input changes what the model makes of the line by
+            // less than all of it: a residual line stronger than the model's
+            // own response at f_d is no map's (a weak line of a multisine and
+            // a strong disturbance near one of its harmonics).
+            let within_response = clearest.is_some_and(|(i, _)| {
+                let est = |x: &[f64]| ctx.part(x, Part::Estimation).to_vec();
+                stats::power_at(&est(&cur.residual[i]), f)
+                    <= stats::power_at(&est(&cur.model[i]), fd)
+            });
             if ratio > (stats::LINE_NEAR_SEARCHED * tests / ctx.line_level).ln()
-                && (m as f64 * fd - f).abs() <= 1.0 / ctx.n_est as f64
+                && within_response
+                && 2.0 * stats::normal_sf((m as f64 * fd - f).abs() / sd) >= ctx.line_level
             {
                 let which = if m == 1 {
                     "at".to_string()
