@@ -2661,8 +2661,8 @@ const PHASE_LOCK_HARMONICS: usize = 6;
 /// residual's line must be weaker than the model's own response at the
 /// excitation's line (a map changes that response by less than all of it);
 /// a disturbance that close to an excitation line is not resolved by this
-/// record either. The
-/// input-driven effects stay candidates. `None` when no excitation is locked.
+/// record either. The input-driven effects stay candidates. `None` when no
+/// excitation is locked.
 fn phase_locked(ctx: &Ctx<'_>, cur: &Current, spec: &GraphSpec, period_s: f64) -> Option<String> {
     let n = ctx.n;
     let lag0 = period_s * ctx.fs;
@@ -2671,8 +2671,7 @@ fn phase_locked(ctx: &Ctx<'_>, cur: &Current, spec: &GraphSpec, period_s: f64) -
     }
     let excitations = excitations(ctx, spec);
     // How well the residual's line frequency is known: from its clearest
-    // output's estimation part.
-    // output's estimation part, and that output.
+    // output's estimation part (and which output that is).
     let clearest = cur
         .residual
         .iter()
