@@ -2681,7 +2681,15 @@ fn phase_locked(ctx: &Ctx<'_>, cur: &Current, spec: &GraphSpec, period_s: f64) -
             stats::line_near(est, 1.0 / lag0).map(|(_, ratio)| (i, ratio))
         })
         .max_by(|a, b| a.1.total_cmp(&b.1));
-    let residual_line_sd = clearest.map(|(_, ratio)| stats::line_frequency_sd(ratio, ctx.n_est));
+    // That output, its line's frequency scatter and its power there.
+    let residual_line = clearest.map(|(i, ratio)| {
+        let est = ctx.part(&cur.residual[i], Part::Estimation);
+        (
+            i,
+            stats::line_frequency_sd(ratio, ctx.n_est),
+            stats::power_at(est, 1.0 / lag0),
+        )
+    });
     // The excitation lines tried: every harmonic of every column.
     let tests = (PHASE_LOCK_HARMONICS * excitations.len()) as f64;
     for (col, x) in excitations {
@@ -2714,7 +2722,7 @@ fn phase_locked(ctx: &Ctx<'_>, cur: &Current, spec: &GraphSpec, period_s: f64) -
         // m·f_d exactly — to within what the two lines' frequencies can be
         // told from their records (`stats::line_frequency_sd`).
         let f = 1.0 / lag0;
-        let Some(residual_sd) = residual_line_sd else {
+        let Some((out, residual_sd, residual_power)) = residual_line else {
             continue;
         };
         for m in 1..=PHASE_LOCK_HARMONICS {
@@ -2726,11 +2734,8 @@ fn phase_locked(ctx: &Ctx<'_>, cur: &Current, spec: &GraphSpec, period_s: f64) -
             // less than all of it: a residual line stronger than the model's
             // own response at f_d is no map's (a weak line of a multisine and
             // a strong disturbance near one of its harmonics).
-            let within_response = clearest.is_some_and(|(i, _)| {
-                let est = |x: &[f64]| ctx.part(x, Part::Estimation).to_vec();
-                stats::power_at(&est(&cur.residual[i]), f)
-                    <= stats::power_at(&est(&cur.model[i]), fd)
-            });
+            let within_response =
+                residual_power <= stats::power_at(ctx.part(&cur.model[out], Part::Estimation), fd);
             if ratio > (stats::LINE_NEAR_SEARCHED * tests / ctx.line_level).ln()
                 && within_response
                 && 2.0 * stats::normal_sf((m as f64 * fd - f).abs() / sd) >= ctx.line_level
