@@ -18,6 +18,11 @@ then the same split by the visibility in the held-out part alone (the only
 part that decides a name) and by what is left there once the nominal
 calibration has taken what it can (`calibrated_visibility`: an effect below 1
 there cannot be told from a nominal that is off), for the columns VIS.csv has.
+With the column `calibrated_per_effect` (each hidden effect's own calibrated
+visibility, the others kept), the issue's "where the effect allows it": a
+record is named correctly when every effect it allows (own visibility ≥ 1) is
+named and nothing that is not hidden is; recall per effect over the records
+that allow it.
 """
 import collections
 import csv
@@ -114,6 +119,33 @@ def visible_split(rows, vis, label):
         print(f"| {e} recall | {cells[0]} | {cells[1]} |")
 
 
+def allowed_split(rows, per_effect):
+    """Named correctly where the effects allow it: every hidden effect whose own
+    calibrated visibility is ≥ 1 named, nothing named that is not hidden;
+    recall per effect over the records that allow it."""
+    pct = lambda a, b: "—" if b == 0 else f"{100 * a / b:.0f} %"
+    eff = [r for r in rows if r["hidden"]]
+    allows = [r for r in eff if any(per_effect[r["seed"]].get(h, 0.0) >= 1.0 for h in r["hidden"])]
+    none = [r for r in eff if r not in allows]
+
+    def ok(r):
+        allowed = {h for h in r["hidden"] if per_effect[r["seed"]].get(h, 0.0) >= 1.0}
+        return allowed <= set(r["found"]) <= set(r["hidden"])
+
+    print(f"\nwhere the effect allows it (each hidden effect's own calibrated visibility ≥ 1): "
+          f"{len(allows)} records allow at least one, {len(none)} none\n")
+    print("| measure | records allowing an effect | records allowing none |\n|---|---|---|")
+    print(f"| every allowed effect named, nothing unhidden | {pct(sum(map(ok, allows)), len(allows))} "
+          f"({sum(map(ok, allows))} of {len(allows)}) | {pct(sum(map(ok, none)), len(none))} "
+          f"({sum(map(ok, none))} of {len(none)}) |")
+    effects = sorted({h for r in eff for h in r["hidden"]})
+    for e in effects:
+        hid = [r for r in eff if e in r["hidden"] and per_effect[r["seed"]].get(e, 0.0) >= 1.0]
+        got = sum(e in r["found"] for r in hid)
+        hidden_not = sum(e in r["hidden"] for r in eff) - len(hid)
+        print(f"| {e} recall where allowed | {pct(got, len(hid))} ({got} of {len(hid)}; {hidden_not} not allowed) | |")
+
+
 def main():
     args = sys.argv[1:]
     old = None
@@ -153,6 +185,14 @@ def main():
             if missing:
                 sys.exit(f"{vis_path} lacks seeds {missing[:5]}…: run --visibility-only over the same records")
             visible_split(rows, vis, column.replace("_", " "))
+        if table and "calibrated_per_effect" in table[0]:
+            per_effect = {
+                int(r["seed"]): {
+                    e: float(x) for e, x in (kv.split(":") for kv in r["calibrated_per_effect"].split())
+                }
+                for r in table
+            }
+            allowed_split(rows, per_effect)
 
 
 if __name__ == "__main__":

@@ -71,8 +71,8 @@ pub fn from_report_json(text: &str, origin: &str) -> Result<Vec<NamedEffect>, Co
 }
 
 /// The effect blocks of an augmented model without its report: blocks named
-/// `plf_<effect>…` whose type is that effect's block type (`hysteresis` or
-/// `bouc_wen` for hysteresis), in graph order (the order the diagnosis inserted
+/// `plf_<effect>…` whose type is one of that effect's block types
+/// ([`Effect::block_types`]), in graph order (the order the diagnosis inserted
 /// them).
 pub fn from_graph(augmented: &GraphSpec) -> Vec<NamedEffect> {
     augmented
@@ -80,9 +80,8 @@ pub fn from_graph(augmented: &GraphSpec) -> Vec<NamedEffect> {
         .iter()
         .filter_map(|b| {
             let ty = b.block.typetag_name();
-            // Hysteresis has two block types (Coleman–Hodgdon and Bouc–Wen).
             let e = Effect::ALL.into_iter().find(|e| {
-                (e.block_type() == ty || (*e == Effect::Hysteresis && ty == "bouc_wen"))
+                e.block_types().contains(&ty)
                     && b.name
                         .strip_prefix("plf_")
                         .is_some_and(|rest| rest.starts_with(e.name()))

@@ -4,6 +4,7 @@
 //! | effect | compensator | block | place |
 //! |---|---|---|---|
 //! | `hysteresis` (Coleman–Hodgdon on the drive) | inverse feed-forward (6.6): H⁻¹(r/G₀ + feedback), Lambert W | `hysteresis_inverse` (+ `position_feedforward`) | before the actuator |
+//! | `hysteresis` (Prandtl–Ishlinskii on the drive) | its exact inverse, another Prandtl–Ishlinskii operator (the loading curve's inverse, [`nanomotion_plf::effects::PrandtlIshlinskii::inverse`]); none where a branch's slope reaches 0 | `prandtl_ishlinskii` | before the actuator |
 //! | `hysteresis` (Bouc–Wen on the drive) | its exact inverse: the drive giving each wanted output, by bisection on the operator's exact step ([`crate::bouc_wen`]); none where its slope can reach 0 | `bouc_wen_inverse` | before the actuator |
 //! | `repetitive_disturbance` periodic in time | standard RC (5.1), L = ZPETC(T), FIR Q of the largest cut-off keeping (5.5) | `repetitive_control` | on the error before the controller (Fig. 5.1) |
 //! | `repetitive_disturbance` periodic in a signal | delay-varying RC (5.7)–(5.8), α = the signal, [m, M] from the loop's motion, (5.9) | `dvrc` | as RC, `alpha` ← the signal |
@@ -431,6 +432,44 @@ pub(crate) fn synthesise(
                 Err(why) => none(
                     &e.effect,
                     format!("no compensator: the fitted Bouc–Wen loop on the drive has no inverse: {why}"),
+                    &design,
+                ),
+            }
+        }
+        ("hysteresis", Where::Input { to }) if ty == "prandtl_ishlinskii" => {
+            let mut fields = params.clone();
+            fields.as_object_mut().map(|o| o.remove("type"));
+            let fitted =
+                serde_json::from_value::<nanomotion_plf::effects::PrandtlIshlinskii>(fields).ok();
+            let slopes = fitted.as_ref().map(|p| p.branch_slopes()).unwrap_or_default();
+            let (lo, hi) = slopes
+                .iter()
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &s| (a.min(s), b.max(s)));
+            let design = [("slope_min", lo), ("slope_max", hi)];
+            match fitted.as_ref().and_then(|p| p.inverse()) {
+                Some(inv) => {
+                    let mut block = serde_json::to_value(&inv).unwrap_or(Value::Null);
+                    block["type"] = json!("prandtl_ishlinskii");
+                    make(
+                        block,
+                        "inverse Prandtl–Ishlinskii feed-forward: the fitted operator's exact inverse — another Prandtl–Ishlinskii operator, whose loading curve is the inverse of the fitted one — before the actuator",
+                        format!("before the actuator, on the connection into {to}"),
+                        &design,
+                        Some("no reference feed-forward: the inverse linearises the actuator for the feedback".into()),
+                        Edit::Before {
+                            to: to.clone(),
+                            ff: None,
+                        },
+                    )
+                }
+                None => none(
+                    &e.effect,
+                    format!(
+                        "no compensator: a branch of the fitted Prandtl–Ishlinskii loop on the drive stops or turns back (a slope ≤ 0: {}), so no drive gives every output",
+                        fitted
+                            .and_then(|p| p.implausible())
+                            .unwrap_or_else(|| "its parameters do not read".into())
+                    ),
                     &design,
                 ),
             }

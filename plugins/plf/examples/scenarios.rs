@@ -12,10 +12,11 @@
 //! ones have been scored and studied); `--tune` takes the
 //! tuning split instead (the only records the workflow may be tuned on).
 //! `--csv` writes one row per record. `--visibility-only` runs no diagnosis:
-//! it prints `seed,visibility,held_out_visibility,calibrated_visibility` of the
-//! same records ([`scenario::visibility`]: what the hidden effects change over
-//! the noise, over the whole record, over the part `diagnose` holds out, and
-//! there beyond what the nominal calibration takes), for
+//! it prints `seed,visibility,held_out_visibility,calibrated_visibility,calibrated_per_effect`
+//! of the same records ([`scenario::visibility`]: what the hidden effects change
+//! over the noise, over the whole record, over the part `diagnose` holds out,
+//! there beyond what the nominal calibration takes, and that last for each
+//! hidden effect alone as `effect:value` pairs), for
 //! `tools/scenario_table.py --visibility`. `--hidden EFFECT` keeps only records
 //! hiding that effect (`none`: the effect-free ones); `--labels-only` prints
 //! `seed,hidden,family` of the records and diagnoses nothing.
@@ -145,14 +146,21 @@ fn main() {
             match scenario::visibility(seed - 1) {
                 Ok(v) => {
                     if records == 0 {
-                        println!("seed,visibility,held_out_visibility,calibrated_visibility");
+                        println!(
+                            "seed,visibility,held_out_visibility,calibrated_visibility,calibrated_per_effect"
+                        );
                     }
                     println!(
-                        "{},{:.3},{:.3},{:.3}",
+                        "{},{:.3},{:.3},{:.3},{}",
                         seed - 1,
                         v.whole,
                         v.held_out,
-                        v.calibrated
+                        v.calibrated,
+                        v.per_effect
+                            .iter()
+                            .map(|(e, x)| format!("{e}:{x:.3}"))
+                            .collect::<Vec<_>>()
+                            .join(" ")
                     );
                     records += 1;
                 }

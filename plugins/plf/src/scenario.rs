@@ -638,7 +638,7 @@ pub fn draw(seed: u64) -> Result<Scenario, DataError> {
 /// drive, whichever shows more) over the rms of the noise in the same signal,
 /// from the same record simulated without the effects, with and without its
 /// noise. Below about 1 an effect hides in the noise (effect-free records: 0).
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct Visibility {
     /// Over the whole record.
     pub whole: f64,
@@ -658,6 +658,15 @@ pub struct Visibility {
     /// its resonance (a heavier stage) is whole-record visible and taken by
     /// the calibration: no record can tell it from a nominal that is off.
     pub calibrated: f64,
+    /// [`Visibility::calibrated`] of each hidden effect alone, the others
+    /// kept: the record with every effect against the record without this
+    /// one, both quiet and calibrated. Where two effects are hidden this is
+    /// what "where the effect allows it" asks of each name (a hysteresis
+    /// whose loop a drift's ramp swamps); one hidden effect: its
+    /// `calibrated`. An estimate: the calibration also bends to the other
+    /// effect, and the difference of the two mean squares assumes the
+    /// effects' residuals uncorrelated (a negative difference counts as 0).
+    pub per_effect: Vec<(String, f64)>,
 }
 
 /// The [`Visibility`] of scenario `seed`'s hidden effects.
@@ -667,6 +676,7 @@ pub fn visibility(seed: u64) -> Result<Visibility, DataError> {
             whole: 0.0,
             held_out: 0.0,
             calibrated: 0.0,
+            per_effect: Vec::new(),
         })
     })
 }
@@ -1063,13 +1073,33 @@ fn draw_with(
                 whole: of_part(0),
                 held_out: of_part(held_out_from),
                 calibrated: 0.0,
+                per_effect: Vec::new(),
             },
-            // The quiet records (with and without the effects) and the
-            // held-out noise rms per compared output (y; u in a closed loop).
+            // The quiet records (with and without the effects; where two or
+            // more are hidden, without each one in turn) and the held-out
+            // noise rms per compared output (y; u in a closed loop).
             (
                 simulate(&forms, QUIET_NOISE)?,
                 simulate(&effect_free, QUIET_NOISE)?,
                 [noise_rms(&y0, &yq), noise_rms(&u0, &uq)],
+                if forms.len() > 1 {
+                    (0..forms.len())
+                        .map(|i| {
+                            let but: Vec<(&str, Form)> = forms
+                                .iter()
+                                .enumerate()
+                                .filter_map(|(j, (e, f))| match f {
+                                    _ if j != i => Some((*e, f.clone())),
+                                    Form::Slits { q, .. } => Some((*e, Form::Rounding { q: *q })),
+                                    _ => None,
+                                })
+                                .collect();
+                            Ok((forms[i].0.to_string(), simulate(&but, QUIET_NOISE)?))
+                        })
+                        .collect::<Result<Vec<_>, DataError>>()?
+                } else {
+                    Vec::new()
+                },
             ),
         ))
     } else {
@@ -1144,7 +1174,7 @@ fn draw_with(
     let data = Dataset::from_columns(format!("scenario {seed}"), fs, 0.0, columns)?;
     let visibility = match visibility {
         None => None,
-        Some((mut v, ((uw, yw), (ue, ye), noise))) => {
+        Some((mut v, ((uw, yw), (ue, ye), noise, without_each))) => {
             // Held-out mean square per output after the calibration alone.
             let calibrated_ms = |u: Vec<f64>, y: Vec<f64>| -> Result<Vec<f64>, DataError> {
                 let quiet = Dataset::from_columns(
@@ -1182,13 +1212,28 @@ fn draw_with(
                     .collect())
             };
             if !forms.is_empty() {
-                let (with, without) = (calibrated_ms(uw, yw)?, calibrated_ms(ue, ye)?);
-                v.calibrated = with
-                    .iter()
-                    .zip(&without)
-                    .zip(noise)
-                    .map(|((w, wo), sigma)| (w - wo).max(0.0).sqrt() / sigma)
-                    .fold(0.0, f64::max);
+                let with = calibrated_ms(uw, yw)?;
+                // What the calibrated record with every effect leaves beyond
+                // the one without `without`'s, over the noise.
+                let beyond = |without: &[f64]| {
+                    with.iter()
+                        .zip(without)
+                        .zip(noise)
+                        .map(|((w, wo), sigma)| (w - wo).max(0.0).sqrt() / sigma)
+                        .fold(0.0, f64::max)
+                };
+                v.calibrated = beyond(&calibrated_ms(ue, ye)?);
+                v.per_effect = if without_each.is_empty() {
+                    forms
+                        .iter()
+                        .map(|(e, _)| (e.to_string(), v.calibrated))
+                        .collect()
+                } else {
+                    without_each
+                        .into_iter()
+                        .map(|(e, (u, y))| Ok((e, beyond(&calibrated_ms(u, y)?))))
+                        .collect::<Result<_, DataError>>()?
+                };
             }
             Some(v)
         }
@@ -1259,12 +1304,21 @@ mod tests {
         let plain = draw(seed).unwrap();
         assert_eq!(with.record.data.column("y"), plain.record.data.column("y"));
         assert!(
-            v.is_some_and(|v| v.whole.is_finite()
+            v.as_ref().is_some_and(|v| v.whole.is_finite()
                 && v.whole > 0.0
                 && v.held_out.is_finite()
                 && v.held_out >= 0.0),
             "{v:?}"
         );
+        // One entry per hidden effect, in the record's order; one effect
+        // alone is the record's calibrated visibility.
+        let v = v.unwrap();
+        let names: Vec<&str> = v.per_effect.iter().map(|(e, _)| e.as_str()).collect();
+        assert_eq!(names, labels(seed).0, "{v:?}");
+        assert!(v.per_effect.iter().all(|(_, x)| x.is_finite() && *x >= 0.0));
+        if names.len() == 1 {
+            assert_eq!(v.per_effect[0].1, v.calibrated);
+        }
     }
 
     #[test]

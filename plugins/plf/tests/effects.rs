@@ -918,6 +918,27 @@ fn effect_slope_ranges_hold_for_every_sample_and_are_attained() {
             1.0,
             false,
         ),
+        // Prandtl–Ishlinskii: [min a_j, max a_j] of the branch slopes
+        // 0.6, 1.1, 0.9 (the narrowest plays move first, so 0.6 + (−0.2)
+        // never occurs).
+        (
+            Box::new(PrandtlIshlinskii::new(
+                0.6,
+                vec![
+                    Play {
+                        radius: 0.05,
+                        weight: 0.5,
+                    },
+                    Play {
+                        radius: 0.2,
+                        weight: -0.2,
+                    },
+                ],
+            )),
+            (0.6, 1.1),
+            1.0,
+            true,
+        ),
     ];
     for (i, (mut b, (a, c), scale, tight)) in cases.into_iter().enumerate() {
         b.build(&ctx(DT)).unwrap();

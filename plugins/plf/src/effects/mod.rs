@@ -11,7 +11,7 @@
 //!
 //! | effect | block type | module |
 //! |---|---|---|
-//! | `hysteresis` | `hysteresis` | [`hysteresis`] |
+//! | `hysteresis` | `hysteresis` (Coleman–Hodgdon); also `bouc_wen`, `prandtl_ishlinskii` | [`hysteresis`], [`bouc_wen`], [`prandtl_ishlinskii`] |
 //! | `friction` | `friction` | [`friction`] |
 //! | `time_delay` | `time_delay` | [`delay`] |
 //! | `repetitive_disturbance` | `repetitive_disturbance` | [`repetitive`] |
@@ -32,7 +32,8 @@
 //! where a bound genuinely holds for every finite input sequence:
 //! `hysteresis` (Coleman–Hodgdon: [min(2c − b, b), max(2c − b, b)]; none for a
 //! `retrace` set with a different b), `bouc_wen` (`linear` + [0, max(a, 2aβ/(β+γ))]
-//! for a > 0, β + γ > 0; none for a non-saturating loop), `backlash` ([0, 1]).
+//! for a > 0, β + γ > 0; none for a non-saturating loop), `prandtl_ishlinskii`
+//! ([min a_j, max a_j] of its branch slopes), `backlash` ([0, 1]).
 //! None for the others, because none exists: `friction` reads the velocity Δu/dt,
 //! so y changes when u stops (Δu = 0, Δy ≠ 0); `drift` and
 //! `repetitive_disturbance` add a signal of time that moves when u does not;
@@ -55,6 +56,7 @@ pub mod drift;
 pub mod friction;
 pub mod gain;
 pub mod hysteresis;
+pub mod prandtl_ishlinskii;
 pub mod repetitive;
 pub mod resonance;
 pub mod slit;
@@ -68,6 +70,7 @@ pub use drift::Drift;
 pub use friction::Friction;
 pub use gain::{GainVariable, PositionDependentGain};
 pub use hysteresis::Hysteresis;
+pub use prandtl_ishlinskii::{Play, PrandtlIshlinskii};
 pub use repetitive::{PhaseVariable, RepetitiveDisturbance};
 pub use resonance::UnmodeledResonance;
 pub use slit::EncoderSlitError;
@@ -147,9 +150,27 @@ impl Effect {
 
     /// The registered block type (`type:` in YAML) that models the effect.
     pub fn block_type(self) -> &'static str {
+        self.block_types()[0]
+    }
+
+    /// Every registered block type that models the effect, [`Effect::block_type`]
+    /// first: hysteresis has three (Coleman–Hodgdon, Bouc–Wen,
+    /// Prandtl–Ishlinskii), the others one.
+    pub fn block_types(self) -> &'static [&'static str] {
         match self {
-            Effect::Quantization => "quantizer",
-            other => other.name(),
+            Effect::Hysteresis => &["hysteresis", "bouc_wen", "prandtl_ishlinskii"],
+            Effect::Quantization => &["quantizer"],
+            Effect::Friction => &["friction"],
+            Effect::TimeDelay => &["time_delay"],
+            Effect::RepetitiveDisturbance => &["repetitive_disturbance"],
+            Effect::PositionDependentGain => &["position_dependent_gain"],
+            Effect::UnmodeledResonance => &["unmodeled_resonance"],
+            Effect::Drift => &["drift"],
+            Effect::Creep => &["creep"],
+            Effect::AxisCoupling => &["axis_coupling"],
+            Effect::EncoderSlitError => &["encoder_slit_error"],
+            Effect::Saturation => &["saturation"],
+            Effect::Backlash => &["backlash"],
         }
     }
 
