@@ -209,6 +209,9 @@ fn print_report(r: &Report) {
             c.excess_cut_percent,
             c.p_value
         );
+        if let Some(why) = &c.with_effect {
+            say!("     {why}");
+        }
     }
     for (k, s) in r.steps.iter().enumerate() {
         if s.candidates.is_empty() {
