@@ -11,60 +11,19 @@
 mod support;
 
 use nanomotion_core::graph::GraphSpec;
-use nanomotion_plf::surgery;
-
-const RATE: f64 = 2000.0;
-/// The stage (position per drive unit): ω = 2π·20, ζ = 0.3, static gain 1.
-fn stage() -> String {
-    let w = 2.0 * std::f64::consts::PI * 20.0;
-    format!(
-        "{{ name: stage, type: state_space, a: [[0.0, 1.0], [{:?}, {:?}]], b: [[0.0], [{:?}]], c: [[1.0, 0.0]], discretisation: zoh }}",
-        -w * w,
-        -2.0 * 0.3 * w,
-        w * w
-    )
-}
 
 /// The Bouc–Wen loop the diagnosis fitted (a loop of half the stroke's width,
 /// a linear part of 0.6).
 const BW: &str = "type: bouc_wen, a: 0.5, beta: 4.0, gamma: 1.0, linear: 0.6";
 
 fn augmented() -> GraphSpec {
-    GraphSpec::from_yaml(
-        &format!(
-            "base_rate_hz: {RATE}\nduration_s: 1\nblocks:\n  - {{ name: drive, type: data_column, column: u }}\n  - {{ name: plf_hysteresis, {BW} }}\n  - {}\nconnections:\n  - {{ from: drive.y, to: plf_hysteresis.u }}\n  - {{ from: plf_hysteresis.y, to: stage.u }}\ncompare:\n  - {{ signal: stage.y, column: y }}\n",
-            stage()
-        ),
-        "model_augmented.yaml",
-    )
-    .unwrap()
+    support::map_on_the_drive(BW)
 }
 
 /// The user's PI loop on the nominal stage; with `hysteresis`, the fitted
-/// loop on its drive too (the plant as diagnosed, built by hand).
+/// loop on its drive too.
 fn closed_loop(hysteresis: bool) -> GraphSpec {
-    let (bw, drive) = if hysteresis {
-        (
-            format!("  - {{ name: bw, {BW} }}\n"),
-            "  - { from: pi.u, to: bw.u }\n  - { from: bw.y, to: stage.u }\n",
-        )
-    } else {
-        (String::new(), "  - { from: pi.u, to: stage.u }\n")
-    };
-    GraphSpec::from_yaml(
-        &format!(
-            "base_rate_hz: {RATE}\nduration_s: 3.0\nblocks:\n  - {{ name: ref, type: sinusoid, amplitude: 0.5, frequency_hz: 2.0 }}\n  - {{ name: err, type: sum, signs: \"+-\" }}\n  - {{ name: pi, type: pi, kp: 2.0, zero_hz: 5.0 }}\n  - {}\n{bw}connections:\n  - {{ from: ref.y, to: err.in0 }}\n  - {{ from: stage.y, to: err.in1 }}\n  - {{ from: err.y, to: pi.e }}\n{drive}score:\n  - {{ signal: err.y, from_s: 1.0 }}\n",
-            stage()
-        ),
-        "controller.yaml",
-    )
-    .unwrap()
-}
-
-/// The scored error's rms of a hand-built loop.
-fn score_rms(spec: &GraphSpec) -> f64 {
-    let (mut s, _) = surgery::clone_spec(spec).unwrap().build().unwrap();
-    s.run(|_| {}).scores[0].rms
+    support::pi_loop_behind(hysteresis.then_some(BW))
 }
 
 #[test]
@@ -83,8 +42,8 @@ fn a_bouc_wen_loop_on_the_drive_is_cancelled_by_its_inverse() {
     assert!((c.design["slope_max"] - (0.6 + 2.0 * 0.5 * 4.0 / 5.0)).abs() < 1e-15);
     // Before: the user's loop on the plant as diagnosed; after: the inverse and
     // the loop cancel, so the loop tracks as on the nominal stage.
-    let before = score_rms(&closed_loop(true));
-    let nominal = score_rms(&closed_loop(false));
+    let before = support::score_rms(&closed_loop(true));
+    let nominal = support::score_rms(&closed_loop(false));
     let close = |a: f64, b: f64, tol: f64| (a - b).abs() <= tol * b.abs();
     assert!(
         close(r.before.rms, before, 1e-12),

@@ -422,6 +422,18 @@ fn a_residual_line_at_a_line_of_a_multisine_drive_is_not_named_a_disturbance() {
     );
 }
 
+/// Two incommensurate sines at 2 kHz, 6 s: reversals of every size (minor
+/// loops inside major ones).
+fn two_sines() -> Vec<f64> {
+    (0..12_000)
+        .map(|k| {
+            let t = k as f64 / 2000.0;
+            0.7 * (2.0 * std::f64::consts::PI * 1.3 * t).sin()
+                + 0.4 * (2.0 * std::f64::consts::PI * 4.1 * t + 0.5).sin()
+        })
+        .collect()
+}
+
 /// A loop of any shape a sum of plays makes: a Prandtl–Ishlinskii truth whose
 /// branches steepen as the wider plays join (slopes 0.5, 0.7, 1.0, 1.4 — a
 /// shape neither Coleman–Hodgdon's nor Bouc–Wen's loop has), under a drive of
@@ -432,13 +444,7 @@ fn a_residual_line_at_a_line_of_a_multisine_drive_is_not_named_a_disturbance() {
 /// fit's held-out rms: 2.2·10⁻⁸ and 2.9·10⁻⁸ against 1.0·10⁻⁸ m).
 #[test]
 fn a_loop_of_plays_on_the_drive_is_named_hysteresis() {
-    let u: Vec<f64> = (0..12_000)
-        .map(|k| {
-            let t = k as f64 / 2000.0;
-            0.7 * (2.0 * std::f64::consts::PI * 1.3 * t).sin()
-                + 0.4 * (2.0 * std::f64::consts::PI * 4.1 * t + 0.5).sin()
-        })
-        .collect();
+    let u = two_sines();
     let r = behind_the_drive(
         u,
         "type: prandtl_ishlinskii, linear: 0.5, plays: [{ radius: 0.05, weight: 0.2 }, { radius: 0.15, weight: 0.3 }, { radius: 0.35, weight: 0.4 }]",
@@ -463,13 +469,7 @@ fn a_loop_of_plays_on_the_drive_is_named_hysteresis() {
 /// blind set 4888–5002 were named hysteresis).
 #[test]
 fn a_dead_band_after_each_reversal_is_backlash_not_hysteresis() {
-    let u: Vec<f64> = (0..12_000)
-        .map(|k| {
-            let t = k as f64 / 2000.0;
-            0.7 * (2.0 * std::f64::consts::PI * 1.3 * t).sin()
-                + 0.4 * (2.0 * std::f64::consts::PI * 4.1 * t + 0.5).sin()
-        })
-        .collect();
+    let u = two_sines();
     let r = behind_the_drive(u, "type: backlash, width: 0.2");
     assert_eq!(
         r.found.first().map(String::as_str),

@@ -212,3 +212,51 @@ pub fn runs_on_the_wall_clock_as_offline(spec: &GraphSpec, log: &[&str]) {
         );
     }
 }
+
+/// The rate of [`stage_20hz`]'s graphs (Hz).
+pub const MAP_RATE: f64 = 2000.0;
+
+/// A stage (position per drive unit): ω = 2π·20, ζ = 0.3, static gain 1.
+pub fn stage_20hz() -> String {
+    let w = 2.0 * std::f64::consts::PI * 20.0;
+    format!(
+        "{{ name: stage, type: state_space, a: [[0.0, 1.0], [{:?}, {:?}]], b: [[0.0], [{:?}]], c: [[1.0, 0.0]], discretisation: zoh }}",
+        -w * w,
+        -2.0 * 0.3 * w,
+        w * w
+    )
+}
+
+/// The augmented model `diagnose` writes for a map `block` (its YAML
+/// fields) on the drive of [`stage_20hz`], named `plf_hysteresis`.
+pub fn map_on_the_drive(block: &str) -> GraphSpec {
+    GraphSpec::from_yaml(
+        &format!(
+            "base_rate_hz: {MAP_RATE}\nduration_s: 1\nblocks:\n  - {{ name: drive, type: data_column, column: u }}\n  - {{ name: plf_hysteresis, {block} }}\n  - {}\nconnections:\n  - {{ from: drive.y, to: plf_hysteresis.u }}\n  - {{ from: plf_hysteresis.y, to: stage.u }}\ncompare:\n  - {{ signal: stage.y, column: y }}\n",
+            stage_20hz()
+        ),
+        "model_augmented.yaml",
+    )
+    .unwrap()
+}
+
+/// The user's PI loop on [`stage_20hz`] tracking a 2 Hz sine, scored after
+/// 1 s; with `map` (its YAML fields), that block on its drive too — the
+/// plant as diagnosed, built by hand.
+pub fn pi_loop_behind(map: Option<&str>) -> GraphSpec {
+    let (block, drive) = match map {
+        Some(m) => (
+            format!("  - {{ name: h, {m} }}\n"),
+            "  - { from: pi.u, to: h.u }\n  - { from: h.y, to: stage.u }\n",
+        ),
+        None => (String::new(), "  - { from: pi.u, to: stage.u }\n"),
+    };
+    GraphSpec::from_yaml(
+        &format!(
+            "base_rate_hz: {MAP_RATE}\nduration_s: 3.0\nblocks:\n  - {{ name: ref, type: sinusoid, amplitude: 0.5, frequency_hz: 2.0 }}\n  - {{ name: err, type: sum, signs: \"+-\" }}\n  - {{ name: pi, type: pi, kp: 2.0, zero_hz: 5.0 }}\n  - {}\n{block}connections:\n  - {{ from: ref.y, to: err.in0 }}\n  - {{ from: stage.y, to: err.in1 }}\n  - {{ from: err.y, to: pi.e }}\n{drive}score:\n  - {{ signal: err.y, from_s: 1.0 }}\n",
+            stage_20hz()
+        ),
+        "controller.yaml",
+    )
+    .unwrap()
+}

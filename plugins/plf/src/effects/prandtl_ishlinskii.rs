@@ -317,6 +317,14 @@ mod tests {
             .collect()
     }
 
+    /// The largest |a_k − b_k|.
+    fn max_gap(a: &[f64], b: &[f64]) -> f64 {
+        a.iter()
+            .zip(b)
+            .map(|(x, y)| (x - y).abs())
+            .fold(0.0, f64::max)
+    }
+
     /// A damped, offset sine: reversals of every amplitude, so every play
     /// takes part.
     fn sweep(n: usize) -> Vec<f64> {
@@ -364,19 +372,11 @@ mod tests {
         let u = sweep(3000);
         let y = run(&mut p, &u);
         let back = run(&mut inv, &y);
-        let worst = u
-            .iter()
-            .zip(&back)
-            .map(|(a, b)| (a - b).abs())
-            .fold(0.0, f64::max);
+        let worst = max_gap(u.as_slice(), &back);
         assert!(worst < 1e-12, "P⁻¹(P(u)) off by {worst:e}");
         let v = run(&mut inv, &u);
         let forth = run(&mut p, &v);
-        let worst = u
-            .iter()
-            .zip(&forth)
-            .map(|(a, b)| (a - b).abs())
-            .fold(0.0, f64::max);
+        let worst = max_gap(u.as_slice(), &forth);
         assert!(worst < 1e-12, "P(P⁻¹(v)) off by {worst:e}");
         // The inverse's slope range: from 1/(0.7 + 0.1 + 0.4 + 0.25 + 0.5),
         // every play moving, to 1/a₀ = 1/0.7.
@@ -458,11 +458,7 @@ mod tests {
         let mut inv = p.inverse().unwrap();
         let y = run(&mut p, &u);
         let back = run(&mut inv, &y);
-        let worst = u
-            .iter()
-            .zip(&back)
-            .map(|(a, b)| (a - b).abs())
-            .fold(0.0, f64::max);
+        let worst = max_gap(u.as_slice(), &back);
         assert!(worst < 1e-12, "saturating: P⁻¹(P(u)) off by {worst:e}");
     }
 
