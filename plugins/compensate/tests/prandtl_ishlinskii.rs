@@ -23,55 +23,20 @@ fn augmented(pi_loop: &str) -> GraphSpec {
     support::map_on_the_drive(pi_loop)
 }
 
-/// The user's PI loop on the nominal stage; with `hysteresis`, the fitted
-/// loop on its drive too.
-fn closed_loop(hysteresis: bool) -> GraphSpec {
-    support::pi_loop_behind(hysteresis.then_some(PI_LOOP))
-}
-
 #[test]
 fn a_prandtl_ishlinskii_loop_on_the_drive_is_cancelled_by_its_inverse() {
-    let out = support::compensate_augmented(&augmented(PI_LOOP), &closed_loop(false));
-    let r = &out.report;
+    let r = support::inverse_cancels_the_map(PI_LOOP, "prandtl_ishlinskii", 1e-9);
     let c = &r.compensators[0];
-    assert_eq!(c.effect, "hysteresis");
-    assert_eq!(c.type_name, "prandtl_ishlinskii");
-    assert!(c.kept && r.gate.passes, "{r:?}");
-    support::runs_on_the_wall_clock_as_offline(&out.compensated, &[]);
     // The fitted loop's branch slopes: 0.6, 0.75, 0.9, 0.85.
     assert!((c.design["slope_min"] - 0.6).abs() < 1e-15);
     assert!((c.design["slope_max"] - 0.9).abs() < 1e-12);
-    let before = support::score_rms(&closed_loop(true));
-    let nominal = support::score_rms(&closed_loop(false));
-    let close = |a: f64, b: f64, tol: f64| (a - b).abs() <= tol * b.abs();
-    assert!(
-        close(r.before.rms, before, 1e-12),
-        "{} {before}",
-        r.before.rms
-    );
-    assert!(
-        close(r.after.rms, nominal, 1e-9),
-        "{} {nominal}",
-        r.after.rms
-    );
-    assert!(r.before.rms > nominal, "{r:?}");
-    assert!(
-        r.effect_error_after <= 1e-9 * r.effect_error_before,
-        "{} {}",
-        r.effect_error_after,
-        r.effect_error_before
-    );
-    eprintln!(
-        "rms {:.4e} -> {:.4e} ({:.1} % cut); the nominal loop: {nominal:.4e}",
-        r.before.rms, r.after.rms, r.cut_percent
-    );
 }
 
 #[test]
 fn a_loop_whose_branch_turns_back_gets_no_inverse_and_says_why() {
     // Slopes 0.6, 0.75, 0.9, −0.1: the last branch turns back.
     let turning = PI_LOOP.replace("weight: -0.05", "weight: -1.0");
-    let out = support::compensate_augmented(&augmented(&turning), &closed_loop(false));
+    let out = support::compensate_augmented(&augmented(&turning), &support::pi_loop_behind(None));
     let r = &out.report;
     assert!(
         r.compensators.is_empty() || r.compensators.iter().all(|c| !c.kept),

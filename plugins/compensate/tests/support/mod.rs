@@ -260,3 +260,49 @@ pub fn pi_loop_behind(map: Option<&str>) -> GraphSpec {
     )
     .unwrap()
 }
+
+/// Compensate the map `map` (its YAML fields) fitted on the drive of
+/// [`stage_20hz`] in the user's PI loop ([`pi_loop_behind`]), and check that
+/// the inverse cancels it: one compensator of type `type_name`, kept, the
+/// gate passing, the written graph on the wall clock as offline; the loop's
+/// rms before is the hand-built loop's on the plant as diagnosed (to 1e-12),
+/// after it is the loop's on the nominal stage (to 1e-9), and what the effect
+/// adds to the error falls to `rounding` of itself. Returns the report.
+pub fn inverse_cancels_the_map(
+    map: &str,
+    type_name: &str,
+    rounding: f64,
+) -> nanomotion_compensate::Report {
+    let out = compensate_augmented(&map_on_the_drive(map), &pi_loop_behind(None));
+    let r = out.report;
+    let c = &r.compensators[0];
+    assert_eq!(c.effect, "hysteresis");
+    assert_eq!(c.type_name, type_name);
+    assert!(c.kept && r.gate.passes, "{r:?}");
+    runs_on_the_wall_clock_as_offline(&out.compensated, &[]);
+    let before = score_rms(&pi_loop_behind(Some(map)));
+    let nominal = score_rms(&pi_loop_behind(None));
+    let close = |a: f64, b: f64, tol: f64| (a - b).abs() <= tol * b.abs();
+    assert!(
+        close(r.before.rms, before, 1e-12),
+        "{} {before}",
+        r.before.rms
+    );
+    assert!(
+        close(r.after.rms, nominal, 1e-9),
+        "{} {nominal}",
+        r.after.rms
+    );
+    assert!(r.before.rms > nominal, "{r:?}");
+    assert!(
+        r.effect_error_after <= rounding * r.effect_error_before,
+        "{} {}",
+        r.effect_error_after,
+        r.effect_error_before
+    );
+    eprintln!(
+        "rms {:.4e} -> {:.4e} ({:.1} % cut); the nominal loop: {nominal:.4e}",
+        r.before.rms, r.after.rms, r.cut_percent
+    );
+    r
+}
