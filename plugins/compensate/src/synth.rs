@@ -437,21 +437,16 @@ pub(crate) fn synthesise(
             }
         }
         ("hysteresis", Where::Input { to }) if ty == "prandtl_ishlinskii" => {
-            let mut fields = params.clone();
-            fields.as_object_mut().map(|o| o.remove("type"));
-            let fitted =
-                serde_json::from_value::<nanomotion_plf::effects::PrandtlIshlinskii>(fields).ok();
-            let slopes = fitted.as_ref().map(|p| p.branch_slopes()).unwrap_or_default();
-            let (lo, hi) = slopes
-                .iter()
-                .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &s| (a.min(s), b.max(s)));
+            let fitted = nanomotion_plf::effects::PrandtlIshlinskii::from_block_json(params);
+            // The branch slopes' range (the operator's sector).
+            let (lo, hi) = fitted
+                .as_ref()
+                .map_or((f64::NAN, f64::NAN), |p| p.slope_range());
             let design = [("slope_min", lo), ("slope_max", hi)];
             match fitted.as_ref().and_then(|p| p.inverse()) {
                 Some(inv) => {
-                    let mut block = serde_json::to_value(&inv).unwrap_or(Value::Null);
-                    block["type"] = json!("prandtl_ishlinskii");
                     make(
-                        block,
+                        surgery::block_to_json(&inv),
                         "inverse Prandtl–Ishlinskii feed-forward: the fitted operator's exact inverse — another Prandtl–Ishlinskii operator, whose loading curve is the inverse of the fitted one — before the actuator",
                         format!("before the actuator, on the connection into {to}"),
                         &design,

@@ -2245,10 +2245,7 @@ fn implausible<'n>(
                 TimeDelay::new(delay_s, delay_s).implausible(1.0 / ctx.fs)
             }
             ("prandtl_ishlinskii", _) => {
-                let mut j = surgery::block_to_json(b.block.as_ref());
-                j.as_object_mut().map(|o| o.remove("type"));
-                serde_json::from_value::<PrandtlIshlinskii>(j)
-                    .ok()
+                PrandtlIshlinskii::from_block_json(&surgery::block_to_json(b.block.as_ref()))
                     .and_then(|pi| pi.implausible())
             }
             _ => None,
@@ -3973,8 +3970,12 @@ fn enumerate(
             // (piezo and magnetostrictive actuators' standard model), where
             // Coleman–Hodgdon's and Bouc–Wen's loops have one shape each
             // ([`pi_radius`] for the plays). Not on a drive that never moves.
-            let span = robust_span(&u[..ctx.n_est.min(u.len())]);
-            if want("hysteresis") && span > 0.0 {
+            let span = if want("hysteresis") {
+                robust_span(&u[..ctx.n_est.min(u.len())])
+            } else {
+                0.0
+            };
+            if span > 0.0 {
                 out.push(Cand {
                     effect: "hysteresis",
                     site: inp.clone(),

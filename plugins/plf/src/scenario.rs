@@ -1031,15 +1031,21 @@ fn draw_with(
     };
     let (u_data, y_data) = simulate(&forms, 1.0)?;
     let visibility = if with_visibility {
-        // The same record without its effects (slit errors: the encoder's
-        // rounding kept, as in the nominal), with and without the noise.
-        let effect_free: Vec<(&str, Form)> = forms
-            .iter()
-            .filter_map(|(e, f)| match f {
-                Form::Slits { q, .. } => Some((*e, Form::Rounding { q: *q })),
-                _ => None,
-            })
-            .collect();
+        // The record's forms with those not `kept(j)` taken out (slit
+        // errors: the encoder's rounding kept, as in the nominal).
+        let without = |kept: &dyn Fn(usize) -> bool| -> Vec<(&str, Form)> {
+            forms
+                .iter()
+                .enumerate()
+                .filter_map(|(j, (e, f))| match f {
+                    _ if kept(j) => Some((*e, f.clone())),
+                    Form::Slits { q, .. } => Some((*e, Form::Rounding { q: *q })),
+                    _ => None,
+                })
+                .collect()
+        };
+        // The same record without its effects, with and without the noise.
+        let effect_free = without(&|_| false);
         let (u0, y0) = simulate(&effect_free, 1.0)?;
         let (uq, yq) = simulate(&effect_free, 0.0)?;
         // From sample `from` on.
@@ -1085,15 +1091,7 @@ fn draw_with(
                 if forms.len() > 1 {
                     (0..forms.len())
                         .map(|i| {
-                            let but: Vec<(&str, Form)> = forms
-                                .iter()
-                                .enumerate()
-                                .filter_map(|(j, (e, f))| match f {
-                                    _ if j != i => Some((*e, f.clone())),
-                                    Form::Slits { q, .. } => Some((*e, Form::Rounding { q: *q })),
-                                    _ => None,
-                                })
-                                .collect();
+                            let but = without(&|j| j != i);
                             Ok((forms[i].0.to_string(), simulate(&but, QUIET_NOISE)?))
                         })
                         .collect::<Result<Vec<_>, DataError>>()?

@@ -99,6 +99,15 @@ impl PrandtlIshlinskii {
         }
     }
 
+    /// The operator a block's JSON describes (as `surgery::block_to_json` or
+    /// a report writes it, its `type` tag included), or `None` when the JSON is
+    /// not one.
+    pub fn from_block_json(block: &serde_json::Value) -> Option<Self> {
+        let mut fields = block.clone();
+        fields.as_object_mut()?.remove("type");
+        serde_json::from_value(fields).ok()
+    }
+
     fn check_values(linear: f64, plays: &[Play]) -> Result<(), ParamError> {
         check_bounded("linear", linear, MAX_MAGNITUDE)?;
         for (i, p) in plays.iter().enumerate() {
