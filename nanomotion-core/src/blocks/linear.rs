@@ -517,6 +517,22 @@ pub struct StateSpaceBlock {
     #[serde(default, skip_serializing_if = "all_unity")]
     #[param(positive)]
     pub mode_frequency_scales: Vec<f64>,
+    /// Calibration damping scales of the 2nd, 3rd and 4th complex pole pair
+    /// (ranked by natural frequency) of a continuous model, each relative to
+    /// the damping scale: that mode's own decay rate × the scale (see
+    /// `lti::linalg::rescale_modes_each`); missing entries are 1 (must stay 1
+    /// for a discrete model).
+    #[serde(default, skip_serializing_if = "all_unity")]
+    #[param(positive)]
+    pub mode_damping_scales: Vec<f64>,
+    /// Calibration gain scales of the 2nd, 3rd and 4th complex pole pair
+    /// (ranked by natural frequency) of a continuous model, each relative to
+    /// the gain: that mode's residues × the scale, its share of the static
+    /// gain with them (see `lti::linalg::rescale_modes_each`); missing entries
+    /// are 1 (must stay 1 for a discrete model).
+    #[serde(default, skip_serializing_if = "all_unity")]
+    #[param(positive)]
+    pub mode_gain_scales: Vec<f64>,
     #[serde(skip)]
     core: Option<LinearCore>,
     /// The sample period the block was built for (re-realised by `set_params`).
@@ -546,6 +562,20 @@ const MODE_SCALE_NAMES: [&str; 3] = [
     "mode_4_frequency_scale",
 ];
 
+/// The same pairs' own damping scales (`mode_damping_scales`, in order).
+const MODE_DAMPING_NAMES: [&str; 3] = [
+    "mode_2_damping_scale",
+    "mode_3_damping_scale",
+    "mode_4_damping_scale",
+];
+
+/// The same pairs' own gain scales (`mode_gain_scales`, in order).
+const MODE_GAIN_NAMES: [&str; 3] = [
+    "mode_2_gain_scale",
+    "mode_3_gain_scale",
+    "mode_4_gain_scale",
+];
+
 impl StateSpaceBlock {
     /// A block running the model `sys` (continuous models are discretised with
     /// `method` at build time; ignored for discrete models). A discrete `sys` must
@@ -569,6 +599,8 @@ impl StateSpaceBlock {
             damping_scale: 1.0,
             lag_scale: 1.0,
             mode_frequency_scales: Vec::new(),
+            mode_damping_scales: Vec::new(),
+            mode_gain_scales: Vec::new(),
             core: None,
             built_dt: None,
         }
@@ -589,10 +621,10 @@ impl StateSpaceBlock {
             ));
         }
         self.check_params()?;
-        let mode_scales = self
-            .mode_frequency_scales
-            .iter()
-            .map(|&v| ("mode_frequency_scales", v));
+        let mode_scales = (self.mode_frequency_scales.iter())
+            .map(|&v| ("mode_frequency_scales", v))
+            .chain((self.mode_damping_scales.iter()).map(|&v| ("mode_damping_scales", v)))
+            .chain((self.mode_gain_scales.iter()).map(|&v| ("mode_gain_scales", v)));
         for (name, v) in self.continuous_scales().into_iter().chain(mode_scales) {
             if self.discrete && v != 1.0 {
                 return Err(ParamError::new(
@@ -604,19 +636,16 @@ impl StateSpaceBlock {
         }
         let lambda = self.frequency_scale;
         let a_raw = matrix_from_rows("a", &self.a, n, n)?;
-        let (a, input_map) = lti::linalg::rescale_modes_each(
-            &a_raw,
-            self.damping_scale,
-            self.lag_scale,
-            &self.mode_frequency_scales,
-        )
-        .ok_or_else(|| {
-            ParamError::new(
-                "damping_scale",
-                "A's modes cannot be moved (a repeated mode: A is not diagonalisable)",
-                "keep damping_scale, lag_scale and mode_frequency_scales at 1 for this model",
-            )
-        })?;
+        let pairs = self.pair_scales();
+        let (a, input_map) =
+            lti::linalg::rescale_modes_each(&a_raw, self.damping_scale, self.lag_scale, &pairs)
+                .ok_or_else(|| {
+                    ParamError::new(
+                        "damping_scale",
+                        "A's modes cannot be moved (a repeated mode: A is not diagonalisable)",
+                        "keep damping_scale, lag_scale and the mode scales at 1 for this model",
+                    )
+                })?;
         let a = a * lambda;
         let b = input_map * matrix_from_rows("b", &self.b, n, m)? * (lambda * self.gain);
         let c = matrix_from_rows("c", &self.c, p, n)?;
@@ -653,11 +682,28 @@ impl StateSpaceBlock {
         ]
     }
 
+    /// The pairs after the first, each with its own scales (1 where none is
+    /// given).
+    fn pair_scales(&self) -> Vec<lti::linalg::PairScale> {
+        let n = (self.mode_frequency_scales.len())
+            .max(self.mode_damping_scales.len())
+            .max(self.mode_gain_scales.len());
+        let at = |v: &[f64], j: usize| v.get(j).copied().unwrap_or(1.0);
+        (0..n)
+            .map(|j| lti::linalg::PairScale {
+                frequency: at(&self.mode_frequency_scales, j),
+                damping: at(&self.mode_damping_scales, j),
+                gain: at(&self.mode_gain_scales, j),
+            })
+            .collect()
+    }
+
     /// The calibration parameters this model offers: the gain always; the
     /// time scale of a continuous model; its damping scale when it has a
     /// complex pole pair; its lag scale when it has real poles beside
     /// complex ones (with real poles alone the time scale moves them); a
-    /// frequency scale for each pair after the first (up to the fourth).
+    /// frequency scale for each pair after the first (up to the fourth), then
+    /// a damping scale for each of them.
     fn calibration_names(&self) -> Vec<&'static str> {
         let mut v = vec!["gain"];
         if self.discrete {
@@ -674,17 +720,25 @@ impl StateSpaceBlock {
                 }
                 let higher = kinds.pairs.saturating_sub(1).min(MODE_SCALE_NAMES.len());
                 v.extend_from_slice(&MODE_SCALE_NAMES[..higher]);
+                v.extend_from_slice(&MODE_DAMPING_NAMES[..higher]);
+                v.extend_from_slice(&MODE_GAIN_NAMES[..higher]);
             }
         }
         v
     }
 
     fn calibration_slot(&mut self, name: &str) -> &mut f64 {
-        if let Some(j) = MODE_SCALE_NAMES.iter().position(|&n| n == name) {
-            if self.mode_frequency_scales.len() <= j {
-                self.mode_frequency_scales.resize(j + 1, 1.0);
+        for (names, scales) in [
+            (&MODE_SCALE_NAMES, &mut self.mode_frequency_scales),
+            (&MODE_DAMPING_NAMES, &mut self.mode_damping_scales),
+            (&MODE_GAIN_NAMES, &mut self.mode_gain_scales),
+        ] {
+            if let Some(j) = names.iter().position(|&n| n == name) {
+                if scales.len() <= j {
+                    scales.resize(j + 1, 1.0);
+                }
+                return &mut scales[j];
             }
-            return &mut self.mode_frequency_scales[j];
         }
         match name {
             "frequency_scale" => &mut self.frequency_scale,
@@ -741,8 +795,9 @@ controller_impl!(StateSpaceBlock);
 
 /// The calibration of a plant model: `[gain]` for a discrete model; for a
 /// continuous one `[gain, frequency_scale]`, then `damping_scale` when it has
-/// a complex pole pair, `lag_scale` when it also has real poles and
-/// `mode_K_frequency_scale` for its pairs K = 2…4 (see the fields). A built block is re-realised at once (outside any tick: it
+/// a complex pole pair, `lag_scale` when it also has real poles,
+/// `mode_K_frequency_scale` for its pairs K = 2…4 and then
+/// `mode_K_damping_scale` for the same pairs (see the fields). A built block is re-realised at once (outside any tick: it
 /// allocates).
 impl crate::Tunable for StateSpaceBlock {
     fn param_names(&self) -> Vec<String> {
@@ -752,13 +807,20 @@ impl crate::Tunable for StateSpaceBlock {
             .collect()
     }
     fn params(&self) -> Vec<f64> {
-        let value = |n: &str| match MODE_SCALE_NAMES.iter().position(|&m| m == n) {
-            Some(j) => self.mode_frequency_scales.get(j).copied().unwrap_or(1.0),
-            None => self
-                .continuous_scales()
-                .iter()
-                .find(|(name, _)| *name == n)
-                .map_or(self.gain, |(_, v)| *v),
+        let mode = |names: &[&str; 3], scales: &[f64], n: &str| {
+            let j = names.iter().position(|&m| m == n)?;
+            Some(scales.get(j).copied().unwrap_or(1.0))
+        };
+        let value = |n: &str| {
+            mode(&MODE_SCALE_NAMES, &self.mode_frequency_scales, n)
+                .or_else(|| mode(&MODE_DAMPING_NAMES, &self.mode_damping_scales, n))
+                .or_else(|| mode(&MODE_GAIN_NAMES, &self.mode_gain_scales, n))
+                .unwrap_or_else(|| {
+                    self.continuous_scales()
+                        .iter()
+                        .find(|(name, _)| *name == n)
+                        .map_or(self.gain, |(_, v)| *v)
+                })
         };
         self.calibration_names().into_iter().map(value).collect()
     }

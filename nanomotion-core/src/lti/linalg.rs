@@ -640,30 +640,61 @@ pub fn rescale_modes(a: &DMatrix<f64>, damping_scale: f64, lag_scale: f64) -> Op
     rescale_modes_each(a, damping_scale, lag_scale, &[]).map(|(a, _)| a)
 }
 
+/// The calibration of one complex pole pair after the first (see
+/// [`rescale_modes_each`]): its own time scale and its own damping scale,
+/// each relative to the model's.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PairScale {
+    /// s_k: the pair's poles × s_k (its frequency; damping ratio kept).
+    pub frequency: f64,
+    /// d_k: the pair's decay rate σ × d_k (its damping ratio × d_k, about).
+    pub damping: f64,
+    /// g_k: the pair's residues × g_k (its share of the static gain × g_k).
+    pub gain: f64,
+}
+
+impl PairScale {
+    /// The pair as the model has it.
+    pub const UNITY: PairScale = PairScale {
+        frequency: 1.0,
+        damping: 1.0,
+        gain: 1.0,
+    };
+}
+
 /// [`rescale_modes`], and then the 2nd, 3rd, … complex pair (ranked by
-/// natural frequency |λ|) given its own time scale `higher_pairs[0]`,
-/// `higher_pairs[1]`, …: that mode's term H_k(s) of the partial fractions
-/// becomes H_k(s/s_k) — its poles × s_k, its damping ratio and its static
-/// contribution kept, as the model's time scale does for every mode. Returns
-/// A' and the input map T (B ← T·B: the mode's residues × s_k). With the
-/// model's time scale this is a frequency per mode: the calibration of a
-/// model whose second mode is off by itself. Pairs beyond the list, and
-/// pairs of equal |λ| (which share a rank), keep their frequency.
+/// natural frequency |λ|) given its own scales `higher_pairs[0]`,
+/// `higher_pairs[1]`, …: its decay rate × d_k besides the model's damping
+/// scale (σ ± jω_d → d·d_k·σ ± jω_d), then its time scale s_k — that mode's
+/// term H_k(s) of the partial fractions becomes H_k(s/s_k), its poles × s_k,
+/// its damping ratio and its static contribution kept, as the model's time
+/// scale does for every mode. Returns A' and the input map T (B ← T·B: the
+/// mode's residues × s_k). With the model's time and damping scales this is a
+/// frequency and a damping per mode: the calibration of a model whose second
+/// mode is off by itself (the damping of two modes comes from different
+/// dissipation — a stage's guide, a mount's rubber — and is off by different
+/// factors). Pairs beyond the list, and pairs of equal |λ| (which share a
+/// rank), keep their frequency and the model's damping scale.
 pub fn rescale_modes_each(
     a: &DMatrix<f64>,
     damping_scale: f64,
     lag_scale: f64,
-    higher_pairs: &[f64],
+    higher_pairs: &[PairScale],
 ) -> Option<(DMatrix<f64>, DMatrix<f64>)> {
     let positive = |v: f64| v.is_finite() && v > 0.0;
     if !a.is_square()
         || !positive(damping_scale)
         || !positive(lag_scale)
-        || !higher_pairs.iter().all(|&s| positive(s))
+        || !higher_pairs
+            .iter()
+            .all(|s| positive(s.frequency) && positive(s.damping) && positive(s.gain))
     {
         return None;
     }
-    if damping_scale == 1.0 && lag_scale == 1.0 && higher_pairs.iter().all(|&s| s == 1.0) {
+    if damping_scale == 1.0
+        && lag_scale == 1.0
+        && higher_pairs.iter().all(|&s| s == PairScale::UNITY)
+    {
         return Some((a.clone(), DMatrix::identity(a.nrows(), a.nrows())));
     }
     let n = a.nrows();
@@ -682,8 +713,8 @@ pub fn rescale_modes_each(
         let r = l.norm();
         upper.iter().filter(|&&u| u < r * (1.0 - 1e-9)).count()
     };
-    // Per eigenvalue: its own time scale (1 but for the higher pairs).
-    let own_scale: Vec<f64> = ev
+    // Per eigenvalue: its own scales (unity but for the higher pairs).
+    let own: Vec<PairScale> = ev
         .iter()
         .map(|&l| {
             if is_oscillatory(l) {
@@ -691,18 +722,19 @@ pub fn rescale_modes_each(
                     .checked_sub(1)
                     .and_then(|j| higher_pairs.get(j))
                     .copied()
-                    .unwrap_or(1.0)
+                    .unwrap_or(PairScale::UNITY)
             } else {
-                1.0
+                PairScale::UNITY
             }
         })
         .collect();
+    let own_scale: Vec<f64> = own.iter().map(|s| s.frequency * s.gain).collect();
     let moved: Vec<Complex<f64>> = ev
         .iter()
-        .zip(&own_scale)
-        .map(|(&l, &s)| {
+        .zip(&own)
+        .map(|(&l, s)| {
             if is_oscillatory(l) {
-                Complex::new(damping_scale * l.re, l.im) * s
+                Complex::new(damping_scale * s.damping * l.re, l.im) * s.frequency
             } else {
                 Complex::new(lag_scale * l.re, 0.0)
             }
@@ -868,9 +900,11 @@ mod tests {
         let pair =
             |w: f64, z: f64| DMatrix::from_row_slice(2, 2, &[0.0, 1.0, -w * w, -2.0 * z * w]);
         let (slow, fast) = (pair(10.0, 0.05), pair(40.0, 0.02));
-        let (d, l, s) = (1.2, 0.9, 1.07);
-        let shift =
-            |m: &DMatrix<f64>, w: f64, z: f64| m + DMatrix::identity(2, 2) * ((d - 1.0) * (-z * w));
+        let (d, l, s, d2, g2) = (1.2, 0.9, 1.07, 0.8, 0.7);
+        let shift_by = |m: &DMatrix<f64>, w: f64, z: f64, d: f64| {
+            m + DMatrix::identity(2, 2) * ((d - 1.0) * (-z * w))
+        };
+        let shift = |m: &DMatrix<f64>, w: f64, z: f64| shift_by(m, w, z, d);
         let mut blk = DMatrix::zeros(5, 5);
         let mut want_blk = DMatrix::zeros(5, 5);
         blk.view_mut((0, 0), (2, 2)).copy_from(&fast);
@@ -878,7 +912,7 @@ mod tests {
         blk[(4, 4)] = -7.0;
         want_blk
             .view_mut((0, 0), (2, 2))
-            .copy_from(&(shift(&fast, 40.0, 0.02) * s));
+            .copy_from(&(shift_by(&fast, 40.0, 0.02, d * d2) * s));
         want_blk
             .view_mut((2, 2), (2, 2))
             .copy_from(&shift(&slow, 10.0, 0.05));
@@ -893,12 +927,18 @@ mod tests {
         let t_inv = t.clone().try_inverse().unwrap();
         let a = &t * &blk * &t_inv;
         let want = &t * &want_blk * &t_inv;
-        let (got, input_map) = rescale_modes_each(&a, d, l, &[s]).unwrap();
+        let second = PairScale {
+            frequency: s,
+            damping: d2,
+            gain: g2,
+        };
+        let (got, input_map) = rescale_modes_each(&a, d, l, &[second]).unwrap();
         assert!(close(&got, &want, 1e-9), "{got} vs {want}");
-        // B ← T·B scales that mode's inputs by s: its residues × s, so its
-        // term H₂(s) becomes H₂(s/s₂) and its static contribution is kept.
+        // B ← T·B scales that mode's inputs by s·g₂: its residues × s, so its
+        // term H₂(s) becomes H₂(s/s₂) with its static contribution kept, and
+        // then × g₂ (its own damping scale moves its poles, not its residues).
         let mut want_map = DMatrix::identity(5, 5);
-        want_map.view_mut((0, 0), (2, 2)).scale_mut(s);
+        want_map.view_mut((0, 0), (2, 2)).scale_mut(s * g2);
         let want_map = &t * want_map * &t_inv;
         assert!(
             close(&input_map, &want_map, 1e-9),
@@ -907,12 +947,29 @@ mod tests {
         assert_eq!(mode_kinds(&a).pairs, 2);
         // Unit scales everywhere give A back; a scale beyond the pairs is unused.
         assert_eq!(
-            rescale_modes_each(&a, 1.0, 1.0, &[1.0]).map(|(m, _)| m),
+            rescale_modes_each(&a, 1.0, 1.0, &[PairScale::UNITY]).map(|(m, _)| m),
             Some(a.clone())
         );
-        let (only_first, _) = rescale_modes_each(&a, d, l, &[1.0, 1.3]).unwrap();
+        let beyond = PairScale {
+            frequency: 1.3,
+            damping: 0.5,
+            gain: 2.0,
+        };
+        let (only_first, _) = rescale_modes_each(&a, d, l, &[PairScale::UNITY, beyond]).unwrap();
         assert!(close(&only_first, &rescale_modes(&a, d, l).unwrap(), 1e-12));
-        assert_eq!(rescale_modes_each(&a, 1.0, 1.0, &[0.0]), None);
+        for bad in [
+            (0.0, 1.0, 1.0),
+            (1.0, 0.0, 1.0),
+            (1.0, 1.0, -1.0),
+            (1.0, f64::NAN, 1.0),
+        ] {
+            let bad = PairScale {
+                frequency: bad.0,
+                damping: bad.1,
+                gain: bad.2,
+            };
+            assert_eq!(rescale_modes_each(&a, 1.0, 1.0, &[bad]), None);
+        }
     }
 
     #[test]

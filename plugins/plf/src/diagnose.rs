@@ -1987,7 +1987,8 @@ fn calibrate(
     // damping the record cannot see, an amplifier pole sent far above the
     // band) is not calibrated: left free, it wanders to absurd values and
     // absorbs an effect. It is held at the nominal, reported with the value
-    // it went to, and the rest refitted.
+    // it went to, and the rest refitted; so is a mode's own scale that moves
+    // the mode away ([`moves_a_mode_away`]).
     // The effects named so far are refitted with the scales, as every new
     // effect is refitted with them (see `joint_refit`): the calibration
     // competes on the same terms, and an effect fitted against the
@@ -2002,6 +2003,7 @@ fn calibrate(
             .filter(|&k| {
                 let value = param_value(&fit.1, &free[k]).unwrap_or(f64::NAN);
                 !fit.2.get(k).is_some_and(|s| s.abs() < value.abs())
+                    || moves_a_mode_away(&param_key(&fit.1, &free[k]), value)
             })
             .collect();
         if undetermined.is_empty() {
@@ -2070,6 +2072,23 @@ fn calibrate(
         with_effect: None,
     };
     Ok(Some((cal, calibrated, (before_ms, after_ms))))
+}
+
+/// The furthest a mode's own calibration scale (`mode_K_…_scale`, relative
+/// to the model's) may go, either way: a factor 3.
+const MODE_SCALE_MAX: f64 = 3.0;
+
+/// Whether the calibration parameter `key` (`block.name`) at `value` is a
+/// mode's own scale moved beyond [`MODE_SCALE_MAX`] either way. That is no
+/// longer the nominal's mode calibrated but another model: a gain scale
+/// towards 0 deletes the mode, a frequency scale of 0.003 with a damping scale
+/// of 1 000 turns it into a slow real lag (blind 4953's creep was so taken
+/// into the calibration), a frequency scale of 7 sends it out of the band the
+/// record excites. Held at the nominal like a scale the data do not
+/// determine (see [`calibrate`]).
+fn moves_a_mode_away(key: &str, value: f64) -> bool {
+    let name = key.rsplit('.').next().unwrap_or(key);
+    name.starts_with("mode_") && !(1.0 / MODE_SCALE_MAX..=MODE_SCALE_MAX).contains(&value)
 }
 
 /// The value of the tunable parameter `f` in `spec`.
@@ -2190,7 +2209,7 @@ fn scan_mode_scales(
             .is_some_and(|t| {
                 t.param_names()
                     .get(free[j].index)
-                    .is_some_and(|n| n.starts_with("mode_"))
+                    .is_some_and(|n| n.starts_with("mode_") && n.ends_with("frequency_scale"))
             });
         if !is_mode_scale {
             continue;

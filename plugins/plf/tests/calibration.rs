@@ -1,6 +1,6 @@
 //! The nominal calibration and the noise floor on records whose nominal is
-//! off in ways a real identified model is: a second mode's frequency off by
-//! itself, and a measurement quantised so coarsely that the stage holds its
+//! off in ways a real identified model is: a second mode's frequency, damping
+//! and gain off by themselves, and a measurement quantised so coarsely that the stage holds its
 //! level most samples.
 
 use nanomotion_core::data::Dataset;
@@ -16,8 +16,14 @@ const RATE: f64 = 2000.0;
 /// ζ = 0.02, a third of the first's static gain) in modal form, driven
 /// open loop from the column `u`.
 fn two_mode_graph(f2: f64, n: usize) -> String {
+    second_mode_graph(f2, 0.02, 1.0 / 3.0, n)
+}
+
+/// [`two_mode_graph`] with the second mode's damping ratio `z2` and its share
+/// `g2` of the first mode's static gain.
+fn second_mode_graph(f2: f64, z2: f64, g2: f64, n: usize) -> String {
     let (w1, w2) = (2.0 * PI * 15.0, 2.0 * PI * f2);
-    let (z1, z2) = (0.05, 0.02);
+    let z1 = 0.05;
     format!(
         "base_rate_hz: {RATE}\nduration_s: {}\nblocks:\n  - {{ name: drive, type: data_column, column: u }}\n  - {{ name: stage, type: state_space, a: [[0.0, 1.0, 0.0, 0.0], [{:?}, {:?}, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0], [0.0, 0.0, {:?}, {:?}]], b: [[0.0], [1.0], [0.0], [1.0]], c: [[{:?}, 0.0, {:?}, 0.0]], discretisation: zoh }}\nconnections:\n  - {{ from: drive.y, to: stage.u }}\ncompare:\n  - {{ signal: stage.y, column: y }}\n",
         n as f64 / RATE,
@@ -26,7 +32,7 @@ fn two_mode_graph(f2: f64, n: usize) -> String {
         -w2 * w2,
         -2.0 * z2 * w2,
         w1 * w1,
-        w2 * w2 / 3.0,
+        w2 * w2 * g2,
     )
 }
 
@@ -104,6 +110,59 @@ fn a_second_mode_off_by_itself_is_calibrated_not_named() {
     assert!((lambda - 1.0).abs() < 0.005, "time scale {lambda}");
     assert!((second - 1.08).abs() < 0.01, "second mode × {second}");
     // The gap closes to the noise: at least 90 % of the held-out rms removed.
+    assert!(
+        rep.final_scores.holdout_rms < 0.1 * rep.nominal.holdout_rms,
+        "{:.3e} -> {:.3e}",
+        rep.nominal.holdout_rms,
+        rep.final_scores.holdout_rms
+    );
+}
+
+#[test]
+fn a_second_mode_with_its_own_damping_and_gain_off_is_calibrated_not_named() {
+    // The second mode's frequency (+6 %), damping ratio (× 1.4) and share of
+    // the static gain (× 0.8) are off by themselves, the first mode exact:
+    // the damping of two modes comes from different dissipation and their
+    // residues from the mode shapes, so a real identified model errs so. One
+    // damping scale for both modes leaves the second's error, which a
+    // resonance was then named for (two-mode records of the scenario set,
+    // blind 5184 and 5224). The second pair's own damping and gain scales
+    // must take it, and nothing be named.
+    let n = 8000;
+    let truth = second_mode_graph(70.0 * 1.06, 0.02 * 1.4, 0.8 / 3.0, n);
+    let data = measured(&truth, n, 6);
+    let nominal = GraphSpec::from_yaml(&two_mode_graph(70.0, n), "nominal.yaml").unwrap();
+    let rep = diagnose(&nominal, &data, &Options::default()).unwrap();
+    let cal = rep.calibration.as_ref().expect("a calibration was tried");
+    eprintln!(
+        "second mode off: found {:?}; calibration {:?}; held-out rms {:.3e} -> {:.3e}",
+        rep.found, cal.params, rep.nominal.holdout_rms, rep.final_scores.holdout_rms,
+    );
+    assert!(rep.found.is_empty(), "named {:?}", rep.found);
+    assert!(cal.accepted, "{cal:?}");
+    let p = |k: &str| cal.params.get(k).copied().unwrap_or(1.0);
+    // The first mode is left where it is; the second's scales are relative
+    // to the model's (time scale λ, damping scale d, gain g).
+    let (lambda, d, g) = (
+        p("stage.frequency_scale"),
+        p("stage.damping_scale"),
+        p("stage.gain"),
+    );
+    assert!((lambda - 1.0).abs() < 0.005, "time scale {lambda}");
+    assert!((d - 1.0).abs() < 0.05, "damping scale {d}");
+    assert!((g - 1.0).abs() < 0.01, "gain {g}");
+    let second = lambda * p("stage.mode_2_frequency_scale");
+    let second_damping = d * p("stage.mode_2_damping_scale");
+    let second_gain = g * p("stage.mode_2_gain_scale");
+    assert!((second - 1.06).abs() < 0.005, "second mode × {second}");
+    assert!(
+        (second_damping - 1.4).abs() < 0.1,
+        "second damping × {second_damping}"
+    );
+    assert!(
+        (second_gain - 0.8).abs() < 0.02,
+        "second gain × {second_gain}"
+    );
     assert!(
         rep.final_scores.holdout_rms < 0.1 * rep.nominal.holdout_rms,
         "{:.3e} -> {:.3e}",
