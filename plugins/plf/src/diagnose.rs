@@ -1290,13 +1290,26 @@ impl<'c, 'a> Search<'c, 'a> {
         // scores better. (Against the effect alone, a calibration that
         // had taken a friction's viscous part as damping (× 6.6) won
         // with a hysteresis inside the loop over the friction that is
-        // there: tuning 288.)
+        // there: tuning 288.) Of the step's candidates, the best
+        // [`CAL_COMPETES_TRIED`] by their score on the nominal as it is are
+        // fitted again (not every one: a fit far down the ranking on the
+        // nominal is not the effect a calibration would have hidden).
         if significant && !cal.accepted {
+            let top: Vec<usize> = ranked
+                .order
+                .iter()
+                .copied()
+                .take(CAL_COMPETES_TRIED)
+                .collect();
+            let cands: Vec<Cand> = top.iter().map(|&i| cands[i].clone()).collect();
+            let locked: Vec<Option<String>> =
+                top.iter().map(|&i| ranked.locked[i].clone()).collect();
+            let cands = &cands;
             let (on_cal, _, fit_runs) = fit_candidates(
                 ctx,
                 &calibrated,
                 cands,
-                &ranked.locked[..cands.len()],
+                &locked,
                 opts.threads,
                 step_no,
                 progress,
@@ -3166,6 +3179,12 @@ fn memory_share(x: &[f64], y: &[f64]) -> Memory {
 /// step's worth of fits would double the time of every record that names
 /// nothing.
 const CAL_WITH_EFFECT_TRIED: usize = 3;
+
+/// The candidates of a step (the best by their penalised score on the
+/// nominal as it is) fitted again on the calibrated nominal when the
+/// calibration competes with the step's best effect (see
+/// `Search::calibration_competes`).
+const CAL_COMPETES_TRIED: usize = 8;
 
 /// The plays of the Prandtl–Ishlinskii hysteresis candidate (see
 /// [`pi_radius`]): each costs a graph run at every fitting step.
