@@ -31,7 +31,6 @@ use crate::effects::resonance::{MAX_RESONANT_DAMPING, UnmodeledResonance};
 use crate::effects::slit::MAX_SLITS;
 use crate::fit::{
     BlockEvaluator, Evaluator, FreeParam, Problem, Records, Scale, levenberg_marquardt,
-    levenberg_marquardt_to,
 };
 use crate::stats;
 use crate::surgery::{self, Channel, Site};
@@ -4785,14 +4784,6 @@ fn flexibility(effect: &str, k: usize) -> (usize, usize) {
     }
 }
 
-/// Where a candidate's fit stops (see [`levenberg_marquardt_to`]): at the
-/// first step that lowers its cost by less than this share. The candidates
-/// are ranked by held-out scores that such a share does not reorder (on the
-/// held-out scenarios no name or cut changed against 1e-9), and their last
-/// steps cost a Jacobian and up to twelve trial runs each. The joint refits
-/// and the calibration stop at [`crate::fit::CONVERGED`].
-const CANDIDATE_CONVERGED: f64 = 1e-6;
-
 fn fit_cost(c: &Cand) -> f64 {
     let per_run = if c.output.is_some() { 1.0 } else { 8.0 };
     c.starts.len() as f64 * (c.free.len() + 2) as f64 * per_run
@@ -4854,9 +4845,7 @@ fn fit_candidate(ctx: &Ctx<'_>, cur: &Current, c: &Cand) -> Result<Fitted, Strin
             .map_err(|e| e.to_string())?
             .with_restarts(&ctx.records.starts());
             let z0 = vec![0.0; c.free.len()];
-            let Some(fit) =
-                levenberg_marquardt_to(&mut be, &z0, ctx.n_est, 30, CANDIDATE_CONVERGED)
-            else {
+            let Some(fit) = levenberg_marquardt(&mut be, &z0, ctx.n_est, 30) else {
                 continue;
             };
             runs += fit.runs;
@@ -4889,9 +4878,7 @@ fn fit_candidate(ctx: &Ctx<'_>, cur: &Current, c: &Cand) -> Result<Fitted, Strin
             .map_err(|e| e.to_string())?;
             ev.set_weights(&ctx.weights);
             let z0 = vec![0.0; new_free.len()];
-            let Some(fit) =
-                levenberg_marquardt_to(&mut ev, &z0, ctx.n_est, 25, CANDIDATE_CONVERGED)
-            else {
+            let Some(fit) = levenberg_marquardt(&mut ev, &z0, ctx.n_est, 25) else {
                 continue;
             };
             runs += fit.runs + 1;

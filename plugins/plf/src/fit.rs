@@ -710,25 +710,6 @@ pub fn levenberg_marquardt<P: Problem>(
     n: usize,
     max_iter: usize,
 ) -> Option<Fit> {
-    levenberg_marquardt_to(ev, z0, n, max_iter, CONVERGED)
-}
-
-/// The relative cost decrease of an accepted step below which
-/// [`levenberg_marquardt`] stops: converged.
-pub const CONVERGED: f64 = 1e-9;
-
-/// [`levenberg_marquardt`] stopping at the first accepted step that lowers
-/// the cost by less than `rel_tol` of it: a coarser `rel_tol` than
-/// [`CONVERGED`] saves the runs of the steps that would follow (a Jacobian
-/// and at least one trial run each), at the price of a slightly less
-/// converged fit.
-pub fn levenberg_marquardt_to<P: Problem>(
-    ev: &mut P,
-    z0: &[f64],
-    n: usize,
-    max_iter: usize,
-    rel_tol: f64,
-) -> Option<Fit> {
     let p = z0.len();
     let mut z = z0.to_vec();
     let mut r = Vec::new();
@@ -794,7 +775,7 @@ pub fn levenberg_marquardt_to<P: Problem>(
                     lambda = (lambda / 3.0).max(1e-12);
                     nu = 2.0;
                     improved = true;
-                    if rel < rel_tol {
+                    if rel < 1e-9 {
                         return Some(finish(ev, z, cost, r.len(), runs, &jac, have_jac));
                     }
                     break;
