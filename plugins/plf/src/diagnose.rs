@@ -688,8 +688,8 @@ struct Search<'c, 'a> {
     stopped: String,
     /// The candidate table of the step that named nothing.
     rejected_candidates: Vec<Candidate>,
-    /// (effect, the outputs it concerns) of every step taken.
-    named: Vec<(&'static str, Vec<usize>)>,
+    /// (effect, the outputs it concerns, its site's kind) of every step taken.
+    named: Vec<(&'static str, Vec<usize>, &'static str)>,
     /// Per step: (force signal, position) of an effect fed by the stage's own motion.
     own_forces: Vec<Option<(String, String)>>,
     /// Per step: the level it was significant at (α over the step's candidates).
@@ -932,22 +932,39 @@ impl<'c, 'a> Search<'c, 'a> {
         // series on it — would only be padding).
         // A hysteretic force of the stage's own motion after friction was named
         // there is that same force again.
-        // Those copies (`again`) are fitted all the same: they are what a new
-        // name must beat (see `same_form` in `step`).
+        // Those copies (`again`) at the kind of place the effect was named
+        // (on the drive, inside the loop, on the output) are fitted all the
+        // same: they are what a new name must beat (see `same_form` in
+        // `step`). A copy at another kind of place is another physical
+        // claim, not the named effect's form: a hysteresis of the stage's own
+        // position inside the loop adds dynamics (the plant's lag on its
+        // input) that a hysteresis on the drive has not, and stood for creep
+        // (blind 5368: after the drive's hysteresis, creep cut the held-out
+        // rms 2.0 -> 0.37, such a copy 0.41, so creep was not named).
+        let copy_of = |c: &Cand| {
+            let outs = outputs_of(ctx, &c.site);
+            let own_motion = matches!(c.site, Site::Feedback { .. });
+            let on_axis = |o: &Vec<usize>| {
+                o.iter().any(|&k| {
+                    outs.iter()
+                        .any(|&j| ctx.channels[k].same_axis(&ctx.channels[j]))
+                })
+            };
+            let is_copy = named.iter().any(|(e, o, _)| {
+                (*e == c.effect || (own_motion && *e == "friction")) && on_axis(o)
+            });
+            let same_place = named.iter().any(|(e, o, kind)| {
+                (*e == c.effect || (own_motion && *e == "friction"))
+                    && on_axis(o)
+                    && *kind == c.site.kind()
+            });
+            (is_copy, same_place)
+        };
         let (mut cands, mut again): (Vec<Cand>, Vec<Cand>) =
             enumerate(ctx, &self.cur, opts, &mut self.runs)?
                 .into_iter()
-                .partition(|c| {
-                    let outs = outputs_of(ctx, &c.site);
-                    let own_motion = matches!(c.site, Site::Feedback { .. });
-                    !named.iter().any(|(e, o)| {
-                        (*e == c.effect || (own_motion && *e == "friction"))
-                            && o.iter().any(|&k| {
-                                outs.iter()
-                                    .any(|&j| ctx.channels[k].same_axis(&ctx.channels[j]))
-                            })
-                    })
-                });
+                .filter(|c| !matches!(copy_of(c), (true, false)))
+                .partition(|c| !copy_of(c).0);
         // A second slit table on an axis that has one has no form the first
         // lacks (every entry of a table is free): no copy to beat.
         again.retain(|c| c.effect != "encoder_slit_error");
@@ -1520,7 +1537,8 @@ impl<'c, 'a> Search<'c, 'a> {
         let new_spec = new.spec()?;
         let (type_name, params, unc) = fitted_params(&new_spec, &win)?;
         let sc = scores(ctx, &new);
-        self.named.push((effect_name, outputs_of(ctx, &cand.site)));
+        self.named
+            .push((effect_name, outputs_of(ctx, &cand.site), cand.site.kind()));
         self.own_forces.push(own_force);
         self.levels.push(level);
         self.steps.push(Step {
@@ -1636,7 +1654,7 @@ impl<'c, 'a> Search<'c, 'a> {
             && let Some((i, step, new)) =
                 quantization_from_grid(self.ctx, &self.cur, self.opts, &self.named, &mut self.runs)?
         {
-            self.named.push(("quantization", vec![i]));
+            self.named.push(("quantization", vec![i], "output"));
             self.own_forces.push(None);
             self.levels.push(self.opts.alpha);
             self.steps.push(step);
@@ -4453,16 +4471,32 @@ fn time_delay(fs: f64, site: Site, output: Option<usize>, rate_hz: Option<f64>) 
     }
 }
 
+/// A resonance on `site`, started at the residual `r`'s strongest line and,
+/// where the spectrum has a peak elsewhere that stands [`PEAK_RATIO`] over
+/// its neighbours ([`stats::prominent_peak`]), there too: the fit cannot
+/// move a pole pair across the band (its cost is many-valleyed in the
+/// frequency), and the strongest line of a residual is often the slow
+/// misfit or the coloured noise at the lowest frequencies, not the mode
+/// ringing after every step (blind 5343: a mode at 79.8 Hz, the line at
+/// 11 Hz, the fit ended on a cancelling pair there).
 fn resonance(r: &[f64], fs: f64, site: Site, output: Option<usize>, rate_hz: Option<f64>) -> Cand {
     let (_, f) = stats::fisher_g(r);
-    let fp = (f * fs).clamp(fs * 1e-4, 0.4 * fs);
+    let at = |f: f64| (f * fs).clamp(fs * 1e-4, 0.4 * fs);
+    let mut poles = vec![at(f)];
+    if let Some((fpk, ratio)) = stats::prominent_peak(r)
+        && ratio >= PEAK_RATIO
+        && (at(fpk) / poles[0]).ln().abs() > 0.15
+    {
+        poles.push(at(fpk));
+    }
     Cand {
         effect: "unmodeled_resonance",
         site,
         output,
-        starts: [0.7, 1.4]
+        starts: poles
             .iter()
-            .map(|k| {
+            .flat_map(|&fp| [0.7, 1.4].map(|k| (fp, k)))
+            .map(|(fp, k)| {
                 json!({"type": "unmodeled_resonance", "f_pole_hz": fp, "zeta_pole": 0.05, "f_zero_hz": (k * fp).min(0.45 * fs), "zeta_zero": 0.05})
             })
             .collect(),
@@ -4471,6 +4505,11 @@ fn resonance(r: &[f64], fs: f64, site: Site, output: Option<usize>, rate_hz: Opt
         rate_hz,
     }
 }
+
+/// How far a spectral peak must stand over its neighbours' median to start a
+/// resonance's fit there too (see [`resonance`]): Welch's average of 16 or
+/// more segments leaves noise bins within about twice their level.
+const PEAK_RATIO: f64 = 4.0;
 
 /// The lsb of a `quantizer` producing `signal`, if one does.
 fn quantizer_lsb(spec: &GraphSpec, signal: &str) -> Option<f64> {
@@ -4661,15 +4700,15 @@ fn quantization_from_grid(
     ctx: &Ctx<'_>,
     cur: &Current,
     opts: &Options,
-    named: &[(&'static str, Vec<usize>)],
+    named: &[(&'static str, Vec<usize>, &'static str)],
     runs: &mut usize,
 ) -> Result<Option<(usize, Step, Current)>, PlfError> {
     let spec = cur.spec()?;
     let level = opts.alpha / ctx.channels.len() as f64;
     for (i, ch) in ctx.channels.iter().enumerate() {
-        let on_axis = named
-            .iter()
-            .any(|(e, o)| *e == "quantization" && o.iter().any(|&k| ctx.channels[k].same_axis(ch)));
+        let on_axis = named.iter().any(|(e, o, _)| {
+            *e == "quantization" && o.iter().any(|&k| ctx.channels[k].same_axis(ch))
+        });
         if on_axis || quantizer_lsb(&spec, &ch.signal).is_some() {
             continue;
         }
@@ -5278,7 +5317,7 @@ mod tests {
                 candidates: Vec::new(),
                 ambiguous_with: Vec::new(),
             });
-            search.named.push(("drift", vec![0]));
+            search.named.push(("drift", vec![0], site.kind()));
             search.own_forces.push(None);
             search.levels.push(opts.alpha);
         }

@@ -160,3 +160,57 @@ fn a_second_mode_off_in_damping_and_gain_is_calibrated_not_named() {
         assert!(cut > 0.9, "{seed}: cut {:.0} %", 100.0 * cut);
     }
 }
+
+/// Blind set 5302–5421: on two lag stages with an attached mass (5392: 47.6
+/// Hz, a sine drive at 1 kHz; 5343: 79.8 Hz, steps at 500 Hz) a hysteresis
+/// was named for the mode: the resonance's fit started at the residual's
+/// strongest line — the slow misfit, at 1–11 Hz — and ended on a pole–zero
+/// pair that nearly cancels there. It now starts at the spectrum's peak over
+/// its neighbours too (`stats::prominent_peak`). On 5343 the steps ring the
+/// mode and the fit finds it (a hysteresis inside the loop is still named
+/// first: padding left); 5392's one tone cannot place a mode (the fit ends at
+/// 106 Hz: at one frequency a resonance is a gain and a phase), only the name
+/// is right.
+#[test]
+fn a_mode_far_above_the_strongest_line_is_fitted_where_it_rings() {
+    let s = studied(5343);
+    assert!(s.record.truth.contains("79.8 Hz"), "{}", s.record.truth);
+    let r = diagnose_studied(5343);
+    let step = r
+        .steps
+        .iter()
+        .find(|s| s.effect == "unmodeled_resonance")
+        .unwrap_or_else(|| panic!("no resonance: {:?}, {}", r.found, r.stopped_because));
+    let p = &step.final_params;
+    for k in ["f_pole_hz", "f_zero_hz"] {
+        assert!((p[k] / 79.8 - 1.0).abs() < 0.2, "{k} = {} Hz: {p:?}", p[k]);
+    }
+    let r = diagnose_studied(5392);
+    assert_eq!(r.found, ["unmodeled_resonance"], "{}", r.stopped_because);
+}
+
+/// Blind set 5302–5421, 5368 (a first-order stage in open loop, a random
+/// drive, hysteresis and creep): after the drive's hysteresis, creep cut the
+/// held-out rms 2.0 → 0.37 but was not named — a second hysteresis *inside
+/// the loop* (a hysteretic force of the stage's own position) cut it to 0.41,
+/// and a new name must beat a copy of one named. A copy at another kind of
+/// place is another physical claim (fed by the stage's lagged position it
+/// has dynamics the drive's map has not): only copies where the effect was
+/// named are the null now, and creep is named.
+#[test]
+fn creep_after_the_drives_hysteresis_beats_only_a_copy_on_the_drive() {
+    let s = studied(5368);
+    assert_eq!(s.record.hidden, ["hysteresis", "creep"]);
+    let r = diagnose_studied(5368);
+    assert_eq!(r.found, ["hysteresis", "creep"], "{}", r.stopped_because);
+    for step in &r.steps {
+        assert!(
+            step.site.starts_with("input side"),
+            "{}: {}",
+            step.effect,
+            step.site
+        );
+    }
+    let cut = 1.0 - r.final_scores.holdout_rms / r.nominal.holdout_rms;
+    assert!(cut > 0.95, "cut {:.0} %", 100.0 * cut);
+}
