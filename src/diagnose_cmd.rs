@@ -269,19 +269,23 @@ fn print_report(r: &Report) {
         say!("     parameters at this step: {}", params.join(", "));
         // Later steps refit earlier effects jointly; say where they ended up.
         if s.final_params != s.params {
+            let fin: Vec<String> = s
+                .final_params
+                .iter()
+                .map(|(k, v)| format!("{k} = {v:.4e}"))
+                .collect();
             say!(
                 "     in model_augmented.yaml (after the later joint refits): {}",
-                pairs(&s.final_params)
-            );
-        }
-        if !s.nominal_params.is_empty() {
-            say!(
-                "     fitted with it, the nominal's {} (a map on the drive has no gain of its own)",
-                pairs(&s.nominal_params)
+                fin.join(", ")
             );
         }
         if !s.derived.is_empty() {
-            say!("     derived from the final fit: {}", pairs(&s.derived));
+            let d: Vec<String> = s
+                .derived
+                .iter()
+                .map(|(k, v)| format!("{k} = {v:.4e}"))
+                .collect();
+            say!("     derived from the final fit: {}", d.join(", "));
         }
         say!(
             "     held-out rms {:.4e} -> {:.4e} ({:.1} % cut, p = {:.1e}{})",
@@ -475,12 +479,4 @@ fn write(out: &Path, r: &Report, a: &Args) -> Result<String, String> {
         .map_err(|e| e.to_string())?;
     }
     Ok(json)
-}
-
-/// `name = value` pairs of a parameter map, as the report prints them.
-fn pairs(m: &std::collections::BTreeMap<String, f64>) -> String {
-    m.iter()
-        .map(|(k, v)| format!("{k} = {v:.4e}"))
-        .collect::<Vec<_>>()
-        .join(", ")
 }

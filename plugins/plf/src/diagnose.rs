@@ -199,14 +199,6 @@ pub struct Step {
     /// The same parameters in the final augmented model (`model_augmented.yaml`),
     /// after every later joint refit.
     pub final_params: BTreeMap<String, f64>,
-    /// Parameters of the nominal model fitted with this effect, `block.parameter`
-    /// → value as at this step: the plant's gain for a map on the drive with a
-    /// unit slope (a play, a limit), which would otherwise lose to a
-    /// hysteresis whose linear part takes a nominal gain a few per cent off.
-    /// Later steps refit them with every effect (the final values are in
-    /// `model_augmented.yaml`). Empty for other effects.
-    #[serde(skip_serializing_if = "BTreeMap::is_empty")]
-    pub nominal_params: BTreeMap<String, f64>,
     /// Physical quantities derived from the final fitted block, in the units of
     /// the signal it acts on: `coulomb` (the Coulomb level of a friction force
     /// of the stage's own motion, whichever block fitted it; see `ForceSplit`).
@@ -1157,7 +1149,8 @@ impl<'c, 'a> Search<'c, 'a> {
         at_floor: bool,
     ) -> (Option<(usize, Fitted, f64)>, Option<(Cand, Fitted, f64)>) {
         let (ctx, opts) = (self.ctx, self.opts);
-        let score_of = |f: &Fitted, ms: f64| penalised(ctx, flexibility(f.effect, f.n_new), ms);
+        let score_of =
+            |f: &Fitted, ms: f64| penalised(ctx, flexibility(f.effect, f.free_indices.len()), ms);
         let mut top: Vec<Fitted> = finalists
             .iter()
             .map(|&i| ranked.results[i].take().expect("fitted"))
@@ -1342,7 +1335,7 @@ impl<'c, 'a> Search<'c, 'a> {
             self.runs += fit_runs;
             let k_cal = cal.params.len();
             let with_cal = |f: &Fitted, ms: f64| {
-                let (k, flex) = flexibility(f.effect, f.n_new);
+                let (k, flex) = flexibility(f.effect, f.free_indices.len());
                 penalised(ctx, (k + k_cal, flex + k_cal), ms)
             };
             let best_on_cal = on_cal
@@ -1543,21 +1536,6 @@ impl<'c, 'a> Search<'c, 'a> {
         );
         let new_spec = new.spec()?;
         let (type_name, params, unc) = fitted_params(&new_spec, &win)?;
-        // The nominal's parameters this effect's fit freed (its gain, for a
-        // map on the drive without one of its own: `needs_nominal_gain`).
-        let nominal_params: BTreeMap<String, f64> = win
-            .free
-            .iter()
-            .filter(|f| {
-                f.block != win.block_name
-                    && !self
-                        .cur
-                        .free
-                        .iter()
-                        .any(|g| g.block == f.block && g.index == f.index)
-            })
-            .filter_map(|f| Some((param_key(&new_spec, f), param_value(&new_spec, f)?)))
-            .collect();
         let sc = scores(ctx, &new);
         self.named
             .push((effect_name, outputs_of(ctx, &cand.site), cand.site.kind()));
@@ -1572,7 +1550,6 @@ impl<'c, 'a> Search<'c, 'a> {
             site: cand.site.describe(),
             params,
             final_params: BTreeMap::new(),
-            nominal_params,
             derived: BTreeMap::new(),
             uncertainty: unc,
             evidence,
@@ -2810,9 +2787,6 @@ struct Fitted {
     block_name: String,
     free: Vec<FreeParam>,
     free_indices: Vec<usize>,
-    /// The parameters the fit freed beyond the model's: the block's own and
-    /// the nominal's gains freed with it ([`needs_nominal_gain`]).
-    n_new: usize,
     std: Vec<f64>,
     residual: Vec<Vec<f64>>,
     score: f64,
@@ -3388,11 +3362,8 @@ fn not_hysteresis(ctx: &Ctx<'_>, f: &Fitted, on_drive: bool) -> Option<String> {
 /// (Coleman–Hodgdon with b = c and α so large that the output sits on y = b·u;
 /// Bouc–Wen with a = 0 and Prandtl–Ishlinskii with every weight 0 (ratios 1),
 /// y = linear·u), for a position-dependent gain the
-/// dependence (g_i = 0, g_0 free: a constant gain error), for a play or a
-/// limit on the drive fitted with the nominal's gain the play or the limit
-/// (y = u, the gain alone free: blind 5302–5421, with the gain freed a
-/// limit never reached stood for a nominal gain error on 5341 and 5388).
-/// `None` for other effects.
+/// dependence (g_i = 0, g_0 free: a constant gain error). `None` for other
+/// effects.
 fn degenerate_twin(c: &Cand, f: &Fitted) -> Option<Cand> {
     let block = f.spec.blocks.iter().find(|b| b.name == f.block_name)?;
     let mut json = surgery::block_to_json(block.block.as_ref());
@@ -3402,58 +3373,38 @@ fn degenerate_twin(c: &Cand, f: &Fitted) -> Option<Cand> {
             let alpha = json.get("alpha")?.as_f64()?;
             json["c"] = json!(b);
             json["alpha"] = json!(alpha * 1e9);
-            Some(1)
+            1
         }
         "bouc_wen" => {
             json["a"] = json!(0.0);
-            Some(3)
+            3
         }
         "prandtl_ishlinskii" => {
             // Every ratio 1: y = linear·u.
             let plays = json.get_mut("plays")?.as_array_mut()?;
             plays.iter_mut().for_each(|p| p["weight"] = json!(0.0));
-            Some(0)
+            0
         }
         "position_dependent_gain" => {
             let coeffs = json.get_mut("coeffs")?.as_array_mut()?;
             coeffs.iter_mut().for_each(|g| *g = json!(0.0));
-            Some(coeffs.len())
-        }
-        // A play of no width, a limit a thousand times as far out: y = u,
-        // the nominal's gain (freed with them, `needs_nominal_gain`) the
-        // only parameter left.
-        "backlash" if needs_nominal_gain(c) => {
-            json["width"] = json!(0.0);
-            None
-        }
-        "saturation" if needs_nominal_gain(c) => {
-            let (lo, hi) = (json.get("lower")?.as_f64()?, json.get("upper")?.as_f64()?);
-            let (m, h) = (0.5 * (hi + lo), 0.5 * (hi - lo));
-            json["lower"] = json!(m - 1e3 * h);
-            json["upper"] = json!(m + 1e3 * h);
-            None
+            coeffs.len()
         }
         _ => return None,
     };
     // Its own scale when the candidate frees it; else (g₀ of a gain on the
     // output, dimensionless like the g_i) that of the first free parameter.
-    let free = match linear {
-        Some(linear) => {
-            let &(_, scale) = c
-                .free
-                .iter()
-                .find(|(k, _)| *k == linear)
-                .or(c.free.first())?;
-            vec![(linear, scale)]
-        }
-        None => Vec::new(),
-    };
+    let &(_, scale) = c
+        .free
+        .iter()
+        .find(|(k, _)| *k == linear)
+        .or(c.free.first())?;
     Some(Cand {
         effect: c.effect,
         site: c.site.clone(),
         output: c.output,
         starts: vec![json],
-        free,
+        free: vec![(linear, scale)],
         s: c.s.clone(),
         rate_hz: c.rate_hz,
     })
@@ -3507,16 +3458,11 @@ fn degenerate_explains(
     (test.p_value >= level || cut < min_cut).then(|| {
         format!(
             "{} explains little beyond {}: fitted alone, that leaves held-out rms {:.4e}, the whole fit {:.4e} (from {:.4e}): p = {:.1e} (needed < {:.1e}), {:.0} % of the excess over the noise floor it leaves (at least {:.0} % needed)",
-            match c.effect {
-                "hysteresis" => "its loop",
-                "backlash" => "its play",
-                "saturation" => "its limit",
-                _ => "its variation",
-            },
-            match c.effect {
-                "hysteresis" => "its linear part (a gain, or a stiffness inside the loop)",
-                "backlash" | "saturation" => "the nominal's gain refitted (a nominal gain error)",
-                _ => "a constant gain (a nominal gain error)",
+            if c.effect == "hysteresis" { "its loop" } else { "its variation" },
+            if c.effect == "hysteresis" {
+                "its linear part (a gain, or a stiffness inside the loop)"
+            } else {
+                "a constant gain (a nominal gain error)"
             },
             holdout_rms(ctx, &t.residual),
             holdout_rms(ctx, &f.residual),
@@ -4819,7 +4765,6 @@ fn quantization_from_grid(
                 ("offset".to_string(), grid.offset),
             ]),
             final_params: BTreeMap::new(),
-            nominal_params: BTreeMap::new(),
             derived: BTreeMap::new(),
             uncertainty: BTreeMap::new(),
             evidence: format!(
@@ -4922,7 +4867,7 @@ fn fit_candidate(ctx: &Ctx<'_>, cur: &Current, c: &Cand) -> Result<Fitted, Strin
         let stem = format!("plf_{}", c.effect);
         let name = surgery::insert(&mut spec, &stem, block, &c.site, &c.s, c.rate_hz)
             .map_err(|e| e.to_string())?;
-        let mut new_free: Vec<FreeParam> = c
+        let new_free: Vec<FreeParam> = c
             .free
             .iter()
             .map(|&(index, scale)| FreeParam {
@@ -4931,13 +4876,6 @@ fn fit_candidate(ctx: &Ctx<'_>, cur: &Current, c: &Cand) -> Result<Fitted, Strin
                 scale,
             })
             .collect();
-        if needs_nominal_gain(c) {
-            new_free.extend(nominal_gains(&spec).into_iter().filter(|g| {
-                !cur.free
-                    .iter()
-                    .any(|f| f.block == g.block && f.index == g.index)
-            }));
-        }
         let (cost, std, residual) = if let Some(i) = c.output {
             // Output side: the effect alone on the current model output.
             let mut inputs = vec![cur.model[i].clone()];
@@ -5024,64 +4962,24 @@ fn fit_candidate(ctx: &Ctx<'_>, cur: &Current, c: &Cand) -> Result<Fitted, Strin
         Some(why) => format!("refused as not physical: {why}"),
         None => "fit failed (refused parameters or diverging runs at every start)".to_string(),
     })?;
-    let n_new = new_free.len();
     let score = penalised(
         ctx,
-        flexibility(c.effect, n_new),
+        flexibility(c.effect, c.free.len()),
         weighted_holdout_ms(ctx, &residual),
     );
-    // The block's own parameters last (see `joint_refit`), the nominal's
-    // gains freed with it before them; σ of the block's own.
-    let (own, gains) = new_free.split_at(c.free.len());
     let mut free = cur.free.clone();
-    free.extend_from_slice(gains);
-    free.extend_from_slice(own);
+    free.extend(new_free);
     Ok(Fitted {
         effect: c.effect,
         spec,
         block_name: name,
         free_indices: c.free.iter().map(|&(i, _)| i).collect(),
-        n_new,
         free,
-        std: std[..c.free.len()].to_vec(),
+        std,
         residual,
         score,
         runs,
     })
-}
-
-/// Whether candidate `c` is fitted with the nominal's gain free beside its
-/// own parameters ([`nominal_gains`]): a map on the drive with a unit slope
-/// and no gain of its own (a play, a limit). A hysteresis block has its
-/// linear part and a position-dependent gain its g₀, so against them a play
-/// or a limit on a nominal a few per cent off was fitted at a disadvantage
-/// and lost to the hysteresis it is not: blind 5422–5537, gear play named
-/// hysteresis on 4 of 11 backlash records (5452: the play's fit 94 against
-/// 44); blind 5302–5421, 5319: a sine clipped at ±0.6 named a resonance and a
-/// varying gain after the calibration took the clipping's gain.
-fn needs_nominal_gain(c: &Cand) -> bool {
-    matches!(c.effect, "backlash" | "saturation") && matches!(c.site, Site::Input { .. })
-}
-
-/// The gain of every continuous plant block the calibration scales (a
-/// `state_space` block with a `frequency_scale`), as free parameters.
-fn nominal_gains(spec: &GraphSpec) -> Vec<FreeParam> {
-    spec.blocks
-        .iter()
-        .filter(|b| b.block.typetag_name() == "state_space")
-        .filter_map(|b| {
-            let names = b.block.tunable()?.param_names();
-            if !names.iter().any(|n| n == "frequency_scale") {
-                return None;
-            }
-            let index = names.iter().position(|n| n == "gain")?;
-            Some(FreeParam {
-                block: b.name.clone(),
-                index,
-                scale: Scale::Log,
-            })
-        })
-        .collect()
 }
 
 /// Refit the free parameters `free` of `spec` together on the full graph,
@@ -5122,7 +5020,6 @@ fn joint_refit(ctx: &Ctx<'_>, win: &Fitted, runs: &mut usize) -> Result<Fitted, 
         block_name: win.block_name.clone(),
         free: win.free.clone(),
         free_indices: win.free_indices.clone(),
-        n_new: win.n_new,
         std: std[k0..].to_vec(),
         residual,
         score: win.score,
@@ -5409,7 +5306,6 @@ mod tests {
                 site: site.describe(),
                 params: BTreeMap::new(),
                 final_params: BTreeMap::new(),
-                nominal_params: BTreeMap::new(),
                 derived: BTreeMap::new(),
                 uncertainty: BTreeMap::new(),
                 evidence: String::new(),
