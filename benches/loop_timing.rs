@@ -193,7 +193,10 @@ fn bench_emps(c: &mut Criterion) {
     nanomotion::link_plugins();
     let mut g = c.benchmark_group("emps_closed_loop");
     g.throughput(Throughput::Elements(SAMPLES as u64));
-    for (name, yaml) in [("emps_nominal", &nominal), ("emps_bouc_wen", &with_bouc_wen)] {
+    for (name, yaml) in [
+        ("emps_nominal", &nominal),
+        ("emps_bouc_wen", &with_bouc_wen),
+    ] {
         let mut s = GraphSpec::from_yaml(yaml, name)
             .expect("EMPS graph parses")
             .build_with_data(data.clone())
