@@ -107,10 +107,10 @@ enum StepKind {
     /// Output phase of a block with feed-through: gather its inputs, compute.
     Output,
     /// Output phase of a block with feed-through whose input is two scalars
-    /// (e.g. the `r − y` sum of a loop): both gathered, then stored as one
-    /// pair, so that a block reading them as one 16-byte vector gets them
-    /// from a single store (two 8-byte stores cannot be forwarded to one
-    /// 16-byte load: it stalls until they reach the cache).
+    /// (e.g. the `r − y` sum of a loop): both copied without the gather
+    /// loop. Meant to store them as one 16-byte pair for `Sum`'s one 16-byte
+    /// load (two 8-byte stores cannot be forwarded to it: it stalls), but
+    /// the compiler still emits two 8-byte stores (docs/performance.md).
     OutputPair,
     /// Output phase of a block with feed-through whose inputs are one
     /// contiguous run of the signal buffer (one gather): the block reads them

@@ -193,8 +193,8 @@ impl Sum {
         {
             // The common `r − y`, unrolled: the same products summed by the
             // same `sum` as below. (This compiles to one 16-byte load of
-            // `u`: the scheduler stores two gathered scalars as one pair for
-            // it, `StepKind::OutputPair`.)
+            // `u`, which stalls on the scheduler's two 8-byte stores of the
+            // gathered inputs: docs/performance.md.)
             *y0 = [g0 * u0, g1 * u1].into_iter().sum();
             return;
         }
