@@ -148,7 +148,78 @@ fn bench_blocks(c: &mut Criterion) {
     g.finish();
 }
 
-criterion_group!(benches, bench_graphs, bench_overhead, bench_blocks);
+/// The closed loop `nanomotion diagnose` simulates ~22 700 times on the EMPS
+/// record (issue #24): examples/diagnose/emps_nominal.yaml with its two compared
+/// logs, run as the fit's evaluator runs it (reset, then every sample), on a
+/// synthetic record of the EMPS length (24 841 samples at 1 kHz; the values do
+/// not change the work per sample). `emps_nominal` is the nominal graph,
+/// `emps_bouc_wen` the same with a Bouc–Wen hysteresis candidate in series
+/// before the amplifier limit. Throughput elements are samples (ticks).
+fn bench_emps(c: &mut Criterion) {
+    use nanomotion::core::data::Dataset;
+    use std::sync::Arc;
+    const SAMPLES: usize = 24_841;
+    let nominal = std::fs::read_to_string(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/examples/diagnose/emps_nominal.yaml"
+    ))
+    .expect("examples/diagnose/emps_nominal.yaml");
+    let with_bouc_wen = nominal
+        .replace(
+            "  - { name: one_sample,",
+            "  - { name: hysteresis, type: bouc_wen, a: 0.5, beta: 0.3, gamma: 0.2, linear: 0.8 }\n  - { name: one_sample,",
+        )
+        .replace(
+            "{ from: kv.y, to: amplifier_limit.u }",
+            "{ from: kv.y, to: hysteresis.u }\n  - { from: hysteresis.y, to: amplifier_limit.u }",
+        );
+    // A slow sweep of ±2 cm as the reference, so that the loop moves.
+    let reference: Vec<f64> = (0..SAMPLES)
+        .map(|k| 0.02 * (k as f64 * 1e-3 * 0.7).sin())
+        .collect();
+    let data = Arc::new(
+        Dataset::from_columns(
+            "emps_synthetic",
+            1000.0,
+            0.0,
+            vec![
+                ("q_ref_m".into(), reference),
+                ("q_meas_m".into(), vec![0.0; SAMPLES]),
+                ("u_v".into(), vec![0.0; SAMPLES]),
+            ],
+        )
+        .expect("synthetic EMPS record"),
+    );
+    nanomotion::link_plugins();
+    let mut g = c.benchmark_group("emps_closed_loop");
+    g.throughput(Throughput::Elements(SAMPLES as u64));
+    for (name, yaml) in [
+        ("emps_nominal", &nominal),
+        ("emps_bouc_wen", &with_bouc_wen),
+    ] {
+        let mut s = GraphSpec::from_yaml(yaml, name)
+            .expect("EMPS graph parses")
+            .build_with_data(data.clone())
+            .expect("EMPS graph builds")
+            .0;
+        g.bench_function(name, |b| {
+            b.iter(|| {
+                s.reset().expect("EMPS graph restarts");
+                s.step_n(black_box(SAMPLES as u64));
+                black_box(s.compare_log(0).map(|(l, _)| l[SAMPLES - 1]))
+            })
+        });
+    }
+    g.finish();
+}
+
+criterion_group!(
+    benches,
+    bench_graphs,
+    bench_overhead,
+    bench_blocks,
+    bench_emps
+);
 criterion_main!(benches);
 
 /// Ten blocks at 4 kHz: reference, noise, sum, PID, saturation, low-pass, plant,

@@ -76,8 +76,10 @@ impl Rate {
     /// Begin the next sample: its `Tick` (`k·dt` with `k` converted through
     /// `i64`, one instruction instead of `u64`'s several; the same value below
     /// 2⁶³ ticks), and when it is due next.
+    /// Returns the new `Tick` (what the single-rate path hands every block,
+    /// from registers rather than read back from `self.tick`).
     #[inline(always)]
-    fn begin_sample(&mut self) {
+    fn begin_sample(&mut self) -> Tick {
         self.tick = Tick {
             k: self.done,
             t: self.done as i64 as f64 * self.dt,
@@ -85,6 +87,7 @@ impl Rate {
         };
         self.done += 1;
         self.next += self.period;
+        self.tick
     }
 
     fn restart(&mut self) {
@@ -103,6 +106,12 @@ enum StepKind {
     Hold,
     /// Output phase of a block with feed-through: gather its inputs, compute.
     Output,
+    /// Output phase of a block with feed-through whose input is two scalars
+    /// (e.g. the `r − y` sum of a loop): both copied without the gather
+    /// loop. Meant to store them as one 16-byte pair for `Sum`'s one 16-byte
+    /// load (two 8-byte stores cannot be forwarded to it: it stalls), but
+    /// the compiler still emits two 8-byte stores (docs/performance.md).
+    OutputPair,
     /// Output phase of a block with feed-through whose inputs are one
     /// contiguous run of the signal buffer (one gather): the block reads them
     /// there, nothing is copied.
@@ -514,10 +523,18 @@ impl Scheduler {
     fn tick_with<P: TickProbe>(&mut self, probe: &mut P, folded: bool) {
         let k = self.k;
         let only_base = k != self.next_slow;
+        // The one sample every step of this tick gets, when only one rate is
+        // due (the common single-rate graph): read once here instead of from
+        // `rates` per step.
+        let mut single: Option<Tick> = None;
         if only_base {
             // Only the base rate is due: begin its sample.
-            for rate in self.rates[..self.n_base].iter_mut() {
-                rate.begin_sample();
+            if let [rate] = &mut self.rates[..self.n_base] {
+                single = Some(rate.begin_sample());
+            } else {
+                for rate in self.rates[..self.n_base].iter_mut() {
+                    rate.begin_sample();
+                }
             }
         } else {
             let mut next_slow = u64::MAX;
@@ -555,14 +572,20 @@ impl Scheduler {
         // state updates of due blocks without feed-through, with this
         // sample's inputs (all outputs of this sample exist now). On a tick
         // with only the base rate due, the fast program holds just its blocks.
-        if only_base {
+        let rates = run.rates;
+        if let Some(tick) = single {
             for step in &program.fast {
-                run.step(step);
+                run.step(step, tick);
+            }
+        } else if only_base {
+            for step in &program.fast {
+                run.step(step, rates[step.rate].tick);
             }
         } else {
             for step in &program.full {
-                if run.rates[step.rate].due {
-                    run.step(step);
+                let rate = &rates[step.rate];
+                if rate.due {
+                    run.step(step, rate.tick);
                 }
             }
         }
@@ -1173,10 +1196,9 @@ struct Run<'a, P> {
 }
 
 impl<P: TickProbe> Run<'_, P> {
-    /// One due block's phase.
+    /// One due block's phase, at sample `tick` of its rate.
     #[inline(always)]
-    fn step(&mut self, s: &Step) {
-        let tick = self.rates[s.rate].tick;
+    fn step(&mut self, s: &Step, tick: Tick) {
         let (g0, g1) = s.gathers;
         let (i0, i1) = s.inputs;
         let (o0, o1) = s.outputs;
@@ -1189,6 +1211,13 @@ impl<P: TickProbe> Run<'_, P> {
             StepKind::Output => {
                 gather(&self.gathers[g0..g1], self.signals, self.inputs);
                 self.blocks[s.block].output(tick, &self.inputs[i0..i1], &mut self.signals[o0..o1]);
+            }
+            StepKind::OutputPair => {
+                let (a, b) = (self.gathers[g0], self.gathers[g0 + 1]);
+                let pair = [self.signals[a.src], self.signals[b.src]];
+                let u = &mut self.inputs[i0..i1];
+                u.copy_from_slice(&pair);
+                self.blocks[s.block].output(tick, u, &mut self.signals[o0..o1]);
             }
             StepKind::OutputDirect => {
                 let g = self.gathers[g0];
@@ -1265,6 +1294,14 @@ impl Program {
             } else if n.gathers.len() == 1 && program.gathers[n.gathers.start].len == n.inputs.len()
             {
                 StepKind::OutputDirect
+            } else if let [a, b] = &program.gathers[n.gathers.clone()]
+                && a.len == 1
+                && b.len == 1
+                && a.dst == n.inputs.start
+                && b.dst == a.dst + 1
+                && n.inputs.len() == 2
+            {
+                StepKind::OutputPair
             } else {
                 StepKind::Output
             };

@@ -474,6 +474,24 @@ fn ticks_do_not_allocate() {
     assert_eq!(res.logs[2].len(), 5_001);
 }
 
+#[test]
+fn single_rate_ticks_do_not_allocate() {
+    // One base rate: every tick takes the single-rate path (one `Tick` for all
+    // steps), and `e` (two scalar inputs) the paired gather.
+    let yaml = LOOP.replace("duration_s: 0.05", "duration_s: 20");
+    let (mut s, report) = GraphSpec::from_yaml(&yaml, "single.yaml")
+        .unwrap()
+        .build()
+        .unwrap();
+    assert!(report.rate_transitions.is_empty());
+    s.tick();
+    let info = allocation_counter::measure(|| {
+        s.step_n(10_000);
+    });
+    assert_eq!(info.count_total, 0, "a tick allocated: {info:?}");
+    assert_eq!(s.result().logs[0].len(), 10_001);
+}
+
 mod mutated_graphs {
     use super::*;
     use proptest::prelude::*;
