@@ -1009,19 +1009,27 @@ impl<'c, 'a> Search<'c, 'a> {
         // busy while the queue's last fits run.
         let calibrate_early =
             opts.calibrate && !self.calibration.as_ref().is_some_and(|c| c.accepted);
+        // With one thread asked for (`Options::threads`), it runs after
+        // the fits on the caller's thread: the same result.
         let cur = &self.cur;
-        let ((mut results, mut failures, fit_runs), early) = std::thread::scope(|sc| {
-            let early = calibrate_early.then(|| {
-                sc.spawn(|| {
-                    let mut runs = 0;
-                    let r = calibrate(ctx, cur, &mut runs);
-                    (r, runs)
-                })
-            });
+        let calibrate_now = || {
+            let mut runs = 0;
+            let r = calibrate(ctx, cur, &mut runs);
+            (r, runs)
+        };
+        let ((mut results, mut failures, fit_runs), early) = if opts.threads > 1 {
+            std::thread::scope(|sc| {
+                let early = calibrate_early.then(|| sc.spawn(calibrate_now));
+                let fits =
+                    fit_candidates(ctx, cur, &cands, &locked, opts.threads, step_no, progress);
+                let early =
+                    early.map(|h| h.join().unwrap_or_else(|e| std::panic::resume_unwind(e)));
+                (fits, early)
+            })
+        } else {
             let fits = fit_candidates(ctx, cur, &cands, &locked, opts.threads, step_no, progress);
-            let early = early.map(|h| h.join().unwrap_or_else(|e| std::panic::resume_unwind(e)));
-            (fits, early)
-        });
+            (fits, calibrate_early.then(calibrate_now))
+        };
         self.early_calibration = early;
         self.runs += fit_runs;
         let again = cands.split_off(total);

@@ -85,3 +85,25 @@ fn an_effect_is_named_on_a_record_it_was_not_fitted_on() {
     assert_eq!(r.found, vec!["friction".to_string()]);
     assert!(r.final_scores.holdout_rms < 0.5 * r.nominal.holdout_rms);
 }
+
+/// The step's calibration runs beside the candidates' fits on a thread of
+/// its own, or after them on the caller's with `threads: 1`: the report is
+/// the same to the bit either way (results land in fixed slots; nothing
+/// depends on timing).
+#[test]
+fn one_thread_or_two_give_the_same_report() {
+    link();
+    let rec = generate::second_order("friction", 3, 4000, false).unwrap();
+    let spec = GraphSpec::from_yaml(&rec.nominal_yaml, "generated.yaml").unwrap();
+    let report = |threads| {
+        let opts = Options {
+            threads,
+            ..Options::default()
+        };
+        let r = nanomotion_plf::diagnose::diagnose(&spec, &rec.data, &opts).unwrap();
+        serde_json::to_string(&r).unwrap()
+    };
+    let (one, two) = (report(1), report(2));
+    assert!(one.contains("\"friction\""), "{one}");
+    assert_eq!(one, two);
+}
