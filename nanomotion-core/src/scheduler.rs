@@ -106,12 +106,6 @@ enum StepKind {
     Hold,
     /// Output phase of a block with feed-through: gather its inputs, compute.
     Output,
-    /// Output phase of a block with feed-through whose input is two scalars
-    /// (e.g. the `r − y` sum of a loop): both copied without the gather
-    /// loop. Meant to store them as one 16-byte pair for `Sum`'s one 16-byte
-    /// load (two 8-byte stores cannot be forwarded to it: it stalls), but
-    /// the compiler still emits two 8-byte stores (docs/performance.md).
-    OutputPair,
     /// Output phase of a block with feed-through whose inputs are one
     /// contiguous run of the signal buffer (one gather): the block reads them
     /// there, nothing is copied.
@@ -1212,13 +1206,6 @@ impl<P: TickProbe> Run<'_, P> {
                 gather(&self.gathers[g0..g1], self.signals, self.inputs);
                 self.blocks[s.block].output(tick, &self.inputs[i0..i1], &mut self.signals[o0..o1]);
             }
-            StepKind::OutputPair => {
-                let (a, b) = (self.gathers[g0], self.gathers[g0 + 1]);
-                let pair = [self.signals[a.src], self.signals[b.src]];
-                let u = &mut self.inputs[i0..i1];
-                u.copy_from_slice(&pair);
-                self.blocks[s.block].output(tick, u, &mut self.signals[o0..o1]);
-            }
             StepKind::OutputDirect => {
                 let g = self.gathers[g0];
                 let (u, y) = disjoint(self.signals, g.src..g.src + g.len, o0..o1);
@@ -1294,14 +1281,6 @@ impl Program {
             } else if n.gathers.len() == 1 && program.gathers[n.gathers.start].len == n.inputs.len()
             {
                 StepKind::OutputDirect
-            } else if let [a, b] = &program.gathers[n.gathers.clone()]
-                && a.len == 1
-                && b.len == 1
-                && a.dst == n.inputs.start
-                && b.dst == a.dst + 1
-                && n.inputs.len() == 2
-            {
-                StepKind::OutputPair
             } else {
                 StepKind::Output
             };

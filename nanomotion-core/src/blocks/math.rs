@@ -192,8 +192,8 @@ impl Sum {
             && let ([g0, g1], [u0, u1], [y0]) = (self.gains.as_slice(), u, &mut *y)
         {
             // The common `r − y`, unrolled: the same products summed by the
-            // same `sum` as below. (This compiles to one 16-byte load of
-            // `u`, which stalls on the scheduler's two 8-byte stores of the
+            // same `sum` as below. (It compiles to one 16-byte load of `u`,
+            // which stalls on the scheduler's two 8-byte stores of the
             // gathered inputs: docs/performance.md.)
             *y0 = [g0 * u0, g1 * u1].into_iter().sum();
             return;

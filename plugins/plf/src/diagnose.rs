@@ -941,30 +941,31 @@ impl<'c, 'a> Search<'c, 'a> {
         // input) that a hysteresis on the drive has not, and stood for creep
         // (blind 5368: after the drive's hysteresis, creep cut the held-out
         // rms 2.0 -> 0.37, such a copy 0.41, so creep was not named).
-        let copy_of = |c: &Cand| {
+        // `None`: not a copy; `Some(at the named one's kind of place)`.
+        let copy = |c: &Cand| {
             let outs = outputs_of(ctx, &c.site);
             let own_motion = matches!(c.site, Site::Feedback { .. });
-            let on_axis = |o: &Vec<usize>| {
-                o.iter().any(|&k| {
-                    outs.iter()
-                        .any(|&j| ctx.channels[k].same_axis(&ctx.channels[j]))
+            let kinds: Vec<&str> = named
+                .iter()
+                .filter(|(e, o, _)| {
+                    (*e == c.effect || (own_motion && *e == "friction"))
+                        && o.iter().any(|&k| {
+                            outs.iter()
+                                .any(|&j| ctx.channels[k].same_axis(&ctx.channels[j]))
+                        })
                 })
-            };
-            let is_copy = named.iter().any(|(e, o, _)| {
-                (*e == c.effect || (own_motion && *e == "friction")) && on_axis(o)
-            });
-            let same_place = named.iter().any(|(e, o, kind)| {
-                (*e == c.effect || (own_motion && *e == "friction"))
-                    && on_axis(o)
-                    && *kind == c.site.kind()
-            });
-            (is_copy, same_place)
+                .map(|&(_, _, kind)| kind)
+                .collect();
+            (!kinds.is_empty()).then(|| kinds.contains(&c.site.kind()))
         };
-        let (mut cands, mut again): (Vec<Cand>, Vec<Cand>) =
-            enumerate(ctx, &self.cur, opts, &mut self.runs)?
-                .into_iter()
-                .filter(|c| !matches!(copy_of(c), (true, false)))
-                .partition(|c| !copy_of(c).0);
+        let (mut cands, mut again) = (Vec::new(), Vec::new());
+        for c in enumerate(ctx, &self.cur, opts, &mut self.runs)? {
+            match copy(&c) {
+                None => cands.push(c),
+                Some(true) => again.push(c),
+                Some(false) => {}
+            }
+        }
         // A second slit table on an axis that has one has no form the first
         // lacks (every entry of a table is free): no copy to beat.
         again.retain(|c| c.effect != "encoder_slit_error");
@@ -4491,6 +4492,7 @@ fn resonance(r: &[f64], fs: f64, site: Site, output: Option<usize>, rate_hz: Opt
     let (_, f) = stats::fisher_g(r);
     let at = |f: f64| (f * fs).clamp(fs * 1e-4, 0.4 * fs);
     let mut poles = vec![at(f)];
+    // A start within 15 % of the first lies in the same valley of the cost.
     if let Some((fpk, ratio)) = stats::prominent_peak(r)
         && ratio >= PEAK_RATIO
         && (at(fpk) / poles[0]).ln().abs() > 0.15
